@@ -1,0 +1,2 @@
+//! motionforge: a dataset builder for text-to-motion research.
+pub mod motion;

@@ -1,0 +1,630 @@
+//! BVH reading and writing, in f64, for any Euler channel order, LF or CRLF, tabs and exponents.
+//!
+//! Why not the `bvh_anim` crate: see `docs/decisions.md` (f32 storage, panics on malformed headers,
+//! 2-decimal default output, unsound transitive dependencies). It stays a dev-dependency that
+//! cross-checks this reader on every real file.
+
+use std::fmt::Write as _;
+use std::sync::Arc;
+
+use glam::{DQuat, DVec3, EulerRot};
+
+use super::motion::Motion;
+use super::skeleton::{Channel, Joint, Skeleton};
+
+/// What went wrong while reading a BVH file, with the 1-based line where it was found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("line {line}{}: {kind}", frame.map(|f| format!(" (frame {f})")).unwrap_or_default())]
+pub struct BvhError {
+    /// 1-based line number.
+    pub line: usize,
+    /// 0-based frame index, for errors in the MOTION section.
+    pub frame: Option<usize>,
+    /// What was expected and what was found.
+    pub kind: BvhErrorKind,
+}
+
+/// The kinds of BVH read errors.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BvhErrorKind {
+    /// A keyword or value other than the one the grammar needs.
+    #[error("expected {expected}, found `{found}`")]
+    Unexpected {
+        /// What the grammar needs here.
+        expected: &'static str,
+        /// The token in the file.
+        found: String,
+    },
+    /// The file ended early.
+    #[error("file ends where {expected} was expected")]
+    UnexpectedEnd {
+        /// What the grammar needs here.
+        expected: &'static str,
+    },
+    /// A token that should be a number is not a finite number.
+    #[error("expected a finite number for {what}, found `{found}`")]
+    BadNumber {
+        /// Which value was being read.
+        what: &'static str,
+        /// The token in the file.
+        found: String,
+    },
+    /// A `CHANNELS` list names an unknown channel.
+    #[error(
+        "unknown channel `{0}` (expected Xposition, Yposition, Zposition, Xrotation, Yrotation or Zrotation)"
+    )]
+    UnknownChannel(String),
+    /// A motion line has the wrong number of values.
+    #[error("expected {expected} channel values (from the HIERARCHY), found {found}")]
+    ValueCount {
+        /// Channels declared in the hierarchy.
+        expected: usize,
+        /// Values on the line.
+        found: usize,
+    },
+    /// Fewer motion lines than `Frames:` declares.
+    #[error("truncated: header declares {declared} frames, file has {found}")]
+    Truncated {
+        /// Frames declared in the header.
+        declared: usize,
+        /// Frames present.
+        found: usize,
+    },
+    /// More motion lines than `Frames:` declares.
+    #[error("header declares {declared} frames, file has more")]
+    ExtraFrames {
+        /// Frames declared in the header.
+        declared: usize,
+    },
+    /// `Frame Time` is zero, negative or not finite.
+    #[error("frame time must be a positive number of seconds, found {0}")]
+    FrameTime(f64),
+    /// The hierarchy has no joint.
+    #[error("HIERARCHY defines no joint")]
+    NoJoints,
+}
+
+/// A read BVH file: its hierarchy, motion and the frame rate its header states.
+#[derive(Debug, Clone)]
+pub struct Bvh {
+    /// The joint hierarchy.
+    pub skeleton: Arc<Skeleton>,
+    /// The motion at the header's rate.
+    pub motion: Motion,
+    /// `1 / Frame Time`, snapped to the nearest integer when within 0.01 of it
+    /// (`.0083333` means 120 fps, not 120.0048).
+    pub header_fps: f64,
+}
+
+struct Tokens<'a> {
+    lines: std::iter::Enumerate<std::str::Lines<'a>>,
+    current: std::str::SplitAsciiWhitespace<'a>,
+    line: usize,
+    rest_offset: usize,
+    text: &'a str,
+}
+
+impl<'a> Tokens<'a> {
+    fn new(text: &'a str) -> Self {
+        Tokens {
+            lines: text.lines().enumerate(),
+            current: "".split_ascii_whitespace(),
+            line: 0,
+            rest_offset: 0,
+            text,
+        }
+    }
+
+    fn next(&mut self) -> Option<&'a str> {
+        loop {
+            if let Some(tok) = self.current.next() {
+                return Some(tok);
+            }
+            let (i, line) = self.lines.next()?;
+            self.line = i + 1;
+            self.rest_offset = line.as_ptr() as usize - self.text.as_ptr() as usize + line.len();
+            self.current = line.split_ascii_whitespace();
+        }
+    }
+
+    fn expect_any(&mut self, expected: &'static str) -> Result<&'a str, BvhError> {
+        let line = self.line;
+        self.next().ok_or(BvhError {
+            line: line.max(1),
+            frame: None,
+            kind: BvhErrorKind::UnexpectedEnd { expected },
+        })
+    }
+
+    fn expect(&mut self, keyword: &'static str) -> Result<(), BvhError> {
+        let tok = self.expect_any(keyword)?;
+        if tok.eq_ignore_ascii_case(keyword) {
+            Ok(())
+        } else {
+            Err(self.unexpected(keyword, tok))
+        }
+    }
+
+    fn number(&mut self, what: &'static str) -> Result<f64, BvhError> {
+        let tok = self.expect_any(what)?;
+        parse_finite(tok).ok_or_else(|| {
+            self.error(BvhErrorKind::BadNumber {
+                what,
+                found: tok.to_string(),
+            })
+        })
+    }
+
+    fn unexpected(&self, expected: &'static str, found: &str) -> BvhError {
+        self.error(BvhErrorKind::Unexpected {
+            expected,
+            found: found.to_string(),
+        })
+    }
+
+    fn error(&self, kind: BvhErrorKind) -> BvhError {
+        BvhError {
+            line: self.line.max(1),
+            frame: None,
+            kind,
+        }
+    }
+}
+
+fn parse_finite(tok: &str) -> Option<f64> {
+    tok.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+/// Reads a BVH file from its text.
+pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut tokens = Tokens::new(text);
+    tokens.expect("HIERARCHY")?;
+    let mut joints: Vec<Joint> = Vec::new();
+    let tok = tokens.expect_any("ROOT")?;
+    if !tok.eq_ignore_ascii_case("ROOT") {
+        return Err(tokens.unexpected("ROOT", tok));
+    }
+    read_joint(&mut tokens, &mut joints, None)?;
+    let tok = tokens.expect_any("MOTION")?;
+    if !tok.eq_ignore_ascii_case("MOTION") {
+        let expected = if tok.eq_ignore_ascii_case("ROOT") {
+            "MOTION (files with several ROOT hierarchies are not supported)"
+        } else {
+            "MOTION"
+        };
+        return Err(tokens.unexpected(expected, tok));
+    }
+    if joints.is_empty() {
+        return Err(tokens.error(BvhErrorKind::NoJoints));
+    }
+    tokens.expect("Frames:")?;
+    let declared = tokens.number("the frame count")?;
+    if declared < 0.0 || declared.fract() != 0.0 {
+        return Err(tokens.error(BvhErrorKind::BadNumber {
+            what: "the frame count",
+            found: declared.to_string(),
+        }));
+    }
+    let declared = declared as usize;
+    tokens.expect("Frame")?;
+    tokens.expect("Time:")?;
+    let frame_time = tokens.number("the frame time")?;
+    if frame_time <= 0.0 {
+        return Err(tokens.error(BvhErrorKind::FrameTime(frame_time)));
+    }
+    // Anything after `Frame Time: x` on the same line is an error, caught below as a value line.
+    let header_fps = snap_fps(1.0 / frame_time);
+    let mut rest_tokens: Vec<&str> = tokens.current.by_ref().collect();
+    let first_motion_line = tokens.line + 1;
+    let body = &text[tokens.rest_offset.min(text.len())..];
+    let body = body
+        .strip_prefix("\r\n")
+        .or_else(|| body.strip_prefix('\n'))
+        .unwrap_or(body);
+    let skeleton = Arc::new(Skeleton { joints });
+    let motion = read_motion(
+        &skeleton,
+        body,
+        first_motion_line,
+        declared,
+        header_fps,
+        &mut rest_tokens,
+    )?;
+    Ok(Bvh {
+        skeleton,
+        motion,
+        header_fps,
+    })
+}
+
+fn snap_fps(fps: f64) -> f64 {
+    let rounded = fps.round();
+    if (fps - rounded).abs() < 0.01 {
+        rounded
+    } else {
+        fps
+    }
+}
+
+fn read_joint(
+    tokens: &mut Tokens<'_>,
+    joints: &mut Vec<Joint>,
+    parent: Option<usize>,
+) -> Result<(), BvhError> {
+    let name = tokens.expect_any("a joint name")?;
+    if name == "{" || name == "}" {
+        return Err(tokens.unexpected("a joint name", name));
+    }
+    let index = joints.len();
+    joints.push(Joint {
+        name: name.to_string(),
+        parent,
+        offset: DVec3::ZERO,
+        channels: Vec::new(),
+        end_site: None,
+    });
+    tokens.expect("{")?;
+    tokens.expect("OFFSET")?;
+    joints[index].offset = read_vec3(tokens)?;
+    let tok = tokens.expect_any("CHANNELS")?;
+    if !tok.eq_ignore_ascii_case("CHANNELS") {
+        return Err(tokens.unexpected("CHANNELS", tok));
+    }
+    let count = tokens.number("the channel count")?;
+    if !(0.0..=6.0).contains(&count) || count.fract() != 0.0 {
+        return Err(tokens.error(BvhErrorKind::BadNumber {
+            what: "the channel count (0 to 6)",
+            found: count.to_string(),
+        }));
+    }
+    for _ in 0..count as usize {
+        let tok = tokens.expect_any("a channel name")?;
+        let channel = Channel::parse(tok)
+            .ok_or_else(|| tokens.error(BvhErrorKind::UnknownChannel(tok.to_string())))?;
+        joints[index].channels.push(channel);
+    }
+    loop {
+        let tok = tokens.expect_any("JOINT, End Site or }")?;
+        if tok == "}" {
+            return Ok(());
+        } else if tok.eq_ignore_ascii_case("JOINT") {
+            read_joint(tokens, joints, Some(index))?;
+        } else if tok.eq_ignore_ascii_case("End") {
+            tokens.expect("Site")?;
+            tokens.expect("{")?;
+            tokens.expect("OFFSET")?;
+            joints[index].end_site = Some(read_vec3(tokens)?);
+            tokens.expect("}")?;
+        } else {
+            return Err(tokens.unexpected("JOINT, End Site or }", tok));
+        }
+    }
+}
+
+fn read_vec3(tokens: &mut Tokens<'_>) -> Result<DVec3, BvhError> {
+    Ok(DVec3::new(
+        tokens.number("OFFSET x")?,
+        tokens.number("OFFSET y")?,
+        tokens.number("OFFSET z")?,
+    ))
+}
+
+/// Where each joint's channels sit in a frame's values, precomputed once per skeleton.
+pub(crate) struct ChannelLayout {
+    /// Per joint: first channel index and the channels.
+    joints: Vec<(usize, Vec<Channel>, DVec3)>,
+    total: usize,
+}
+
+impl ChannelLayout {
+    pub(crate) fn new(skeleton: &Skeleton) -> Self {
+        let mut start = 0;
+        let joints = skeleton
+            .joints
+            .iter()
+            .map(|j| {
+                let entry = (start, j.channels.clone(), j.offset);
+                start += j.channels.len();
+                entry
+            })
+            .collect();
+        ChannelLayout {
+            joints,
+            total: start,
+        }
+    }
+
+    /// Converts one frame of channel values (degrees) into local rotations and translations.
+    pub(crate) fn decode(
+        &self,
+        values: &[f64],
+        rotations: &mut Vec<DQuat>,
+        translations: &mut Vec<DVec3>,
+    ) {
+        for (start, channels, offset) in &self.joints {
+            let mut t = *offset;
+            let mut r = DQuat::IDENTITY;
+            for (k, channel) in channels.iter().enumerate() {
+                let v = values[start + k];
+                if channel.is_position() {
+                    t[channel.axis()] = v;
+                } else {
+                    r *= channel.rotation(v.to_radians());
+                }
+            }
+            rotations.push(r);
+            translations.push(t);
+        }
+    }
+}
+
+fn read_motion(
+    skeleton: &Arc<Skeleton>,
+    body: &str,
+    first_line: usize,
+    declared: usize,
+    fps: f64,
+    leftover: &mut Vec<&str>,
+) -> Result<Motion, BvhError> {
+    let layout = ChannelLayout::new(skeleton);
+    let n = skeleton.len();
+    let mut rotations = Vec::with_capacity(declared * n);
+    let mut translations = Vec::with_capacity(declared * n);
+    let mut values = Vec::with_capacity(layout.total);
+    let mut frame = 0usize;
+    if !leftover.is_empty() {
+        return Err(BvhError {
+            line: first_line - 1,
+            frame: None,
+            kind: BvhErrorKind::Unexpected {
+                expected: "end of line after Frame Time",
+                found: leftover.join(" "),
+            },
+        });
+    }
+    leftover.clear();
+    let mut last_line = first_line;
+    for (i, line) in body.lines().enumerate() {
+        let line_no = first_line + i;
+        last_line = line_no;
+        let mut fields = line.split_ascii_whitespace().peekable();
+        if fields.peek().is_none() {
+            continue;
+        }
+        if frame == declared {
+            return Err(BvhError {
+                line: line_no,
+                frame: Some(frame),
+                kind: BvhErrorKind::ExtraFrames { declared },
+            });
+        }
+        values.clear();
+        for tok in fields {
+            let v = parse_finite(tok).ok_or_else(|| BvhError {
+                line: line_no,
+                frame: Some(frame),
+                kind: BvhErrorKind::BadNumber {
+                    what: "a channel value",
+                    found: tok.to_string(),
+                },
+            })?;
+            values.push(v);
+        }
+        if values.len() != layout.total {
+            return Err(BvhError {
+                line: line_no,
+                frame: Some(frame),
+                kind: BvhErrorKind::ValueCount {
+                    expected: layout.total,
+                    found: values.len(),
+                },
+            });
+        }
+        layout.decode(&values, &mut rotations, &mut translations);
+        frame += 1;
+    }
+    if frame < declared {
+        return Err(BvhError {
+            line: last_line,
+            frame: Some(frame),
+            kind: BvhErrorKind::Truncated {
+                declared,
+                found: frame,
+            },
+        });
+    }
+    Ok(Motion {
+        skeleton: Arc::clone(skeleton),
+        fps,
+        rotations,
+        translations,
+    })
+}
+
+/// Why a motion cannot be written as BVH.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BvhWriteError {
+    /// Writing needs 0 or 3 rotation channels on distinct axes to represent any rotation.
+    #[error(
+        "joint `{joint}` has rotation channels {channels:?}; writing needs none or three on distinct axes"
+    )]
+    UnsupportedRotationChannels {
+        /// The joint.
+        joint: String,
+        /// Its rotation channels.
+        channels: Vec<&'static str>,
+    },
+    /// A joint without rotation channels carries a rotation that would be lost.
+    #[error("joint `{joint}` has no rotation channels but rotates at frame {frame}")]
+    LostRotation {
+        /// The joint.
+        joint: String,
+        /// First frame where it rotates.
+        frame: usize,
+    },
+}
+
+fn euler_order(axes: [usize; 3]) -> Option<EulerRot> {
+    Some(match axes {
+        [0, 1, 2] => EulerRot::XYZ,
+        [0, 2, 1] => EulerRot::XZY,
+        [1, 0, 2] => EulerRot::YXZ,
+        [1, 2, 0] => EulerRot::YZX,
+        [2, 0, 1] => EulerRot::ZXY,
+        [2, 1, 0] => EulerRot::ZYX,
+        _ => return None,
+    })
+}
+
+/// Euler angles (radians) for `q` in `order`, choosing among the equivalent triples the one closest
+/// to `previous`, so curves stay continuous instead of jumping by 360 degrees.
+fn euler_near(q: DQuat, order: EulerRot, previous: Option<[f64; 3]>) -> [f64; 3] {
+    use std::f64::consts::{PI, TAU};
+    let (a, b, c) = q.to_euler(order);
+    let Some(prev) = previous else {
+        return [a, b, c];
+    };
+    let near = |v: f64, target: f64| v + ((target - v) / TAU).round() * TAU;
+    let candidates = [[a, b, c], [a + PI, PI - b, c + PI]];
+    let mut best = [a, b, c];
+    let mut best_cost = f64::INFINITY;
+    for cand in candidates {
+        let shifted = [
+            near(cand[0], prev[0]),
+            near(cand[1], prev[1]),
+            near(cand[2], prev[2]),
+        ];
+        // The alternative triple is only equivalent for proper Tait-Bryan orders; check it.
+        let back = DQuat::from_euler(order, shifted[0], shifted[1], shifted[2]);
+        if back.dot(q).abs() < 1.0 - 1e-9 {
+            continue;
+        }
+        let cost: f64 = (0..3).map(|k| (shifted[k] - prev[k]).abs()).sum();
+        if cost < best_cost {
+            best_cost = cost;
+            best = shifted;
+        }
+    }
+    best
+}
+
+/// Writes a motion as BVH text, keeping the skeleton's hierarchy and channel layout. Values are
+/// written at full f64 precision (shortest representation that reads back to the same number).
+pub fn write_bvh(motion: &Motion) -> Result<String, BvhWriteError> {
+    let skeleton = &motion.skeleton;
+    let mut orders: Vec<Option<(EulerRot, [usize; 3])>> = Vec::with_capacity(skeleton.len());
+    for joint in &skeleton.joints {
+        let rot: Vec<Channel> = joint
+            .channels
+            .iter()
+            .copied()
+            .filter(|c| !c.is_position())
+            .collect();
+        let order = match rot.len() {
+            0 => None,
+            3 => {
+                let axes = [rot[0].axis(), rot[1].axis(), rot[2].axis()];
+                Some((
+                    euler_order(axes).ok_or_else(|| unsupported(joint, &rot))?,
+                    axes,
+                ))
+            }
+            _ => return Err(unsupported(joint, &rot)),
+        };
+        orders.push(order);
+    }
+    let mut out = String::with_capacity(
+        64 * skeleton.len() + motion.num_frames() * skeleton.channel_count() * 12,
+    );
+    out.push_str("HIERARCHY\n");
+    write_joint(&mut out, skeleton, 0, 0);
+    let _ = write!(
+        out,
+        "MOTION\nFrames: {}\nFrame Time: {}\n",
+        motion.num_frames(),
+        1.0 / motion.fps
+    );
+    let n = skeleton.len();
+    let mut previous: Vec<Option<[f64; 3]>> = vec![None; n];
+    for f in 0..motion.num_frames() {
+        let mut first = true;
+        for (j, joint) in skeleton.joints.iter().enumerate() {
+            let q = motion.rotations[f * n + j];
+            let t = motion.translations[f * n + j];
+            let angles = match orders[j] {
+                Some((order, axes)) => {
+                    let e = euler_near(q, order, previous[j]);
+                    previous[j] = Some(e);
+                    let mut by_axis = [0.0; 3];
+                    for k in 0..3 {
+                        by_axis[axes[k]] = e[k].to_degrees();
+                    }
+                    by_axis
+                }
+                None => {
+                    if q.angle_between(DQuat::IDENTITY) > 1e-9 {
+                        return Err(BvhWriteError::LostRotation {
+                            joint: joint.name.clone(),
+                            frame: f,
+                        });
+                    }
+                    [0.0; 3]
+                }
+            };
+            for c in &joint.channels {
+                let v = if c.is_position() {
+                    t[c.axis()]
+                } else {
+                    angles[c.axis()]
+                };
+                if !first {
+                    out.push(' ');
+                }
+                first = false;
+                // `-0` reads back fine but adds noise to diffs.
+                let v = if v == 0.0 { 0.0 } else { v };
+                let _ = write!(out, "{v}");
+            }
+        }
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+fn unsupported(joint: &Joint, rot: &[Channel]) -> BvhWriteError {
+    BvhWriteError::UnsupportedRotationChannels {
+        joint: joint.name.clone(),
+        channels: rot.iter().map(|c| c.name()).collect(),
+    }
+}
+
+fn write_joint(out: &mut String, skeleton: &Skeleton, j: usize, depth: usize) {
+    let joint = &skeleton.joints[j];
+    let pad = "\t".repeat(depth);
+    let kind = if joint.parent.is_none() {
+        "ROOT"
+    } else {
+        "JOINT"
+    };
+    let o = joint.offset;
+    let _ = writeln!(
+        out,
+        "{pad}{kind} {}\n{pad}{{\n{pad}\tOFFSET {} {} {}",
+        joint.name, o.x, o.y, o.z
+    );
+    let names: Vec<&str> = joint.channels.iter().map(|c| c.name()).collect();
+    let _ = writeln!(out, "{pad}\tCHANNELS {} {}", names.len(), names.join(" "));
+    let children: Vec<usize> = skeleton.children(j).collect();
+    for c in children {
+        write_joint(out, skeleton, c, depth + 1);
+    }
+    if let Some(e) = joint.end_site {
+        let _ = writeln!(
+            out,
+            "{pad}\tEnd Site\n{pad}\t{{\n{pad}\t\tOFFSET {} {} {}\n{pad}\t}}",
+            e.x, e.y, e.z
+        );
+    }
+    let _ = writeln!(out, "{pad}}}");
+}

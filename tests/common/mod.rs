@@ -1,0 +1,56 @@
+//! Shared helpers for integration tests: where the real data lives, and reading it.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use motionforge::motion::{Bvh, read_bvh};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// `../shared/data` beside the repository (or `MOTIONFORGE_SHARED_DATA`). Tests that need it fail
+/// loudly when it is missing rather than skipping into a pass.
+pub fn shared_data() -> PathBuf {
+    let dir = std::env::var_os("MOTIONFORGE_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("../shared/data"));
+    assert!(
+        dir.is_dir(),
+        "real data not found at {}: clone the repo beside ../shared or set MOTIONFORGE_SHARED_DATA",
+        dir.display()
+    );
+    dir
+}
+
+/// Sorted `.bvh` files in a folder.
+pub fn bvh_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "bvh"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// Reads a BVH file, panicking with the path on error.
+pub fn load(path: &Path) -> Bvh {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    read_bvh(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// A Bandai Namco dataset-1 capture by content/style/take.
+pub fn bandai1(content: &str, style: &str) -> PathBuf {
+    shared_data().join(format!(
+        "bandai-namco-1/data/dataset-1_{content}_{style}_001.bvh"
+    ))
+}
+
+/// A Bandai Namco dataset-2 subset capture.
+pub fn bandai2(content: &str, take: u32) -> PathBuf {
+    shared_data().join(format!(
+        "bandai-namco-2-subset/data/dataset-2_{content}_normal_{take:03}.bvh"
+    ))
+}
