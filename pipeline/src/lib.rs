@@ -1,2 +1,10 @@
 //! motionforge: a dataset builder for text-to-motion research.
+pub mod annotate;
+pub mod build;
+pub mod clip;
+pub mod config;
+pub mod io;
 pub mod motion;
+pub mod source;
+pub mod stages;
+pub mod text;

@@ -1,1 +1,323 @@
-fn main() {}
+//! The `motionforge` command: argument parsing and human output over the library.
+
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+
+use motionforge::build::{BuildOptions, BuildReport, build};
+use motionforge::config::Config;
+use motionforge::motion::{MirrorPlan, OffsetPolicy, ProfileSpec, calibrate, read_bvh};
+
+/// Build text-to-motion training sets from mocap captures: segment, mirror, label, compose,
+/// and write sharded Parquet with statistics for papers.
+#[derive(Parser)]
+#[command(name = "motionforge", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run every stage of a build: read captures, label, resample, mirror, write the clip table.
+    ///
+    /// Work whose inputs, config and stage version are unchanged is reused from the output
+    /// folder's cache; bad inputs are listed in `rejects.jsonl` and the build goes on.
+    Build {
+        /// Build configuration (TOML); relative paths inside resolve against its folder.
+        #[arg(long, short, default_value = "motionforge.toml")]
+        config: PathBuf,
+        /// Recompute everything, ignoring cached stage outputs.
+        #[arg(long)]
+        force: bool,
+        /// Exit with code 3 when any input was rejected.
+        #[arg(long)]
+        strict: bool,
+        /// Print the build report as JSON instead of a summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Mirror caption lines: swap left/right and clockwise/counterclockwise, whole words only.
+    ///
+    /// Reads FILE (or standard input) line by line and writes the mirrored lines to standard
+    /// output, e.g. to mirror an existing HumanML3D-style caption set.
+    MirrorText {
+        /// Text file to mirror; standard input when absent.
+        file: Option<PathBuf>,
+    },
+    /// Calibrate a skeleton profile's mirror reflections on captures and print them as TOML.
+    ///
+    /// Among the per-joint reflections that fit the skeleton's offsets, picks the one whose
+    /// mirrored rotations best match the real ones (one roughly symmetric take, e.g. a walk,
+    /// is enough). Paste the output into the profile's `[reflections]` table.
+    CalibrateMirror {
+        /// Bundled profile name (bandai-namco, cmu, smpl-22) or a profile TOML file.
+        #[arg(long)]
+        profile: String,
+        /// BVH captures of that skeleton.
+        #[arg(required = true)]
+        captures: Vec<PathBuf>,
+    },
+    /// Print the clip table schema (columns, types, version) as JSON.
+    Schema,
+    /// Measure BVH read, forward kinematics and mirroring throughput on a folder of captures.
+    Bench {
+        /// Folder of BVH files (all must share one skeleton profile).
+        #[arg(long, default_value = "../shared/data/bandai-namco-1/data")]
+        data: PathBuf,
+        /// Skeleton profile of the captures.
+        #[arg(long, default_value = "bandai-namco")]
+        profile: String,
+        /// Repeat the whole folder this many times and keep the fastest pass.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(err) => {
+            // A closed pipe (`motionforge mirror-text | head`) is not an error worth reporting.
+            if err.chain().any(|e| {
+                e.downcast_ref::<std::io::Error>()
+                    .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+            }) {
+                return ExitCode::SUCCESS;
+            }
+            eprintln!("error: {err:#}");
+            let usage = err.chain().any(|e| {
+                e.downcast_ref::<motionforge::config::ConfigError>()
+                    .is_some()
+            });
+            ExitCode::from(if usage { 2 } else { 1 })
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Command::Build {
+            config,
+            force,
+            strict,
+            json,
+        } => {
+            let config = Config::load(&config)?;
+            let report = build(&config, &BuildOptions { force })?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print_report(&report);
+            }
+            if strict && !report.rejects.is_empty() {
+                return Ok(ExitCode::from(3));
+            }
+        }
+        Command::MirrorText { file } => mirror_text(file.as_deref())?,
+        Command::CalibrateMirror { profile, captures } => calibrate_mirror(&profile, &captures)?,
+        Command::Schema => println!(
+            "{}",
+            serde_json::to_string_pretty(&motionforge::io::schema::clip_schema_json())?
+        ),
+        Command::Bench {
+            data,
+            profile,
+            repeat,
+        } => bench(&data, &profile, repeat.max(1))?,
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_report(report: &BuildReport) {
+    for stage in &report.stages {
+        let what = if stage.ran == 0 {
+            "up to date, nothing re-run".to_string()
+        } else {
+            format!(
+                "ran {} of {} ({} reused)",
+                stage.ran, stage.items, stage.reused
+            )
+        };
+        println!("{:>8}  {what}", stage.stage);
+    }
+    println!(
+        "{} captures -> {} clips ({} mirrored) in {}",
+        report.captures,
+        report.clips,
+        report.mirrored,
+        report.output.join(motionforge::build::CLIPS_FILE).display()
+    );
+    if !report.actions.is_empty() {
+        let counts: Vec<String> = report
+            .actions
+            .iter()
+            .map(|(a, n)| format!("{a} {n}"))
+            .collect();
+        println!("actions: {}", counts.join(", "));
+    }
+    if report.rejects.is_empty() {
+        println!("rejects: none");
+    } else {
+        let by: Vec<String> = report
+            .rejects_by_reason
+            .iter()
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
+        println!(
+            "rejects: {} ({}), listed in {}:",
+            report.rejects.len(),
+            by.join(", "),
+            report
+                .output
+                .join(motionforge::build::REJECTS_FILE)
+                .display()
+        );
+        for r in report.rejects.iter().take(10) {
+            println!("  {r}");
+        }
+    }
+    if report.nothing_ran() {
+        println!("nothing changed since the last build");
+    }
+}
+
+fn mirror_text(file: Option<&Path>) -> Result<()> {
+    let stdin = std::io::stdin();
+    let reader: Box<dyn BufRead> = match file {
+        Some(p) => Box::new(std::io::BufReader::new(
+            std::fs::File::open(p).with_context(|| format!("cannot open {}", p.display()))?,
+        )),
+        None => Box::new(stdin.lock()),
+    };
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    for line in reader.lines() {
+        let line = line.context("reading text")?;
+        writeln!(out, "{}", motionforge::text::mirror_text(&line))?;
+    }
+    out.flush()?;
+    Ok(())
+}
+
+fn load_profile(name: &str) -> Result<ProfileSpec> {
+    if name.ends_with(".toml") {
+        let text =
+            std::fs::read_to_string(name).with_context(|| format!("cannot read profile {name}"))?;
+        Ok(ProfileSpec::from_toml(name, &text)?)
+    } else {
+        Ok(ProfileSpec::bundled(name)?)
+    }
+}
+
+fn read_capture(path: &Path) -> Result<motionforge::motion::Bvh> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    read_bvh(&text).with_context(|| format!("{}", path.display()))
+}
+
+fn calibrate_mirror(profile: &str, captures: &[PathBuf]) -> Result<()> {
+    let spec = load_profile(profile)?;
+    let bvhs: Vec<_> = captures
+        .iter()
+        .map(|p| read_capture(p))
+        .collect::<Result<_>>()?;
+    let skeleton = &bvhs[0].skeleton;
+    if let Some((p, _)) = captures
+        .iter()
+        .zip(&bvhs)
+        .find(|(_, b)| b.skeleton.names().ne(skeleton.names()))
+    {
+        bail!(
+            "{} has a different skeleton from {}",
+            p.display(),
+            captures[0].display()
+        );
+    }
+    let bound = spec.bind(skeleton)?;
+    let motions: Vec<_> = bvhs.iter().map(|b| &b.motion).collect();
+    let reflections = calibrate(skeleton, &bound, &motions);
+    let names: Vec<String> = captures
+        .iter()
+        .filter_map(|p| p.file_name())
+        .map(|n| n.to_string_lossy().into_owned())
+        .collect();
+    println!(
+        "# Calibrated on {} with `motionforge calibrate-mirror`.\n[reflections]",
+        names.join(", ")
+    );
+    for (joint, r) in skeleton.joints.iter().zip(&reflections) {
+        println!(
+            "{} = \"{}\"",
+            joint.name,
+            serde_json::to_value(r)?.as_str().unwrap_or_default()
+        );
+    }
+    Ok(())
+}
+
+fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
+    let spec = load_profile(profile)?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(data)
+        .with_context(|| format!("cannot list {}", data.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "bvh"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("no .bvh files in {}", data.display());
+    }
+    let texts: Vec<String> = files
+        .iter()
+        .map(std::fs::read_to_string)
+        .collect::<std::io::Result<_>>()?;
+    let bytes: usize = texts.iter().map(String::len).sum();
+    let first = read_bvh(&texts[0]).with_context(|| files[0].display().to_string())?;
+    let plan = MirrorPlan::from_profile(&first.skeleton, &spec.bind(&first.skeleton)?)?;
+    let (mut parse_s, mut fk_s, mut mirror_s, mut total_s) =
+        (f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let mut frames = 0usize;
+    for _ in 0..repeat {
+        let (mut p, mut f, mut m) = (0.0, 0.0, 0.0);
+        frames = 0;
+        for text in &texts {
+            let t0 = std::time::Instant::now();
+            let bvh = read_bvh(text)?;
+            let t1 = std::time::Instant::now();
+            let pose = bvh.motion.forward_kinematics();
+            let t2 = std::time::Instant::now();
+            let mirrored = plan.mirror(&bvh.motion, OffsetPolicy::Keep);
+            let t3 = std::time::Instant::now();
+            std::hint::black_box((&pose, &mirrored));
+            frames += bvh.motion.num_frames();
+            p += (t1 - t0).as_secs_f64();
+            f += (t2 - t1).as_secs_f64();
+            m += (t3 - t2).as_secs_f64();
+        }
+        parse_s = parse_s.min(p);
+        fk_s = fk_s.min(f);
+        mirror_s = mirror_s.min(m);
+        total_s = total_s.min(p + f + m);
+    }
+    let mb = bytes as f64 / 1e6;
+    println!(
+        "{} files, {frames} frames, {mb:.1} MB, one thread, best of {repeat}",
+        files.len()
+    );
+    println!(
+        "read      {:>10.0} frames/s  {:>7.1} MB/s",
+        frames as f64 / parse_s,
+        mb / parse_s
+    );
+    println!("fk        {:>10.0} frames/s", frames as f64 / fk_s);
+    println!("mirror    {:>10.0} frames/s", frames as f64 / mirror_s);
+    println!(
+        "read+fk+mirror {:>10.0} frames/s  {:>7.1} MB/s",
+        frames as f64 / total_s,
+        mb / total_s
+    );
+    Ok(())
+}

@@ -210,7 +210,8 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
     tokens.expect("Frame")?;
     tokens.expect("Time:")?;
     let frame_time = tokens.number("the frame time")?;
-    if frame_time <= 0.0 {
+    // A positive but subnormal frame time would give an infinite rate.
+    if frame_time <= 0.0 || !(1.0 / frame_time).is_finite() {
         return Err(tokens.error(BvhErrorKind::FrameTime(frame_time)));
     }
     // Anything after `Frame Time: x` on the same line is an error, caught below as a value line.
@@ -240,18 +241,48 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
 
 fn snap_fps(fps: f64) -> f64 {
     let rounded = fps.round();
-    if (fps - rounded).abs() < 0.01 {
+    // Never snap a very slow rate (frame time over 100 s) to 0 fps.
+    if rounded > 0.0 && (fps - rounded).abs() < 0.01 {
         rounded
     } else {
         fps
     }
 }
 
+/// Reads the joint after `ROOT` and everything nested in it, up to its closing `}`. Iterative, with
+/// an explicit stack of open joints, so deeply nested (damaged) hierarchies cannot overflow the
+/// call stack.
 fn read_joint(
     tokens: &mut Tokens<'_>,
     joints: &mut Vec<Joint>,
     parent: Option<usize>,
 ) -> Result<(), BvhError> {
+    let mut open = vec![read_joint_header(tokens, joints, parent)?];
+    while let Some(&index) = open.last() {
+        let tok = tokens.expect_any("JOINT, End Site or }")?;
+        if tok == "}" {
+            open.pop();
+        } else if tok.eq_ignore_ascii_case("JOINT") {
+            open.push(read_joint_header(tokens, joints, Some(index))?);
+        } else if tok.eq_ignore_ascii_case("End") {
+            tokens.expect("Site")?;
+            tokens.expect("{")?;
+            tokens.expect("OFFSET")?;
+            joints[index].end_site = Some(read_vec3(tokens)?);
+            tokens.expect("}")?;
+        } else {
+            return Err(tokens.unexpected("JOINT, End Site or }", tok));
+        }
+    }
+    Ok(())
+}
+
+/// Reads a joint's name, `{`, `OFFSET` and `CHANNELS`, pushes it and returns its index.
+fn read_joint_header(
+    tokens: &mut Tokens<'_>,
+    joints: &mut Vec<Joint>,
+    parent: Option<usize>,
+) -> Result<usize, BvhError> {
     let name = tokens.expect_any("a joint name")?;
     if name == "{" || name == "}" {
         return Err(tokens.unexpected("a joint name", name));
@@ -284,22 +315,7 @@ fn read_joint(
             .ok_or_else(|| tokens.error(BvhErrorKind::UnknownChannel(tok.to_string())))?;
         joints[index].channels.push(channel);
     }
-    loop {
-        let tok = tokens.expect_any("JOINT, End Site or }")?;
-        if tok == "}" {
-            return Ok(());
-        } else if tok.eq_ignore_ascii_case("JOINT") {
-            read_joint(tokens, joints, Some(index))?;
-        } else if tok.eq_ignore_ascii_case("End") {
-            tokens.expect("Site")?;
-            tokens.expect("{")?;
-            tokens.expect("OFFSET")?;
-            joints[index].end_site = Some(read_vec3(tokens)?);
-            tokens.expect("}")?;
-        } else {
-            return Err(tokens.unexpected("JOINT, End Site or }", tok));
-        }
-    }
+    Ok(index)
 }
 
 fn read_vec3(tokens: &mut Tokens<'_>) -> Result<DVec3, BvhError> {
@@ -369,8 +385,11 @@ fn read_motion(
 ) -> Result<Motion, BvhError> {
     let layout = ChannelLayout::new(skeleton);
     let n = skeleton.len();
-    let mut rotations = Vec::with_capacity(declared * n);
-    let mut translations = Vec::with_capacity(declared * n);
+    // A damaged `Frames:` count must not drive the allocation: a frame needs at least one
+    // non-blank line, so the body cannot hold more than `body.len() / 2 + 1` frames.
+    let capacity = declared.min(body.len() / 2 + 1).saturating_mul(n);
+    let mut rotations = Vec::with_capacity(capacity);
+    let mut translations = Vec::with_capacity(capacity);
     let mut values = Vec::with_capacity(layout.total);
     let mut frame = 0usize;
     if !leftover.is_empty() {
@@ -384,7 +403,8 @@ fn read_motion(
         });
     }
     leftover.clear();
-    let mut last_line = first_line;
+    // The Frame Time line, when no line follows it.
+    let mut last_line = first_line - 1;
     for (i, line) in body.lines().enumerate() {
         let line_no = first_line + i;
         last_line = line_no;

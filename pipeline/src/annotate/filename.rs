@@ -1,0 +1,156 @@
+//! Labels from file names (one action per file, as in Bandai Namco's datasets), plus an optional
+//! sidecar JSON beside each capture.
+
+use std::collections::BTreeMap;
+
+use regex::Regex;
+
+/// Why a file-name pattern or template cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PatternError {
+    /// The pattern is not a valid regex once placeholders are expanded.
+    #[error("not a valid pattern: {0}")]
+    Regex(String),
+    /// An unclosed `{` in a pattern or template.
+    #[error("unclosed `{{` in `{0}`")]
+    Unclosed(String),
+    /// A template names a field the pattern does not capture.
+    #[error("`{{{field}}}` is not captured by the file-name pattern or the sidecar")]
+    UnknownField {
+        /// The field name.
+        field: String,
+    },
+}
+
+/// A compiled file-stem pattern.
+#[derive(Debug, Clone)]
+pub struct FilenamePattern {
+    source: String,
+    regex: Regex,
+}
+
+impl FilenamePattern {
+    /// Compiles `dataset-1_{content}_{style}_{take}`-style patterns (each `{name}` matches one or
+    /// more characters other than `_`), or a raw regex with named groups when it starts with `^`.
+    pub fn new(pattern: &str) -> Result<FilenamePattern, PatternError> {
+        let regex_text = if pattern.starts_with('^') {
+            pattern.to_string()
+        } else {
+            let mut out = String::from("^");
+            let mut rest = pattern;
+            while let Some(open) = rest.find('{') {
+                out.push_str(&regex::escape(&rest[..open]));
+                let close = rest[open..]
+                    .find('}')
+                    .ok_or_else(|| PatternError::Unclosed(pattern.to_string()))?
+                    + open;
+                let name = &rest[open + 1..close];
+                out.push_str(&format!("(?P<{name}>[^_]+)"));
+                rest = &rest[close + 1..];
+            }
+            out.push_str(&regex::escape(rest));
+            out.push('$');
+            out
+        };
+        let regex = Regex::new(&regex_text).map_err(|e| PatternError::Regex(e.to_string()))?;
+        Ok(FilenamePattern {
+            source: pattern.to_string(),
+            regex,
+        })
+    }
+
+    /// The pattern as configured.
+    pub fn as_str(&self) -> &str {
+        &self.source
+    }
+
+    /// The named groups of a file stem, or `None` when it does not match.
+    pub fn captures(&self, stem: &str) -> Option<BTreeMap<String, String>> {
+        let caps = self.regex.captures(stem)?;
+        Some(
+            self.regex
+                .capture_names()
+                .flatten()
+                .filter_map(|name| {
+                    caps.name(name)
+                        .map(|m| (name.to_string(), m.as_str().to_string()))
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Fills `{field}` placeholders from `fields`. With `words`, `-` and `_` in values become spaces
+/// (captions read as text; labels keep their spelling).
+pub fn fill_template(
+    template: &str,
+    fields: &BTreeMap<String, String>,
+    words: bool,
+) -> Result<String, PatternError> {
+    let mut out = String::new();
+    let mut rest = template;
+    while let Some(open) = rest.find('{') {
+        out.push_str(&rest[..open]);
+        let close = rest[open..]
+            .find('}')
+            .ok_or_else(|| PatternError::Unclosed(template.to_string()))?
+            + open;
+        let field = &rest[open + 1..close];
+        let value = fields
+            .get(field)
+            .ok_or_else(|| PatternError::UnknownField {
+                field: field.to_string(),
+            })?;
+        if words {
+            out.push_str(&value.replace(['-', '_'], " "));
+        } else {
+            out.push_str(value);
+        }
+        rest = &rest[close + 1..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// Flattens a sidecar JSON object into string attributes (numbers and booleans as written).
+pub fn sidecar_fields(json: &serde_json::Value) -> Option<BTreeMap<String, String>> {
+    let object = json.as_object()?;
+    Some(
+        object
+            .iter()
+            .filter_map(|(k, v)| {
+                let s = match v {
+                    serde_json::Value::String(s) => s.clone(),
+                    serde_json::Value::Number(n) => n.to_string(),
+                    serde_json::Value::Bool(b) => b.to_string(),
+                    _ => return None,
+                };
+                Some((k.clone(), s))
+            })
+            .collect(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bandai_names_split_on_underscores_and_keep_hyphens() {
+        let p = FilenamePattern::new("dataset-1_{content}_{style}_{take}").unwrap();
+        let f = p.captures("dataset-1_walk-left_not-confident_001").unwrap();
+        assert_eq!(f["content"], "walk-left");
+        assert_eq!(f["style"], "not-confident");
+        assert_eq!(f["take"], "001");
+        assert!(p.captures("dataset-2_walk_normal_001").is_none());
+        assert_eq!(
+            fill_template("{content}, {style} style", &f, true).unwrap(),
+            "walk left, not confident style"
+        );
+        assert_eq!(fill_template("{content}", &f, false).unwrap(), "walk-left");
+        assert!(matches!(
+            fill_template("{mood}", &f, true),
+            Err(PatternError::UnknownField { .. })
+        ));
+    }
+}

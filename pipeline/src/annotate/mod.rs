@@ -1,0 +1,5 @@
+//! Annotation formats: where clips' frame ranges and texts come from.
+//!
+//! Knows nothing of motion math beyond frame counts.
+
+pub mod filename;

@@ -1,0 +1,70 @@
+//! `Clip`: a labelled stretch of motion with its provenance, the unit every stage passes on.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::motion::Motion;
+
+/// Where a clip came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SourceKind {
+    /// One real action.
+    RealSingle,
+    /// Two real actions performed at once (overlapping annotations).
+    RealPair,
+    /// Two clips stitched by body part.
+    Synthetic,
+}
+
+impl SourceKind {
+    /// The name written in datasets and reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SourceKind::RealSingle => "real_single",
+            SourceKind::RealPair => "real_pair",
+            SourceKind::Synthetic => "synthetic",
+        }
+    }
+}
+
+/// The capture file a clip was cut from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaptureRef {
+    /// Source name from the config.
+    pub source: String,
+    /// Path as found by the capture glob (relative to the config folder when under it).
+    pub path: String,
+    /// SHA-256 of the file's bytes, hex.
+    pub sha256: String,
+    /// Frame rate used for the file (header or override).
+    pub fps: f64,
+}
+
+/// A clip: motion at the dataset frame rate on its capture's skeleton, its texts and provenance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Clip {
+    /// Stable identifier: `<capture stem>:<start>-<end>`, with `:m` for mirrors.
+    pub clip_id: String,
+    /// Real single, real pair or synthetic.
+    pub kind: SourceKind,
+    /// The capture.
+    pub capture: CaptureRef,
+    /// Half-open frame range `[start, end)` in the capture's own frames.
+    pub frame_range: (u64, u64),
+    /// True for the mirrored copy.
+    pub mirrored: bool,
+    /// Action label.
+    pub action: String,
+    /// Caption.
+    pub text: String,
+    /// Annotation source (`filename`, ...).
+    pub annotation: String,
+    /// Extra fields from the annotation (file-name groups, sidecar keys).
+    pub attributes: BTreeMap<String, String>,
+    /// Skeleton profile name.
+    pub profile: String,
+    /// The motion, resampled to the dataset rate, in the capture's units and axes.
+    pub motion: Motion,
+}

@@ -1,0 +1,263 @@
+//! Build configuration (TOML), one typed section per stage, validated on load.
+//!
+//! Relative paths in a config resolve against the folder of the config file, so a build gives the
+//! same result whatever the working folder.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// A configuration error that names the file, the key and what was expected.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file cannot be read.
+    #[error("cannot read config {path}: {source}")]
+    Read {
+        /// The config path.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The TOML does not parse or does not fit the schema.
+    #[error("config {path}: {message}")]
+    Parse {
+        /// The config path.
+        path: PathBuf,
+        /// What the parser reported, with line and key.
+        message: String,
+    },
+    /// A value parses but is not acceptable.
+    #[error("config {path}: `{key}` = {value}: {expected}")]
+    Invalid {
+        /// The config path.
+        path: PathBuf,
+        /// Dotted key.
+        key: String,
+        /// The value found.
+        value: String,
+        /// What is expected.
+        expected: String,
+    },
+}
+
+/// The whole build configuration.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Dataset-wide settings.
+    pub dataset: DatasetConfig,
+    /// Mirroring.
+    #[serde(default)]
+    pub mirror: MirrorConfig,
+    /// Capture sources.
+    #[serde(rename = "sources")]
+    pub sources: Vec<SourceConfig>,
+    /// Folder of the config file; relative paths resolve against it.
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+}
+
+/// Dataset-wide settings.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetConfig {
+    /// Dataset name (file names, manifest).
+    pub name: String,
+    /// Output folder.
+    pub output: PathBuf,
+    /// Frame rate every clip is resampled to.
+    #[serde(default = "default_fps")]
+    pub fps: f64,
+    /// Seed for every random choice.
+    #[serde(default)]
+    pub seed: u64,
+}
+
+fn default_fps() -> f64 {
+    30.0
+}
+
+/// Mirroring settings.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MirrorConfig {
+    /// Add a mirrored copy of every clip.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Default for MirrorConfig {
+    fn default() -> Self {
+        MirrorConfig { enabled: true }
+    }
+}
+
+/// One set of captures sharing a skeleton profile and an annotation source.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SourceConfig {
+    /// Source name (provenance, reports).
+    pub name: String,
+    /// Glob patterns of capture files, relative to the config file.
+    pub captures: Vec<String>,
+    /// Skeleton profile: a bundled name (`bandai-namco`, `cmu`, `smpl-22`) or a path to a TOML file.
+    pub profile: String,
+    /// Per-file frame-rate overrides (file name or glob -> fps), for headers that state the wrong
+    /// rate.
+    #[serde(default)]
+    pub fps_override: BTreeMap<String, f64>,
+    /// Licence of the captures, carried to the dataset card.
+    #[serde(default)]
+    pub licence: String,
+    /// Where action labels come from.
+    pub labels: LabelConfig,
+}
+
+/// How a source's captures get their labels.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum LabelConfig {
+    /// One action per file, taken from the file name (and an optional sidecar JSON).
+    Filename {
+        /// File-stem pattern with `{name}` placeholders (each matches up to the next `_`), e.g.
+        /// `dataset-1_{content}_{style}_{take}`; or a full regex with named groups when it starts
+        /// with `^`.
+        pattern: String,
+        /// Action label template, e.g. `{content}`.
+        action: String,
+        /// Caption template, e.g. `{content}, {style} style`; `-` and `_` in values become spaces.
+        text: String,
+        /// Read `<stem>.json` beside each capture when present; its keys join the attributes and
+        /// `action`/`text` keys override the templates.
+        #[serde(default)]
+        sidecar: bool,
+    },
+}
+
+impl Config {
+    /// Reads and validates a config file.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Config::parse(&text, path)
+    }
+
+    /// Parses and validates config text; `path` names the file in errors and sets the base folder.
+    pub fn parse(text: &str, path: &Path) -> Result<Config, ConfigError> {
+        let mut config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        config.base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        config.validate(path)?;
+        Ok(config)
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let invalid = |key: &str, value: String, expected: &str| ConfigError::Invalid {
+            path: path.to_path_buf(),
+            key: key.to_string(),
+            value,
+            expected: expected.to_string(),
+        };
+        let d = &self.dataset;
+        if d.name.is_empty()
+            || !d
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+        {
+            return Err(invalid(
+                "dataset.name",
+                format!("{:?}", d.name),
+                "a non-empty name of letters, digits, `-`, `_`, `.`",
+            ));
+        }
+        if !(d.fps.is_finite() && d.fps > 0.0 && d.fps <= 1000.0) {
+            return Err(invalid(
+                "dataset.fps",
+                d.fps.to_string(),
+                "a frame rate between 0 and 1000",
+            ));
+        }
+        if self.sources.is_empty() {
+            return Err(invalid(
+                "sources",
+                "[]".into(),
+                "at least one [[sources]] table",
+            ));
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for (i, s) in self.sources.iter().enumerate() {
+            if !names.insert(&s.name) {
+                return Err(invalid(
+                    &format!("sources[{i}].name"),
+                    format!("{:?}", s.name),
+                    "a name no other source uses",
+                ));
+            }
+            if s.captures.is_empty() {
+                return Err(invalid(
+                    &format!("sources[{i}].captures"),
+                    "[]".into(),
+                    "at least one glob pattern",
+                ));
+            }
+            for (file, fps) in &s.fps_override {
+                if !(fps.is_finite() && *fps > 0.0) {
+                    return Err(invalid(
+                        &format!("sources[{i}].fps_override.{file}"),
+                        fps.to_string(),
+                        "a positive frame rate",
+                    ));
+                }
+            }
+            let LabelConfig::Filename { pattern, .. } = &s.labels;
+            if let Err(e) = crate::annotate::filename::FilenamePattern::new(pattern) {
+                return Err(invalid(
+                    &format!("sources[{i}].labels.pattern"),
+                    format!("{pattern:?}"),
+                    &e.to_string(),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// A path from the config, resolved against the config's folder.
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base_dir.join(p)
+        }
+    }
+
+    /// The output folder.
+    pub fn output_dir(&self) -> PathBuf {
+        self.resolve(&self.dataset.output)
+    }
+}
+
+/// Removes `.` and folds `dir/..` lexically, so paths print the way people wrote them.
+fn normalize(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out: Vec<Component<'_>> = Vec::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    if out.is_empty() { PathBuf::from(".") } else { out.iter().collect() }
+}

@@ -1,0 +1,239 @@
+//! Writes clips as a Parquet table (arrow-rs, zstd), streaming one row group at a time.
+//!
+//! Motion columns are in the dataset frame: metres, x right, y forward, z up (right-handed), see
+//! `schemas/clips.md`. Arrays are flat `list<float32>` so any reader reshapes them with one call.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::sync::Arc;
+
+use arrow_array::builder::{MapBuilder, MapFieldNames, StringBuilder};
+use arrow_array::{
+    ArrayRef, BooleanArray, Float32Array, Float64Array, Int32Array, Int64Array, ListArray,
+    RecordBatch, StringArray, StructArray,
+};
+use arrow_buffer::{OffsetBuffer, ScalarBuffer};
+use arrow_schema::{ArrowError, DataType, Field, Fields};
+use glam::DQuat;
+use parquet::arrow::ArrowWriter;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::errors::ParquetError;
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::WriterProperties;
+
+use super::schema::{SCHEMA_VERSION, clip_schema};
+use crate::clip::Clip;
+use crate::motion::Profile;
+
+/// Errors writing a table.
+#[derive(Debug, thiserror::Error)]
+pub enum TableError {
+    /// Arrow rejected the arrays (a schema mismatch: a bug, reported rather than hidden).
+    #[error("building the clip table: {0}")]
+    Arrow(#[from] ArrowError),
+    /// Parquet encoding or I/O failed.
+    #[error("writing Parquet: {0}")]
+    Parquet(#[from] ParquetError),
+    /// A clip's skeleton profile was not supplied.
+    #[error("clip `{clip}` uses skeleton profile `{profile}`, which the writer was not given")]
+    MissingProfile {
+        /// The clip.
+        clip: String,
+        /// The profile.
+        profile: String,
+    },
+}
+
+/// A clip's motion in the dataset frame, as the table stores it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DatasetMotion {
+    /// `frames × joints × 3` positions in metres.
+    pub positions: Vec<f32>,
+    /// `frames × joints × 4` local rotations (x, y, z, w), `w ≥ 0`; joint 0 includes the turn from
+    /// capture axes to dataset axes.
+    pub rotations: Vec<f32>,
+    /// `frames × 3` world position of the root-motion joint in metres.
+    pub root: Vec<f32>,
+}
+
+/// Converts a clip's motion from capture units and axes to the dataset frame.
+pub fn dataset_motion(clip: &Clip, profile: &Profile) -> DatasetMotion {
+    let axes = profile.to_dataset_axes();
+    let scale = profile.unit_scale;
+    let pose = clip.motion.forward_kinematics();
+    let n = clip.motion.num_joints();
+    let mut positions = Vec::with_capacity(pose.positions.len() * 3);
+    for p in &pose.positions {
+        let q = axes * (*p * scale);
+        positions.extend([q.x as f32, q.y as f32, q.z as f32]);
+    }
+    let mut rotations = Vec::with_capacity(clip.motion.rotations.len() * 4);
+    for (i, r) in clip.motion.rotations.iter().enumerate() {
+        let r = if i % n == 0 { axes * *r } else { *r };
+        let r: DQuat = if r.w < 0.0 { -r } else { r };
+        rotations.extend([r.x as f32, r.y as f32, r.z as f32, r.w as f32]);
+    }
+    let mut root = Vec::with_capacity(pose.num_frames() * 3);
+    for f in 0..pose.num_frames() {
+        let at = (f * n + profile.root) * 3;
+        root.extend_from_slice(&positions[at..at + 3]);
+    }
+    DatasetMotion {
+        positions,
+        rotations,
+        root,
+    }
+}
+
+fn list(values: Vec<f32>, lengths: Vec<usize>) -> Result<ArrayRef, ArrowError> {
+    let field = Arc::new(Field::new("item", DataType::Float32, false));
+    let offsets = checked_offsets(&lengths)?;
+    Ok(Arc::new(ListArray::try_new(
+        field,
+        offsets,
+        Arc::new(Float32Array::from(values)),
+        None,
+    )?))
+}
+
+fn checked_offsets(lengths: &[usize]) -> Result<OffsetBuffer<i32>, ArrowError> {
+    let mut offsets = Vec::with_capacity(lengths.len() + 1);
+    let mut total: i32 = 0;
+    offsets.push(0);
+    for &l in lengths {
+        let l = i32::try_from(l)
+            .map_err(|_| ArrowError::ComputeError("list longer than 2^31 values".into()))?;
+        total = total.checked_add(l).ok_or_else(|| {
+            ArrowError::ComputeError("row group over 2^31 values; lower the row group size".into())
+        })?;
+        offsets.push(total);
+    }
+    Ok(OffsetBuffer::new(ScalarBuffer::from(offsets)))
+}
+
+/// Builds one record batch from clips.
+pub fn clips_to_batch(
+    clips: &[Clip],
+    profiles: &BTreeMap<String, Profile>,
+) -> Result<RecordBatch, TableError> {
+    let schema = Arc::new(clip_schema());
+    let strings = |f: &dyn Fn(&Clip) -> &str| -> ArrayRef {
+        Arc::new(StringArray::from_iter_values(clips.iter().map(f)))
+    };
+    let mut positions = Vec::new();
+    let mut rotations = Vec::new();
+    let mut roots = Vec::new();
+    let (mut pl, mut rl, mut tl) = (Vec::new(), Vec::new(), Vec::new());
+    for clip in clips {
+        let profile = profiles
+            .get(&clip.profile)
+            .ok_or_else(|| TableError::MissingProfile {
+                clip: clip.clip_id.clone(),
+                profile: clip.profile.clone(),
+            })?;
+        let m = dataset_motion(clip, profile);
+        pl.push(m.positions.len());
+        rl.push(m.rotations.len());
+        tl.push(m.root.len());
+        positions.extend(m.positions);
+        rotations.extend(m.rotations);
+        roots.extend(m.root);
+    }
+    let frame_range = StructArray::try_new(
+        Fields::from(vec![
+            Field::new("start", DataType::Int64, false),
+            Field::new("end", DataType::Int64, false),
+        ]),
+        vec![
+            Arc::new(Int64Array::from_iter_values(
+                clips.iter().map(|c| c.frame_range.0 as i64),
+            )) as ArrayRef,
+            Arc::new(Int64Array::from_iter_values(
+                clips.iter().map(|c| c.frame_range.1 as i64),
+            )),
+        ],
+        None,
+    )?;
+    let mut attributes = MapBuilder::new(
+        Some(MapFieldNames {
+            entry: "entries".into(),
+            key: "key".into(),
+            value: "value".into(),
+        }),
+        StringBuilder::new(),
+        StringBuilder::new(),
+    );
+    for clip in clips {
+        for (k, v) in &clip.attributes {
+            attributes.keys().append_value(k);
+            attributes.values().append_value(v);
+        }
+        attributes.append(true)?;
+    }
+    let columns: Vec<ArrayRef> = vec![
+        strings(&|c| &c.clip_id),
+        strings(&|c| c.kind.as_str()),
+        strings(&|c| &c.capture.source),
+        strings(&|c| &c.capture.path),
+        strings(&|c| &c.capture.sha256),
+        Arc::new(Float64Array::from_iter_values(
+            clips.iter().map(|c| c.capture.fps),
+        )),
+        Arc::new(frame_range),
+        Arc::new(BooleanArray::from(
+            clips.iter().map(|c| c.mirrored).collect::<Vec<_>>(),
+        )),
+        strings(&|c| &c.action),
+        strings(&|c| &c.text),
+        strings(&|c| &c.annotation),
+        Arc::new(attributes.finish()),
+        strings(&|c| &c.profile),
+        Arc::new(Float64Array::from_iter_values(
+            clips.iter().map(|c| c.motion.fps),
+        )),
+        Arc::new(Int32Array::from_iter_values(
+            clips.iter().map(|c| c.motion.num_frames() as i32),
+        )),
+        Arc::new(Int32Array::from_iter_values(
+            clips.iter().map(|c| c.motion.num_joints() as i32),
+        )),
+        list(positions, pl)?,
+        list(rotations, rl)?,
+        list(roots, tl)?,
+    ];
+    Ok(RecordBatch::try_new(schema, columns)?)
+}
+
+/// Clips per row group: large enough for efficient scans, small enough that one group's buffers
+/// stay a few tens of MB for long captures.
+pub const ROWS_PER_GROUP: usize = 64;
+
+/// Streams clips into a Parquet file, one row group at a time, with the schema version and the
+/// skeletons (`key_value_metadata`) so the file describes itself.
+pub fn write_clips(
+    file: File,
+    clips: &[Clip],
+    profiles: &BTreeMap<String, Profile>,
+    skeletons_json: &str,
+) -> Result<File, TableError> {
+    let props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
+        .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
+        .set_key_value_metadata(Some(vec![
+            KeyValue::new(
+                "motionforge.schema_version".to_string(),
+                SCHEMA_VERSION.to_string(),
+            ),
+            KeyValue::new(
+                "motionforge.skeletons".to_string(),
+                skeletons_json.to_string(),
+            ),
+        ]))
+        .build();
+    let mut writer = ArrowWriter::try_new(file, Arc::new(clip_schema()), Some(props))?;
+    for chunk in clips.chunks(ROWS_PER_GROUP) {
+        writer.write(&clips_to_batch(chunk, profiles)?)?;
+        writer.flush()?;
+    }
+    Ok(writer.into_inner()?)
+}
