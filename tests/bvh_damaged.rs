@@ -1,28 +1,721 @@
+//! Damaged BVH input never panics and gets a clear error with the right line: specific damage to a
+//! real Bandai Namco capture (each error kind and line asserted), then random damage and arbitrary
+//! strings (proptest).
 mod common;
-use motionforge::motion::*;
 
-#[test]
-fn deep() {
-    for depth in [1000usize, 10_000, 100_000] {
-        let mut s = String::from("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
-        for _ in 0..depth {
-            s.push_str("JOINT b\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
+use std::sync::OnceLock;
+
+use common::*;
+use motionforge::motion::*;
+use proptest::prelude::*;
+
+/// Frames kept from the real capture, so every case stays fast.
+const FRAMES: usize = 20;
+
+/// `dataset-1_walk_normal_001.bvh`: its hierarchy and first 20 frames, `Frames:` set to 20, LF.
+fn walk20() -> &'static str {
+    static TEXT: OnceLock<String> = OnceLock::new();
+    TEXT.get_or_init(|| {
+        let path = bandai1("walk", "normal");
+        let full =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut out = String::new();
+        let mut frames = None;
+        for line in full.lines() {
+            match frames {
+                None if line.starts_with("Frames:") => {
+                    out.push_str(&format!("Frames:\t{FRAMES}\n"))
+                }
+                None => {
+                    out.push_str(line);
+                    out.push('\n');
+                    if line.starts_with("Frame Time:") {
+                        frames = Some(0);
+                    }
+                }
+                Some(n) if n < FRAMES => {
+                    out.push_str(line);
+                    out.push('\n');
+                    frames = Some(n + 1);
+                }
+                Some(_) => break,
+            }
         }
-        let r = read_bvh(&s);
-        println!("{depth}: {:?}", r.err());
+        out
+    })
+}
+
+// Line numbers in walk20 (1-based), checked by `walk20_is_what_the_cases_assume`.
+const ROOT_LINE: usize = 2;
+const FIRST_CHANNELS_LINE: usize = 5;
+const LAST_BRACE_LINE: usize = 131;
+const MOTION_LINE: usize = 132;
+const FRAMES_LINE: usize = 133;
+const FRAME_TIME_LINE: usize = 134;
+const FIRST_FRAME_LINE: usize = 135;
+const CHANNELS: usize = 22 * 6;
+
+fn lines() -> Vec<&'static str> {
+    walk20().lines().collect()
+}
+
+fn join(lines: &[&str]) -> String {
+    let mut s = lines.join("\n");
+    s.push('\n');
+    s
+}
+
+/// walk20 with line `n` (1-based) replaced.
+fn with_line(n: usize, new: &str) -> String {
+    let mut l = lines();
+    l[n - 1] = new;
+    join(&l)
+}
+
+fn err(text: &str) -> BvhError {
+    match read_bvh(text) {
+        Ok(bvh) => panic!(
+            "expected an error, read {} frames of {} joints",
+            bvh.motion.num_frames(),
+            bvh.skeleton.len()
+        ),
+        Err(e) => e,
     }
 }
 
 #[test]
-fn huge_frames() {
-    let s = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\nEnd Site\n{\nOFFSET 0 0 1\n}\n}\nMOTION\nFrames: 1e12\nFrame Time: 0.03\n1 2 3\n";
-    println!("{:?}", read_bvh(s).err());
+fn walk20_is_what_the_cases_assume() {
+    let l = lines();
+    assert_eq!(l.len(), FIRST_FRAME_LINE - 1 + FRAMES);
+    assert_eq!(l[ROOT_LINE - 1], "ROOT joint_Root");
+    assert!(
+        l[FIRST_CHANNELS_LINE - 1]
+            .trim_start()
+            .starts_with("CHANNELS 6 Xposition")
+    );
+    assert_eq!(l[LAST_BRACE_LINE - 1], "}");
+    assert_eq!(l[MOTION_LINE - 1], "MOTION");
+    assert_eq!(l[FRAMES_LINE - 1], "Frames:\t20");
+    assert_eq!(l[FRAME_TIME_LINE - 1], "Frame Time:\t0.0333333");
+    let bvh = read_bvh(walk20()).unwrap();
+    assert_eq!(bvh.motion.num_frames(), FRAMES);
+    assert_eq!(bvh.skeleton.channel_count(), CHANNELS);
 }
 
 #[test]
-fn no_newline_truncated() {
-    let s = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n}\nMOTION\nFrames: 2\nFrame Time: 0.03";
-    println!("lines {} {:?}", s.lines().count(), read_bvh(s).err());
-    let s = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n}\nMOTION\nFrames: 2\nFrame Time: 1e-320\n1 2 3\n4 5 6\n";
-    println!("{:?}", read_bvh(s).map(|b| b.header_fps));
+fn truncated_file_is_truncated_at_its_last_line() {
+    // Whole frame lines missing: 15 of 20.
+    let l = lines();
+    let text = join(&l[..FIRST_FRAME_LINE - 1 + 15]);
+    let e = err(&text);
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::Truncated {
+            declared: 20,
+            found: 15
+        }
+    );
+    assert_eq!(e.line, FIRST_FRAME_LINE + 14);
+    assert_eq!(e.line, text.lines().count());
+    assert_eq!(e.frame, Some(15));
+    assert!(
+        e.to_string().starts_with("line 149 (frame 15): truncated"),
+        "{e}"
+    );
+
+    // Cut in the middle of frame 15's line: that line has too few values.
+    let start: usize = l[..FIRST_FRAME_LINE - 1 + 15]
+        .iter()
+        .map(|s| s.len() + 1)
+        .sum();
+    let cut = start + l[FIRST_FRAME_LINE - 1 + 15].len() / 2;
+    let e = err(&walk20()[..cut]);
+    assert!(
+        matches!(e.kind, BvhErrorKind::ValueCount { expected: CHANNELS, found } if found < CHANNELS),
+        "{e}"
+    );
+    assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 15, Some(15)));
+
+    // No motion line at all, with and without the final newline: the Frame Time line.
+    let text = join(&l[..FRAME_TIME_LINE]);
+    for t in [text.as_str(), text.trim_end()] {
+        let e = err(t);
+        assert_eq!(
+            e.kind,
+            BvhErrorKind::Truncated {
+                declared: 20,
+                found: 0
+            }
+        );
+        assert_eq!((e.line, e.frame), (FRAME_TIME_LINE, Some(0)));
+    }
+}
+
+#[test]
+fn wrong_value_count_names_line_and_frame() {
+    // One value short on frame 7.
+    let n = FIRST_FRAME_LINE + 7;
+    let line = lines()[n - 1];
+    let short = line.trim_end().rsplit_once(' ').unwrap().0;
+    let e = err(&with_line(n, short));
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::ValueCount {
+            expected: CHANNELS,
+            found: CHANNELS - 1
+        }
+    );
+    assert_eq!((e.line, e.frame), (n, Some(7)));
+
+    // One value too many on frame 0.
+    let long = format!("{line} 1.0");
+    let e = err(&with_line(FIRST_FRAME_LINE, &long));
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::ValueCount {
+            expected: CHANNELS,
+            found: CHANNELS + 1
+        }
+    );
+    assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE, Some(0)));
+}
+
+#[test]
+fn text_where_numbers_belong_is_a_bad_number() {
+    // A motion value.
+    let n = FIRST_FRAME_LINE + 3;
+    let mut values: Vec<&str> = lines()[n - 1].split_ascii_whitespace().collect();
+    for word in ["abc", "nan", "inf", "-inf", "1.2.3", "1e", "0x10", "1,5"] {
+        values[10] = word;
+        let e = err(&with_line(n, &values.join(" ")));
+        assert_eq!(
+            e.kind,
+            BvhErrorKind::BadNumber {
+                what: "a channel value",
+                found: word.to_string()
+            },
+            "{word}"
+        );
+        assert_eq!((e.line, e.frame), (n, Some(3)), "{word}");
+    }
+    // An OFFSET coordinate (line 4 is the root's OFFSET).
+    let e = err(&with_line(4, "  OFFSET 0 zero 0"));
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::BadNumber {
+            what: "OFFSET y",
+            found: "zero".into()
+        }
+    );
+    assert_eq!((e.line, e.frame), (4, None));
+    // The frame count and the frame time.
+    let e = err(&with_line(FRAMES_LINE, "Frames: twenty"));
+    assert!(
+        matches!(
+            e.kind,
+            BvhErrorKind::BadNumber {
+                what: "the frame count",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(e.line, FRAMES_LINE);
+    for bad in ["Frames: -3", "Frames: 2.5"] {
+        let e = err(&with_line(FRAMES_LINE, bad));
+        assert!(
+            matches!(
+                e.kind,
+                BvhErrorKind::BadNumber {
+                    what: "the frame count",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert_eq!(e.line, FRAMES_LINE);
+    }
+    let e = err(&with_line(FRAME_TIME_LINE, "Frame Time: fast"));
+    assert!(
+        matches!(
+            e.kind,
+            BvhErrorKind::BadNumber {
+                what: "the frame time",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(e.line, FRAME_TIME_LINE);
+}
+
+#[test]
+fn missing_motion_section() {
+    let l = lines();
+    // The file ends after the hierarchy.
+    let e = err(&join(&l[..LAST_BRACE_LINE]));
+    assert_eq!(e.kind, BvhErrorKind::UnexpectedEnd { expected: "MOTION" });
+    assert_eq!(e.line, LAST_BRACE_LINE);
+    // The MOTION keyword alone is missing.
+    let mut without = l.clone();
+    without.remove(MOTION_LINE - 1);
+    let e = err(&join(&without));
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::Unexpected {
+            expected: "MOTION",
+            found: "Frames:".into()
+        }
+    );
+    assert_eq!(e.line, MOTION_LINE);
+    // A second ROOT hierarchy where MOTION belongs.
+    let mut two = l[..LAST_BRACE_LINE].to_vec();
+    two.extend_from_slice(&l[1..]);
+    let e = err(&join(&two));
+    assert!(
+        matches!(&e.kind, BvhErrorKind::Unexpected { expected, found } if expected.starts_with("MOTION (files with several ROOT") && found == "ROOT"),
+        "{e}"
+    );
+    assert_eq!(e.line, LAST_BRACE_LINE + 1);
+}
+
+#[test]
+fn root_without_name() {
+    let e = err(&with_line(ROOT_LINE, "ROOT"));
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::Unexpected {
+            expected: "a joint name",
+            found: "{".into()
+        }
+    );
+    // The `{` found where the name belongs, on the next line.
+    assert_eq!(e.line, ROOT_LINE + 1);
+    let e = err("HIERARCHY\nROOT\n{\n  OFFSET 0 0 0\n");
+    assert_eq!(e.line, 3);
+    assert!(matches!(
+        e.kind,
+        BvhErrorKind::Unexpected {
+            expected: "a joint name",
+            ..
+        }
+    ));
+    // A JOINT without name: `}` where the name belongs.
+    let e = err("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\nJOINT\n}\n");
+    assert_eq!(e.line, 7);
+    assert!(matches!(
+        e.kind,
+        BvhErrorKind::Unexpected {
+            expected: "a joint name",
+            ..
+        }
+    ));
+}
+
+#[test]
+fn unknown_channel_name() {
+    let line = lines()[FIRST_CHANNELS_LINE - 1].replacen("Zrotation", "Wrotation", 1);
+    let e = err(&with_line(FIRST_CHANNELS_LINE, &line));
+    assert_eq!(e.kind, BvhErrorKind::UnknownChannel("Wrotation".into()));
+    assert_eq!((e.line, e.frame), (FIRST_CHANNELS_LINE, None));
+    // Fewer channel names than the count: the next keyword is read as a channel name.
+    let e = err(&with_line(
+        FIRST_CHANNELS_LINE,
+        "CHANNELS 6 Xposition Yposition",
+    ));
+    assert_eq!(e.kind, BvhErrorKind::UnknownChannel("JOINT".into()));
+    assert_eq!(e.line, FIRST_CHANNELS_LINE + 1);
+}
+
+#[test]
+fn channel_count_out_of_range() {
+    for (count, found) in [
+        ("7", "7"),
+        ("-1", "-1"),
+        ("2.5", "2.5"),
+        ("1e9", "1000000000"),
+    ] {
+        let line = lines()[FIRST_CHANNELS_LINE - 1].replacen("6", count, 1);
+        let e = err(&with_line(FIRST_CHANNELS_LINE, &line));
+        assert_eq!(
+            e.kind,
+            BvhErrorKind::BadNumber {
+                what: "the channel count (0 to 6)",
+                found: found.into()
+            },
+            "{count}"
+        );
+        assert_eq!(e.line, FIRST_CHANNELS_LINE);
+    }
+}
+
+#[test]
+fn zero_negative_or_absurd_frame_time() {
+    for (time, value) in [
+        ("-0.0333333", -0.0333333),
+        ("0", 0.0),
+        ("-0", -0.0),
+        ("0.0e0", 0.0),
+        // Positive but subnormal: 1 / t is infinite.
+        ("1e-320", 1e-320),
+    ] {
+        let e = err(&with_line(FRAME_TIME_LINE, &format!("Frame Time:\t{time}")));
+        assert_eq!(e.kind, BvhErrorKind::FrameTime(value), "{time}");
+        assert_eq!(e.line, FRAME_TIME_LINE, "{time}");
+    }
+    // A very slow rate is kept, not snapped to 0 fps.
+    let bvh = read_bvh(&with_line(FRAME_TIME_LINE, "Frame Time: 1000")).unwrap();
+    assert_eq!(bvh.header_fps, 0.001);
+    // Anything after the frame time on its line.
+    let e = err(&with_line(FRAME_TIME_LINE, "Frame Time: 0.0333333 0.5"));
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::Unexpected {
+            expected: "end of line after Frame Time",
+            found: "0.5".into()
+        }
+    );
+    assert_eq!(e.line, FRAME_TIME_LINE);
+}
+
+#[test]
+fn extra_frames() {
+    // One more frame line than declared.
+    let mut l = lines();
+    let last = *l.last().unwrap();
+    l.push(last);
+    let e = err(&join(&l));
+    assert_eq!(e.kind, BvhErrorKind::ExtraFrames { declared: 20 });
+    assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 20, Some(20)));
+    // Header says 19.
+    let e = err(&with_line(FRAMES_LINE, "Frames: 19"));
+    assert_eq!(e.kind, BvhErrorKind::ExtraFrames { declared: 19 });
+    assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 19, Some(19)));
+    // Blank lines after the last frame are not frames.
+    let text = format!("{}\n\n  \t\n", walk20());
+    assert_eq!(read_bvh(&text).unwrap().motion.num_frames(), FRAMES);
+}
+
+#[test]
+fn empty_or_blank_file() {
+    for text in ["", "\n", "  \n\t\n\n", "\u{feff}", "\r\n\r\n"] {
+        let e = err(text);
+        assert_eq!(
+            e.kind,
+            BvhErrorKind::UnexpectedEnd {
+                expected: "HIERARCHY"
+            },
+            "{text:?}"
+        );
+        assert_eq!((e.line, e.frame), (1, None), "{text:?}");
+    }
+    let e = err("MOTION\nFrames: 0\n");
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::Unexpected {
+            expected: "HIERARCHY",
+            found: "MOTION".into()
+        }
+    );
+    let e = err("HIERARCHY\n");
+    assert_eq!(e.kind, BvhErrorKind::UnexpectedEnd { expected: "ROOT" });
+    assert_eq!(e.line, 1);
+}
+
+#[test]
+fn crlf_errors_report_the_same_lines() {
+    let n = FIRST_FRAME_LINE + 5;
+    let mut values: Vec<&str> = lines()[n - 1].split_ascii_whitespace().collect();
+    values[3] = "oops";
+    let lf = with_line(n, &values.join(" "));
+    let crlf = lf.replace('\n', "\r\n");
+    assert_eq!(err(&lf), err(&crlf));
+    assert_eq!(err(&crlf).line, n);
+    let short = join(&lines()[..FIRST_FRAME_LINE + 3]).replace('\n', "\r\n");
+    let e = err(&short);
+    assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 3, Some(4)));
+    let e = err(&format!("\u{feff}{short}"));
+    assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 3, Some(4)));
+}
+
+#[test]
+fn deeply_nested_hierarchy_does_not_overflow_the_stack() {
+    // Was a recursive descent: about 1,000 nested joints overflowed a test thread's 2 MB stack
+    // (an abort, not a panic).
+    for depth in [1_000usize, 100_000] {
+        let mut s = String::from("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
+        for _ in 0..depth {
+            s.push_str("JOINT b\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
+        }
+        let e = err(&s);
+        assert_eq!(
+            e.kind,
+            BvhErrorKind::UnexpectedEnd {
+                expected: "JOINT, End Site or }"
+            }
+        );
+        assert_eq!(e.line, s.lines().count());
+        // Closed properly, it reads.
+        s.push_str(&"}\n".repeat(depth + 1));
+        s.push_str("MOTION\nFrames: 0\nFrame Time: 0.04\n");
+        let bvh = read_bvh(&s).unwrap();
+        assert_eq!(bvh.skeleton.len(), depth + 1);
+        assert_eq!(bvh.skeleton.joints[depth].parent, Some(depth - 1));
+    }
+}
+
+#[test]
+fn huge_frame_count_is_truncated_not_an_allocation_failure() {
+    // Was `Vec::with_capacity(declared * joints)`: 1e12 frames aborted on allocation, 1e18
+    // overflowed the multiplication.
+    for count in ["1000000000000", "1e18", "1e300"] {
+        let e = err(&with_line(FRAMES_LINE, &format!("Frames: {count}")));
+        assert!(
+            matches!(e.kind, BvhErrorKind::Truncated { found: 20, .. }),
+            "{count}: {e}"
+        );
+        assert_eq!(e.line, walk20().lines().count());
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Random damage.
+// ---------------------------------------------------------------------------------------------
+
+/// Tokens worth inserting: BVH keywords, braces, odd numbers and characters.
+const TOKENS: &[&str] = &[
+    "{",
+    "}",
+    "ROOT",
+    "ROOT x",
+    "JOINT",
+    "JOINT j",
+    "End",
+    "End Site",
+    "Site",
+    "OFFSET",
+    "OFFSET 1 2 3",
+    "CHANNELS",
+    "CHANNELS 7",
+    "CHANNELS 3 Zrotation Xrotation Yrotation",
+    "Xrotation",
+    "HIERARCHY",
+    "MOTION",
+    "Frames:",
+    "Frames: 99999999999",
+    "Frame Time:",
+    "Frame Time: 0",
+    "nan",
+    "inf",
+    "-1e400",
+    "1e-320",
+    "-0",
+    "1.5e-05",
+    "2E+01",
+    "\u{feff}",
+    "é",
+    "日本",
+    "\r",
+    "\n",
+    "\r\n",
+    "\t",
+    "\0",
+    " ",
+];
+
+#[derive(Debug, Clone)]
+enum Damage {
+    /// Cut the text at this byte (modulo length, moved back to a char boundary).
+    Truncate(usize),
+    /// Delete this many bytes from this position.
+    DeleteRange(usize, usize),
+    /// Insert text at this position.
+    Insert(usize, String),
+    /// Replace the n-th numeric token with this text.
+    ReplaceNumber(usize, String),
+    /// Duplicate the n-th line.
+    DuplicateLine(usize),
+    /// Delete the n-th line.
+    DeleteLine(usize),
+    /// Flip the n-th brace (`{` <-> `}`).
+    SwapBrace(usize),
+}
+
+fn boundary(text: &str, pos: usize) -> usize {
+    let mut p = pos % (text.len() + 1);
+    while !text.is_char_boundary(p) {
+        p -= 1;
+    }
+    p
+}
+
+/// Byte ranges of whitespace-separated tokens that parse as numbers.
+fn number_ranges(text: &str) -> Vec<(usize, usize)> {
+    text.split_ascii_whitespace()
+        .filter(|t| t.parse::<f64>().is_ok())
+        .map(|t| {
+            let start = t.as_ptr() as usize - text.as_ptr() as usize;
+            (start, start + t.len())
+        })
+        .collect()
+}
+
+fn apply(mut text: String, damage: &Damage) -> String {
+    match damage {
+        Damage::Truncate(at) => {
+            let at = boundary(&text, *at);
+            text.truncate(at);
+        }
+        Damage::DeleteRange(at, len) => {
+            let start = boundary(&text, *at);
+            let end = boundary(&text, start + len % 200);
+            let end = if end < start { text.len() } else { end };
+            text.replace_range(start..end, "");
+        }
+        Damage::Insert(at, what) => {
+            let at = boundary(&text, *at);
+            text.insert_str(at, what);
+        }
+        Damage::ReplaceNumber(n, what) => {
+            let ranges = number_ranges(&text);
+            if !ranges.is_empty() {
+                let (s, e) = ranges[n % ranges.len()];
+                text.replace_range(s..e, what);
+            }
+        }
+        Damage::DuplicateLine(n) | Damage::DeleteLine(n) => {
+            let mut lines: Vec<&str> = text.split_inclusive('\n').collect();
+            if !lines.is_empty() {
+                let i = n % lines.len();
+                if matches!(damage, Damage::DuplicateLine(_)) {
+                    let line = lines[i];
+                    lines.insert(i, line);
+                } else {
+                    lines.remove(i);
+                }
+            }
+            text = lines.concat();
+        }
+        Damage::SwapBrace(n) => {
+            let braces: Vec<usize> = text.match_indices(['{', '}']).map(|(i, _)| i).collect();
+            if !braces.is_empty() {
+                let i = braces[n % braces.len()];
+                let flipped = if &text[i..=i] == "{" { "}" } else { "{" };
+                text.replace_range(i..=i, flipped);
+            }
+        }
+    }
+    text
+}
+
+fn garbage() -> impl Strategy<Value = String> {
+    prop_oneof![
+        "[ -~\t\r\n]{1,16}",
+        prop::collection::vec(any::<u8>(), 1..12)
+            .prop_map(|b| String::from_utf8_lossy(&b).into_owned()),
+        prop::sample::select(TOKENS).prop_map(String::from),
+        prop::collection::vec(prop::sample::select(TOKENS), 1..6).prop_map(|t| t.join(" ")),
+    ]
+}
+
+fn damage() -> impl Strategy<Value = Damage> {
+    prop_oneof![
+        any::<usize>().prop_map(Damage::Truncate),
+        (any::<usize>(), 1..200usize).prop_map(|(a, l)| Damage::DeleteRange(a, l)),
+        (any::<usize>(), garbage()).prop_map(|(a, g)| Damage::Insert(a, g)),
+        (any::<usize>(), garbage()).prop_map(|(n, g)| Damage::ReplaceNumber(n, g)),
+        any::<usize>().prop_map(Damage::DuplicateLine),
+        any::<usize>().prop_map(Damage::DeleteLine),
+        any::<usize>().prop_map(Damage::SwapBrace),
+    ]
+}
+
+/// `read_bvh` returns (never panics); an error's line is a line of the text (an empty text counts
+/// as one line); a success is self-consistent.
+fn check(text: &str) -> Result<(), TestCaseError> {
+    match read_bvh(text) {
+        Ok(bvh) => {
+            let n = bvh.skeleton.len();
+            prop_assert!(n > 0);
+            prop_assert_eq!(bvh.motion.rotations.len(), bvh.motion.num_frames() * n);
+            prop_assert_eq!(bvh.motion.translations.len(), bvh.motion.rotations.len());
+            prop_assert!(bvh.header_fps.is_finite() && bvh.header_fps > 0.0);
+        }
+        Err(e) => {
+            let lines = text.lines().count().max(1);
+            prop_assert!(
+                (1..=lines).contains(&e.line),
+                "error line {} outside 1..={}: {}",
+                e.line,
+                lines,
+                e
+            );
+            let prefix = format!("line {}", e.line);
+            prop_assert!(e.to_string().starts_with(&prefix), "{}", e);
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn randomly_damaged_real_file_never_panics(
+        crlf in any::<bool>(),
+        damages in prop::collection::vec(damage(), 1..5),
+    ) {
+        let base = if crlf { walk20().replace('\n', "\r\n") } else { walk20().to_string() };
+        let text = damages.iter().fold(base, apply);
+        check(&text)?;
+    }
+
+    /// A single number replaced by a word is a BadNumber on exactly that token's line.
+    #[test]
+    fn a_number_replaced_by_a_word_is_reported_on_its_line(
+        crlf in any::<bool>(),
+        n in any::<usize>(),
+        word in "[a-zA-Z_][a-zA-Z_0-9]{0,8}",
+    ) {
+        let base = if crlf { walk20().replace('\n', "\r\n") } else { walk20().to_string() };
+        let ranges = number_ranges(&base);
+        let (start, _) = ranges[n % ranges.len()];
+        let line = base[..start].matches('\n').count() + 1;
+        let text = apply(base, &Damage::ReplaceNumber(n, word.clone()));
+        let e = read_bvh(&text).err();
+        prop_assert!(
+            matches!(&e, Some(BvhError { kind: BvhErrorKind::BadNumber { found, .. }, .. }) if *found == word),
+            "{:?}", e
+        );
+        prop_assert_eq!(e.map(|e| e.line), Some(line));
+    }
+
+    #[test]
+    fn arbitrary_text_never_panics(text in "(?s).{0,400}") {
+        check(&text)?;
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
+        check(&String::from_utf8_lossy(&bytes))?;
+    }
+
+    /// Streams of BVH tokens get much further into the grammar than random text.
+    #[test]
+    fn token_soup_never_panics(
+        tokens in prop::collection::vec(
+            prop_oneof![
+                prop::sample::select(TOKENS).prop_map(String::from),
+                any::<f32>().prop_map(|v| v.to_string()),
+                (0u8..10).prop_map(|v| v.to_string()),
+            ],
+            0..120,
+        ),
+        sep in prop::sample::select(&[" ", "\n", "\r\n", "\t"][..]),
+    ) {
+        let mut text = String::from("HIERARCHY\n");
+        text.push_str(&tokens.join(sep));
+        check(&text)?;
+        check(&tokens.join(sep))?;
+    }
 }

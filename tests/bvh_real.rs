@@ -90,7 +90,11 @@ fn bandai1_files() -> Vec<PathBuf> {
 
 fn bandai2_files() -> Vec<PathBuf> {
     let files = bvh_files(&shared_data().join("bandai-namco-2-subset/data"));
-    assert_eq!(files.len(), 56, "bandai-namco-2-subset should hold 56 BVH files");
+    assert_eq!(
+        files.len(),
+        56,
+        "bandai-namco-2-subset should hold 56 BVH files"
+    );
     files
 }
 
@@ -135,7 +139,11 @@ fn read_and_check_values(path: &Path, fps: f64) -> (Bvh, String) {
     assert_eq!(raw.len(), frames, "{file}: motion lines");
     let indices = channel_indices(&bvh.skeleton);
     for (f, values) in raw.iter().enumerate() {
-        assert_eq!(values.len(), bvh.skeleton.channel_count(), "{file} frame {f}");
+        assert_eq!(
+            values.len(),
+            bvh.skeleton.channel_count(),
+            "{file} frame {f}"
+        );
         for (j, joint) in bvh.skeleton.joints.iter().enumerate() {
             let idx = &indices[j];
             let t = bvh.motion.translation(f, j);
@@ -146,7 +154,11 @@ fn read_and_check_values(path: &Path, fps: f64) -> (Bvh, String) {
             }
             let expected = rotation_from_channels(&joint.channels, |k| values[idx[k]]);
             let dot = bvh.motion.rotation(f, j).dot(expected).abs();
-            assert!(1.0 - dot < 1e-12, "{file} frame {f} joint {j}: 1 - |dot| = {:e}", 1.0 - dot);
+            assert!(
+                1.0 - dot < 1e-12,
+                "{file} frame {f} joint {j}: 1 - |dot| = {:e}",
+                1.0 - dot
+            );
         }
     }
     (bvh, text)
@@ -206,10 +218,12 @@ fn cmu_01_01_reads_with_expected_shape() {
         assert!(joint.parent.is_some(), "{}", joint.name);
     }
     assert_eq!(bvh.skeleton.channel_count(), 6 + 30 * 3);
-    // Frame 0 is the added T-pose: every rotation zero.
-    for j in 0..bvh.skeleton.len() {
-        assert_eq!(bvh.motion.rotation(0, j), DQuat::IDENTITY, "joint {j}");
-    }
+    // Frame 0 is the added T-pose: root at (9.3722, 17.8693, -17.3198), unrotated.
+    assert_eq!(
+        bvh.motion.translation(0, 0),
+        DVec3::new(9.3722, 17.8693, -17.3198)
+    );
+    assert_eq!(bvh.motion.rotation(0, 0), DQuat::IDENTITY);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -279,7 +293,14 @@ fn round_trip(path: &Path, stats: &mut RoundTrip) {
                 let i = indices[j][k];
                 if c.is_position() {
                     let d = (ra[i] - rb[i]).abs();
-                    assert!(d <= 1e-4, "{file} frame {f} {} {}: {} vs {}", joint.name, c.name(), ra[i], rb[i]);
+                    assert!(
+                        d <= 1e-4,
+                        "{file} frame {f} {} {}: {} vs {}",
+                        joint.name,
+                        c.name(),
+                        ra[i],
+                        rb[i]
+                    );
                     stats.max_plain_diff = stats.max_plain_diff.max(d);
                 } else {
                     rot.push(i);
@@ -293,7 +314,11 @@ fn round_trip(path: &Path, stats: &mut RoundTrip) {
             let orig = [ra[rot[0]], ra[rot[1]], ra[rot[2]]];
             let back = [rb[rot[0]], rb[rot[1]], rb[rot[2]]];
             let alt = [back[0] + 180.0, 180.0 - back[1], back[2] + 180.0];
-            let residual = |t: [f64; 3]| (0..3).map(|k| wrap360(t[k] - orig[k]).abs()).fold(0.0, f64::max);
+            let residual = |t: [f64; 3]| {
+                (0..3)
+                    .map(|k| wrap360(t[k] - orig[k]).abs())
+                    .fold(0.0, f64::max)
+            };
             let (direct, alternative) = (residual(back), residual(alt));
             if direct <= alternative {
                 for k in 0..3 {
@@ -318,13 +343,28 @@ fn round_trip(path: &Path, stats: &mut RoundTrip) {
     }
 
     // Rotations and translations as read.
-    for (i, (q, r)) in a.motion.rotations.iter().zip(&b.motion.rotations).enumerate() {
+    for (i, (q, r)) in a
+        .motion
+        .rotations
+        .iter()
+        .zip(&b.motion.rotations)
+        .enumerate()
+    {
         let gap = 1.0 - q.dot(*r).abs();
         stats.max_quat_gap = stats.max_quat_gap.max(gap);
         assert!(gap <= 1e-9, "{file} sample {i}: 1 - |q.r| = {gap:e}");
     }
-    for (i, (s, t)) in a.motion.translations.iter().zip(&b.motion.translations).enumerate() {
-        assert!((*s - *t).abs().max_element() <= 1e-9, "{file} sample {i}: {s} vs {t}");
+    for (i, (s, t)) in a
+        .motion
+        .translations
+        .iter()
+        .zip(&b.motion.translations)
+        .enumerate()
+    {
+        assert!(
+            (*s - *t).abs().max_element() <= 1e-9,
+            "{file} sample {i}: {s} vs {t}"
+        );
     }
     stats.files += 1;
 }
@@ -395,13 +435,26 @@ fn cross_check(path: &Path, stats: &mut CrossCheck) {
     let mut motion_index = 0;
     for (j, (their, our)) in joints.iter().zip(&ours.skeleton.joints).enumerate() {
         let data = their.data();
-        assert_eq!(data.name().as_bytes(), our.name.as_bytes(), "{file}: joint {j}");
-        assert_eq!(data.parent_index(), our.parent, "{file}: {} parent", our.name);
+        assert_eq!(
+            data.name().as_bytes(),
+            our.name.as_bytes(),
+            "{file}: joint {j}"
+        );
+        assert_eq!(
+            data.parent_index(),
+            our.parent,
+            "{file}: {} parent",
+            our.name
+        );
         let o = data.offset();
         for (k, v) in [o.x, o.y, o.z].into_iter().enumerate() {
             let d = (f64::from(v) - our.offset[k]).abs();
             stats.max_offset_diff = stats.max_offset_diff.max(d);
-            assert!(close_f32(f64::from(v), our.offset[k]), "{file}: {} offset", our.name);
+            assert!(
+                close_f32(f64::from(v), our.offset[k]),
+                "{file}: {} offset",
+                our.name
+            );
         }
         // bvh_anim keeps no end site on the root (JointData::Root has none); the files have none there.
         match (data.end_site(), our.end_site) {
@@ -410,28 +463,53 @@ fn cross_check(path: &Path, stats: &mut CrossCheck) {
                 for (k, v) in [e.x, e.y, e.z].into_iter().enumerate() {
                     let d = (f64::from(v) - our_e[k]).abs();
                     stats.max_offset_diff = stats.max_offset_diff.max(d);
-                    assert!(close_f32(f64::from(v), our_e[k]), "{file}: {} end site", our.name);
+                    assert!(
+                        close_f32(f64::from(v), our_e[k]),
+                        "{file}: {} end site",
+                        our.name
+                    );
                 }
             }
             (e, our_e) => panic!("{file}: {} end site {e:?} vs {our_e:?}", our.name),
         }
         let channels = data.channels();
-        assert_eq!(channels.len(), our.channels.len(), "{file}: {} channels", our.name);
+        assert_eq!(
+            channels.len(),
+            our.channels.len(),
+            "{file}: {} channels",
+            our.name
+        );
         for (c, our_c) in channels.iter().zip(&our.channels) {
-            assert_eq!(c.channel_type().as_str(), our_c.name(), "{file}: {}", our.name);
+            assert_eq!(
+                c.channel_type().as_str(),
+                our_c.name(),
+                "{file}: {}",
+                our.name
+            );
             assert_eq!(c.motion_index(), motion_index, "{file}: {}", our.name);
             motion_index += 1;
         }
     }
-    assert_eq!(theirs.num_channels(), ours.skeleton.channel_count(), "{file}");
+    assert_eq!(
+        theirs.num_channels(),
+        ours.skeleton.channel_count(),
+        "{file}"
+    );
 
     // Frame time.
     let frame_time = theirs.frame_time().as_secs_f64();
-    assert!((frame_time - 1.0 / ours.header_fps).abs() < 1e-6, "{file}: frame time {frame_time}");
+    assert!(
+        (frame_time - 1.0 / ours.header_fps).abs() < 1e-6,
+        "{file}: frame time {frame_time}"
+    );
 
     // Channel values: the file's numbers as bvh_anim holds them, against the file's numbers
     // (parsed here) and against our decoded motion.
-    assert_eq!(theirs.num_frames(), ours.motion.num_frames(), "{file}: frames");
+    assert_eq!(
+        theirs.num_frames(),
+        ours.motion.num_frames(),
+        "{file}: frames"
+    );
     let raw = motion_values(&text);
     let indices = channel_indices(&ours.skeleton);
     let mut frames = 0;
@@ -441,7 +519,10 @@ fn cross_check(path: &Path, stats: &mut CrossCheck) {
         assert_eq!(values.len(), raw[f].len(), "{file} frame {f}");
         for (k, (&v, &r)) in values.iter().zip(&raw[f]).enumerate() {
             stats.max_value_diff = stats.max_value_diff.max((f64::from(v) - r).abs());
-            assert!(close_f32(f64::from(v), r), "{file} frame {f} value {k}: {v} vs {r}");
+            assert!(
+                close_f32(f64::from(v), r),
+                "{file} frame {f} value {k}: {v} vs {r}"
+            );
         }
         for (j, our) in ours.skeleton.joints.iter().enumerate() {
             let idx = &indices[j];
@@ -449,8 +530,14 @@ fn cross_check(path: &Path, stats: &mut CrossCheck) {
             for (k, c) in our.channels.iter().enumerate() {
                 if c.is_position() {
                     let v = f64::from(values[idx[k]]);
-                    stats.max_translation_diff = stats.max_translation_diff.max((v - t[c.axis()]).abs());
-                    assert!(close_f32(v, t[c.axis()]), "{file} frame {f} {} {}", our.name, c.name());
+                    stats.max_translation_diff =
+                        stats.max_translation_diff.max((v - t[c.axis()]).abs());
+                    assert!(
+                        close_f32(v, t[c.axis()]),
+                        "{file} frame {f} {} {}",
+                        our.name,
+                        c.name()
+                    );
                 }
             }
             let theirs_q = rotation_from_channels(&our.channels, |k| f64::from(values[idx[k]]));
@@ -476,19 +563,31 @@ fn cross_check_all(label: &str, files: &[PathBuf]) -> CrossCheck {
 #[test]
 fn bandai1_agrees_with_bvh_anim() {
     let stats = cross_check_all("bandai-namco-1", &bandai1_files());
-    assert!(stats.bvh_anim_failures.is_empty(), "{:?}", stats.bvh_anim_failures);
+    assert!(
+        stats.bvh_anim_failures.is_empty(),
+        "{:?}",
+        stats.bvh_anim_failures
+    );
 }
 
 #[test]
 fn bandai2_agrees_with_bvh_anim() {
     let stats = cross_check_all("bandai-namco-2-subset", &bandai2_files());
-    assert!(stats.bvh_anim_failures.is_empty(), "{:?}", stats.bvh_anim_failures);
+    assert!(
+        stats.bvh_anim_failures.is_empty(),
+        "{:?}",
+        stats.bvh_anim_failures
+    );
 }
 
 #[test]
 fn cmu_01_01_agrees_with_bvh_anim() {
     let stats = cross_check_all("cmu 01_01", &[cmu_file()]);
-    assert!(stats.bvh_anim_failures.is_empty(), "{:?}", stats.bvh_anim_failures);
+    assert!(
+        stats.bvh_anim_failures.is_empty(),
+        "{:?}",
+        stats.bvh_anim_failures
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -535,7 +634,10 @@ fn hand_written_features_read_identically_in_every_variant() {
     assert_eq!(s.joints[2].end_site, Some(DVec3::new(0.0, 1.0, 0.0)));
     assert_eq!(s.joints[0].end_site, None);
     assert_eq!(
-        s.joints.iter().map(|j| j.channels.len()).collect::<Vec<_>>(),
+        s.joints
+            .iter()
+            .map(|j| j.channels.len())
+            .collect::<Vec<_>>(),
         [6, 3, 6]
     );
     assert_eq!(base.header_fps, 30.0);
@@ -549,12 +651,32 @@ fn hand_written_features_read_identically_in_every_variant() {
     assert_eq!(m.translation(1, 2), DVec3::new(0.0, 5.0, 0.0));
     let deg = f64::to_radians;
     let expect = [
-        (0, 0, DQuat::from_euler(EulerRot::ZYX, deg(10.0), deg(20.0), deg(30.0))),
-        (0, 1, DQuat::from_euler(EulerRot::ZXY, deg(40.0), deg(50.0), deg(60.0))),
-        (0, 2, DQuat::from_euler(EulerRot::YXZ, deg(70.0), deg(-80.0), deg(90.0))),
+        (
+            0,
+            0,
+            DQuat::from_euler(EulerRot::ZYX, deg(10.0), deg(20.0), deg(30.0)),
+        ),
+        (
+            0,
+            1,
+            DQuat::from_euler(EulerRot::ZXY, deg(40.0), deg(50.0), deg(60.0)),
+        ),
+        (
+            0,
+            2,
+            DQuat::from_euler(EulerRot::YXZ, deg(70.0), deg(-80.0), deg(90.0)),
+        ),
         (1, 0, DQuat::IDENTITY),
-        (1, 1, DQuat::from_euler(EulerRot::ZXY, deg(1e-300), deg(-20.0), deg(45.0))),
-        (1, 2, DQuat::from_euler(EulerRot::YXZ, 0.0, 0.0, deg(-150.0))),
+        (
+            1,
+            1,
+            DQuat::from_euler(EulerRot::ZXY, deg(1e-300), deg(-20.0), deg(45.0)),
+        ),
+        (
+            1,
+            2,
+            DQuat::from_euler(EulerRot::YXZ, 0.0, 0.0, deg(-150.0)),
+        ),
     ];
     for (f, j, q) in expect {
         let dot = m.rotation(f, j).dot(q).abs();
@@ -567,7 +689,10 @@ fn hand_written_features_read_identically_in_every_variant() {
         ("BOM", format!("\u{feff}{FEATURES}")),
         ("BOM + CRLF", format!("\u{feff}{crlf}")),
         ("trailing blank lines", format!("{FEATURES}\n\n   \n\t\n")),
-        ("CRLF + trailing blank lines", format!("{crlf}\r\n\r\n \t\r\n")),
+        (
+            "CRLF + trailing blank lines",
+            format!("{crlf}\r\n\r\n \t\r\n"),
+        ),
         ("no final newline", FEATURES.trim_end().to_string()),
         ("spaces for tabs", FEATURES.replace('\t', "    ")),
     ];
@@ -616,7 +741,12 @@ fn every_euler_order_matches_glam_intrinsic_rotation() {
             "HIERARCHY\nROOT R\n{{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition {channels}\n  \
              JOINT C\n  {{\n    OFFSET 1 2 3\n    CHANNELS 3 {channels}\n    End Site\n    {{\n      OFFSET 0 1 0\n    }}\n  }}\n}}\n\
              MOTION\nFrames: 1\nFrame Time: 0.0083333\n4 5 6 {} {} {} {} {} {}\n",
-            root_angles[0], root_angles[1], root_angles[2], child_angles[0], child_angles[1], child_angles[2],
+            root_angles[0],
+            root_angles[1],
+            root_angles[2],
+            child_angles[0],
+            child_angles[1],
+            child_angles[2],
         );
         let bvh = read_bvh(&text).unwrap_or_else(|e| panic!("{order}: {e}"));
         assert_eq!(bvh.header_fps, 120.0);
@@ -632,7 +762,10 @@ fn every_euler_order_matches_glam_intrinsic_rotation() {
         };
         let chars: Vec<char> = order.chars().collect();
         let product = axis(chars[0], a) * axis(chars[1], b) * axis(chars[2], c);
-        assert!(1.0 - product.dot(root).abs() < 1e-12, "{order}: glam EulerRot is not intrinsic");
+        assert!(
+            1.0 - product.dot(root).abs() < 1e-12,
+            "{order}: glam EulerRot is not intrinsic"
+        );
         for (got, want, what) in [
             (bvh.motion.rotation(0, 0), root, "root"),
             (bvh.motion.rotation(0, 1), child, "child"),
@@ -650,11 +783,17 @@ fn every_euler_order_matches_glam_intrinsic_rotation() {
         // rotation: check that identity holds for this order.
         let pi = std::f64::consts::PI;
         let alt = DQuat::from_euler(rot, a2 + pi, pi - b2, c2 + pi);
-        assert!(1.0 - alt.dot(child).abs() < 1e-12, "{order}: equivalent triple");
+        assert!(
+            1.0 - alt.dot(child).abs() < 1e-12,
+            "{order}: equivalent triple"
+        );
 
         // Writing keeps the order and, for these angles, the very values.
         let written = write_bvh(&bvh.motion).unwrap();
-        assert!(written.contains(&format!("CHANNELS 3 {channels}")), "{order}");
+        assert!(
+            written.contains(&format!("CHANNELS 3 {channels}")),
+            "{order}"
+        );
         let values = motion_values(&written);
         let expected_values = [4.0, 5.0, 6.0]
             .into_iter()

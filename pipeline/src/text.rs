@@ -45,7 +45,7 @@ impl Side {
     }
 }
 
-/// A rotation sense named in a caption, seen from above as the captions describe it.
+/// A rotation sense named in a caption.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Rotation {
     Clockwise,
@@ -177,8 +177,7 @@ fn tokens(text: &str) -> Vec<Token> {
         let Some(token) = token_from(&caps) else {
             // Unreachable while the regex and the table agree; skip the candidate rather than
             // stop, so one odd spelling cannot hide the words after it.
-            let whole = caps.get(0).map_or(text.len(), |m| m.end());
-            pos = whole.max(pos + 1);
+            pos = caps.get(0).map_or(text.len(), |m| m.end());
             continue;
         };
         let preceded_by_word_char = text[..token.span.start]

@@ -153,7 +153,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     }
 
     if config.mirror.enabled {
-        let mirrored: Vec<(String, (Vec<Clip>, Vec<Reject>), bool)> = items
+        let mirrored: Vec<(String, mirror::MirrorOutput, bool)> = items
             .par_iter()
             .map(|item| {
                 let spec = &specs[item.file.source];
@@ -169,9 +169,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             ran: mirrored.iter().filter(|m| m.2).count(),
             reused: mirrored.iter().filter(|m| !m.2).count(),
         });
-        for (fp, (m, r), _) in mirrored {
-            clips.extend(m);
-            rejects.extend(r);
+        for (fp, out, _) in mirrored {
+            clips.extend(out.clips);
+            rejects.extend(out.rejects);
             fingerprints.push(fp);
         }
     }

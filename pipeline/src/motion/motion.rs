@@ -130,9 +130,10 @@ impl Motion {
     pub fn resample(&self, fps: f64) -> Motion {
         let n = self.num_joints();
         let frames = self.num_frames();
-        if frames == 0 || !(fps > 0.0) || (fps - self.fps).abs() < 1e-9 {
+        let valid = fps.is_finite() && fps > 0.0;
+        if frames == 0 || !valid || (fps - self.fps).abs() < 1e-9 {
             return Motion {
-                fps: if fps > 0.0 { fps } else { self.fps },
+                fps: if valid { fps } else { self.fps },
                 ..self.clone()
             };
         }

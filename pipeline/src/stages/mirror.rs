@@ -1,6 +1,8 @@
 //! `mirror`: every clip in, its mirrored copy out: motion reflected on the same skeleton, and
 //! everything that carries a side (texts, labels, attributes) swapped with it.
 
+use serde::{Deserialize, Serialize};
+
 use crate::build::{Fingerprint, Reject};
 use crate::clip::Clip;
 use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};
@@ -19,8 +21,17 @@ pub fn fingerprint(ingest_fingerprint: &str, profile: &ProfileSpec) -> String {
         .finish()
 }
 
+/// The stage's output for one ingest item.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct MirrorOutput {
+    /// Mirrored clips.
+    pub clips: Vec<Clip>,
+    /// Clips that could not be mirrored.
+    pub rejects: Vec<Reject>,
+}
+
 /// Mirrored copies of `clips`; a clip whose skeleton the profile cannot mirror is rejected.
-pub fn run(clips: &[Clip], profile: &ProfileSpec) -> (Vec<Clip>, Vec<Reject>) {
+pub fn run(clips: &[Clip], profile: &ProfileSpec) -> MirrorOutput {
     let mut out = Vec::with_capacity(clips.len());
     let mut rejects = Vec::new();
     for clip in clips {
@@ -43,7 +54,10 @@ pub fn run(clips: &[Clip], profile: &ProfileSpec) -> (Vec<Clip>, Vec<Reject>) {
             }),
         }
     }
-    (out, rejects)
+    MirrorOutput {
+        clips: out,
+        rejects,
+    }
 }
 
 /// The mirrored copy of one clip.

@@ -1,0 +1,342 @@
+//! The build end to end on real captures: outputs, reuse of unchanged work, rejects, determinism.
+mod common;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::*;
+use motionforge::build::{BuildOptions, BuildReport, build};
+use motionforge::config::Config;
+
+/// Copies real captures (and their sidecars) into a fresh folder and writes a config for them.
+struct Scratch {
+    dir: tempfile::TempDir,
+}
+
+impl Scratch {
+    fn new(captures: &[&str]) -> Scratch {
+        let dir = tempfile::tempdir().unwrap();
+        fs::create_dir_all(dir.path().join("captures")).unwrap();
+        let scratch = Scratch { dir };
+        for name in captures {
+            scratch.add(name);
+        }
+        fs::write(
+            scratch.config_path(),
+            r#"
+[dataset]
+name = "scratch"
+output = "out"
+fps = 30
+
+[[sources]]
+name = "bandai-namco-1"
+captures = ["captures/*.bvh"]
+profile = "bandai-namco"
+
+[sources.labels]
+kind = "filename"
+pattern = "dataset-1_{content}_{style}_{take}"
+action = "{content}"
+text = "{content}, {style} style"
+sidecar = true
+"#,
+        )
+        .unwrap();
+        scratch
+    }
+
+    fn add(&self, name: &str) {
+        let src = shared_data().join("bandai-namco-1/data");
+        for ext in ["bvh", "json"] {
+            fs::copy(
+                src.join(format!("{name}.{ext}")),
+                self.captures().join(format!("{name}.{ext}")),
+            )
+            .unwrap();
+        }
+    }
+
+    fn captures(&self) -> PathBuf {
+        self.dir.path().join("captures")
+    }
+
+    fn config_path(&self) -> PathBuf {
+        self.dir.path().join("build.toml")
+    }
+
+    fn out(&self) -> PathBuf {
+        self.dir.path().join("out")
+    }
+
+    fn build(&self) -> BuildReport {
+        let config = Config::load(&self.config_path()).unwrap();
+        build(&config, &BuildOptions::default()).unwrap()
+    }
+}
+
+fn ran(report: &BuildReport, stage: &str) -> usize {
+    report
+        .stages
+        .iter()
+        .find(|s| s.stage == stage)
+        .map(|s| s.ran)
+        .unwrap_or(usize::MAX)
+}
+
+const THREE: [&str; 3] = [
+    "dataset-1_walk-left_normal_001",
+    "dataset-1_walk_normal_001",
+    "dataset-1_bye_happy_001",
+];
+
+#[test]
+fn build_writes_originals_and_mirrors_and_reuses_unchanged_work() {
+    let s = Scratch::new(&THREE);
+    let first = s.build();
+    assert_eq!(first.captures, 3);
+    assert_eq!(first.clips, 6);
+    assert_eq!(first.mirrored, 3);
+    assert!(first.rejects.is_empty(), "{:?}", first.rejects);
+    assert_eq!(
+        (
+            ran(&first, "ingest"),
+            ran(&first, "mirror"),
+            ran(&first, "write")
+        ),
+        (3, 3, 1)
+    );
+
+    let again = s.build();
+    assert!(
+        again.nothing_ran(),
+        "second build re-ran work: {:?}",
+        again.stages
+    );
+
+    // Change one capture: only its items re-run, and the table is rewritten.
+    let path = s.captures().join("dataset-1_walk_normal_001.bvh");
+    let text = fs::read_to_string(&path).unwrap();
+    fs::write(
+        &path,
+        text.replacen("Frame Time:\t0.0333333", "Frame Time:\t0.0333334", 1),
+    )
+    .unwrap();
+    let third = s.build();
+    assert_eq!(
+        (
+            ran(&third, "ingest"),
+            ran(&third, "mirror"),
+            ran(&third, "write")
+        ),
+        (1, 1, 1)
+    );
+
+    // A deleted output is noticed and rewritten even though no input changed.
+    fs::remove_file(s.out().join("clips.parquet")).unwrap();
+    let fourth = s.build();
+    assert_eq!(ran(&fourth, "write"), 1);
+    assert!(s.out().join("clips.parquet").is_file());
+}
+
+#[test]
+fn same_inputs_give_byte_identical_tables() {
+    let a = Scratch::new(&THREE);
+    let b = Scratch::new(&[THREE[2], THREE[0], THREE[1]]);
+    a.build();
+    b.build();
+    let ta = fs::read(a.out().join("clips.parquet")).unwrap();
+    let tb = fs::read(b.out().join("clips.parquet")).unwrap();
+    assert!(ta == tb, "tables differ between identical builds");
+    // And a forced rebuild reproduces the same bytes.
+    let config = Config::load(&a.config_path()).unwrap();
+    build(&config, &BuildOptions { force: true }).unwrap();
+    assert!(fs::read(a.out().join("clips.parquet")).unwrap() == ta);
+}
+
+#[test]
+fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
+    let s = Scratch::new(&THREE);
+    let real =
+        fs::read_to_string(shared_data().join("bandai-namco-1/data/dataset-1_kick_normal_001.bvh"))
+            .unwrap();
+    let lines: Vec<&str> = real.lines().collect();
+    let motion_at = lines.iter().position(|l| l.starts_with("MOTION")).unwrap();
+    let write = |name: &str, text: String| {
+        fs::write(
+            s.captures()
+                .join(format!("dataset-1_{name}_normal_001.bvh")),
+            text,
+        )
+        .unwrap()
+    };
+    // Truncated: the last 50 lines lost.
+    write("truncated", lines[..lines.len() - 50].join("\n"));
+    // A motion line with one value missing.
+    let mut short = lines.clone();
+    let cut = short[motion_at + 5]
+        .trim_end()
+        .rsplit_once(' ')
+        .unwrap()
+        .0
+        .to_string();
+    short[motion_at + 5] = &cut;
+    write("short-line", short.join("\n"));
+    // Text where a number belongs.
+    write(
+        "text-number",
+        real.replacen("OFFSET 0 93.9241 -3", "OFFSET 0 ninety -3", 1),
+    );
+    // No MOTION section.
+    write("no-motion", lines[..motion_at].join("\n"));
+    // A name the label pattern does not match.
+    fs::write(s.captures().join("kick.bvh"), &real).unwrap();
+
+    let report = s.build();
+    assert_eq!(
+        report.clips, 6,
+        "good captures still built; rejects: {:#?}",
+        report.rejects
+    );
+    let find = |file: &str| {
+        report
+            .rejects
+            .iter()
+            .find(|r| r.file.contains(file))
+            .unwrap_or_else(|| panic!("no reject for {file}: {:?}", report.rejects))
+    };
+    let truncated = find("truncated");
+    assert_eq!(truncated.reason, "bvh");
+    assert!(truncated.message.contains("truncated"), "{truncated}");
+    let short = find("short-line");
+    assert_eq!(short.line, Some(motion_at as u64 + 6));
+    assert_eq!(short.frame, Some(2));
+    assert!(short.message.contains("expected 132"), "{short}");
+    let text = find("text-number");
+    assert_eq!(text.line, Some(8));
+    assert!(text.message.contains("ninety"), "{text}");
+    let missing = find("no-motion");
+    assert!(missing.message.contains("MOTION"), "{missing}");
+    let pattern = find("kick.bvh");
+    assert_eq!(pattern.reason, "label_pattern");
+    assert!(
+        pattern
+            .message
+            .contains("dataset-1_{content}_{style}_{take}"),
+        "{pattern}"
+    );
+
+    // The rejects file lists the same, one JSON object per line.
+    let listed = fs::read_to_string(s.out().join("rejects.jsonl")).unwrap();
+    assert_eq!(listed.lines().count(), report.rejects.len());
+    assert_eq!(report.rejects.len(), 5);
+    // No temporary file is left behind.
+    for entry in fs::read_dir(s.out()).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(!name.ends_with(".tmp"), "left over: {name}");
+    }
+}
+
+#[test]
+fn mirrored_rows_carry_mirrored_labels() {
+    let s = Scratch::new(&THREE[..1]);
+    s.build();
+    let rows = read_rows(
+        &s.out().join("clips.parquet"),
+        "clip_id,mirrored,action,text",
+    );
+    assert_eq!(
+        rows,
+        vec![
+            "dataset-1_walk-left_normal_001:0-135|False|walk-left|walk left, normal style",
+            "dataset-1_walk-left_normal_001:0-135:m|True|walk-right|walk right, normal style",
+        ]
+    );
+}
+
+/// Reads columns with pyarrow, an independent reader (installed by `.ci/run`).
+fn read_rows(table: &Path, columns: &str) -> Vec<String> {
+    let script = format!(
+        "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
+    );
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(table)
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "pyarrow failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn pyarrow_and_polars_read_positions_as_frames_by_joints_by_3() {
+    let s = Scratch::new(&THREE);
+    let report = s.build();
+    let script = r#"
+import sys, numpy as np, pyarrow.parquet as pq, polars as pl
+t = pq.read_table(sys.argv[1])
+assert t.num_rows == int(sys.argv[2]), t.num_rows
+for i in range(t.num_rows):
+    n, j = t['num_frames'][i].as_py(), t['num_joints'][i].as_py()
+    p = np.asarray(t['joint_positions'][i].values).reshape(n, j, 3)
+    q = np.asarray(t['local_rotations'][i].values).reshape(n, j, 4)
+    r = np.asarray(t['root_translation'][i].values).reshape(n, 3)
+    assert np.allclose(np.linalg.norm(q, axis=-1), 1, atol=1e-5)
+    assert 1.2 < p[0, :, 2].max() - p[0, :, 2].min() < 2.0, 'body height in metres, z up'
+    assert np.allclose(r, p[:, 1, :]), 'root translation is the Hips position'
+df = pl.read_parquet(sys.argv[1])
+first = df['joint_positions'][0].to_numpy().reshape(df['num_frames'][0], df['num_joints'][0], 3)
+assert first.shape[2] == 3
+print('ok')
+"#;
+    let out = Command::new("python3")
+        .args(["-c", script])
+        .arg(s.out().join("clips.parquet"))
+        .arg(report.clips.to_string())
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn the_schema_in_schemas_matches_the_writer() {
+    let documented: serde_json::Value = serde_json::from_str(
+        &fs::read_to_string(repo().join("schemas/clips.schema.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        documented,
+        motionforge::io::schema::clip_schema_json(),
+        "run `motionforge schema > schemas/clips.schema.json` and document the change in schemas/clips.md"
+    );
+}
+
+#[test]
+fn config_errors_name_the_key_and_what_was_expected() {
+    let err = Config::parse("[dataset]\nname = \"x\"\noutput = \"o\"\nfps = -3\n[[sources]]\nname = \"s\"\ncaptures = [\"*.bvh\"]\nprofile = \"cmu\"\n[sources.labels]\nkind = \"filename\"\npattern = \"{a}\"\naction = \"{a}\"\ntext = \"{a}\"\n", Path::new("c.toml")).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("c.toml") && msg.contains("dataset.fps") && msg.contains("-3"),
+        "{msg}"
+    );
+    let err = Config::parse(
+        "[dataset]\nname = \"x\"\noutptu = \"o\"\n",
+        Path::new("c.toml"),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("outptu"), "{err}");
+}
