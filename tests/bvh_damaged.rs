@@ -152,6 +152,57 @@ fn truncated_file_is_truncated_at_its_last_line() {
 }
 
 #[test]
+fn every_line_prefix_fails_on_a_line_it_has() {
+    for crlf in [false, true] {
+        let base = if crlf {
+            walk20().replace('\n', "\r\n")
+        } else {
+            walk20().to_string()
+        };
+        let lines: Vec<&str> = base.split_inclusive('\n').collect();
+        for keep in 0..lines.len() {
+            let with_newline = lines[..keep].concat();
+            let without = with_newline.trim_end_matches(['\r', '\n']);
+            for text in [with_newline.as_str(), without] {
+                let e = err(text);
+                assert!(
+                    (1..=keep.max(1)).contains(&e.line),
+                    "first {keep} lines: {e}"
+                );
+                if keep >= FRAME_TIME_LINE {
+                    let found = keep - FRAME_TIME_LINE;
+                    assert_eq!(
+                        e.kind,
+                        BvhErrorKind::Truncated {
+                            declared: FRAMES,
+                            found
+                        }
+                    );
+                    assert_eq!((e.line, e.frame), (keep, Some(found)));
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn every_byte_prefix_up_to_the_second_frame_fails_on_a_line_it_has() {
+    let text = walk20();
+    let end: usize = lines()[..FIRST_FRAME_LINE + 1]
+        .iter()
+        .map(|l| l.len() + 1)
+        .sum();
+    for cut in 0..end {
+        let prefix = &text[..cut];
+        let e = err(prefix);
+        assert!(
+            (1..=prefix.lines().count().max(1)).contains(&e.line),
+            "{cut} bytes: {e}"
+        );
+    }
+}
+
+#[test]
 fn wrong_value_count_names_line_and_frame() {
     // One value short on frame 7.
     let n = FIRST_FRAME_LINE + 7;
@@ -527,6 +578,10 @@ const TOKENS: &[&str] = &[
 enum Damage {
     /// Cut the text at this byte (modulo length, moved back to a char boundary).
     Truncate(usize),
+    /// Keep the first n lines (modulo the line count), with or without the last line's newline.
+    TruncateLines(usize, bool),
+    /// Replace the value after `Frames:` (false) or `Frame Time:` (true) with this text.
+    SetHeader(bool, String),
     /// Delete this many bytes from this position.
     DeleteRange(usize, usize),
     /// Insert text at this position.
@@ -565,6 +620,32 @@ fn apply(mut text: String, damage: &Damage) -> String {
         Damage::Truncate(at) => {
             let at = boundary(&text, *at);
             text.truncate(at);
+        }
+        Damage::TruncateLines(n, newline) => {
+            let lines: Vec<&str> = text.split_inclusive('\n').collect();
+            let keep = n % (lines.len() + 1);
+            let mut kept = lines[..keep].concat();
+            if !newline && kept.ends_with('\n') {
+                kept.pop();
+                if kept.ends_with('\r') {
+                    kept.pop();
+                }
+            }
+            text = kept;
+        }
+        Damage::SetHeader(frame_time, value) => {
+            let key = if *frame_time {
+                "Frame Time:"
+            } else {
+                "Frames:"
+            };
+            if let Some(start) = text.find(key) {
+                let from = start + key.len();
+                let end = text[from..]
+                    .find(['\r', '\n'])
+                    .map_or(text.len(), |e| from + e);
+                text.replace_range(from..end, &format!(" {value}"));
+            }
         }
         Damage::DeleteRange(at, len) => {
             let start = boundary(&text, *at);
@@ -618,9 +699,22 @@ fn garbage() -> impl Strategy<Value = String> {
     ]
 }
 
+/// Numbers a damaged header might hold.
+fn header_value() -> impl Strategy<Value = String> {
+    prop_oneof![
+        (0u64..40).prop_map(|v| v.to_string()),
+        any::<u64>().prop_map(|v| v.to_string()),
+        any::<f64>().prop_map(|v| v.to_string()),
+        (-3i32..3, -330i32..330).prop_map(|(m, e)| format!("{m}e{e}")),
+        garbage(),
+    ]
+}
+
 fn damage() -> impl Strategy<Value = Damage> {
     prop_oneof![
         any::<usize>().prop_map(Damage::Truncate),
+        (any::<usize>(), any::<bool>()).prop_map(|(n, nl)| Damage::TruncateLines(n, nl)),
+        (any::<bool>(), header_value()).prop_map(|(ft, v)| Damage::SetHeader(ft, v)),
         (any::<usize>(), 1..200usize).prop_map(|(a, l)| Damage::DeleteRange(a, l)),
         (any::<usize>(), garbage()).prop_map(|(a, g)| Damage::Insert(a, g)),
         (any::<usize>(), garbage()).prop_map(|(n, g)| Damage::ReplaceNumber(n, g)),

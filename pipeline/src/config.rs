@@ -114,6 +114,12 @@ pub struct SourceConfig {
     /// Licence of the captures, carried to the dataset card.
     #[serde(default)]
     pub licence: String,
+    /// Left/right pairs that override the profile's (joint name -> partner).
+    #[serde(default)]
+    pub pairs: BTreeMap<String, String>,
+    /// Mirror reflections that override the profile's (joint name -> `x`, `y`, `z` or `xyz`).
+    #[serde(default)]
+    pub reflections: BTreeMap<String, crate::motion::Reflection>,
     /// Where action labels come from.
     pub labels: LabelConfig,
 }

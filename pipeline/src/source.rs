@@ -108,8 +108,16 @@ fn display_path(base: &Path, path: &Path) -> String {
     shown.to_string_lossy().replace('\\', "/")
 }
 
-/// The profile a source names: bundled, or a TOML file relative to the config.
+/// The profile a source names (bundled, or a TOML file relative to the config), with the source's
+/// `pairs` and `reflections` overrides applied.
 pub fn resolve_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, SourceError> {
+    let mut spec = load_profile(config, source)?;
+    spec.pairs.extend(source.pairs.clone());
+    spec.reflections.extend(source.reflections.clone());
+    Ok(spec)
+}
+
+fn load_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, SourceError> {
     let err = |message: String| SourceError::Profile {
         source_name: source.name.clone(),
         message,

@@ -590,15 +590,21 @@ mod tests {
 
     #[test]
     fn dataset_axes_map_y_up_z_forward_to_z_up_y_forward() {
-        let spec = ProfileSpec::bundled("cmu").unwrap();
-        let sk = Skeleton { joints: Vec::new() };
-        let _ = sk;
-        let up = spec.up.vector();
-        let fwd = spec.forward.vector();
-        let lateral = fwd.cross(up);
-        let q = DQuat::from_mat3(&DMat3::from_cols(lateral, fwd, up).transpose());
-        assert!((q * up - DVec3::Z).length() < 1e-12);
-        assert!((q * fwd - DVec3::Y).length() < 1e-12);
-        assert!((q * lateral - DVec3::X).length() < 1e-12);
+        let spec = ProfileSpec::bundled("smpl-22").unwrap();
+        let profile = spec.bind(&spec.skeleton().unwrap()).unwrap();
+        let q = profile.to_dataset_axes();
+        assert!(
+            (q * DVec3::Y - DVec3::Z).length() < 1e-12,
+            "capture up becomes z"
+        );
+        assert!(
+            (q * DVec3::Z - DVec3::Y).length() < 1e-12,
+            "capture forward becomes y"
+        );
+        assert!(
+            (q * DVec3::NEG_X - DVec3::X).length() < 1e-12,
+            "the character's right becomes x"
+        );
+        assert_eq!(profile.world_reflection, Reflection::X);
     }
 }
