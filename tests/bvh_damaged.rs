@@ -324,7 +324,8 @@ fn missing_motion_section() {
     two.extend_from_slice(&l[1..]);
     let e = err(&join(&two));
     assert!(
-        matches!(&e.kind, BvhErrorKind::Unexpected { expected, found } if expected.starts_with("MOTION (files with several ROOT") && found == "ROOT"),
+        matches!(&e.kind, BvhErrorKind::Unexpected { expected, found }
+            if expected.starts_with("MOTION (files with several ROOT") && found == "ROOT"),
         "{e}"
     );
     assert_eq!(e.line, LAST_BRACE_LINE + 1);
@@ -778,7 +779,8 @@ proptest! {
         let text = apply(base, &Damage::ReplaceNumber(n, word.clone()));
         let e = read_bvh(&text).err();
         prop_assert!(
-            matches!(&e, Some(BvhError { kind: BvhErrorKind::BadNumber { found, .. }, .. }) if *found == word),
+            matches!(&e, Some(BvhError { kind: BvhErrorKind::BadNumber { found, .. }, .. })
+                if *found == word),
             "{:?}", e
         );
         prop_assert_eq!(e.map(|e| e.line), Some(line));

@@ -250,14 +250,22 @@ struct RoundTrip {
 
 /// Checks one file's round trip and accumulates the measurements.
 ///
-/// Rotation channels: `write_bvh` does not reproduce the file's Euler angles. It recomputes them
-/// from the quaternions and picks, frame to frame, the triple closest to the previous frame
-/// (`euler_near`). On the real files this yields values that differ from the file's by a multiple of
-/// 360 degrees, and near gimbal lock (Bandai spines sit at Xrotation ~ 87-89 degrees) the
-/// equivalent triple (a + 180, 180 - b, c + 180); following it the first and third angles wind up
-/// to about +-1600 degrees. Both describe the same rotation, so for rotation channels (only) a
-/// joint's triple is compared modulo 360, either as written or in its equivalent form; the
-/// quaternions themselves are compared to 1e-9. Position channels are compared plainly.
+/// Rotation channels are NOT compared plainly. `write_bvh` does not reproduce the file's Euler
+/// angles: it recomputes them from the quaternions and picks, frame to frame, the triple closest
+/// to the previous frame (`euler_near`). Measured on the real files (debug run, this test's
+/// printout):
+/// - values that differ from the file's by a non-zero multiple of 360 degrees: 33,987 in
+///   bandai-namco-1, 8,677 in the bandai-namco-2 subset, 0 in CMU 01_01;
+/// - whole triples written as the equivalent (a + 180, 180 - b, c + 180), which is not a 360
+///   multiple: 5,197 in bandai-namco-1, 474 in bandai-namco-2, 2,751 in CMU 01_01 (its root
+///   Yrotation runs to -183 in the file, and frame 0 is a T-pose the writer continues from).
+///   Bandai spines sit near gimbal lock (Xrotation 85-89 degrees), where the file's Zrotation and
+///   Yrotation jump by ~180 and the writer's continuous curve instead winds: written angles reach
+///   1,983 degrees (dataset-1 walk_proud: 131.009 in the file, -1488.991 written).
+///
+/// Both forms are the same rotation, so a joint's rotation triple is compared modulo 360, either
+/// as written or in its equivalent form, within 1e-4 degrees; the quaternions themselves must agree
+/// to 1 - |q.r| <= 1e-9. Position channels are compared plainly (within 1e-4; measured: 0).
 fn round_trip(path: &Path, stats: &mut RoundTrip) {
     let file = name(path);
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -401,8 +409,8 @@ fn cmu_01_01_round_trips() {
 #[derive(Default, Debug)]
 struct CrossCheck {
     files: usize,
-    /// Files bvh_anim could not read (error or panic), with the reason. None on the real data so
-    /// far; recorded rather than failing, as it would be bvh_anim's bug.
+    /// Files bvh_anim could not read (error or panic), with the reason; recorded rather than
+    /// failing our test, as that would be bvh_anim's bug. Measured: none of the 231 real files.
     bvh_anim_failures: Vec<String>,
     max_offset_diff: f64,
     max_value_diff: f64,
@@ -456,7 +464,8 @@ fn cross_check(path: &Path, stats: &mut CrossCheck) {
                 our.name
             );
         }
-        // bvh_anim keeps no end site on the root (JointData::Root has none); the files have none there.
+        // bvh_anim keeps no end site on the root (JointData::Root has none); the files have none
+        // there.
         match (data.end_site(), our.end_site) {
             (None, None) => {}
             (Some(e), Some(our_e)) => {
@@ -550,6 +559,13 @@ fn cross_check(path: &Path, stats: &mut CrossCheck) {
     stats.files += 1;
 }
 
+/// Real files bvh_anim 0.4.0 cannot read, as "file name: reason". It reads all 231
+/// (bandai-namco-1, the bandai-namco-2 subset, CMU 01_01), so the list is empty. Should
+/// a file ever trip bvh_anim (it panics on some malformed headers and needs `Frames` and
+/// `Frame Time` on lines of their own), add it here with the reason: that is bvh_anim's bug, not
+/// ours, and the file is then skipped by the cross-check instead of failing it.
+const KNOWN_BVH_ANIM_FAILURES: &[&str] = &[];
+
 fn cross_check_all(label: &str, files: &[PathBuf]) -> CrossCheck {
     let mut stats = CrossCheck::default();
     for path in files {
@@ -557,37 +573,36 @@ fn cross_check_all(label: &str, files: &[PathBuf]) -> CrossCheck {
     }
     println!("{label} vs bvh_anim: {stats:#?}");
     assert_eq!(stats.files + stats.bvh_anim_failures.len(), files.len());
+    let unexpected: Vec<&String> = stats
+        .bvh_anim_failures
+        .iter()
+        .filter(|f| {
+            let file = f.split(':').next();
+            !KNOWN_BVH_ANIM_FAILURES
+                .iter()
+                .any(|k| k.split(':').next() == file)
+        })
+        .collect();
+    assert!(
+        unexpected.is_empty(),
+        "bvh_anim failed on files not yet recorded in KNOWN_BVH_ANIM_FAILURES: {unexpected:?}"
+    );
     stats
 }
 
 #[test]
 fn bandai1_agrees_with_bvh_anim() {
-    let stats = cross_check_all("bandai-namco-1", &bandai1_files());
-    assert!(
-        stats.bvh_anim_failures.is_empty(),
-        "{:?}",
-        stats.bvh_anim_failures
-    );
+    cross_check_all("bandai-namco-1", &bandai1_files());
 }
 
 #[test]
 fn bandai2_agrees_with_bvh_anim() {
-    let stats = cross_check_all("bandai-namco-2-subset", &bandai2_files());
-    assert!(
-        stats.bvh_anim_failures.is_empty(),
-        "{:?}",
-        stats.bvh_anim_failures
-    );
+    cross_check_all("bandai-namco-2-subset", &bandai2_files());
 }
 
 #[test]
 fn cmu_01_01_agrees_with_bvh_anim() {
-    let stats = cross_check_all("cmu 01_01", &[cmu_file()]);
-    assert!(
-        stats.bvh_anim_failures.is_empty(),
-        "{:?}",
-        stats.bvh_anim_failures
-    );
+    cross_check_all("cmu 01_01", &[cmu_file()]);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -805,4 +820,31 @@ fn every_euler_order_matches_glam_intrinsic_rotation() {
             assert!((v - e).abs() < 1e-9, "{order} value {k}: {v} vs {e}");
         }
     }
+}
+
+/// With the file's own channel values as the reference, an unchanged motion writes back value for
+/// value: every channel within 1e-4, no 360-degree or equivalent-triple rewrites allowed.
+#[test]
+fn every_real_file_round_trips_value_for_value_with_its_reference_angles() {
+    let mut files = bandai1_files();
+    files.extend(bandai2_files());
+    files.push(shared_data().join("cmu/01_01.bvh"));
+    let mut worst = 0.0f64;
+    for path in &files {
+        let text = std::fs::read_to_string(path).unwrap();
+        let a = read_bvh(&text).unwrap();
+        let written =
+            motionforge::motion::write_bvh_with_reference(&a.motion, Some(&a.channels)).unwrap();
+        let b = read_bvh(&written).unwrap();
+        assert_eq!(a.skeleton, b.skeleton, "{}", path.display());
+        assert_eq!(a.channels.len(), b.channels.len(), "{}", path.display());
+        for (x, y) in a.channels.iter().zip(&b.channels) {
+            worst = worst.max((x - y).abs());
+        }
+    }
+    println!(
+        "{} files, largest channel difference {worst:e}",
+        files.len()
+    );
+    assert!(worst <= 1e-4, "largest channel difference {worst}");
 }

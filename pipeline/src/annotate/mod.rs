@@ -2,4 +2,6 @@
 //!
 //! Knows nothing of motion math beyond frame counts.
 
+pub mod babel;
 pub mod filename;
+pub mod span;

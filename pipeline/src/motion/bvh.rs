@@ -94,6 +94,9 @@ pub struct Bvh {
     /// `1 / Frame Time`, snapped to the nearest integer when within 0.01 of it
     /// (`.0083333` means 120 fps, not 120.0048).
     pub header_fps: f64,
+    /// The channel values as written in the file (degrees for rotations), frame-major. Passed to
+    /// [`write_bvh_with_reference`], they make an unchanged motion write back value for value.
+    pub channels: Vec<f64>,
 }
 
 struct Tokens<'a> {
@@ -224,7 +227,7 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
         .or_else(|| body.strip_prefix('\n'))
         .unwrap_or(body);
     let skeleton = Arc::new(Skeleton { joints });
-    let motion = read_motion(
+    let (motion, channels) = read_motion(
         &skeleton,
         body,
         first_motion_line,
@@ -236,6 +239,7 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
         skeleton,
         motion,
         header_fps,
+        channels,
     })
 }
 
@@ -382,7 +386,7 @@ fn read_motion(
     declared: usize,
     fps: f64,
     leftover: &mut Vec<&str>,
-) -> Result<Motion, BvhError> {
+) -> Result<(Motion, Vec<f64>), BvhError> {
     let layout = ChannelLayout::new(skeleton);
     let n = skeleton.len();
     // A damaged `Frames:` count must not drive the allocation: a frame needs at least one
@@ -391,6 +395,11 @@ fn read_motion(
     let mut rotations = Vec::with_capacity(capacity);
     let mut translations = Vec::with_capacity(capacity);
     let mut values = Vec::with_capacity(layout.total);
+    let mut channels = Vec::with_capacity(
+        declared
+            .min(body.len() / 2 + 1)
+            .saturating_mul(layout.total),
+    );
     let mut frame = 0usize;
     if !leftover.is_empty() {
         return Err(BvhError {
@@ -442,6 +451,7 @@ fn read_motion(
             });
         }
         layout.decode(&values, &mut rotations, &mut translations);
+        channels.extend_from_slice(&values);
         frame += 1;
     }
     if frame < declared {
@@ -454,12 +464,13 @@ fn read_motion(
             },
         });
     }
-    Ok(Motion {
+    let motion = Motion {
         skeleton: Arc::clone(skeleton),
         fps,
         rotations,
         translations,
-    })
+    };
+    Ok((motion, channels))
 }
 
 /// Why a motion cannot be written as BVH.
@@ -501,37 +512,47 @@ fn euler_order(axes: [usize; 3]) -> Option<EulerRot> {
 /// to `previous`, so curves stay continuous instead of jumping by 360 degrees.
 fn euler_near(q: DQuat, order: EulerRot, previous: Option<[f64; 3]>) -> [f64; 3] {
     use std::f64::consts::{PI, TAU};
-    let (a, b, c) = q.to_euler(order);
-    let Some(prev) = previous else {
-        return [a, b, c];
+    // Into (-π, π]: exporters and Blender expect principal angles, and unbounded continuity
+    // winds up near gimbal lock (thousands of degrees on Bandai spines).
+    let wrap = |v: f64| {
+        let w = v - (v / TAU).round() * TAU;
+        if w <= -PI { w + TAU } else { w }
     };
-    let near = |v: f64, target: f64| v + ((target - v) / TAU).round() * TAU;
-    let candidates = [[a, b, c], [a + PI, PI - b, c + PI]];
-    let mut best = [a, b, c];
-    let mut best_cost = f64::INFINITY;
-    for cand in candidates {
-        let shifted = [
-            near(cand[0], prev[0]),
-            near(cand[1], prev[1]),
-            near(cand[2], prev[2]),
-        ];
-        // The alternative triple is only equivalent for proper Tait-Bryan orders; check it.
-        let back = DQuat::from_euler(order, shifted[0], shifted[1], shifted[2]);
-        if back.dot(q).abs() < 1.0 - 1e-9 {
-            continue;
-        }
-        let cost: f64 = (0..3).map(|k| (shifted[k] - prev[k]).abs()).sum();
-        if cost < best_cost {
-            best_cost = cost;
-            best = shifted;
-        }
+    let (a, b, c) = q.to_euler(order);
+    let principal = [wrap(a), b, wrap(c)];
+    let Some(prev) = previous else {
+        return principal;
+    };
+    // The other triple for the same rotation; near gimbal lock, capture software often switches
+    // to it to keep curves smooth, so following the previous frame reproduces their choice.
+    let alternative = [wrap(a + PI), wrap(PI - b), wrap(c + PI)];
+    let back = DQuat::from_euler(order, alternative[0], alternative[1], alternative[2]);
+    if back.dot(q).abs() < 1.0 - 1e-9 {
+        return principal;
     }
-    best
+    let cost = |t: &[f64; 3]| -> f64 { (0..3).map(|k| wrap(t[k] - prev[k]).abs()).sum() };
+    if cost(&alternative) < cost(&principal) {
+        alternative
+    } else {
+        principal
+    }
 }
 
 /// Writes a motion as BVH text, keeping the skeleton's hierarchy and channel layout. Values are
 /// written at full f64 precision (shortest representation that reads back to the same number).
+/// Euler angles are principal, following the previous frame where two triples describe the same
+/// rotation.
 pub fn write_bvh(motion: &Motion) -> Result<String, BvhWriteError> {
+    write_bvh_with_reference(motion, None)
+}
+
+/// Like [`write_bvh`], but wherever `reference` (channel values as read, [`Bvh::channels`]) holds
+/// a triple for the same rotation, that triple is written unchanged, so a motion read and written
+/// back keeps the file's own Euler angles, not just its rotations.
+pub fn write_bvh_with_reference(
+    motion: &Motion,
+    reference: Option<&[f64]>,
+) -> Result<String, BvhWriteError> {
     let skeleton = &motion.skeleton;
     let mut orders: Vec<Option<(EulerRot, [usize; 3])>> = Vec::with_capacity(skeleton.len());
     for joint in &skeleton.joints {
@@ -566,19 +587,32 @@ pub fn write_bvh(motion: &Motion) -> Result<String, BvhWriteError> {
         1.0 / motion.fps
     );
     let n = skeleton.len();
+    let total = skeleton.channel_count();
+    let reference = reference.filter(|r| r.len() == total * motion.num_frames());
     let mut previous: Vec<Option<[f64; 3]>> = vec![None; n];
     for f in 0..motion.num_frames() {
         let mut first = true;
+        let mut start = f * total;
         for (j, joint) in skeleton.joints.iter().enumerate() {
             let q = motion.rotations[f * n + j];
             let t = motion.translations[f * n + j];
+            let given = reference.map(|r| &r[start..start + joint.channels.len()]);
+            start += joint.channels.len();
             let angles = match orders[j] {
                 Some((order, axes)) => {
-                    let e = euler_near(q, order, previous[j]);
-                    previous[j] = Some(e);
                     let mut by_axis = [0.0; 3];
-                    for k in 0..3 {
-                        by_axis[axes[k]] = e[k].to_degrees();
+                    match given.and_then(|g| same_rotation(joint, g, q)) {
+                        Some(degrees) => {
+                            by_axis = degrees;
+                            previous[j] = Some([0, 1, 2].map(|k| degrees[axes[k]].to_radians()));
+                        }
+                        None => {
+                            let e = euler_near(q, order, previous[j]);
+                            previous[j] = Some(e);
+                            for k in 0..3 {
+                                by_axis[axes[k]] = e[k].to_degrees();
+                            }
+                        }
                     }
                     by_axis
                 }
@@ -610,6 +644,19 @@ pub fn write_bvh(motion: &Motion) -> Result<String, BvhWriteError> {
         out.push('\n');
     }
     Ok(out)
+}
+
+/// The reference's rotation values by axis (degrees), if they describe rotation `q`.
+fn same_rotation(joint: &Joint, values: &[f64], q: DQuat) -> Option<[f64; 3]> {
+    let mut r = DQuat::IDENTITY;
+    let mut by_axis = [0.0; 3];
+    for (c, v) in joint.channels.iter().zip(values) {
+        if !c.is_position() {
+            r *= c.rotation(v.to_radians());
+            by_axis[c.axis()] = *v;
+        }
+    }
+    (r.dot(q).abs() >= 1.0 - 1e-12).then_some(by_axis)
 }
 
 fn unsupported(joint: &Joint, rot: &[Channel]) -> BvhWriteError {

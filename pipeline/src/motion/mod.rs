@@ -9,7 +9,9 @@ mod motion;
 pub mod profile;
 pub mod skeleton;
 
-pub use bvh::{Bvh, BvhError, BvhErrorKind, BvhWriteError, read_bvh, write_bvh};
+pub use bvh::{
+    Bvh, BvhError, BvhErrorKind, BvhWriteError, read_bvh, write_bvh, write_bvh_with_reference,
+};
 pub use mirror::{MirrorPlan, OffsetPolicy, calibrate, mean_rotation};
 pub use motion::{Motion, WorldPose};
 pub use profile::{BodyPart, Profile, ProfileSpec, Reflection, Role, SignedAxis};

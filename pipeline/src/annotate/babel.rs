@@ -1,0 +1,249 @@
+//! BABEL JSON (`frame_ann.labels[]` with `start_t`/`end_t` in seconds, `seq_ann` for the whole
+//! sequence). Accepts the real quirks: integer times, unsorted labels, `end_t` past the duration,
+//! `null` labels, overlapping segments, and the wrapped record shapes of saved notebook outputs.
+
+use std::collections::BTreeMap;
+
+use serde_json::Value;
+
+use super::span::{AnnotationError, CaptureAnnotation, Note, Span, Time};
+
+/// One BABEL sequence record, keyed by its AMASS feature path.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BabelRecord {
+    /// BABEL sequence id.
+    pub sid: String,
+    /// AMASS path (`CMU/CMU/141/141_05_poses.npz`), when the record has one.
+    pub feat_p: Option<String>,
+    /// The capture's spans and notes.
+    pub annotation: CaptureAnnotation,
+}
+
+fn number(v: &Value) -> Option<f64> {
+    v.as_f64().filter(|x| x.is_finite())
+}
+
+fn string(v: Option<&Value>) -> Option<String> {
+    v.and_then(Value::as_str).map(str::to_string)
+}
+
+/// Reads a BABEL JSON file: `{sid: record}` as released, or `{"records": {sid: {"record": ...}}}`.
+/// Records that cannot be used are returned as notes in a record without spans, never dropped
+/// silently.
+pub fn read_babel(text: &str, file: &str) -> Result<Vec<BabelRecord>, AnnotationError> {
+    let root: Value = serde_json::from_str(text).map_err(|e| AnnotationError {
+        file: file.to_string(),
+        line: Some(e.line() as u64),
+        message: format!("not valid JSON: {e}"),
+    })?;
+    let records = root.get("records").unwrap_or(&root);
+    let Some(map) = records.as_object() else {
+        return Err(AnnotationError {
+            file: file.to_string(),
+            line: None,
+            message: "expected a JSON object of BABEL records keyed by sequence id".into(),
+        });
+    };
+    let mut out = Vec::new();
+    for (sid, value) in map {
+        if sid.starts_with('_') {
+            continue;
+        }
+        let record = value.get("record").unwrap_or(value);
+        out.push(read_record(sid, record, file));
+    }
+    Ok(out)
+}
+
+fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
+    let mut notes = Vec::new();
+    let feat_p = string(record.get("feat_p"));
+    let duration = record.get("dur").and_then(number);
+    let mut spans = Vec::new();
+    let mut nulls = 0;
+    let labels = record
+        .get("frame_ann")
+        .and_then(|f| f.get("labels"))
+        .and_then(Value::as_array);
+    if let Some(labels) = labels {
+        for (i, label) in labels.iter().enumerate() {
+            let raw = string(label.get("raw_label"));
+            let proc = string(label.get("proc_label"));
+            let (Some(start), Some(end)) = (
+                label.get("start_t").and_then(number),
+                label.get("end_t").and_then(number),
+            ) else {
+                notes.push(Note::new(
+                    "bad_times",
+                    format!("sid {sid}: label {i} has no numeric start_t/end_t"),
+                ));
+                continue;
+            };
+            let Some(text) = raw.clone().or_else(|| proc.clone()) else {
+                nulls += 1;
+                continue;
+            };
+            if label.get("start_t").is_some_and(Value::is_u64)
+                || label.get("end_t").is_some_and(Value::is_u64)
+            {
+                notes.push(Note::new(
+                    "integer_times",
+                    format!("sid {sid}: label `{text}` has integer times"),
+                ));
+            }
+            let categories = label
+                .get("act_cat")
+                .and_then(Value::as_array)
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|c| c.as_str().map(str::to_string))
+                        .collect()
+                })
+                .unwrap_or_default();
+            spans.push(Span {
+                start: Time::Seconds(start),
+                end: Time::Seconds(end),
+                raw_text: text.clone(),
+                label: proc.unwrap_or(text),
+                categories,
+                motion_type: None,
+                hand: None,
+                object: None,
+                grasp: None,
+                id: string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-{i}")),
+            });
+        }
+    } else if let Some(rows) = record
+        .get("frame_labels_raw_start_end")
+        .and_then(Value::as_array)
+    {
+        // Saved notebook outputs keep frame labels as `[raw_label, start_t, end_t]` rows.
+        for (i, row) in rows.iter().enumerate() {
+            let cells = row.as_array();
+            let text = cells.and_then(|c| c.first()).and_then(Value::as_str);
+            let start = cells.and_then(|c| c.get(1)).and_then(number);
+            let end = cells.and_then(|c| c.get(2)).and_then(number);
+            match (text, start, end) {
+                (Some(t), Some(s), Some(e)) => spans.push(Span {
+                    start: Time::Seconds(s),
+                    end: Time::Seconds(e),
+                    raw_text: t.to_string(),
+                    label: t.to_string(),
+                    categories: Vec::new(),
+                    motion_type: None,
+                    hand: None,
+                    object: None,
+                    grasp: None,
+                    id: format!("{sid}-{i}"),
+                }),
+                (None, Some(_), Some(_)) => nulls += 1,
+                _ => notes.push(Note::new(
+                    "bad_times",
+                    format!("sid {sid}: row {i} is not [label, start, end]"),
+                )),
+            }
+        }
+    } else if let Some(seq) = record
+        .get("seq_ann")
+        .and_then(|s| s.get("labels"))
+        .and_then(Value::as_array)
+    {
+        // No frame labels: the sequence label covers the whole capture (SINC's `seq`).
+        for (i, label) in seq.iter().enumerate() {
+            match string(label.get("raw_label")).or_else(|| string(label.get("proc_label"))) {
+                Some(text) => spans.push(Span {
+                    start: Time::Seconds(0.0),
+                    end: Time::End,
+                    raw_text: text.clone(),
+                    label: string(label.get("proc_label")).unwrap_or(text),
+                    categories: Vec::new(),
+                    motion_type: None,
+                    hand: None,
+                    object: None,
+                    grasp: None,
+                    id: string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-seq-{i}")),
+                }),
+                None => nulls += 1,
+            }
+        }
+    } else {
+        notes.push(Note::new(
+            "no_labels",
+            format!("sid {sid}: record has neither frame_ann nor seq_ann labels"),
+        ));
+    }
+    if nulls > 0 {
+        notes.push(Note::new(
+            "null_label",
+            format!("sid {sid}: skipped {nulls} labels with null text"),
+        ));
+    }
+    let sorted = spans
+        .windows(2)
+        .all(|w| start_secs(&w[0]) <= start_secs(&w[1]));
+    if !sorted {
+        notes.push(Note::new(
+            "unsorted",
+            format!("sid {sid}: labels are not in time order (sorted on read)"),
+        ));
+        spans.sort_by(|a, b| {
+            start_secs(a)
+                .total_cmp(&start_secs(b))
+                .then(a.id.cmp(&b.id))
+        });
+    }
+    if let Some(dur) = duration {
+        for s in &mut spans {
+            if let Time::Seconds(e) = s.end
+                && e > dur
+            {
+                notes.push(Note::new(
+                    "end_past_duration",
+                    format!(
+                        "sid {sid}: `{}` ends at {e} s, past the {dur} s duration (clamped)",
+                        s.raw_text
+                    ),
+                ));
+                s.end = Time::Seconds(dur);
+            }
+        }
+    }
+    if feat_p.is_none() {
+        notes.push(Note::new(
+            "no_feat_p",
+            format!("sid {sid}: record has no feat_p; it cannot be matched to a capture"),
+        ));
+    }
+    BabelRecord {
+        sid: sid.to_string(),
+        feat_p,
+        annotation: CaptureAnnotation {
+            spans,
+            simultaneous: true,
+            duration,
+            origin: format!("{file}#{sid}"),
+            notes,
+        },
+    }
+}
+
+fn start_secs(s: &Span) -> f64 {
+    match s.start {
+        Time::Seconds(t) => t,
+        _ => 0.0,
+    }
+}
+
+/// Records by capture key (the mapped stem of `feat_p`).
+pub fn index_by_capture(
+    records: Vec<BabelRecord>,
+    key: impl Fn(&str) -> String,
+) -> BTreeMap<String, CaptureAnnotation> {
+    let mut out = BTreeMap::new();
+    for r in records {
+        if let Some(p) = &r.feat_p {
+            out.insert(key(p), r.annotation);
+        }
+    }
+    out
+}
