@@ -340,3 +340,45 @@ fn config_errors_name_the_key_and_what_was_expected() {
     .unwrap_err();
     assert!(err.to_string().contains("outptu"), "{err}");
 }
+
+#[test]
+fn demo_build_segments_the_long_capture_and_prints_counts() {
+    let out = tempfile::tempdir().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(repo().join("fixtures/demo.toml"))
+        .arg("--output")
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let printed = String::from_utf8(run.stdout).unwrap();
+    assert!(
+        printed.contains("motion types (originals):") && printed.contains("walk forward 1"),
+        "{printed}"
+    );
+    assert!(printed.contains("dropped segments:"), "{printed}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&fs::read(out.path().join("build-report.json")).unwrap()).unwrap();
+    assert_eq!(report["captures"], 9);
+    assert_eq!(report["clips"], 20);
+    let rows = read_rows(
+        &out.path().join("clips.parquet"),
+        "clip_id,annotation_source,frame_range",
+    );
+    let cmu: Vec<&String> = rows.iter().filter(|r| r.starts_with("01_01:")).collect();
+    assert_eq!(
+        cmu.len(),
+        4,
+        "two crops of CMU 01_01 and their mirrors: {rows:?}"
+    );
+    assert!(cmu.iter().all(|r| r.contains("frame_index")));
+    assert!(
+        cmu.iter().any(|r| r.contains("'start': 115, 'end': 1315")),
+        "{cmu:?}"
+    );
+}

@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::annotate::span::Hand;
 use crate::motion::Motion;
 
 /// Where a clip came from.
@@ -42,6 +43,19 @@ pub struct CaptureRef {
     pub fps: f64,
 }
 
+/// A parsed capture at its own frame rate, before segmentation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Capture {
+    /// The file and its digest.
+    pub capture: CaptureRef,
+    /// File stem: the key annotations find the capture by.
+    pub stem: String,
+    /// Skeleton profile name.
+    pub profile: String,
+    /// The whole motion at the capture's rate (`capture.fps`).
+    pub motion: Motion,
+}
+
 /// A clip: motion at the dataset frame rate on its capture's skeleton, its texts and provenance.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Clip {
@@ -59,8 +73,24 @@ pub struct Clip {
     pub action: String,
     /// Caption.
     pub text: String,
-    /// Annotation source (`filename`, ...).
+    /// Every text of the clip: one for a single action, both for a real pair.
+    pub texts: Vec<String>,
+    /// Processed labels (BABEL `proc_label`, event-log motion type, ...), one per action.
+    pub labels: Vec<String>,
+    /// Annotation format (`filename`, `babel`, `event_log`, `frame_index`).
     pub annotation: String,
+    /// Annotation file and record the clip was cut by.
+    pub annotation_origin: String,
+    /// Motion type from the taxonomy, for single actions whose label maps to one.
+    pub motion_type: Option<String>,
+    /// Hand used, when the annotation says.
+    pub hand: Option<Hand>,
+    /// Object involved, when the annotation says.
+    pub object: Option<String>,
+    /// Locomotion goal: pelvis at the last frame, (x, y) in the first-frame canonical frame, metres.
+    pub goal_pelvis: Option<[f64; 2]>,
+    /// Reaching goal: the hand at the grasp (or last) frame, (x, y, z) canonical, metres.
+    pub goal_hand: Option<[f64; 3]>,
     /// Extra fields from the annotation (file-name groups, sidecar keys).
     pub attributes: BTreeMap<String, String>,
     /// Skeleton profile name.

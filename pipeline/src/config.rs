@@ -50,6 +50,9 @@ pub struct Config {
     /// Mirroring.
     #[serde(default)]
     pub mirror: MirrorConfig,
+    /// Motion types: taxonomy and how dataset labels map to it.
+    #[serde(default)]
+    pub motion_types: crate::annotate::taxonomy::TypeMapConfig,
     /// Capture sources.
     #[serde(rename = "sources")]
     pub sources: Vec<SourceConfig>,
@@ -111,6 +114,10 @@ pub struct SourceConfig {
     /// rate.
     #[serde(default)]
     pub fps_override: BTreeMap<String, f64>,
+    /// A JSON object of true frame rates by annotation path (BABEL's `featp_2_fps.json`), matched
+    /// to captures by the same key as annotations; `fps_override` wins over it.
+    #[serde(default)]
+    pub fps_table: Option<String>,
     /// Licence of the captures, carried to the dataset card.
     #[serde(default)]
     pub licence: String,
@@ -122,6 +129,9 @@ pub struct SourceConfig {
     pub reflections: BTreeMap<String, crate::motion::Reflection>,
     /// Where action labels come from.
     pub labels: LabelConfig,
+    /// How annotations become clips.
+    #[serde(default)]
+    pub segment: SegmentConfig,
 }
 
 /// How a source's captures get their labels.
@@ -143,6 +153,113 @@ pub enum LabelConfig {
         #[serde(default)]
         sidecar: bool,
     },
+    /// BABEL JSON: frame labels in seconds, overlapping labels are simultaneous actions.
+    Babel {
+        /// The BABEL JSON file(s), a path or glob relative to the config.
+        path: String,
+        /// Regex with a named group `key` that turns a record's `feat_p` into the capture's file
+        /// stem; default: the file name without `_poses` and extension.
+        #[serde(default)]
+        key_pattern: Option<String>,
+    },
+    /// LINGO-style event logs (CSV or JSON): each instruction lasts until the next one.
+    EventLog {
+        /// The log file(s), a path or glob relative to the config; one per capture unless rows
+        /// name their `capture`.
+        path: String,
+        /// Rate of `frame` columns.
+        #[serde(default = "default_fps")]
+        fps: f64,
+    },
+    /// A frame-range index such as HumanML3D's `index.csv`: independent crops.
+    FrameIndex {
+        /// The index CSV, relative to the config.
+        path: String,
+        /// Rate the index counts frames at (HumanML3D: 20).
+        fps: f64,
+        /// Folder of caption files `<new_name>.txt` (HumanML3D `texts/`), relative to the config.
+        #[serde(default)]
+        texts: Option<String>,
+        /// Caption for rows without a caption file.
+        #[serde(default)]
+        default_text: String,
+        /// Regex with a named group `key` that turns `source_path` into the capture's file stem.
+        #[serde(default)]
+        key_pattern: Option<String>,
+    },
+}
+
+impl LabelConfig {
+    /// The format name recorded in clips.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            LabelConfig::Filename { .. } => "filename",
+            LabelConfig::Babel { .. } => "babel",
+            LabelConfig::EventLog { .. } => "event_log",
+            LabelConfig::FrameIndex { .. } => "frame_index",
+        }
+    }
+}
+
+/// How a source's annotations become clips.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentConfig {
+    /// Shortest clip kept, seconds after resampling (SINC: 15 frames at 30 fps).
+    #[serde(default = "default_min_seconds")]
+    pub min_seconds: f64,
+    /// Longest clip kept, seconds (SINC: 600 frames at 30 fps).
+    #[serde(default = "default_max_seconds")]
+    pub max_seconds: f64,
+    /// Labels dropped before segmentation (compared lowercase, `-` and `_` as spaces).
+    #[serde(default = "default_drop_labels")]
+    pub drop_labels: Vec<String>,
+    /// Real pairs involving a label that contains one of these words are dropped (SINC drops
+    /// pairs with `stand` from validation).
+    #[serde(default)]
+    pub pair_exclude: Vec<String>,
+    /// Seconds cut from the start of every capture (HumanML3D trims T-pose starts per dataset).
+    #[serde(default)]
+    pub trim_start_seconds: f64,
+    /// Frames of the capture before the annotations' time zero (CMU BVH conversions add a
+    /// T-pose frame 0 that AMASS-based annotations do not count).
+    #[serde(default)]
+    pub timeline_offset_frames: u64,
+    /// Most actions one real simultaneous clip may combine.
+    #[serde(default = "default_max_simultaneous")]
+    pub max_simultaneous: usize,
+}
+
+fn default_min_seconds() -> f64 {
+    0.5
+}
+
+fn default_max_seconds() -> f64 {
+    20.0
+}
+
+fn default_max_simultaneous() -> usize {
+    2
+}
+
+fn default_drop_labels() -> Vec<String> {
+    ["transition", "t pose", "tpose", "a pose", "apose"]
+        .map(String::from)
+        .to_vec()
+}
+
+impl Default for SegmentConfig {
+    fn default() -> Self {
+        SegmentConfig {
+            min_seconds: default_min_seconds(),
+            max_seconds: default_max_seconds(),
+            drop_labels: default_drop_labels(),
+            pair_exclude: Vec::new(),
+            trim_start_seconds: 0.0,
+            timeline_offset_frames: 0,
+            max_simultaneous: default_max_simultaneous(),
+        }
+    }
 }
 
 impl Config {
@@ -225,12 +342,52 @@ impl Config {
                     ));
                 }
             }
-            let LabelConfig::Filename { pattern, .. } = &s.labels;
-            if let Err(e) = crate::annotate::filename::FilenamePattern::new(pattern) {
+            if let LabelConfig::Filename { pattern, .. } = &s.labels
+                && let Err(e) = crate::annotate::filename::FilenamePattern::new(pattern)
+            {
                 return Err(invalid(
                     &format!("sources[{i}].labels.pattern"),
                     format!("{pattern:?}"),
                     &e.to_string(),
+                ));
+            }
+            if let LabelConfig::Babel {
+                key_pattern: Some(p),
+                ..
+            }
+            | LabelConfig::FrameIndex {
+                key_pattern: Some(p),
+                ..
+            } = &s.labels
+                && !regex::Regex::new(p)
+                    .is_ok_and(|r| r.capture_names().flatten().any(|n| n == "key"))
+            {
+                return Err(invalid(
+                    &format!("sources[{i}].labels.key_pattern"),
+                    format!("{p:?}"),
+                    "a regex with a named group `key`",
+                ));
+            }
+            let seg = &s.segment;
+            if !(seg.min_seconds >= 0.0 && seg.max_seconds > seg.min_seconds) {
+                return Err(invalid(
+                    &format!("sources[{i}].segment.max_seconds"),
+                    seg.max_seconds.to_string(),
+                    &format!("a length above min_seconds ({})", seg.min_seconds),
+                ));
+            }
+            if !(seg.trim_start_seconds >= 0.0 && seg.trim_start_seconds.is_finite()) {
+                return Err(invalid(
+                    &format!("sources[{i}].segment.trim_start_seconds"),
+                    seg.trim_start_seconds.to_string(),
+                    "zero or more seconds",
+                ));
+            }
+            if seg.max_simultaneous < 2 {
+                return Err(invalid(
+                    &format!("sources[{i}].segment.max_simultaneous"),
+                    seg.max_simultaneous.to_string(),
+                    "2 or more",
                 ));
             }
         }

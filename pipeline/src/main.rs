@@ -30,6 +30,9 @@ enum Command {
         /// Build configuration (TOML); relative paths inside resolve against its folder.
         #[arg(long, short, default_value = "motionforge.toml")]
         config: PathBuf,
+        /// Write the dataset here instead of the config's `dataset.output`.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
         /// Recompute everything, ignoring cached stage outputs.
         #[arg(long)]
         force: bool,
@@ -103,11 +106,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Build {
             config,
+            output,
             force,
             strict,
             json,
         } => {
-            let config = Config::load(&config)?;
+            let mut config = Config::load(&config)?;
+            if let Some(output) = output {
+                config.dataset.output = std::path::absolute(&output).unwrap_or(output);
+            }
             let report = build(&config, &BuildOptions { force })?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
@@ -133,6 +140,16 @@ fn run(cli: Cli) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+fn counts(map: &std::collections::BTreeMap<String, usize>) -> String {
+    if map.is_empty() {
+        return "none".to_string();
+    }
+    map.iter()
+        .map(|(k, n)| format!("{k} {n}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 fn print_report(report: &BuildReport) {
     for stage in &report.stages {
         let what = if stage.ran == 0 {
@@ -152,26 +169,25 @@ fn print_report(report: &BuildReport) {
         report.mirrored,
         report.output.join(motionforge::build::CLIPS_FILE).display()
     );
-    if !report.actions.is_empty() {
-        let counts: Vec<String> = report
-            .actions
-            .iter()
-            .map(|(a, n)| format!("{a} {n}"))
-            .collect();
-        println!("actions: {}", counts.join(", "));
+    println!("by kind: {}", counts(&report.kinds));
+    println!("motion types (originals): {}", counts(&report.motion_types));
+    if !report.unmapped_labels.is_empty() {
+        println!(
+            "labels with no motion type: {}",
+            counts(&report.unmapped_labels)
+        );
+    }
+    println!("dropped segments: {}", counts(&report.drops_by_reason));
+    if !report.notes_by_kind.is_empty() {
+        println!("annotation notes: {}", counts(&report.notes_by_kind));
     }
     if report.rejects.is_empty() {
         println!("rejects: none");
     } else {
-        let by: Vec<String> = report
-            .rejects_by_reason
-            .iter()
-            .map(|(r, n)| format!("{r} {n}"))
-            .collect();
         println!(
             "rejects: {} ({}), listed in {}:",
             report.rejects.len(),
-            by.join(", "),
+            counts(&report.rejects_by_reason),
             report
                 .output
                 .join(motionforge::build::REJECTS_FILE)

@@ -1,8 +1,12 @@
 //! Sources: finding capture files from the config's globs and resolving skeleton profiles.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::config::{Config, SourceConfig};
+use crate::annotate::event_log::{self, EventLogFormat};
+use crate::annotate::span::{AnnotationError, CaptureAnnotation, Note, stem_of};
+use crate::annotate::{babel, frame_index};
+use crate::config::{Config, LabelConfig, SourceConfig};
 use crate::motion::ProfileSpec;
 
 /// A capture file found by a source's globs.
@@ -58,6 +62,14 @@ pub enum SourceError {
         pattern: String,
         /// The pattern after resolution.
         resolved: String,
+    },
+    /// An annotation file cannot be read or parsed at all.
+    #[error("source `{source_name}`: {message}")]
+    Annotation {
+        /// Source name.
+        source_name: String,
+        /// What went wrong, naming the file and line.
+        message: String,
     },
     /// A profile file cannot be read or parsed, or the name is unknown.
     #[error("source `{source_name}`: {message}")]
@@ -132,12 +144,216 @@ fn load_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, S
     }
 }
 
-/// The frame-rate override for a file, if any (matched by file name or glob on the name).
-pub fn fps_override(source: &SourceConfig, file: &CaptureFile) -> Option<f64> {
+/// The frame-rate override for a file, if any: `fps_override` (file name or glob on the name),
+/// then the source's fps table by capture key.
+pub fn fps_override(
+    source: &SourceConfig,
+    table: &BTreeMap<String, f64>,
+    file: &CaptureFile,
+) -> Option<f64> {
     let name = file.file_name();
-    source.fps_override.iter().find_map(|(pattern, fps)| {
-        let matches =
-            pattern == &name || glob::Pattern::new(pattern).is_ok_and(|p| p.matches(&name));
-        matches.then_some(*fps)
-    })
+    source
+        .fps_override
+        .iter()
+        .find_map(|(pattern, fps)| {
+            let matches =
+                pattern == &name || glob::Pattern::new(pattern).is_ok_and(|p| p.matches(&name));
+            matches.then_some(*fps)
+        })
+        .or_else(|| table.get(&file.stem()).copied())
+}
+
+/// The source's fps table (path -> fps JSON) by capture key; empty without one.
+pub fn load_fps_table(
+    config: &Config,
+    source: &SourceConfig,
+) -> Result<BTreeMap<String, f64>, SourceError> {
+    let Some(path) = &source.fps_table else {
+        return Ok(BTreeMap::new());
+    };
+    let err = |message: String| SourceError::Annotation {
+        source_name: source.name.clone(),
+        message,
+    };
+    let file = config.resolve(Path::new(path));
+    let text = std::fs::read_to_string(&file)
+        .map_err(|e| err(format!("fps table {}: {e}", file.display())))?;
+    let table: BTreeMap<String, f64> = serde_json::from_str(&text).map_err(|e| {
+        err(format!(
+            "fps table {}:{}: expected an object of path -> frame rate: {e}",
+            file.display(),
+            e.line()
+        ))
+    })?;
+    let key_pattern = match &source.labels {
+        LabelConfig::Babel { key_pattern, .. } | LabelConfig::FrameIndex { key_pattern, .. } => {
+            key_pattern
+                .as_deref()
+                .and_then(|p| regex::Regex::new(p).ok())
+        }
+        _ => None,
+    };
+    Ok(table
+        .into_iter()
+        .filter(|(_, fps)| fps.is_finite() && *fps > 0.0)
+        .map(|(path, fps)| (capture_key(&path, key_pattern.as_ref()), fps))
+        .collect())
+}
+
+/// A source's annotations, loaded once before the per-capture stages.
+#[derive(Debug, Clone)]
+pub enum SourceAnnotations {
+    /// Labels come from each capture's file name (and sidecar), made per capture.
+    Filename {
+        /// File-stem pattern.
+        pattern: String,
+        /// Action template.
+        action: String,
+        /// Caption template.
+        text: String,
+        /// Whether sidecars are read.
+        sidecar: bool,
+    },
+    /// Annotations read from files, by capture key (file stem).
+    Indexed {
+        /// Annotation per capture key.
+        by_key: BTreeMap<String, CaptureAnnotation>,
+        /// Quirks of the files that belong to no capture (unreadable records, ...).
+        notes: Vec<Note>,
+    },
+}
+
+fn annotation_files(
+    config: &Config,
+    source: &SourceConfig,
+    pattern: &str,
+) -> Result<Vec<PathBuf>, SourceError> {
+    let resolved = config.resolve(Path::new(pattern));
+    let text = resolved.to_string_lossy().into_owned();
+    let mut files: Vec<PathBuf> = glob::glob(&text)
+        .map_err(|e| SourceError::Pattern {
+            source_name: source.name.clone(),
+            pattern: pattern.to_string(),
+            message: e.to_string(),
+        })?
+        .flatten()
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(SourceError::NoMatch {
+            source_name: source.name.clone(),
+            pattern: pattern.to_string(),
+            resolved: text,
+        });
+    }
+    Ok(files)
+}
+
+/// The capture key of an annotation path: the `key` group of `key_pattern`, or by default the
+/// file stem without a `_poses` suffix (AMASS naming: `CMU/CMU/01/01_01_poses.npz` -> `01_01`).
+pub fn capture_key(path: &str, key_pattern: Option<&regex::Regex>) -> String {
+    if let Some(re) = key_pattern
+        && let Some(m) = re.captures(path).and_then(|c| c.name("key"))
+    {
+        return m.as_str().to_string();
+    }
+    let stem = stem_of(path);
+    stem.strip_suffix("_poses")
+        .map(str::to_string)
+        .unwrap_or(stem)
+}
+
+/// Loads a source's annotation files.
+pub fn load_annotations(
+    config: &Config,
+    source: &SourceConfig,
+) -> Result<SourceAnnotations, SourceError> {
+    let failed = |e: AnnotationError| SourceError::Annotation {
+        source_name: source.name.clone(),
+        message: e.to_string(),
+    };
+    let read = |path: &Path| {
+        std::fs::read_to_string(path).map_err(|e| SourceError::Annotation {
+            source_name: source.name.clone(),
+            message: format!("{}: {e}", path.display()),
+        })
+    };
+    let key_regex = |p: &Option<String>| p.as_deref().and_then(|p| regex::Regex::new(p).ok());
+    let mut by_key = BTreeMap::new();
+    let mut notes = Vec::new();
+    match &source.labels {
+        LabelConfig::Filename {
+            pattern,
+            action,
+            text,
+            sidecar,
+        } => {
+            return Ok(SourceAnnotations::Filename {
+                pattern: pattern.clone(),
+                action: action.clone(),
+                text: text.clone(),
+                sidecar: *sidecar,
+            });
+        }
+        LabelConfig::Babel { path, key_pattern } => {
+            let re = key_regex(key_pattern);
+            for file in annotation_files(config, source, path)? {
+                let shown = display_path(&config.base_dir, &file);
+                let records = babel::read_babel(&read(&file)?, &shown).map_err(failed)?;
+                for r in records {
+                    match &r.feat_p {
+                        Some(p) => {
+                            by_key.insert(capture_key(p, re.as_ref()), r.annotation);
+                        }
+                        None => notes.extend(r.annotation.notes),
+                    }
+                }
+            }
+        }
+        LabelConfig::EventLog { path, fps } => {
+            for file in annotation_files(config, source, path)? {
+                let shown = display_path(&config.base_dir, &file);
+                let format = if shown.to_ascii_lowercase().ends_with(".json") {
+                    EventLogFormat::Json
+                } else {
+                    EventLogFormat::Csv
+                };
+                by_key.extend(
+                    event_log::read_event_log(&read(&file)?, format, &shown, *fps)
+                        .map_err(failed)?,
+                );
+            }
+        }
+        LabelConfig::FrameIndex {
+            path,
+            fps,
+            texts,
+            default_text,
+            key_pattern,
+        } => {
+            let re = key_regex(key_pattern);
+            let file = config.resolve(Path::new(path));
+            let shown = display_path(&config.base_dir, &file);
+            let (rows, read_notes) =
+                frame_index::read_frame_index(&read(&file)?, &shown).map_err(failed)?;
+            notes.extend(read_notes);
+            let texts_dir = texts.as_ref().map(|t| config.resolve(Path::new(t)));
+            let caption = |name: &str| {
+                let dir = texts_dir.as_ref()?;
+                let text =
+                    std::fs::read_to_string(dir.join(format!("{}.txt", stem_of(name)))).ok()?;
+                frame_index::read_caption(&text)
+            };
+            by_key = frame_index::index_annotations(
+                &rows,
+                *fps,
+                &shown,
+                |p| capture_key(p, re.as_ref()),
+                caption,
+                default_text,
+            );
+        }
+    }
+    Ok(SourceAnnotations::Indexed { by_key, notes })
 }

@@ -223,6 +223,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
             duration,
             origin: format!("{file}#{sid}"),
             notes,
+            attributes: BTreeMap::from([("babel_sid".to_string(), sid.to_string())]),
         },
     }
 }

@@ -5,6 +5,8 @@ use std::collections::BTreeMap;
 
 use regex::Regex;
 
+use super::span::{CaptureAnnotation, Span, Time};
+
 /// Why a file-name pattern or template cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PatternError {
@@ -129,6 +131,81 @@ pub fn sidecar_fields(json: &serde_json::Value) -> Option<BTreeMap<String, Strin
             })
             .collect(),
     )
+}
+
+/// Why a capture's file name gives no label: a short reason and a message for people.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelRefusal {
+    /// `label_pattern`, `sidecar` or `label_template`.
+    pub reason: &'static str,
+    /// What was expected and found.
+    pub message: String,
+}
+
+/// The annotation a file name (and its sidecar JSON) gives a capture: one span over the whole
+/// capture, with the pattern's fields (and the sidecar's, as `sidecar.<key>`) as attributes.
+pub fn filename_annotation(
+    pattern: &str,
+    action: &str,
+    text: &str,
+    stem: &str,
+    sidecar: Option<&[u8]>,
+) -> Result<CaptureAnnotation, LabelRefusal> {
+    let refuse = |reason, message| LabelRefusal { reason, message };
+    let compiled =
+        FilenamePattern::new(pattern).map_err(|e| refuse("label_pattern", e.to_string()))?;
+    let mut fields = compiled.captures(stem).ok_or_else(|| {
+        refuse(
+            "label_pattern",
+            format!("file name `{stem}` does not match the label pattern `{pattern}`"),
+        )
+    })?;
+    let mut overrides: BTreeMap<String, String> = BTreeMap::new();
+    if let Some(bytes) = sidecar {
+        let side = serde_json::from_slice::<serde_json::Value>(bytes)
+            .ok()
+            .as_ref()
+            .and_then(sidecar_fields)
+            .ok_or_else(|| {
+                refuse(
+                    "sidecar",
+                    format!("sidecar `{stem}.json` is not a JSON object"),
+                )
+            })?;
+        for (k, v) in side {
+            if k == "action" || k == "text" {
+                overrides.insert(k, v);
+            } else {
+                fields.entry(format!("sidecar.{k}")).or_insert(v);
+            }
+        }
+    }
+    let fill = |template: &str, words: bool, key: &str| match overrides.get(key) {
+        Some(v) => Ok(v.clone()),
+        None => fill_template(template, &fields, words)
+            .map_err(|e| refuse("label_template", e.to_string())),
+    };
+    let label = fill(action, false, "action")?;
+    let caption = fill(text, true, "text")?;
+    Ok(CaptureAnnotation {
+        spans: vec![Span {
+            start: Time::Seconds(0.0),
+            end: Time::End,
+            raw_text: caption,
+            label,
+            categories: Vec::new(),
+            motion_type: None,
+            hand: None,
+            object: None,
+            grasp: None,
+            id: stem.to_string(),
+        }],
+        simultaneous: false,
+        duration: None,
+        origin: format!("file name {stem}"),
+        notes: Vec::new(),
+        attributes: fields,
+    })
 }
 
 #[cfg(test)]

@@ -111,6 +111,9 @@ pub struct CaptureAnnotation {
     pub origin: String,
     /// Quirks met while reading (clamped ends, skipped null labels, ...), counted by kind.
     pub notes: Vec<Note>,
+    /// Capture-level fields (file-name groups, sidecar keys), carried to every clip.
+    #[serde(default)]
+    pub attributes: std::collections::BTreeMap<String, String>,
 }
 
 /// Something odd in an annotation that was handled, not fatal.

@@ -15,11 +15,15 @@ pub use workspace::{
     Fingerprint, Workspace, WorkspaceError, sha256_hex, temp_path, write_atomic, write_atomic_with,
 };
 
-use crate::clip::Clip;
+use crate::annotate::filename::filename_annotation;
+use crate::annotate::span::Note;
+use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
+use crate::clip::{Clip, SourceKind};
 use crate::config::Config;
 use crate::io::parquet::{TableError, write_clips};
 use crate::motion::{Profile, ProfileSpec};
-use crate::source::{self, CaptureFile, SourceError};
+use crate::source::{self, CaptureFile, SourceAnnotations, SourceError};
+use crate::stages::segment::{self, SegmentOutput};
 use crate::stages::{ingest, mirror};
 
 /// Name of the clip table inside the output folder.
@@ -43,6 +47,9 @@ pub enum BuildError {
     /// The workspace or an output cannot be written.
     #[error(transparent)]
     Workspace(#[from] WorkspaceError),
+    /// The motion-type taxonomy or mapping is invalid.
+    #[error(transparent)]
+    Taxonomy(#[from] TaxonomyError),
     /// The table cannot be written.
     #[error("{path}: {source}")]
     Table {
@@ -81,8 +88,20 @@ pub struct BuildReport {
     pub clips: usize,
     /// Rows that are mirrored copies.
     pub mirrored: usize,
+    /// Rows by source kind (`real_single`, `real_pair`, ...), mirrors included.
+    pub kinds: BTreeMap<String, usize>,
     /// Clips per action label (originals only).
     pub actions: BTreeMap<String, usize>,
+    /// Single clips per motion type (originals only); `(unmapped)` for labels with no type.
+    pub motion_types: BTreeMap<String, usize>,
+    /// Labels that map to no motion type, with counts: listed, never merged.
+    pub unmapped_labels: BTreeMap<String, usize>,
+    /// Segments dropped during segmentation, by reason.
+    pub drops_by_reason: BTreeMap<String, usize>,
+    /// Annotation quirks handled (clamped ends, null labels, ...), by kind.
+    pub notes_by_kind: BTreeMap<String, usize>,
+    /// Every annotation quirk, for people.
+    pub notes: Vec<Note>,
     /// Rejected inputs by reason.
     pub rejects_by_reason: BTreeMap<String, usize>,
     /// Every rejected input.
@@ -111,11 +130,24 @@ pub struct BuildOptions {
     pub force: bool,
 }
 
+/// What the per-capture stages produced for one capture.
+#[derive(Default)]
 struct Item {
-    file: CaptureFile,
-    fingerprint: String,
-    output: ingest::IngestOutput,
-    ran: bool,
+    ran: [bool; 3],
+    fingerprints: Vec<(&'static str, String)>,
+    clips: Vec<Clip>,
+    rejects: Vec<Reject>,
+    segment: SegmentOutput,
+}
+
+/// Everything the per-capture stages share.
+struct Shared<'a> {
+    config: &'a Config,
+    workspace: Workspace,
+    specs: Vec<ProfileSpec>,
+    annotations: Vec<SourceAnnotations>,
+    fps_tables: Vec<BTreeMap<String, f64>>,
+    types: TypeMap,
 }
 
 /// Runs every stage of the build described by `config`.
@@ -131,58 +163,99 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .iter()
         .map(|s| source::resolve_profile(config, s))
         .collect::<Result<_, _>>()?;
+    let annotations: Vec<SourceAnnotations> = config
+        .sources
+        .iter()
+        .map(|s| source::load_annotations(config, s))
+        .collect::<Result<_, _>>()?;
+    let fps_tables: Vec<BTreeMap<String, f64>> = config
+        .sources
+        .iter()
+        .map(|s| source::load_fps_table(config, s))
+        .collect::<Result<_, _>>()?;
+    let types = load_types(config)?;
+    let shared = Shared {
+        config,
+        workspace,
+        specs,
+        annotations,
+        fps_tables,
+        types,
+    };
 
     let items: Vec<Item> = files
         .par_iter()
-        .map(|file| ingest_item(config, &specs, &workspace, file))
+        .map(|file| run_capture(&shared, file))
         .collect::<Result<_, _>>()?;
-    let mut stages = vec![StageRun {
-        stage: ingest::NAME.into(),
-        items: items.len(),
-        ran: items.iter().filter(|i| i.ran).count(),
-        reused: items.iter().filter(|i| !i.ran).count(),
-    }];
+
+    let mut stages = Vec::new();
+    let names = [ingest::NAME, segment::NAME, mirror::NAME];
+    for (k, name) in names.iter().enumerate() {
+        if k == 2 && !config.mirror.enabled {
+            continue;
+        }
+        let covered: Vec<&Item> = items
+            .iter()
+            .filter(|i| i.fingerprints.iter().any(|(s, _)| s == name))
+            .collect();
+        stages.push(StageRun {
+            stage: (*name).into(),
+            items: covered.len(),
+            ran: covered.iter().filter(|i| i.ran[k]).count(),
+            reused: covered.iter().filter(|i| !i.ran[k]).count(),
+        });
+    }
+    for name in names {
+        let live: BTreeSet<String> = items
+            .iter()
+            .flat_map(|i| {
+                i.fingerprints
+                    .iter()
+                    .filter(|(s, _)| *s == name)
+                    .map(|(_, f)| f.clone())
+            })
+            .collect();
+        shared.workspace.prune(name, &live);
+    }
 
     let mut clips: Vec<Clip> = Vec::new();
     let mut rejects: Vec<Reject> = Vec::new();
     let mut fingerprints: Vec<String> = Vec::new();
-    for item in &items {
-        clips.extend(item.output.clips.iter().cloned());
-        rejects.extend(item.output.rejects.iter().cloned());
-        fingerprints.push(item.fingerprint.clone());
+    let mut drops_by_reason = BTreeMap::new();
+    let mut unmapped_labels = BTreeMap::new();
+    let mut notes: Vec<Note> = Vec::new();
+    for item in items {
+        clips.extend(item.clips);
+        rejects.extend(item.rejects);
+        fingerprints.extend(item.fingerprints.into_iter().map(|(_, f)| f));
+        add_counts(&mut drops_by_reason, item.segment.drops);
+        add_counts(&mut unmapped_labels, item.segment.unmapped);
+        notes.extend(item.segment.notes);
     }
-
-    if config.mirror.enabled {
-        let mirrored: Vec<(String, mirror::MirrorOutput, bool)> = items
-            .par_iter()
-            .map(|item| {
-                let spec = &specs[item.file.source];
-                let fp = mirror::fingerprint(&item.fingerprint, spec);
-                let (out, ran) = workspace
-                    .cached(mirror::NAME, &fp, || mirror::run(&item.output.clips, spec))?;
-                Ok((fp, out, ran))
-            })
-            .collect::<Result<_, WorkspaceError>>()?;
-        stages.push(StageRun {
-            stage: mirror::NAME.into(),
-            items: mirrored.len(),
-            ran: mirrored.iter().filter(|m| m.2).count(),
-            reused: mirrored.iter().filter(|m| !m.2).count(),
-        });
-        for (fp, out, _) in mirrored {
-            clips.extend(out.clips);
-            rejects.extend(out.rejects);
-            fingerprints.push(fp);
+    let mut matched: BTreeSet<(usize, String)> = BTreeSet::new();
+    for file in &files {
+        matched.insert((file.source, file.stem()));
+    }
+    for (index, ann) in shared.annotations.iter().enumerate() {
+        if let SourceAnnotations::Indexed {
+            by_key,
+            notes: file_notes,
+        } = ann
+        {
+            notes.extend(file_notes.iter().cloned());
+            for key in by_key
+                .keys()
+                .filter(|k| !matched.contains(&(index, (*k).clone())))
+            {
+                notes.push(Note::new(
+                    "annotation_without_capture",
+                    format!(
+                        "source `{}`: annotations for `{key}` match no capture file",
+                        config.sources[index].name
+                    ),
+                ));
+            }
         }
-    }
-    for (stage, keep) in [(ingest::NAME, 0usize), (mirror::NAME, items.len())] {
-        let live: BTreeSet<String> = fingerprints
-            .iter()
-            .skip(keep)
-            .take(items.len())
-            .cloned()
-            .collect();
-        workspace.prune(stage, &live);
     }
 
     // Row order: by clip id, so the table does not depend on scheduling or glob order.
@@ -192,6 +265,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             .then(a.capture.path.cmp(&b.capture.path))
     });
     rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
+    notes.sort();
 
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
@@ -199,7 +273,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         if profiles.contains_key(&clip.profile) {
             continue;
         }
-        if let Some(spec) = specs.iter().find(|s| s.name == clip.profile)
+        if let Some(spec) = shared.specs.iter().find(|s| s.name == clip.profile)
             && let Ok(bound) = spec.bind(&clip.motion.skeleton)
         {
             skeletons.insert(
@@ -215,7 +289,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .finish();
     let write_ran = write_outputs(
         &output,
-        &workspace,
+        &shared.workspace,
         &table_fingerprint,
         &clips,
         &profiles,
@@ -230,12 +304,29 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     });
 
     let mut actions = BTreeMap::new();
-    for clip in clips.iter().filter(|c| !c.mirrored) {
+    let mut motion_types = BTreeMap::new();
+    let mut kinds = BTreeMap::new();
+    for clip in &clips {
+        *kinds.entry(clip.kind.as_str().to_string()).or_insert(0) += 1;
+        if clip.mirrored {
+            continue;
+        }
         *actions.entry(clip.action.clone()).or_insert(0) += 1;
+        if clip.kind == SourceKind::RealSingle {
+            let t = clip
+                .motion_type
+                .clone()
+                .unwrap_or_else(|| "(unmapped)".into());
+            *motion_types.entry(t).or_insert(0) += 1;
+        }
     }
     let mut rejects_by_reason = BTreeMap::new();
     for r in &rejects {
         *rejects_by_reason.entry(r.reason.clone()).or_insert(0) += 1;
+    }
+    let mut notes_by_kind = BTreeMap::new();
+    for n in &notes {
+        *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;
     }
     let report = BuildReport {
         dataset: config.dataset.name.clone(),
@@ -244,7 +335,13 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         captures: files.len(),
         clips: clips.len(),
         mirrored: clips.iter().filter(|c| c.mirrored).count(),
+        kinds,
         actions,
+        motion_types,
+        unmapped_labels,
+        drops_by_reason,
+        notes_by_kind,
+        notes,
         rejects_by_reason,
         rejects,
         table_fingerprint,
@@ -254,63 +351,158 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     Ok(report)
 }
 
-fn ingest_item(
-    config: &Config,
-    specs: &[ProfileSpec],
-    workspace: &Workspace,
-    file: &CaptureFile,
-) -> Result<Item, BuildError> {
-    let source = &config.sources[file.source];
-    let unreadable = |e: std::io::Error| ingest::IngestOutput {
-        clips: Vec::new(),
-        rejects: vec![Reject {
-            stage: ingest::NAME.into(),
-            file: file.display.clone(),
-            line: None,
-            frame: None,
-            reason: "io".into(),
-            message: format!("cannot read: {e}"),
-        }],
+fn add_counts(into: &mut BTreeMap<String, usize>, from: BTreeMap<String, usize>) {
+    for (k, v) in from {
+        *into.entry(k).or_insert(0) += v;
+    }
+}
+
+fn load_types(config: &Config) -> Result<TypeMap, BuildError> {
+    let cfg = &config.motion_types;
+    let taxonomy = match &cfg.taxonomy {
+        Some(path) => {
+            let path = config.resolve(path);
+            let text = std::fs::read_to_string(&path).map_err(workspace::io_err(&path))?;
+            Taxonomy::from_toml(&text, &path.display().to_string())?
+        }
+        None => Taxonomy::bundled()?,
     };
+    Ok(TypeMap::new(taxonomy.with_extra(cfg.extra.clone())?, cfg)?)
+}
+
+/// Runs ingest, segment and mirror for one capture, reusing cached outputs.
+fn run_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result<Item, BuildError> {
+    let config = shared.config;
+    let source = &config.sources[file.source];
+    let spec = &shared.specs[file.source];
+    let mut item = Item::default();
     let bytes = match std::fs::read(&file.path) {
         Ok(b) => b,
         Err(e) => {
-            return Ok(Item {
-                file: file.clone(),
-                fingerprint: Fingerprint::new("unreadable", 0)
-                    .text(&file.display)
-                    .finish(),
-                output: unreadable(e),
-                ran: true,
-            });
+            item.rejects.push(ingest::reject(
+                ingest::NAME,
+                file,
+                "io",
+                format!("cannot read: {e}"),
+                None,
+                None,
+            ));
+            return Ok(item);
         }
-    };
-    let uses_sidecar = matches!(
-        source.labels,
-        crate::config::LabelConfig::Filename { sidecar: true, .. }
-    );
-    let sidecar = if uses_sidecar {
-        std::fs::read(file.path.with_extension("json")).ok()
-    } else {
-        None
     };
     let input = ingest::CaptureInput {
         file,
         bytes: &bytes,
-        sidecar: sidecar.as_deref(),
-        source,
-        profile: &specs[file.source],
-        fps_override: source::fps_override(source, file),
+        source: &source.name,
+        profile: spec,
+        fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
+    };
+    let ingest_fp = ingest::fingerprint(&input);
+    let (ingested, ran): (ingest::IngestOutput, bool) =
+        shared
+            .workspace
+            .cached(ingest::NAME, &ingest_fp, || ingest::run(&input))?;
+    item.ran[0] = ran;
+    item.fingerprints.push((ingest::NAME, ingest_fp.clone()));
+    item.rejects.extend(ingested.rejects);
+    let Some(capture) = ingested.capture else {
+        return Ok(item);
+    };
+    drop(bytes);
+
+    let annotation = match &shared.annotations[file.source] {
+        SourceAnnotations::Filename {
+            pattern,
+            action,
+            text,
+            sidecar,
+        } => {
+            let side = if *sidecar {
+                std::fs::read(file.path.with_extension("json")).ok()
+            } else {
+                None
+            };
+            match filename_annotation(pattern, action, text, &capture.stem, side.as_deref()) {
+                Ok(a) => a,
+                Err(refusal) => {
+                    item.rejects.push(ingest::reject(
+                        segment::NAME,
+                        file,
+                        refusal.reason,
+                        refusal.message,
+                        None,
+                        None,
+                    ));
+                    return Ok(item);
+                }
+            }
+        }
+        SourceAnnotations::Indexed { by_key, .. } => match by_key.get(&capture.stem) {
+            Some(a) => a.clone(),
+            None => {
+                let message = format!(
+                    "no annotation for capture `{}` in the source's {} files",
+                    capture.stem,
+                    source.labels.kind()
+                );
+                item.rejects.push(ingest::reject(
+                    segment::NAME,
+                    file,
+                    "no_annotation",
+                    message,
+                    None,
+                    None,
+                ));
+                return Ok(item);
+            }
+        },
+    };
+    let profile = match spec.bind(&capture.motion.skeleton) {
+        Ok(p) => p,
+        Err(e) => {
+            item.rejects.push(ingest::reject(
+                segment::NAME,
+                file,
+                "profile",
+                e.to_string(),
+                None,
+                None,
+            ));
+            return Ok(item);
+        }
+    };
+    let seg_input = segment::SegmentInput {
+        capture: &capture,
+        annotation: &annotation,
+        kind: source.labels.kind(),
+        config: &source.segment,
+        types: &shared.types,
+        profile: &profile,
         fps: config.dataset.fps,
     };
-    let fingerprint = ingest::fingerprint(&input);
-    let (output, ran) = workspace.cached(ingest::NAME, &fingerprint, || ingest::run(&input))?;
-    Ok(Item {
-        file: file.clone(),
-        fingerprint,
-        output,
-        ran,
-    })
+    let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &config.motion_types);
+    let (segmented, ran): (SegmentOutput, bool) =
+        shared
+            .workspace
+            .cached(segment::NAME, &seg_fp, || segment::run(&seg_input))?;
+    item.ran[1] = ran;
+    item.fingerprints.push((segment::NAME, seg_fp.clone()));
+
+    if config.mirror.enabled {
+        let fp = mirror::fingerprint(&seg_fp, spec, &config.motion_types);
+        let (mirrored, ran): (mirror::MirrorOutput, bool) =
+            shared.workspace.cached(mirror::NAME, &fp, || {
+                mirror::run(&segmented.clips, spec, shared.types.taxonomy())
+            })?;
+        item.ran[2] = ran;
+        item.fingerprints.push((mirror::NAME, fp));
+        item.clips.extend(mirrored.clips);
+        item.rejects.extend(mirrored.rejects);
+    }
+    item.clips.extend(segmented.clips.iter().cloned());
+    item.segment = segmented;
+    item.segment.clips.clear();
+    Ok(item)
 }
 
 fn skeleton_json(skeleton: &crate::motion::Skeleton, profile: &Profile) -> serde_json::Value {

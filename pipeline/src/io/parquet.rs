@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::sync::Arc;
 
-use arrow_array::builder::{MapBuilder, MapFieldNames, StringBuilder};
+use arrow_array::builder::{Float32Builder, ListBuilder, MapBuilder, MapFieldNames, StringBuilder};
 use arrow_array::{
     ArrayRef, BooleanArray, Float32Array, Float64Array, Int32Array, Int64Array, ListArray,
     RecordBatch, StringArray, StructArray,
@@ -111,6 +111,41 @@ fn checked_offsets(lengths: &[usize]) -> Result<OffsetBuffer<i32>, ArrowError> {
     Ok(OffsetBuffer::new(ScalarBuffer::from(offsets)))
 }
 
+fn string_lists<'a>(rows: impl Iterator<Item = &'a [String]>) -> ArrayRef {
+    let mut b = ListBuilder::new(StringBuilder::new()).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Utf8,
+        false,
+    )));
+    for row in rows {
+        for s in row {
+            b.values().append_value(s);
+        }
+        b.append(true);
+    }
+    Arc::new(b.finish())
+}
+
+fn optional_f32_lists(rows: impl Iterator<Item = Option<Vec<f64>>>) -> ArrayRef {
+    let mut b = ListBuilder::new(Float32Builder::new()).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Float32,
+        false,
+    )));
+    for row in rows {
+        match row {
+            Some(values) => {
+                for v in values {
+                    b.values().append_value(v as f32);
+                }
+                b.append(true);
+            }
+            None => b.append(false),
+        }
+    }
+    Arc::new(b.finish())
+}
+
 /// Builds one record batch from clips.
 pub fn clips_to_batch(
     clips: &[Clip],
@@ -185,7 +220,30 @@ pub fn clips_to_batch(
         )),
         strings(&|c| &c.action),
         strings(&|c| &c.text),
+        string_lists(clips.iter().map(|c| c.texts.as_slice())),
+        string_lists(clips.iter().map(|c| c.labels.as_slice())),
         strings(&|c| &c.annotation),
+        strings(&|c| &c.annotation_origin),
+        Arc::new(StringArray::from(
+            clips
+                .iter()
+                .map(|c| c.motion_type.as_deref())
+                .collect::<Vec<_>>(),
+        )),
+        Arc::new(StringArray::from(
+            clips
+                .iter()
+                .map(|c| c.hand.map(|h| h.as_str()))
+                .collect::<Vec<_>>(),
+        )),
+        Arc::new(StringArray::from(
+            clips
+                .iter()
+                .map(|c| c.object.as_deref())
+                .collect::<Vec<_>>(),
+        )),
+        optional_f32_lists(clips.iter().map(|c| c.goal_pelvis.map(|g| g.to_vec()))),
+        optional_f32_lists(clips.iter().map(|c| c.goal_hand.map(|g| g.to_vec()))),
         Arc::new(attributes.finish()),
         strings(&|c| &c.profile),
         Arc::new(Float64Array::from_iter_values(

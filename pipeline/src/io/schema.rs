@@ -6,13 +6,29 @@ use std::sync::Arc;
 use arrow_schema::{DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
         name,
         DataType::List(Arc::new(Field::new("item", DataType::Float32, false))),
         false,
+    )
+}
+
+fn list_utf8(name: &str) -> Field {
+    Field::new(
+        name,
+        DataType::List(Arc::new(Field::new("item", DataType::Utf8, false))),
+        false,
+    )
+}
+
+fn goal(name: &str) -> Field {
+    Field::new(
+        name,
+        DataType::List(Arc::new(Field::new("item", DataType::Float32, false))),
+        true,
     )
 }
 
@@ -44,7 +60,15 @@ pub fn clip_schema() -> Schema {
         Field::new("mirrored", DataType::Boolean, false),
         Field::new("action", DataType::Utf8, false),
         Field::new("text", DataType::Utf8, false),
+        list_utf8("texts"),
+        list_utf8("labels"),
         Field::new("annotation_source", DataType::Utf8, false),
+        Field::new("annotation_origin", DataType::Utf8, false),
+        Field::new("motion_type", DataType::Utf8, true),
+        Field::new("hand", DataType::Utf8, true),
+        Field::new("object", DataType::Utf8, true),
+        goal("goal_pelvis"),
+        goal("goal_hand"),
         Field::new("attributes", attributes, false),
         Field::new("skeleton", DataType::Utf8, false),
         Field::new("fps", DataType::Float64, false),

@@ -16,3 +16,4 @@ pub use mirror::{MirrorPlan, OffsetPolicy, calibrate, mean_rotation};
 pub use motion::{Motion, WorldPose};
 pub use profile::{BodyPart, Profile, ProfileSpec, Reflection, Role, SignedAxis};
 pub use skeleton::{Channel, Joint, Skeleton};
+pub mod canonical;

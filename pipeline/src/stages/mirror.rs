@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::annotate::span::Hand;
+use crate::annotate::taxonomy::Taxonomy;
 use crate::build::{Fingerprint, Reject};
 use crate::clip::Clip;
 use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};
@@ -11,13 +13,18 @@ use crate::text::mirror_text;
 /// Stage name.
 pub const NAME: &str = "mirror";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
-/// Fingerprint of mirroring one ingest item.
-pub fn fingerprint(ingest_fingerprint: &str, profile: &ProfileSpec) -> String {
+/// Fingerprint of mirroring one segmented capture.
+pub fn fingerprint(
+    segment_fingerprint: &str,
+    profile: &ProfileSpec,
+    types: &impl Serialize,
+) -> String {
     Fingerprint::new(NAME, VERSION)
-        .text(ingest_fingerprint)
+        .text(segment_fingerprint)
         .json(profile)
+        .json(types)
         .finish()
 }
 
@@ -31,7 +38,7 @@ pub struct MirrorOutput {
 }
 
 /// Mirrored copies of `clips`; a clip whose skeleton the profile cannot mirror is rejected.
-pub fn run(clips: &[Clip], profile: &ProfileSpec) -> MirrorOutput {
+pub fn run(clips: &[Clip], profile: &ProfileSpec, taxonomy: &Taxonomy) -> MirrorOutput {
     let mut out = Vec::with_capacity(clips.len());
     let mut rejects = Vec::new();
     for clip in clips {
@@ -43,7 +50,7 @@ pub fn run(clips: &[Clip], profile: &ProfileSpec) -> MirrorOutput {
                 MirrorPlan::from_profile(skeleton, &bound).map_err(|e| e.to_string())
             });
         match plan {
-            Ok(plan) => out.push(mirror_clip(clip, &plan)),
+            Ok(plan) => out.push(mirror_clip(clip, &plan, taxonomy)),
             Err(message) => rejects.push(Reject {
                 stage: NAME.to_string(),
                 file: clip.capture.path.clone(),
@@ -60,18 +67,27 @@ pub fn run(clips: &[Clip], profile: &ProfileSpec) -> MirrorOutput {
     }
 }
 
-/// The mirrored copy of one clip.
-pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan) -> Clip {
+/// The mirrored copy of one clip: everything that carries a side swaps with the motion.
+pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> Clip {
     Clip {
         clip_id: format!("{}:m", clip.clip_id),
         mirrored: !clip.mirrored,
         action: mirror_text(&clip.action),
         text: mirror_text(&clip.text),
+        texts: clip.texts.iter().map(|t| mirror_text(t)).collect(),
+        labels: clip.labels.iter().map(|t| mirror_text(t)).collect(),
         attributes: clip
             .attributes
             .iter()
             .map(|(k, v)| (k.clone(), mirror_text(v)))
             .collect(),
+        motion_type: clip
+            .motion_type
+            .as_deref()
+            .map(|t| taxonomy.mirror_of(t).unwrap_or(t).to_string()),
+        hand: clip.hand.map(Hand::mirrored),
+        goal_pelvis: clip.goal_pelvis.map(|[x, y]| [-x, y]),
+        goal_hand: clip.goal_hand.map(|[x, y, z]| [-x, y, z]),
         motion: plan.mirror(&clip.motion, OffsetPolicy::Keep),
         ..clip.clone()
     }

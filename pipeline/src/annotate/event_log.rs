@@ -1,0 +1,574 @@
+//! LINGO's Motion Planner event log: timestamped rows (`frame` or `time` in seconds) of
+//! instructions, grasps and releases, as CSV with a header or as JSON. Instruction events become
+//! spans that last until the next instruction starting strictly later (the last one until the end
+//! of the capture); instructions starting at the same time are concurrent and overlap. Grasp events
+//! set the grasp time (and hand) of the instruction active at that moment.
+//!
+//! Event logs are stricter than the segment formats: one unreadable row shifts its neighbours'
+//! ends, so a bad row is an error naming its line, not a note.
+
+use std::collections::BTreeMap;
+
+use serde_json::Value;
+
+use super::frame_index::{csv_lines, split_csv_line};
+use super::span::{AnnotationError, CaptureAnnotation, Hand, Note, Span, Time, stem_of};
+
+/// How an event log is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EventLogFormat {
+    /// CSV with a header naming the columns (any order).
+    Csv,
+    /// JSON: an array of event objects, or `{"capture": "...", "events": [...]}`.
+    Json,
+}
+
+/// The columns (CSV) or keys (JSON) an event log may have.
+pub const EVENT_COLUMNS: [&str; 8] = [
+    "frame",
+    "time",
+    "instruction",
+    "motion_type",
+    "hand",
+    "object",
+    "event",
+    "capture",
+];
+
+/// Two starts closer than this (seconds) are the same time.
+const SAME_TIME: f64 = 1e-9;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Instruction,
+    Grasp,
+    Release,
+}
+
+impl Kind {
+    fn as_str(self) -> &'static str {
+        match self {
+            Kind::Instruction => "instruction",
+            Kind::Grasp => "grasp",
+            Kind::Release => "release",
+        }
+    }
+}
+
+/// One row as written: cells by column name, `None` for absent or empty.
+struct RawRow {
+    /// 1-based data row number (the span id is `row {n}`).
+    n: usize,
+    /// 1-based line in the file, where known.
+    line: Option<u64>,
+    cells: BTreeMap<&'static str, String>,
+}
+
+/// One row, checked.
+struct Event {
+    n: usize,
+    at: Time,
+    secs: f64,
+    kind: Kind,
+    instruction: String,
+    motion_type: Option<String>,
+    hand: Option<Hand>,
+    object: Option<String>,
+    capture: String,
+}
+
+/// Reads an event log into per-capture annotations. The capture key is the row's `capture`
+/// (or, in JSON, the wrapper's `capture`), else `stem_of(file)`. `fps` places frame rows on the
+/// same timeline as second rows; frames are kept as `Time::Frame { frame, fps }`.
+pub fn read_event_log(
+    text: &str,
+    format: EventLogFormat,
+    file: &str,
+    fps: f64,
+) -> Result<BTreeMap<String, CaptureAnnotation>, AnnotationError> {
+    let (rows, default_capture, unknown) = match format {
+        EventLogFormat::Csv => csv_rows(text, file)?,
+        EventLogFormat::Json => json_rows(text, file)?,
+    };
+    let default_capture = default_capture.unwrap_or_else(|| stem_of(file));
+    let mut events = Vec::with_capacity(rows.len());
+    for row in rows {
+        events.push(check_row(row, file, fps, &default_capture)?);
+    }
+    let mut by_capture: BTreeMap<String, Vec<Event>> = BTreeMap::new();
+    for e in events {
+        by_capture.entry(e.capture.clone()).or_default().push(e);
+    }
+    let mut out = BTreeMap::new();
+    for (capture, events) in by_capture {
+        let mut annotation = build(&capture, events, file);
+        for name in &unknown {
+            annotation.notes.push(Note::new(
+                "unknown_column",
+                format!(
+                    "{file}: column `{name}` is not one of {} (ignored)",
+                    EVENT_COLUMNS.join(", ")
+                ),
+            ));
+        }
+        out.insert(capture, annotation);
+    }
+    Ok(out)
+}
+
+fn error(file: &str, line: Option<u64>, message: impl Into<String>) -> AnnotationError {
+    AnnotationError {
+        file: file.to_string(),
+        line,
+        message: message.into(),
+    }
+}
+
+/// The name of a known column, as a `'static` key.
+fn known(name: &str) -> Option<&'static str> {
+    EVENT_COLUMNS.iter().copied().find(|c| *c == name)
+}
+
+type Rows = (Vec<RawRow>, Option<String>, Vec<String>);
+
+fn csv_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
+    let mut lines = csv_lines(text);
+    let Some((header_line, header)) = lines.next() else {
+        return Err(error(
+            file,
+            None,
+            "empty file: expected a header naming `instruction` and `frame` or `time`",
+        ));
+    };
+    let names = split_csv_line(header)
+        .map_err(|e| error(file, Some(header_line), format!("header: {e}")))?;
+    let mut columns: Vec<Option<&'static str>> = Vec::with_capacity(names.len());
+    let mut unknown = Vec::new();
+    for name in &names {
+        let name = name.trim().to_ascii_lowercase();
+        match known(&name) {
+            Some(c) if columns.contains(&Some(c)) => {
+                return Err(error(
+                    file,
+                    Some(header_line),
+                    format!("header names column `{c}` twice"),
+                ));
+            }
+            Some(c) => columns.push(Some(c)),
+            None => {
+                if !name.is_empty() {
+                    unknown.push(name);
+                }
+                columns.push(None);
+            }
+        }
+    }
+    if !columns.contains(&Some("instruction")) {
+        return Err(error(
+            file,
+            Some(header_line),
+            format!(
+                "header has no `instruction` column (expected columns among {}), found `{}`",
+                EVENT_COLUMNS.join(", "),
+                header.trim()
+            ),
+        ));
+    }
+    if !columns.contains(&Some("frame")) && !columns.contains(&Some("time")) {
+        return Err(error(
+            file,
+            Some(header_line),
+            format!(
+                "header has neither a `frame` nor a `time` column, found `{}`",
+                header.trim()
+            ),
+        ));
+    }
+    let mut rows = Vec::new();
+    for (n, (line, text)) in lines.enumerate() {
+        let cells = split_csv_line(text).map_err(|e| error(file, Some(line), e))?;
+        if cells.len() != columns.len() {
+            return Err(error(
+                file,
+                Some(line),
+                format!(
+                    "expected {} columns as in the header, found {}",
+                    columns.len(),
+                    cells.len()
+                ),
+            ));
+        }
+        let cells = columns
+            .iter()
+            .zip(cells)
+            .filter_map(|(c, v)| {
+                let v = v.trim();
+                c.filter(|_| !v.is_empty()).map(|c| (c, v.to_string()))
+            })
+            .collect();
+        rows.push(RawRow {
+            n: n + 1,
+            line: Some(line),
+            cells,
+        });
+    }
+    Ok((rows, None, unknown))
+}
+
+fn json_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
+    let root: Value = serde_json::from_str(text)
+        .map_err(|e| error(file, Some(e.line() as u64), format!("not valid JSON: {e}")))?;
+    let (events, capture, wrapped) = match &root {
+        Value::Array(events) => (events, None, false),
+        Value::Object(map) => {
+            let Some(events) = map.get("events").and_then(Value::as_array) else {
+                return Err(error(
+                    file,
+                    None,
+                    "expected an array of events or an object with an `events` array",
+                ));
+            };
+            let capture = match map.get("capture") {
+                None | Some(Value::Null) => None,
+                Some(Value::String(s)) if s.trim().is_empty() => None,
+                Some(Value::String(s)) => Some(s.trim().to_string()),
+                Some(other) => {
+                    return Err(error(
+                        file,
+                        None,
+                        format!("`capture` must be a string, found {other}"),
+                    ));
+                }
+            };
+            (events, capture, true)
+        }
+        _ => {
+            return Err(error(
+                file,
+                None,
+                "expected an array of events or an object with an `events` array",
+            ));
+        }
+    };
+    let lines = element_lines(text, wrapped);
+    let lines = (lines.len() == events.len()).then_some(lines);
+    let mut rows = Vec::with_capacity(events.len());
+    let mut unknown: Vec<String> = Vec::new();
+    for (i, event) in events.iter().enumerate() {
+        let line = lines.as_ref().and_then(|l| l.get(i).copied());
+        let Some(map) = event.as_object() else {
+            return Err(error(
+                file,
+                line,
+                format!("event {}: expected an object, found {event}", i + 1),
+            ));
+        };
+        let mut cells = BTreeMap::new();
+        for (key, value) in map {
+            let Some(column) = known(key) else {
+                if !unknown.contains(key) {
+                    unknown.push(key.clone());
+                }
+                continue;
+            };
+            let cell = match value {
+                Value::Null => continue,
+                Value::String(s) => s.trim().to_string(),
+                Value::Number(x) => x.to_string(),
+                other => {
+                    return Err(error(
+                        file,
+                        line,
+                        format!(
+                            "event {}: `{key}` must be a string or a number, found {other}",
+                            i + 1
+                        ),
+                    ));
+                }
+            };
+            if !cell.is_empty() {
+                cells.insert(column, cell);
+            }
+        }
+        rows.push(RawRow {
+            n: i + 1,
+            line,
+            cells,
+        });
+    }
+    Ok((rows, capture, unknown))
+}
+
+/// 1-based lines where the elements of the events array start: the root array, or (`wrapped`)
+/// the array under the root object's `events` key. Run on text serde_json accepted.
+fn element_lines(text: &str, wrapped: bool) -> Vec<u64> {
+    let bytes = text.as_bytes();
+    let target = if wrapped { 2 } else { 1 };
+    let mut line = 1u64;
+    let mut depth = 0usize;
+    let mut in_string = false;
+    let mut escaped = false;
+    let mut string_start = 0usize;
+    let mut last_key: Option<(usize, usize)> = None;
+    let mut after_events_key = false;
+    let mut in_target = false;
+    let mut expect_element = false;
+    let mut lines = Vec::new();
+    for (i, &b) in bytes.iter().enumerate() {
+        if b == b'\n' {
+            line += 1;
+        }
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if b == b'\\' {
+                escaped = true;
+            } else if b == b'"' {
+                in_string = false;
+                if depth == 1 {
+                    last_key = Some((string_start, i));
+                }
+            }
+            continue;
+        }
+        if b.is_ascii_whitespace() {
+            continue;
+        }
+        if in_target && depth == target && expect_element && b != b']' {
+            lines.push(line);
+            expect_element = false;
+        }
+        let value_of_events = std::mem::take(&mut after_events_key);
+        match b {
+            b'"' => {
+                in_string = true;
+                string_start = i + 1;
+            }
+            b':' if wrapped && depth == 1 => {
+                after_events_key = last_key
+                    .and_then(|(s, e)| text.get(s..e))
+                    .is_some_and(|k| k == "events");
+            }
+            b'[' => {
+                depth += 1;
+                if depth == target && (!wrapped || value_of_events) {
+                    // serde_json keeps the last of duplicate keys; so do we.
+                    lines.clear();
+                    in_target = true;
+                    expect_element = true;
+                }
+            }
+            b'{' => depth += 1,
+            b']' | b'}' => {
+                if depth == target {
+                    in_target = false;
+                }
+                depth = depth.saturating_sub(1);
+            }
+            b',' if in_target && depth == target => expect_element = true,
+            _ => {}
+        }
+    }
+    lines
+}
+
+fn check_row(
+    row: RawRow,
+    file: &str,
+    fps: f64,
+    default_capture: &str,
+) -> Result<Event, AnnotationError> {
+    let n = row.n;
+    let fail = |message: String| error(file, row.line, format!("row {n}: {message}"));
+    let cell = |name: &str| row.cells.get(name).map(String::as_str);
+    let frame = match cell("frame") {
+        None => None,
+        Some(raw) => match raw.parse::<i64>() {
+            Ok(f) if f >= 0 => Some(f),
+            Ok(f) => return Err(fail(format!("frame {f} is negative"))),
+            Err(_) => {
+                return Err(fail(format!(
+                    "frame `{raw}`: expected a whole frame number"
+                )));
+            }
+        },
+    };
+    let time = match cell("time") {
+        None => None,
+        Some(raw) => match raw.parse::<f64>() {
+            Ok(t) if t.is_finite() && t >= 0.0 => Some(t),
+            Ok(_) => {
+                return Err(fail(format!(
+                    "time `{raw}`: expected a finite, non-negative number of seconds"
+                )));
+            }
+            Err(_) => {
+                return Err(fail(format!("time `{raw}`: expected a number of seconds")));
+            }
+        },
+    };
+    if frame.is_some() && !(fps.is_finite() && fps > 0.0) {
+        return Err(fail(format!(
+            "frame rows need a positive frame rate to be placed in time, got {fps}"
+        )));
+    }
+    let (at, secs) = match (frame, time) {
+        (Some(f), None) => (Time::Frame { frame: f, fps }, f as f64 / fps),
+        (None, Some(t)) => (Time::Seconds(t), t),
+        (Some(f), Some(t)) => {
+            let secs = f as f64 / fps;
+            if (secs - t).abs() > 0.5 / fps {
+                return Err(fail(format!(
+                    "frame {f} ({secs} s at {fps} fps) and time {t} s disagree; give one of them"
+                )));
+            }
+            (Time::Frame { frame: f, fps }, secs)
+        }
+        (None, None) => {
+            return Err(fail(
+                "has neither a frame nor a time: expected one of them".into(),
+            ));
+        }
+    };
+    let kind = match cell("event").map(str::to_ascii_lowercase).as_deref() {
+        None | Some("instruction") => Kind::Instruction,
+        Some("grasp") => Kind::Grasp,
+        Some("release") => Kind::Release,
+        Some(other) => {
+            return Err(fail(format!(
+                "event `{other}`: expected `instruction`, `grasp` or `release`"
+            )));
+        }
+    };
+    let hand = match cell("hand") {
+        None => None,
+        Some(raw) => match Hand::parse(raw) {
+            Some(h) => Some(h),
+            None => {
+                return Err(fail(format!(
+                    "hand `{raw}`: expected `left`, `right` or `both`"
+                )));
+            }
+        },
+    };
+    let instruction = cell("instruction").unwrap_or("").to_string();
+    if kind == Kind::Instruction && instruction.is_empty() {
+        return Err(fail(
+            "instruction event with no instruction text: expected the instruction".into(),
+        ));
+    }
+    Ok(Event {
+        n,
+        at,
+        secs,
+        kind,
+        instruction,
+        motion_type: cell("motion_type").map(str::to_string),
+        hand,
+        object: cell("object").map(str::to_string),
+        capture: cell("capture").unwrap_or(default_capture).to_string(),
+    })
+}
+
+fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation {
+    let mut notes = Vec::new();
+    if !events.windows(2).all(|w| w[0].secs <= w[1].secs) {
+        notes.push(Note::new(
+            "unsorted",
+            format!("{file}: events of `{capture}` are not in time order (sorted on read)"),
+        ));
+    }
+    // Stable: events at the same time keep their order in the file.
+    events.sort_by(|a, b| a.secs.total_cmp(&b.secs));
+    let instructions: Vec<&Event> = events
+        .iter()
+        .filter(|e| e.kind == Kind::Instruction)
+        .collect();
+    let mut spans: Vec<Span> = instructions
+        .iter()
+        .map(|e| {
+            let end = instructions
+                .iter()
+                .find(|next| next.secs > e.secs + SAME_TIME)
+                .map_or(Time::End, |next| next.at);
+            Span {
+                start: e.at,
+                end,
+                raw_text: e.instruction.clone(),
+                label: e
+                    .motion_type
+                    .clone()
+                    .unwrap_or_else(|| e.instruction.clone()),
+                categories: Vec::new(),
+                motion_type: e.motion_type.clone(),
+                hand: e.hand,
+                object: e.object.clone(),
+                grasp: None,
+                id: format!("row {}", e.n),
+            }
+        })
+        .collect();
+    for e in events.iter().filter(|e| e.kind != Kind::Instruction) {
+        // The active group: instructions starting at the latest start at or before the event.
+        let Some(latest) = instructions
+            .iter()
+            .filter(|i| i.secs <= e.secs + SAME_TIME)
+            .map(|i| i.secs)
+            .next_back()
+        else {
+            notes.push(Note::new(
+                "event_before_instruction",
+                format!(
+                    "{file}: row {} ({} at {:?}) comes before the first instruction of \
+                     `{capture}`",
+                    e.n,
+                    e.kind.as_str(),
+                    e.at
+                ),
+            ));
+            continue;
+        };
+        if e.kind == Kind::Release {
+            continue;
+        }
+        let group: Vec<usize> = instructions
+            .iter()
+            .enumerate()
+            .filter(|(_, i)| (i.secs - latest).abs() <= SAME_TIME)
+            .map(|(k, _)| k)
+            .collect();
+        let chosen = group
+            .iter()
+            .copied()
+            .find(|&k| e.hand.is_some() && spans.get(k).is_some_and(|s| s.hand == e.hand))
+            .or_else(|| group.first().copied());
+        let Some(span) = chosen.and_then(|k| spans.get_mut(k)) else {
+            continue;
+        };
+        if span.grasp.is_some() {
+            notes.push(Note::new(
+                "second_grasp",
+                format!(
+                    "{file}: row {} grasps again during `{}` ({}); the first grasp is kept",
+                    e.n, span.raw_text, span.id
+                ),
+            ));
+            continue;
+        }
+        span.grasp = Some(e.at);
+        if span.hand.is_none() {
+            span.hand = e.hand;
+        }
+        if span.object.is_none() {
+            span.object = e.object.clone();
+        }
+    }
+    CaptureAnnotation {
+        spans,
+        simultaneous: true,
+        duration: None,
+        origin: format!("{file}#{capture}"),
+        notes,
+        ..CaptureAnnotation::default()
+    }
+}
