@@ -422,3 +422,46 @@ proptest! {
         prop_assert!(singles + single_drops <= spans.len() && spans.len() <= singles + single_drops + length_drops);
     }
 }
+
+#[test]
+fn hand_goals_sit_at_the_grasp_frame_and_mirror_with_the_hand() {
+    use motionforge::annotate::span::Hand;
+    use motionforge::motion::canonical::{canonical_frame, dataset_positions};
+    let cap = capture(&bandai2("raise-up-right-hand", 1), "bandai-namco");
+    let annotation = CaptureAnnotation {
+        spans: vec![Span {
+            start: Time::Seconds(0.0),
+            end: Time::End,
+            raw_text: "raise the right hand and take the cup".into(),
+            label: "pick up".into(),
+            categories: vec![],
+            motion_type: Some("pick up".into()),
+            hand: Some(Hand::Right),
+            object: Some("cup".into()),
+            grasp: Some(Time::Seconds(1.0)),
+            id: "row 1".into(),
+        }],
+        simultaneous: true,
+        ..CaptureAnnotation::default()
+    };
+    let types = demo_types();
+    let out = segment_with(&cap, &annotation, "event_log", &SegmentConfig::default(), &types);
+    let clip = &out.clips[0];
+    assert_eq!(clip.motion_type.as_deref(), Some("pick up"));
+    assert!(clip.goal_pelvis.is_none(), "pick up is not locomotion");
+    let goal = clip.goal_hand.expect("pick up with a hand gets a hand goal");
+    // Independently: the right hand at 1.0 s (frame 30 at 30 fps) in the first-frame frame.
+    let profile = ProfileSpec::bundled("bandai-namco").unwrap().bind(&cap.motion.skeleton).unwrap();
+    let positions = dataset_positions(&clip.motion, &profile);
+    let n = clip.motion.num_joints();
+    let frame = canonical_frame(&positions[..n], &profile).unwrap();
+    let hand = cap.motion.skeleton.index_of("Hand_R").unwrap();
+    let expected = frame.apply(positions[30 * n + hand]);
+    assert!((expected - glam::DVec3::from(goal)).length() < 1e-9, "{goal:?} vs {expected:?}");
+    assert!(goal[2] > 0.5, "a raised hand is well above the floor: {goal:?}");
+    let spec = ProfileSpec::bundled("bandai-namco").unwrap();
+    let mirrored = &mirror::run(std::slice::from_ref(clip), &spec, types.taxonomy()).clips[0];
+    assert_eq!(mirrored.hand, Some(Hand::Left));
+    assert_eq!(mirrored.goal_hand, Some([-goal[0], goal[1], goal[2]]));
+    assert_eq!(mirrored.texts, vec!["raise the left hand and take the cup"]);
+}
