@@ -445,20 +445,37 @@ fn hand_goals_sit_at_the_grasp_frame_and_mirror_with_the_hand() {
         ..CaptureAnnotation::default()
     };
     let types = demo_types();
-    let out = segment_with(&cap, &annotation, "event_log", &SegmentConfig::default(), &types);
+    let out = segment_with(
+        &cap,
+        &annotation,
+        "event_log",
+        &SegmentConfig::default(),
+        &types,
+    );
     let clip = &out.clips[0];
     assert_eq!(clip.motion_type.as_deref(), Some("pick up"));
     assert!(clip.goal_pelvis.is_none(), "pick up is not locomotion");
-    let goal = clip.goal_hand.expect("pick up with a hand gets a hand goal");
+    let goal = clip
+        .goal_hand
+        .expect("pick up with a hand gets a hand goal");
     // Independently: the right hand at 1.0 s (frame 30 at 30 fps) in the first-frame frame.
-    let profile = ProfileSpec::bundled("bandai-namco").unwrap().bind(&cap.motion.skeleton).unwrap();
+    let profile = ProfileSpec::bundled("bandai-namco")
+        .unwrap()
+        .bind(&cap.motion.skeleton)
+        .unwrap();
     let positions = dataset_positions(&clip.motion, &profile);
     let n = clip.motion.num_joints();
     let frame = canonical_frame(&positions[..n], &profile).unwrap();
     let hand = cap.motion.skeleton.index_of("Hand_R").unwrap();
     let expected = frame.apply(positions[30 * n + hand]);
-    assert!((expected - glam::DVec3::from(goal)).length() < 1e-9, "{goal:?} vs {expected:?}");
-    assert!(goal[2] > 0.5, "a raised hand is well above the floor: {goal:?}");
+    assert!(
+        (expected - glam::DVec3::from(goal)).length() < 1e-9,
+        "{goal:?} vs {expected:?}"
+    );
+    assert!(
+        goal[2] > 0.5,
+        "a raised hand is well above the floor: {goal:?}"
+    );
     let spec = ProfileSpec::bundled("bandai-namco").unwrap();
     let mirrored = &mirror::run(std::slice::from_ref(clip), &spec, types.taxonomy()).clips[0];
     assert_eq!(mirrored.hand, Some(Hand::Left));
