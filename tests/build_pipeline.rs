@@ -231,6 +231,10 @@ fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
     let listed = fs::read_to_string(s.out().join("rejects.jsonl")).unwrap();
     assert_eq!(listed.lines().count(), report.rejects.len());
     assert_eq!(report.rejects.len(), 5);
+    // Rejected inputs are cached like the rest: a second build re-runs nothing.
+    let again = s.build();
+    assert!(again.nothing_ran(), "{:?}", again.stages);
+    assert_eq!(again.rejects, report.rejects);
     // No temporary file is left behind.
     for entry in fs::read_dir(s.out()).unwrap() {
         let name = entry.unwrap().file_name().to_string_lossy().into_owned();
@@ -249,8 +253,8 @@ fn mirrored_rows_carry_mirrored_labels() {
     assert_eq!(
         rows,
         vec![
-            "dataset-1_walk-left_normal_001:0-135|False|walk-left|walk left, normal style",
-            "dataset-1_walk-left_normal_001:0-135:m|True|walk-right|walk right, normal style",
+            "bandai-namco-1/dataset-1_walk-left_normal_001:0-135|False|walk-left|walk left, normal style",
+            "bandai-namco-1/dataset-1_walk-left_normal_001:0-135:m|True|walk-right|walk right, normal style",
         ]
     );
 }
@@ -370,7 +374,10 @@ fn demo_build_segments_the_long_capture_and_prints_counts() {
         &out.path().join("clips.parquet"),
         "clip_id,annotation_source,frame_range",
     );
-    let cmu: Vec<&String> = rows.iter().filter(|r| r.starts_with("01_01:")).collect();
+    let cmu: Vec<&String> = rows
+        .iter()
+        .filter(|r| r.starts_with("cmu/01_01:"))
+        .collect();
     assert_eq!(
         cmu.len(),
         4,

@@ -92,14 +92,44 @@ fn main() -> ExitCode {
             }) {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("error: {err:#}");
-            let usage = err.chain().any(|e| {
-                e.downcast_ref::<motionforge::config::ConfigError>()
-                    .is_some()
-            });
-            ExitCode::from(if usage { 2 } else { 1 })
+            eprintln!("error: {}", error_message(&err));
+            ExitCode::from(exit_code(&err))
         }
     }
+}
+
+/// The error and its causes on one line, skipping causes the message already quotes.
+fn error_message(err: &anyhow::Error) -> String {
+    let mut message = err.to_string();
+    for cause in err.chain().skip(1) {
+        let text = cause.to_string();
+        if !message.contains(&text) {
+            message = format!("{message}: {text}");
+        }
+    }
+    message
+}
+
+/// 2 for mistakes in the config or what it names (documented exit codes), 1 otherwise.
+fn exit_code(err: &anyhow::Error) -> u8 {
+    use motionforge::build::BuildError;
+    let usage = err.chain().any(|e| {
+        e.downcast_ref::<motionforge::config::ConfigError>()
+            .is_some()
+            || e.downcast_ref::<motionforge::source::SourceError>()
+                .is_some()
+            || e.downcast_ref::<motionforge::annotate::taxonomy::TaxonomyError>()
+                .is_some()
+            || e.downcast_ref::<motionforge::motion::profile::ProfileError>()
+                .is_some()
+            || e.downcast_ref::<motionforge::llm::prompt::PromptError>()
+                .is_some()
+            || matches!(
+                e.downcast_ref::<BuildError>(),
+                Some(BuildError::Source(_) | BuildError::Taxonomy(_))
+            )
+    });
+    if usage { 2 } else { 1 }
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
@@ -119,7 +149,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
-                print_report(&report);
+                print_report(&report)?;
             }
             if strict && !report.rejects.is_empty() {
                 return Ok(ExitCode::from(3));
@@ -150,7 +180,8 @@ fn counts(map: &std::collections::BTreeMap<String, usize>) -> String {
         .join(", ")
 }
 
-fn print_report(report: &BuildReport) {
+fn print_report(report: &BuildReport) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
     for stage in &report.stages {
         let what = if stage.ran == 0 {
             "up to date, nothing re-run".to_string()
@@ -160,31 +191,38 @@ fn print_report(report: &BuildReport) {
                 stage.ran, stage.items, stage.reused
             )
         };
-        println!("{:>8}  {what}", stage.stage);
+        writeln!(out, "{:>8}  {what}", stage.stage)?;
     }
-    println!(
+    writeln!(
+        out,
         "{} captures -> {} clips ({} mirrored) in {}",
         report.captures,
         report.clips,
         report.mirrored,
         report.output.join(motionforge::build::CLIPS_FILE).display()
-    );
-    println!("by kind: {}", counts(&report.kinds));
-    println!("motion types (originals): {}", counts(&report.motion_types));
+    )?;
+    writeln!(out, "by kind: {}", counts(&report.kinds))?;
+    writeln!(
+        out,
+        "motion types (originals): {}",
+        counts(&report.motion_types)
+    )?;
     if !report.unmapped_labels.is_empty() {
-        println!(
+        writeln!(
+            out,
             "labels with no motion type: {}",
             counts(&report.unmapped_labels)
-        );
+        )?;
     }
-    println!("dropped segments: {}", counts(&report.drops_by_reason));
+    writeln!(out, "dropped segments: {}", counts(&report.drops_by_reason))?;
     if !report.notes_by_kind.is_empty() {
-        println!("annotation notes: {}", counts(&report.notes_by_kind));
+        writeln!(out, "annotation notes: {}", counts(&report.notes_by_kind))?;
     }
     if report.rejects.is_empty() {
-        println!("rejects: none");
+        writeln!(out, "rejects: none")?;
     } else {
-        println!(
+        writeln!(
+            out,
             "rejects: {} ({}), listed in {}:",
             report.rejects.len(),
             counts(&report.rejects_by_reason),
@@ -192,14 +230,15 @@ fn print_report(report: &BuildReport) {
                 .output
                 .join(motionforge::build::REJECTS_FILE)
                 .display()
-        );
+        )?;
         for r in report.rejects.iter().take(10) {
-            println!("  {r}");
+            writeln!(out, "  {r}")?;
         }
     }
     if report.nothing_ran() {
-        println!("nothing changed since the last build");
+        writeln!(out, "nothing changed since the last build")?;
     }
+    Ok(())
 }
 
 fn mirror_text(file: Option<&Path>) -> Result<()> {

@@ -31,7 +31,7 @@ use regex::{Regex, RegexBuilder};
 use serde::{Deserialize, Serialize};
 
 /// The bundled taxonomy's text (`schemas/motion_types.toml`).
-const BUNDLED_TEXT: &str = include_str!("../../../schemas/motion_types.toml");
+pub const BUNDLED_TOML: &str = include_str!("../../../schemas/motion_types.toml");
 
 /// The name errors in the bundled taxonomy are reported under.
 pub const BUNDLED_FILE: &str = "schemas/motion_types.toml";
@@ -227,7 +227,7 @@ pub fn normalize_label(label: &str) -> String {
 impl Taxonomy {
     /// The bundled taxonomy (`schemas/motion_types.toml`, LINGO's Table A1).
     pub fn bundled() -> Result<Taxonomy, TaxonomyError> {
-        Taxonomy::from_toml(BUNDLED_TEXT, BUNDLED_FILE)
+        Taxonomy::from_toml(BUNDLED_TOML, BUNDLED_FILE)
     }
 
     /// Reads a taxonomy file.

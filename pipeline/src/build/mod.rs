@@ -2,7 +2,7 @@
 //! unchanged, writes outputs atomically and records what it rejected and why.
 
 mod reject;
-mod workspace;
+pub mod workspace;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -148,6 +148,8 @@ struct Shared<'a> {
     annotations: Vec<SourceAnnotations>,
     fps_tables: Vec<BTreeMap<String, f64>>,
     types: TypeMap,
+    /// Digest of the taxonomy's content and the mapping config: a taxonomy edit re-runs segments.
+    types_digest: String,
 }
 
 /// Runs every stage of the build described by `config`.
@@ -173,7 +175,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .iter()
         .map(|s| source::load_fps_table(config, s))
         .collect::<Result<_, _>>()?;
-    let types = load_types(config)?;
+    let (types, types_digest) = load_types(config)?;
     let shared = Shared {
         config,
         workspace,
@@ -181,6 +183,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         annotations,
         fps_tables,
         types,
+        types_digest,
     };
 
     let items: Vec<Item> = files
@@ -288,6 +291,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .json(&crate::io::schema::SCHEMA_VERSION)
         .finish();
     let write_ran = write_outputs(
+        options.force,
         &output,
         &shared.workspace,
         &table_fingerprint,
@@ -357,17 +361,30 @@ fn add_counts(into: &mut BTreeMap<String, usize>, from: BTreeMap<String, usize>)
     }
 }
 
-fn load_types(config: &Config) -> Result<TypeMap, BuildError> {
+fn load_types(config: &Config) -> Result<(TypeMap, String), BuildError> {
     let cfg = &config.motion_types;
-    let taxonomy = match &cfg.taxonomy {
+    let (taxonomy, text) = match &cfg.taxonomy {
         Some(path) => {
             let path = config.resolve(path);
             let text = std::fs::read_to_string(&path).map_err(workspace::io_err(&path))?;
-            Taxonomy::from_toml(&text, &path.display().to_string())?
+            (
+                Taxonomy::from_toml(&text, &path.display().to_string())?,
+                text,
+            )
         }
-        None => Taxonomy::bundled()?,
+        None => (
+            Taxonomy::bundled()?,
+            crate::annotate::taxonomy::BUNDLED_TOML.to_string(),
+        ),
     };
-    Ok(TypeMap::new(taxonomy.with_extra(cfg.extra.clone())?, cfg)?)
+    let digest = Fingerprint::new("motion_types", 1)
+        .text(&text)
+        .json(cfg)
+        .finish();
+    Ok((
+        TypeMap::new(taxonomy.with_extra(cfg.extra.clone())?, cfg)?,
+        digest,
+    ))
 }
 
 /// Runs ingest, segment and mirror for one capture, reusing cached outputs.
@@ -480,7 +497,7 @@ fn run_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result<Item, BuildErr
         profile: &profile,
         fps: config.dataset.fps,
     };
-    let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &config.motion_types);
+    let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &shared.types_digest);
     let (segmented, ran): (SegmentOutput, bool) =
         shared
             .workspace
@@ -489,7 +506,7 @@ fn run_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result<Item, BuildErr
     item.fingerprints.push((segment::NAME, seg_fp.clone()));
 
     if config.mirror.enabled {
-        let fp = mirror::fingerprint(&seg_fp, spec, &config.motion_types);
+        let fp = mirror::fingerprint(&seg_fp, spec, &shared.types_digest);
         let (mirrored, ran): (mirror::MirrorOutput, bool) =
             shared.workspace.cached(mirror::NAME, &fp, || {
                 mirror::run(&segmented.clips, spec, shared.types.taxonomy())
@@ -543,6 +560,7 @@ fn outputs_match(output: &Path, state: &State) -> bool {
 /// Writes the table and its companions unless the last build wrote the same; returns whether it
 /// wrote.
 fn write_outputs(
+    force: bool,
     output: &Path,
     workspace: &Workspace,
     fingerprint: &str,
@@ -556,7 +574,7 @@ fn write_outputs(
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok())
         .unwrap_or_default();
-    if state.table_fingerprint == fingerprint && outputs_match(output, &state) {
+    if !force && state.table_fingerprint == fingerprint && outputs_match(output, &state) {
         return Ok(false);
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();

@@ -9,11 +9,10 @@ pub struct Reject {
     pub stage: String,
     /// The input file.
     pub file: String,
-    /// 1-based line in that file, where known.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// 1-based line in that file, where known. (Always serialised, `null` when unknown: the
+    /// stage cache uses a format without field names, where skipped fields cannot be decoded.)
     pub line: Option<u64>,
     /// 0-based frame, where known.
-    #[serde(skip_serializing_if = "Option::is_none")]
     pub frame: Option<u64>,
     /// Short machine-readable reason (`bvh`, `label_pattern`, `profile`, ...).
     pub reason: String,

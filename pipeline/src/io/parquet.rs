@@ -56,6 +56,12 @@ pub struct DatasetMotion {
     pub root: Vec<f32>,
 }
 
+/// The clip's skeleton as the table names it: profile and a digest of the hierarchy and offsets,
+/// since captures of one profile can come from differently sized actors.
+pub fn skeleton_id(clip: &Clip) -> String {
+    format!("{}:{}", clip.profile, clip.motion.skeleton.digest())
+}
+
 /// Converts a clip's motion from capture units and axes to the dataset frame.
 pub fn dataset_motion(clip: &Clip, profile: &Profile) -> DatasetMotion {
     let axes = profile.to_dataset_axes();
@@ -245,7 +251,7 @@ pub fn clips_to_batch(
         optional_f32_lists(clips.iter().map(|c| c.goal_pelvis.map(|g| g.to_vec()))),
         optional_f32_lists(clips.iter().map(|c| c.goal_hand.map(|g| g.to_vec()))),
         Arc::new(attributes.finish()),
-        strings(&|c| &c.profile),
+        Arc::new(StringArray::from_iter_values(clips.iter().map(skeleton_id))),
         Arc::new(Float64Array::from_iter_values(
             clips.iter().map(|c| c.motion.fps),
         )),

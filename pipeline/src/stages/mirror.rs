@@ -1,5 +1,5 @@
 //! `mirror`: every clip in, its mirrored copy out: motion reflected on the same skeleton, and
-//! everything that carries a side (texts, labels, attributes) swapped with it.
+//! everything that carries a side (texts, labels, motion type, hand, goals) swapped with it.
 
 use serde::{Deserialize, Serialize};
 
@@ -67,7 +67,9 @@ pub fn run(clips: &[Clip], profile: &ProfileSpec, taxonomy: &Taxonomy) -> Mirror
     }
 }
 
-/// The mirrored copy of one clip: everything that carries a side swaps with the motion.
+/// The mirrored copy of one clip: everything that carries a side swaps with the motion. The
+/// attributes are left as they are: they describe the source capture as annotated (file-name
+/// fields, sidecar ids), which a mirror does not change.
 pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> Clip {
     Clip {
         clip_id: format!("{}:m", clip.clip_id),
@@ -76,11 +78,6 @@ pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> Clip 
         text: mirror_text(&clip.text),
         texts: clip.texts.iter().map(|t| mirror_text(t)).collect(),
         labels: clip.labels.iter().map(|t| mirror_text(t)).collect(),
-        attributes: clip
-            .attributes
-            .iter()
-            .map(|(k, v)| (k.clone(), mirror_text(v)))
-            .collect(),
         motion_type: clip
             .motion_type
             .as_deref()

@@ -20,7 +20,7 @@ use crate::motion::{BodyPart, Profile};
 /// Stage name.
 pub const NAME: &str = "segment";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// What the stage reads for one capture.
 pub struct SegmentInput<'a> {
@@ -217,7 +217,7 @@ impl ClipMaker<'_, '_> {
             return Err("too_long");
         }
         Ok(Clip {
-            clip_id: format!("{}:{start}-{end}", capture.stem),
+            clip_id: format!("{}/{}:{start}-{end}", capture.capture.source, capture.stem),
             kind: SourceKind::RealSingle,
             capture: capture.capture.clone(),
             frame_range: (start, end),
@@ -242,6 +242,7 @@ impl ClipMaker<'_, '_> {
     fn single(&self, k: &Kept<'_>) -> Result<Clip, &'static str> {
         let mut clip = self.base(k.start, k.end)?;
         let span = k.span;
+        clip.annotation_origin = format!("{}#{}", clip.annotation_origin, span.id);
         clip.action = span.label.clone();
         clip.text = span.raw_text.clone();
         clip.texts = vec![span.raw_text.clone()];
@@ -274,7 +275,9 @@ impl ClipMaker<'_, '_> {
     fn pair(&self, members: &[&Kept<'_>], start: u64, end: u64) -> Result<Clip, &'static str> {
         let mut clip = self.base(start, end)?;
         clip.kind = SourceKind::RealPair;
-        clip.clip_id = format!("{}:{start}-{end}:pair", self.input.capture.stem);
+        clip.clip_id = format!("{}:pair", clip.clip_id);
+        let ids: Vec<&str> = members.iter().map(|m| m.span.id.as_str()).collect();
+        clip.annotation_origin = format!("{}#{}", clip.annotation_origin, ids.join("+"));
         clip.texts = members.iter().map(|m| m.span.raw_text.clone()).collect();
         clip.labels = members.iter().map(|m| m.span.label.clone()).collect();
         clip.action = clip.labels.join(" + ");

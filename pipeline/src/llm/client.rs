@@ -1,0 +1,740 @@
+//! An OpenAI-compatible LLM client (OpenAI, vLLM, llama.cpp's server, Ollama's `/v1`) with bounded
+//! concurrency, a request-rate limit, retries with jittered exponential backoff, and a persistent
+//! response cache in front.
+//!
+//! The rest of the pipeline is synchronous, so [`LlmClient::complete_all`] is too: the client owns
+//! a small tokio runtime and blocks on it.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+use tokio::sync::Semaphore;
+use tokio::time::Instant;
+
+use crate::llm::cache::{CacheEntry, CacheKey, ResponseCache};
+
+/// Characters of an error body kept in [`LlmError::Http`].
+const BODY_PREVIEW_CHARS: usize = 300;
+
+/// The backoff ceiling doubles per retry up to `backoff_seconds × 2^MAX_BACKOFF_DOUBLINGS`.
+const MAX_BACKOFF_DOUBLINGS: u32 = 6;
+
+/// Which OpenAI endpoint a request goes to.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum RequestKind {
+    /// `POST {base_url}/chat/completions`; the prompt is sent as one user message.
+    #[default]
+    Chat,
+    /// `POST {base_url}/completions`; the prompt is sent as raw text.
+    Completion,
+}
+
+impl RequestKind {
+    /// `chat` or `completion`, as in configs and cache keys.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RequestKind::Chat => "chat",
+            RequestKind::Completion => "completion",
+        }
+    }
+
+    fn endpoint(self) -> &'static str {
+        match self {
+            RequestKind::Chat => "chat/completions",
+            RequestKind::Completion => "completions",
+        }
+    }
+}
+
+/// The sampling parameters sent with every request; all of them are part of the cache key.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct SamplingParams {
+    /// Sampling temperature; 0 is (close to) greedy.
+    pub temperature: f64,
+    /// Upper bound on generated tokens.
+    pub max_tokens: u32,
+    /// Sampling seed, sent only when set.
+    #[serde(default)]
+    pub seed: Option<u64>,
+}
+
+fn default_kind() -> RequestKind {
+    RequestKind::Chat
+}
+fn default_max_tokens() -> u32 {
+    256
+}
+fn default_concurrency() -> usize {
+    4
+}
+fn default_requests_per_minute() -> u32 {
+    60
+}
+fn default_max_retries() -> u32 {
+    5
+}
+fn default_timeout_seconds() -> f64 {
+    60.0
+}
+fn default_backoff_seconds() -> f64 {
+    1.0
+}
+fn default_max_retry_after_seconds() -> f64 {
+    60.0
+}
+
+/// How to reach an OpenAI-compatible server and how to sample from it.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LlmConfig {
+    /// The API root including `/v1`, e.g. `http://127.0.0.1:8080/v1`.
+    pub base_url: String,
+    /// The model name sent in each request.
+    pub model: String,
+    /// Name of the environment variable holding the API key, sent as `Authorization: Bearer`.
+    /// The key itself never appears in configs.
+    #[serde(default)]
+    pub api_key_env: Option<String>,
+    /// Chat or completion endpoint.
+    #[serde(default = "default_kind")]
+    pub kind: RequestKind,
+    /// Sampling temperature.
+    #[serde(default)]
+    pub temperature: f64,
+    /// Upper bound on generated tokens per answer.
+    #[serde(default = "default_max_tokens")]
+    pub max_tokens: u32,
+    /// Sampling seed, if the server supports one.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// Requests in flight at once.
+    #[serde(default = "default_concurrency")]
+    pub concurrency: usize,
+    /// Request starts (retries included) allowed per minute.
+    #[serde(default = "default_requests_per_minute")]
+    pub requests_per_minute: u32,
+    /// Retries after the first attempt.
+    #[serde(default = "default_max_retries")]
+    pub max_retries: u32,
+    /// Deadline of one attempt, from sending to the last byte of the answer.
+    #[serde(default = "default_timeout_seconds")]
+    pub timeout_seconds: f64,
+    /// Base of the exponential backoff between retries.
+    #[serde(default = "default_backoff_seconds")]
+    pub backoff_seconds: f64,
+    /// Upper bound on a server's `Retry-After`.
+    #[serde(default = "default_max_retry_after_seconds")]
+    pub max_retry_after_seconds: f64,
+}
+
+impl LlmConfig {
+    /// A config with every optional field at its default.
+    pub fn new(base_url: &str, model: &str) -> LlmConfig {
+        LlmConfig {
+            base_url: base_url.to_string(),
+            model: model.to_string(),
+            api_key_env: None,
+            kind: default_kind(),
+            temperature: 0.0,
+            max_tokens: default_max_tokens(),
+            seed: None,
+            concurrency: default_concurrency(),
+            requests_per_minute: default_requests_per_minute(),
+            max_retries: default_max_retries(),
+            timeout_seconds: default_timeout_seconds(),
+            backoff_seconds: default_backoff_seconds(),
+            max_retry_after_seconds: default_max_retry_after_seconds(),
+        }
+    }
+
+    /// The sampling parameters of this config.
+    pub fn sampling(&self) -> SamplingParams {
+        SamplingParams {
+            temperature: self.temperature,
+            max_tokens: self.max_tokens,
+            seed: self.seed,
+        }
+    }
+
+    /// The cache key of a prompt under this config. Needs no server or API key, so offline runs
+    /// can look answers up.
+    pub fn cache_key(&self, prompt: &str) -> CacheKey {
+        CacheKey::new(&self.model, self.kind, prompt, &self.sampling())
+    }
+}
+
+/// Errors of the LLM client. Cloneable because one result answers every duplicate of a prompt.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LlmError {
+    /// A config value is out of range.
+    #[error("LLM config: {message}")]
+    Config {
+        /// What is wrong.
+        message: String,
+    },
+    /// `api_key_env` names a variable that is unset or empty.
+    #[error("environment variable {var} (api_key_env) is not set or empty")]
+    MissingApiKey {
+        /// The variable name.
+        var: String,
+    },
+    /// The server answered with an error status (the last one, if retried).
+    #[error("HTTP {status} after {attempts} attempt(s): {body_preview}")]
+    Http {
+        /// The status code.
+        status: u16,
+        /// The start of the response body.
+        body_preview: String,
+        /// Requests sent for this prompt.
+        attempts: u32,
+    },
+    /// Every attempt exceeded `timeout_seconds`.
+    #[error("no answer within the timeout after {attempts} attempt(s)")]
+    Timeout {
+        /// Requests sent for this prompt.
+        attempts: u32,
+    },
+    /// The connection could not be made or broke mid-request.
+    #[error("connection failed after {attempts} attempt(s): {message}")]
+    Connect {
+        /// The transport's message.
+        message: String,
+        /// Requests sent for this prompt.
+        attempts: u32,
+    },
+    /// A success status with a body that is not JSON or holds no answer.
+    #[error("unusable response after {attempts} attempt(s): {message}")]
+    BadResponse {
+        /// What is wrong with the body.
+        message: String,
+        /// Requests sent for this prompt.
+        attempts: u32,
+    },
+    /// The answer is not cached and the server may not be asked; returned by callers in offline mode.
+    #[error("no cached answer, and the LLM may not be called (offline)")]
+    Offline,
+    /// An answer arrived but could not be written to the cache; it is withheld so that no result
+    /// depends on an answer a later run cannot reproduce.
+    #[error("answer not cached: {message}")]
+    Cache {
+        /// The cache error.
+        message: String,
+    },
+    /// The async runtime or HTTP client could not be set up, or a request task died.
+    #[error("LLM client: {message}")]
+    Internal {
+        /// What failed.
+        message: String,
+    },
+}
+
+/// One answer, and whether it came from the cache.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Answer {
+    /// The model's text.
+    pub text: String,
+    /// True when no request was sent for it.
+    pub from_cache: bool,
+}
+
+/// The OpenAI-compatible client. Holds its own tokio runtime; the rate limit carries over between
+/// calls of [`complete_all`](LlmClient::complete_all).
+pub struct LlmClient {
+    config: LlmConfig,
+    shared: Arc<Shared>,
+    runtime: Option<tokio::runtime::Runtime>,
+}
+
+impl std::fmt::Debug for LlmClient {
+    // Hand-written so the API key can never end up in a log.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LlmClient")
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+/// What request tasks share.
+struct Shared {
+    http: reqwest::Client,
+    url: String,
+    api_key: Option<String>,
+    model: String,
+    kind: RequestKind,
+    params: SamplingParams,
+    max_retries: u32,
+    timeout: Duration,
+    backoff_seconds: f64,
+    max_retry_after: Duration,
+    semaphore: Semaphore,
+    limiter: RateLimiter,
+}
+
+fn seconds(name: &str, value: f64, allow_zero: bool) -> Result<Duration, LlmError> {
+    let bad = || LlmError::Config {
+        message: format!(
+            "{name} must be a finite number {} seconds, got {value}",
+            if allow_zero { ">= 0" } else { "> 0" }
+        ),
+    };
+    if !allow_zero && value <= 0.0 {
+        return Err(bad());
+    }
+    Duration::try_from_secs_f64(value).map_err(|_| bad())
+}
+
+impl LlmClient {
+    /// Checks the config, reads the API key from its environment variable and starts the runtime.
+    pub fn new(config: LlmConfig) -> Result<LlmClient, LlmError> {
+        let config_err = |message: String| Err(LlmError::Config { message });
+        let root = config.base_url.trim_end_matches('/');
+        match reqwest::Url::parse(root) {
+            Ok(u) if matches!(u.scheme(), "http" | "https") => {}
+            _ => {
+                return config_err(format!(
+                    "base_url `{}` is not an http(s) URL",
+                    config.base_url
+                ));
+            }
+        }
+        if config.model.trim().is_empty() {
+            return config_err("model is empty".into());
+        }
+        if !(config.temperature.is_finite() && config.temperature >= 0.0) {
+            return config_err(format!(
+                "temperature must be finite and >= 0, got {}",
+                config.temperature
+            ));
+        }
+        if config.concurrency == 0 {
+            return config_err("concurrency must be at least 1".into());
+        }
+        if config.requests_per_minute == 0 {
+            return config_err("requests_per_minute must be at least 1".into());
+        }
+        let timeout = seconds("timeout_seconds", config.timeout_seconds, false)?;
+        let max_retry_after = seconds(
+            "max_retry_after_seconds",
+            config.max_retry_after_seconds,
+            true,
+        )?;
+        // Check the largest backoff ceiling too, so computing a delay can never fail later.
+        seconds("backoff_seconds", config.backoff_seconds, true)?;
+        seconds(
+            "backoff_seconds",
+            config.backoff_seconds * f64::from(1u32 << MAX_BACKOFF_DOUBLINGS),
+            true,
+        )?;
+
+        let api_key = match &config.api_key_env {
+            None => None,
+            Some(var) => match std::env::var(var) {
+                Ok(key) if !key.trim().is_empty() => Some(key.trim().to_string()),
+                _ => return Err(LlmError::MissingApiKey { var: var.clone() }),
+            },
+        };
+
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            // Requests are I/O-bound; two workers drive hundreds of them.
+            .worker_threads(2)
+            .thread_name("motionforge-llm")
+            .enable_all()
+            .build()
+            .map_err(|e| LlmError::Internal {
+                message: format!("cannot start the async runtime: {e}"),
+            })?;
+        // reqwest's connector registers with the runtime it is built in.
+        let http = {
+            let _guard = runtime.enter();
+            reqwest::Client::builder()
+                .user_agent(concat!("motionforge/", env!("CARGO_PKG_VERSION")))
+                .build()
+                .map_err(|e| LlmError::Internal {
+                    message: format!("cannot build the HTTP client: {e}"),
+                })?
+        };
+
+        let shared = Shared {
+            http,
+            url: format!("{root}/{}", config.kind.endpoint()),
+            api_key,
+            model: config.model.clone(),
+            kind: config.kind,
+            params: config.sampling(),
+            max_retries: config.max_retries,
+            timeout,
+            backoff_seconds: config.backoff_seconds,
+            max_retry_after,
+            semaphore: Semaphore::new(config.concurrency),
+            limiter: RateLimiter::new(config.requests_per_minute),
+        };
+        Ok(LlmClient {
+            config,
+            shared: Arc::new(shared),
+            runtime: Some(runtime),
+        })
+    }
+
+    /// The config the client was built from.
+    pub fn config(&self) -> &LlmConfig {
+        &self.config
+    }
+
+    /// The cache key of a prompt under this client's model, endpoint and sampling parameters.
+    pub fn key(&self, prompt: &str) -> CacheKey {
+        self.config.cache_key(prompt)
+    }
+
+    /// Sends every prompt not already in the cache, at most `concurrency` at a time and
+    /// `requests_per_minute` overall; identical prompts are sent once. Returns per prompt the
+    /// answer or the final error. Answers are written to the cache as they arrive, so a crash
+    /// loses at most the requests in flight.
+    ///
+    /// Blocks the calling thread. Safe to call from inside another tokio runtime: the work then
+    /// runs on a helper thread.
+    pub fn complete_all(
+        &self,
+        prompts: &[String],
+        cache: &mut ResponseCache,
+    ) -> Vec<Result<Answer, LlmError>> {
+        let Some(runtime) = &self.runtime else {
+            return internal_errors(prompts.len(), "runtime already shut down");
+        };
+        let mut work = || runtime.block_on(self.run(prompts, cache));
+        if tokio::runtime::Handle::try_current().is_ok() {
+            // block_on panics inside a runtime; a plain thread has no runtime context.
+            std::thread::scope(|s| {
+                s.spawn(work)
+                    .join()
+                    .unwrap_or_else(|_| internal_errors(prompts.len(), "request driver panicked"))
+            })
+        } else {
+            work()
+        }
+    }
+
+    async fn run(
+        &self,
+        prompts: &[String],
+        cache: &mut ResponseCache,
+    ) -> Vec<Result<Answer, LlmError>> {
+        let mut results: Vec<Option<Result<Answer, LlmError>>> = vec![None; prompts.len()];
+        // Distinct uncached keys, each with the prompt positions it answers.
+        let mut pending: Vec<(CacheKey, Vec<usize>)> = Vec::new();
+        let mut slot_of: HashMap<CacheKey, usize> = HashMap::new();
+        for (i, prompt) in prompts.iter().enumerate() {
+            let key = self.key(prompt);
+            if let Some(text) = cache.get(&key) {
+                results[i] = Some(Ok(Answer {
+                    text: text.to_string(),
+                    from_cache: true,
+                }));
+            } else if let Some(&slot) = slot_of.get(&key) {
+                pending[slot].1.push(i);
+            } else {
+                slot_of.insert(key.clone(), pending.len());
+                pending.push((key, vec![i]));
+            }
+        }
+
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        for (slot, (_, positions)) in pending.iter().enumerate() {
+            let shared = Arc::clone(&self.shared);
+            let tx = tx.clone();
+            let prompt = prompts[positions[0]].clone();
+            tokio::spawn(async move {
+                let result = match shared.semaphore.acquire().await {
+                    Ok(_permit) => shared.request(&prompt).await,
+                    Err(_) => Err(LlmError::Internal {
+                        message: "request semaphore closed".into(),
+                    }),
+                };
+                let _ = tx.send((slot, result));
+            });
+        }
+        drop(tx);
+
+        // The cache is written here, on one task, as answers arrive: no locking, and each answer is
+        // durable before the next is taken.
+        while let Some((slot, result)) = rx.recv().await {
+            let (key, positions) = &pending[slot];
+            let outcome = result.and_then(|text| {
+                let prompt = &prompts[positions[0]];
+                let entry = CacheEntry::new(
+                    &self.shared.model,
+                    self.shared.kind,
+                    prompt,
+                    &self.shared.params,
+                    text.clone(),
+                    "llm",
+                );
+                cache
+                    .insert(key.clone(), entry)
+                    .map_err(|e| LlmError::Cache {
+                        message: e.to_string(),
+                    })?;
+                Ok(Answer {
+                    text,
+                    from_cache: false,
+                })
+            });
+            for &i in positions {
+                results[i] = Some(outcome.clone());
+            }
+        }
+
+        results
+            .into_iter()
+            .map(|r| {
+                r.unwrap_or_else(|| {
+                    Err(LlmError::Internal {
+                        message: "request task ended without a result".into(),
+                    })
+                })
+            })
+            .collect()
+    }
+}
+
+impl Drop for LlmClient {
+    fn drop(&mut self) {
+        // A plain drop of a runtime panics inside an async context; this never blocks or panics.
+        if let Some(rt) = self.runtime.take() {
+            rt.shutdown_background();
+        }
+    }
+}
+
+fn internal_errors(n: usize, message: &str) -> Vec<Result<Answer, LlmError>> {
+    vec![
+        Err(LlmError::Internal {
+            message: message.to_string(),
+        });
+        n
+    ]
+}
+
+/// Why one attempt failed, before the attempt count is known.
+enum Failure {
+    Status {
+        status: u16,
+        body_preview: String,
+        retry_after: Option<f64>,
+    },
+    Timeout,
+    Transport(String),
+    Bad(String),
+}
+
+impl Failure {
+    /// 429, 5xx, timeouts, broken connections and unusable 200 bodies are retried; a 200 that is
+    /// not the documented JSON is a server fault, like a 5xx. Other statuses are the request's fault.
+    fn retryable(&self) -> bool {
+        match self {
+            Failure::Status { status, .. } => *status == 429 || *status >= 500,
+            Failure::Timeout | Failure::Transport(_) | Failure::Bad(_) => true,
+        }
+    }
+
+    fn into_error(self, attempts: u32) -> LlmError {
+        match self {
+            Failure::Status {
+                status,
+                body_preview,
+                ..
+            } => LlmError::Http {
+                status,
+                body_preview,
+                attempts,
+            },
+            Failure::Timeout => LlmError::Timeout { attempts },
+            Failure::Transport(message) => LlmError::Connect { message, attempts },
+            Failure::Bad(message) => LlmError::BadResponse { message, attempts },
+        }
+    }
+}
+
+impl Shared {
+    /// One prompt with retries. Holds its concurrency permit through the backoff sleeps, so an
+    /// overloaded server sees fewer requests, not the same number reshuffled.
+    async fn request(&self, prompt: &str) -> Result<String, LlmError> {
+        let body = self.body(prompt);
+        let mut attempts = 0;
+        loop {
+            attempts += 1;
+            self.limiter.wait().await;
+            let failure = match self.attempt(&body).await {
+                Ok(text) => return Ok(text),
+                Err(f) => f,
+            };
+            if !failure.retryable() || attempts > self.max_retries {
+                return Err(failure.into_error(attempts));
+            }
+            let delay = match &failure {
+                Failure::Status {
+                    retry_after: Some(s),
+                    ..
+                } => Duration::try_from_secs_f64(*s)
+                    .map_or(self.max_retry_after, |d| d.min(self.max_retry_after)),
+                _ => self.backoff(attempts),
+            };
+            tokio::time::sleep(delay).await;
+        }
+    }
+
+    fn body(&self, prompt: &str) -> Value {
+        let mut body = json!({
+            "model": self.model,
+            "temperature": self.params.temperature,
+            "max_tokens": self.params.max_tokens,
+        });
+        match self.kind {
+            RequestKind::Chat => {
+                body["messages"] = json!([{ "role": "user", "content": prompt }]);
+            }
+            RequestKind::Completion => body["prompt"] = json!(prompt),
+        }
+        if let Some(seed) = self.params.seed {
+            body["seed"] = json!(seed);
+        }
+        body
+    }
+
+    /// Full jitter: uniform in [0, backoff × 2^(n−1)], the exponent capped, after the n-th attempt.
+    fn backoff(&self, attempts: u32) -> Duration {
+        let doublings = attempts.saturating_sub(1).min(MAX_BACKOFF_DOUBLINGS);
+        let ceiling = self.backoff_seconds * f64::from(1u32 << doublings);
+        Duration::try_from_secs_f64(fastrand::f64() * ceiling).unwrap_or_default()
+    }
+
+    async fn attempt(&self, body: &Value) -> Result<String, Failure> {
+        let mut request = self.http.post(&self.url).json(body);
+        if let Some(key) = &self.api_key {
+            request = request.bearer_auth(key);
+        }
+        // One deadline over connecting, sending and reading the whole body.
+        let exchange = async {
+            let response = request.send().await?;
+            let status = response.status().as_u16();
+            let retry_after = response
+                .headers()
+                .get(reqwest::header::RETRY_AFTER)
+                .and_then(|v| v.to_str().ok())
+                .and_then(parse_retry_after);
+            let bytes = response.bytes().await?;
+            Ok::<_, reqwest::Error>((status, retry_after, bytes))
+        };
+        let (status, retry_after, bytes) = match tokio::time::timeout(self.timeout, exchange).await
+        {
+            Err(_) => return Err(Failure::Timeout),
+            Ok(Err(e)) if e.is_timeout() => return Err(Failure::Timeout),
+            Ok(Err(e)) => return Err(Failure::Transport(error_chain(&e))),
+            Ok(Ok(parts)) => parts,
+        };
+        if !(200..300).contains(&status) {
+            return Err(Failure::Status {
+                status,
+                body_preview: preview(&String::from_utf8_lossy(&bytes)),
+                retry_after,
+            });
+        }
+        parse_answer(self.kind, &bytes).map_err(Failure::Bad)
+    }
+}
+
+/// `Retry-After` as delay-seconds (decimals accepted). The HTTP-date form is not parsed; such a
+/// response falls back to the computed backoff.
+fn parse_retry_after(value: &str) -> Option<f64> {
+    value
+        .trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|s| s.is_finite() && *s >= 0.0)
+}
+
+fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<String, String> {
+    let value: Value = serde_json::from_slice(bytes).map_err(|e| {
+        format!(
+            "body is not JSON ({e}): {}",
+            preview(&String::from_utf8_lossy(bytes))
+        )
+    })?;
+    let Some(choice) = value
+        .get("choices")
+        .and_then(Value::as_array)
+        .and_then(|c| c.first())
+    else {
+        return Err(format!(
+            "no choices in response: {}",
+            preview(&value.to_string())
+        ));
+    };
+    let (field, text) = match kind {
+        RequestKind::Chat => (
+            "choices[0].message.content",
+            choice.pointer("/message/content"),
+        ),
+        RequestKind::Completion => ("choices[0].text", choice.get("text")),
+    };
+    match text.and_then(Value::as_str) {
+        Some(t) => Ok(t.to_string()),
+        None => Err(format!(
+            "{field} is missing or not a string: {}",
+            preview(&choice.to_string())
+        )),
+    }
+}
+
+fn preview(text: &str) -> String {
+    let mut p: String = text.chars().take(BODY_PREVIEW_CHARS).collect();
+    if p.len() < text.len() {
+        p.push('…');
+    }
+    p
+}
+
+/// reqwest's top-level message is often just "error sending request"; the cause is further down.
+fn error_chain(e: &reqwest::Error) -> String {
+    let mut message = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(s) = source {
+        message.push_str(": ");
+        message.push_str(&s.to_string());
+        source = s.source();
+    }
+    message
+}
+
+/// Spaces request starts at least 60 s / `requests_per_minute` apart, so no 60-second window
+/// holds more than `requests_per_minute` starts. Each caller reserves the next free start time
+/// under a lock and sleeps until it. No bursts: servers that enforce per-minute limits often
+/// enforce them over shorter periods too.
+struct RateLimiter {
+    interval: Duration,
+    next_free: Mutex<Option<Instant>>,
+}
+
+impl RateLimiter {
+    fn new(requests_per_minute: u32) -> RateLimiter {
+        RateLimiter {
+            interval: Duration::from_secs(60) / requests_per_minute.max(1),
+            next_free: Mutex::new(None),
+        }
+    }
+
+    async fn wait(&self) {
+        let start = {
+            // A poisoned lock only means another task panicked between two plain assignments.
+            let mut next = self.next_free.lock().unwrap_or_else(|e| e.into_inner());
+            let now = Instant::now();
+            let start = next.filter(|&t| t > now).unwrap_or(now);
+            *next = Some(start + self.interval);
+            start
+        };
+        tokio::time::sleep_until(start).await;
+    }
+}

@@ -1,0 +1,7 @@
+//! LLM access: prompt templates, an OpenAI-compatible client with a persistent response cache,
+//! and parsers for the answers. Knows nothing of clips or motion.
+
+pub mod cache;
+pub mod client;
+pub mod plans;
+pub mod prompt;

@@ -1,0 +1,924 @@
+//! The LLM client and response cache over real HTTP on loopback: a scripted axum server plays an
+//! OpenAI-compatible endpoint (success, 429 with Retry-After, 5xx, hangs, malformed bodies, 400s)
+//! and counts what it receives.
+
+use std::collections::VecDeque;
+use std::io::Write;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use axum::extract::State;
+use axum::http::{HeaderMap, StatusCode, Uri, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::post;
+use axum::{Json, Router};
+use serde_json::{Value, json};
+
+use motionforge::llm::cache::{CacheEntry, CacheKey, ResponseCache};
+use motionforge::llm::client::{
+    Answer, LlmClient, LlmConfig, LlmError, RequestKind, SamplingParams,
+};
+
+/// What the server does with one request.
+#[derive(Clone, Debug)]
+enum Step {
+    /// 200 with `echo: <prompt>`.
+    Echo,
+    /// An error status with a body and optional `Retry-After`.
+    Status(u16, &'static str, Option<&'static str>),
+    /// Sleep (longer than the client's timeout), then echo.
+    Hang(Duration),
+    /// 200 with this body as JSON content type.
+    Raw(&'static str),
+}
+
+#[derive(Debug, Clone)]
+struct Seen {
+    path: String,
+    auth: Option<String>,
+    body: Value,
+    at: Instant,
+}
+
+struct ServerState {
+    /// Steps taken in order; `default` once empty.
+    script: Mutex<VecDeque<Step>>,
+    default: Step,
+    /// Every request sleeps this long before answering (to make concurrency observable).
+    delay: Duration,
+    /// When set, requests without exactly this `Authorization` header get a 401.
+    expected_auth: Option<String>,
+    requests: AtomicUsize,
+    in_flight: AtomicUsize,
+    max_in_flight: AtomicUsize,
+    seen: Mutex<Vec<Seen>>,
+}
+
+struct InFlight(Arc<ServerState>);
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        self.0.in_flight.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+fn prompt_of(body: &Value) -> String {
+    body.pointer("/messages/0/content")
+        .or_else(|| body.get("prompt"))
+        .and_then(Value::as_str)
+        .unwrap_or_default()
+        .to_string()
+}
+
+fn echo(chat: bool, prompt: &str) -> Response {
+    let text = format!("echo: {prompt}");
+    let body = if chat {
+        json!({"object": "chat.completion", "choices": [
+            {"index": 0, "message": {"role": "assistant", "content": text}, "finish_reason": "stop"}
+        ]})
+    } else {
+        json!({"object": "text_completion", "choices": [
+            {"index": 0, "text": text, "finish_reason": "stop"}
+        ]})
+    };
+    Json(body).into_response()
+}
+
+async fn handle(
+    State(s): State<Arc<ServerState>>,
+    uri: Uri,
+    headers: HeaderMap,
+    Json(body): Json<Value>,
+) -> Response {
+    s.requests.fetch_add(1, Ordering::SeqCst);
+    let now = s.in_flight.fetch_add(1, Ordering::SeqCst) + 1;
+    s.max_in_flight.fetch_max(now, Ordering::SeqCst);
+    let _guard = InFlight(Arc::clone(&s));
+    let auth = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_string);
+    let chat = uri.path().ends_with("/chat/completions");
+    let prompt = prompt_of(&body);
+    s.seen.lock().unwrap().push(Seen {
+        path: uri.path().to_string(),
+        auth: auth.clone(),
+        body,
+        at: Instant::now(),
+    });
+    if let Some(expected) = &s.expected_auth
+        && auth.as_deref() != Some(expected.as_str())
+    {
+        return (StatusCode::UNAUTHORIZED, "bad or missing API key").into_response();
+    }
+    if !s.delay.is_zero() {
+        tokio::time::sleep(s.delay).await;
+    }
+    let step = s
+        .script
+        .lock()
+        .unwrap()
+        .pop_front()
+        .unwrap_or_else(|| s.default.clone());
+    match step {
+        Step::Echo => echo(chat, &prompt),
+        Step::Status(code, text, retry_after) => {
+            let mut r = (StatusCode::from_u16(code).unwrap(), text).into_response();
+            if let Some(v) = retry_after {
+                r.headers_mut()
+                    .insert(header::RETRY_AFTER, v.parse().unwrap());
+            }
+            r
+        }
+        Step::Hang(d) => {
+            tokio::time::sleep(d).await;
+            echo(chat, &prompt)
+        }
+        Step::Raw(text) => ([(header::CONTENT_TYPE, "application/json")], text).into_response(),
+    }
+}
+
+/// A scripted OpenAI-compatible server on 127.0.0.1, running on its own runtime.
+struct TestServer {
+    state: Arc<ServerState>,
+    base_url: String,
+    _runtime: tokio::runtime::Runtime,
+}
+
+struct ServerSpec {
+    script: Vec<Step>,
+    default: Step,
+    delay: Duration,
+    expected_auth: Option<String>,
+}
+
+impl Default for ServerSpec {
+    fn default() -> Self {
+        ServerSpec {
+            script: Vec::new(),
+            default: Step::Echo,
+            delay: Duration::ZERO,
+            expected_auth: None,
+        }
+    }
+}
+
+impl TestServer {
+    fn start(spec: ServerSpec) -> TestServer {
+        let state = Arc::new(ServerState {
+            script: Mutex::new(spec.script.into()),
+            default: spec.default,
+            delay: spec.delay,
+            expected_auth: spec.expected_auth,
+            requests: AtomicUsize::new(0),
+            in_flight: AtomicUsize::new(0),
+            max_in_flight: AtomicUsize::new(0),
+            seen: Mutex::new(Vec::new()),
+        });
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap();
+        let listener = runtime
+            .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+            .unwrap();
+        let addr = listener.local_addr().unwrap();
+        let app = Router::new()
+            .route("/v1/chat/completions", post(handle))
+            .route("/v1/completions", post(handle))
+            .with_state(Arc::clone(&state));
+        runtime.spawn(async move { axum::serve(listener, app).await });
+        TestServer {
+            state,
+            base_url: format!("http://{addr}/v1"),
+            _runtime: runtime,
+        }
+    }
+
+    fn echo() -> TestServer {
+        TestServer::start(ServerSpec::default())
+    }
+
+    fn scripted(script: Vec<Step>) -> TestServer {
+        TestServer::start(ServerSpec {
+            script,
+            ..ServerSpec::default()
+        })
+    }
+
+    fn requests(&self) -> usize {
+        self.state.requests.load(Ordering::SeqCst)
+    }
+
+    fn seen(&self) -> Vec<Seen> {
+        self.state.seen.lock().unwrap().clone()
+    }
+
+    /// A config for this server that retries fast and is not rate limited in practice.
+    fn config(&self) -> LlmConfig {
+        LlmConfig {
+            requests_per_minute: 600_000,
+            backoff_seconds: 0.01,
+            timeout_seconds: 10.0,
+            max_retries: 3,
+            ..LlmConfig::new(&self.base_url, "test-model")
+        }
+    }
+}
+
+fn strings(items: &[&str]) -> Vec<String> {
+    items.iter().map(|s| s.to_string()).collect()
+}
+
+fn open_cache(dir: &Path) -> ResponseCache {
+    ResponseCache::open(&dir.join("llm").join("responses.jsonl")).unwrap()
+}
+
+fn answer(r: &Result<Answer, LlmError>) -> &Answer {
+    r.as_ref()
+        .unwrap_or_else(|e| panic!("expected an answer, got {e}"))
+}
+
+#[test]
+fn chat_success_sends_the_documented_request() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        seed: Some(7),
+        temperature: 0.5,
+        max_tokens: 32,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["hello"]), &mut cache);
+    assert_eq!(
+        answer(&results[0]),
+        &Answer {
+            text: "echo: hello".into(),
+            from_cache: false
+        }
+    );
+    assert_eq!(server.requests(), 1);
+    let seen = &server.seen()[0];
+    assert_eq!(seen.path, "/v1/chat/completions");
+    assert_eq!(seen.auth, None, "no api_key_env, no Authorization header");
+    assert_eq!(seen.body["model"], "test-model");
+    assert_eq!(
+        seen.body["messages"],
+        json!([{"role": "user", "content": "hello"}])
+    );
+    assert_eq!(seen.body["temperature"], 0.5);
+    assert_eq!(seen.body["max_tokens"], 32);
+    assert_eq!(seen.body["seed"], 7);
+    assert_eq!(cache.len(), 1);
+    assert_eq!(cache.get(&client.key("hello")), Some("echo: hello"));
+    let entry = cache.get_entry(&client.key("hello")).unwrap();
+    assert_eq!(entry.source, "llm");
+    assert_eq!(entry.kind, RequestKind::Chat);
+    assert_eq!(entry.prompt_preview, "hello");
+}
+
+#[test]
+fn completion_success_uses_the_completions_endpoint() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        kind: RequestKind::Completion,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["once upon"]), &mut cache);
+    assert_eq!(answer(&results[0]).text, "echo: once upon");
+    let seen = &server.seen()[0];
+    assert_eq!(seen.path, "/v1/completions");
+    assert_eq!(seen.body["prompt"], "once upon");
+    assert!(seen.body.get("messages").is_none());
+    assert!(
+        seen.body.get("seed").is_none(),
+        "seed is only sent when set"
+    );
+    // Chat and completion answers are cached apart.
+    let chat_key = LlmConfig::new(&server.base_url, "test-model").cache_key("once upon");
+    assert_ne!(client.key("once upon"), chat_key);
+}
+
+#[test]
+fn retry_after_on_429_is_respected() {
+    let server = TestServer::scripted(vec![Step::Status(429, "slow down", Some("1"))]);
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let t = Instant::now();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    let elapsed = t.elapsed();
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    assert_eq!(server.requests(), 2);
+    let seen = server.seen();
+    let gap = seen[1].at - seen[0].at;
+    assert!(gap >= Duration::from_secs(1), "retried after {gap:?}");
+    assert!(elapsed >= Duration::from_secs(1));
+    assert!(elapsed < Duration::from_secs(5), "took {elapsed:?}");
+}
+
+#[test]
+fn retry_after_is_capped_by_config() {
+    let server = TestServer::scripted(vec![Step::Status(503, "loading model", Some("30"))]);
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        max_retry_after_seconds: 0.2,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let t = Instant::now();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    let seen = server.seen();
+    let gap = seen[1].at - seen[0].at;
+    assert!(gap >= Duration::from_millis(200), "retried after {gap:?}");
+    assert!(t.elapsed() < Duration::from_secs(5));
+}
+
+#[test]
+fn server_errors_are_retried_then_succeed() {
+    let server = TestServer::scripted(vec![
+        Step::Status(500, "boom", None),
+        Step::Status(500, "boom", None),
+    ]);
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    assert_eq!(server.requests(), 3);
+    assert_eq!(cache.len(), 1);
+}
+
+#[test]
+fn server_errors_exhaust_retries() {
+    let server = TestServer::start(ServerSpec {
+        default: Step::Status(502, "bad gateway", None),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        max_retries: 2,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    assert_eq!(
+        results[0],
+        Err(LlmError::Http {
+            status: 502,
+            body_preview: "bad gateway".into(),
+            attempts: 3
+        })
+    );
+    assert_eq!(server.requests(), 3);
+    assert!(cache.is_empty());
+}
+
+#[test]
+fn hanging_response_times_out_then_retry_succeeds() {
+    let server = TestServer::scripted(vec![Step::Hang(Duration::from_secs(5))]);
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        timeout_seconds: 0.3,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let t = Instant::now();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    let elapsed = t.elapsed();
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    assert_eq!(server.requests(), 2);
+    assert!(elapsed >= Duration::from_millis(300), "took {elapsed:?}");
+    assert!(elapsed < Duration::from_secs(3), "took {elapsed:?}");
+}
+
+#[test]
+fn hanging_every_time_gives_timeout() {
+    let server = TestServer::start(ServerSpec {
+        default: Step::Hang(Duration::from_secs(5)),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        timeout_seconds: 0.2,
+        max_retries: 1,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    assert_eq!(results[0], Err(LlmError::Timeout { attempts: 2 }));
+    assert_eq!(server.requests(), 2);
+}
+
+#[test]
+fn malformed_json_is_retried() {
+    let server = TestServer::scripted(vec![Step::Raw("{\"choices\": [ {\"mess")]);
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    assert_eq!(server.requests(), 2);
+}
+
+#[test]
+fn malformed_json_every_time_is_a_bad_response() {
+    let server = TestServer::start(ServerSpec {
+        default: Step::Raw("<html>not json</html>"),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        max_retries: 1,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    match &results[0] {
+        Err(LlmError::BadResponse { message, attempts }) => {
+            assert_eq!(*attempts, 2);
+            assert!(message.contains("not JSON"), "{message}");
+            assert!(message.contains("<html>"), "{message}");
+        }
+        other => panic!("expected BadResponse, got {other:?}"),
+    }
+    assert!(cache.is_empty());
+}
+
+#[test]
+fn no_choices_is_a_bad_response_after_retries() {
+    let server = TestServer::start(ServerSpec {
+        default: Step::Raw(r#"{"object": "chat.completion", "choices": []}"#),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        max_retries: 2,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    match &results[0] {
+        Err(LlmError::BadResponse { message, attempts }) => {
+            assert_eq!(*attempts, 3);
+            assert!(message.contains("no choices"), "{message}");
+        }
+        other => panic!("expected BadResponse, got {other:?}"),
+    }
+    assert_eq!(server.requests(), 3);
+    assert!(cache.is_empty());
+}
+
+#[test]
+fn client_error_is_not_retried() {
+    let body = "{\"error\": {\"message\": \"model 'test-model' not found\"}}";
+    let server = TestServer::start(ServerSpec {
+        default: Step::Status(400, body, None),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    match &results[0] {
+        Err(
+            e @ LlmError::Http {
+                status,
+                body_preview,
+                attempts,
+            },
+        ) => {
+            assert_eq!(*status, 400);
+            assert_eq!(*attempts, 1);
+            assert!(body_preview.contains("not found"), "{body_preview}");
+            assert!(e.to_string().contains("HTTP 400"), "{e}");
+        }
+        other => panic!("expected Http, got {other:?}"),
+    }
+    assert_eq!(server.requests(), 1);
+}
+
+#[test]
+fn connection_refused_is_retried_then_reported() {
+    // A port that was free a moment ago: nothing listens on it.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        backoff_seconds: 0.01,
+        max_retries: 2,
+        requests_per_minute: 600_000,
+        ..LlmConfig::new(&format!("http://127.0.0.1:{port}/v1"), "m")
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    match &results[0] {
+        Err(LlmError::Connect { attempts, .. }) => assert_eq!(*attempts, 3),
+        other => panic!("expected Connect, got {other:?}"),
+    }
+}
+
+#[test]
+fn identical_prompts_in_a_batch_are_sent_once() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let prompts = strings(&["a", "b", "a", "a", "b"]);
+    let results = client.complete_all(&prompts, &mut cache);
+    assert_eq!(server.requests(), 2);
+    for (p, r) in prompts.iter().zip(&results) {
+        assert_eq!(answer(r).text, format!("echo: {p}"));
+    }
+    assert_eq!(cache.len(), 2);
+}
+
+#[test]
+fn concurrency_limit_is_respected() {
+    let server = TestServer::start(ServerSpec {
+        delay: Duration::from_millis(150),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        concurrency: 3,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let prompts: Vec<String> = (0..12).map(|i| format!("prompt {i}")).collect();
+    let results = client.complete_all(&prompts, &mut cache);
+    assert!(results.iter().all(Result::is_ok));
+    assert_eq!(server.requests(), 12);
+    assert_eq!(server.state.max_in_flight.load(Ordering::SeqCst), 3);
+}
+
+#[test]
+fn request_starts_are_spaced_by_the_rate_limit() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    // 600 per minute: one start every 100 ms.
+    let config = LlmConfig {
+        concurrency: 5,
+        requests_per_minute: 600,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let prompts: Vec<String> = (0..5).map(|i| format!("prompt {i}")).collect();
+    let results = client.complete_all(&prompts, &mut cache);
+    assert!(results.iter().all(Result::is_ok));
+    let mut times: Vec<Instant> = server.seen().iter().map(|s| s.at).collect();
+    times.sort();
+    for pair in times.windows(2) {
+        let gap = pair[1] - pair[0];
+        // Arrival jitter on loopback is well under the 20 ms slack.
+        assert!(gap >= Duration::from_millis(80), "starts {gap:?} apart");
+    }
+    assert!(times[4] - times[0] >= Duration::from_millis(380));
+}
+
+#[test]
+fn second_run_is_served_from_the_cache() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let prompts = strings(&["x", "y", "z"]);
+    let first = client.complete_all(&prompts, &mut cache);
+    assert!(first.iter().all(|r| !answer(r).from_cache));
+    assert_eq!(server.requests(), 3);
+    let second = client.complete_all(&prompts, &mut cache);
+    assert_eq!(server.requests(), 3, "no request on the second run");
+    for (a, b) in first.iter().zip(&second) {
+        assert_eq!(answer(a).text, answer(b).text);
+        assert!(answer(b).from_cache);
+    }
+}
+
+#[test]
+fn cache_survives_a_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let prompts = strings(&["walk forward", "wave the left hand"]);
+    let config;
+    {
+        let server = TestServer::echo();
+        config = server.config();
+        let mut cache = open_cache(dir.path());
+        let client = LlmClient::new(config.clone()).unwrap();
+        let results = client.complete_all(&prompts, &mut cache);
+        assert!(results.iter().all(Result::is_ok));
+    }
+    // Everything from the first "process" is gone; a server that would fail every request stands
+    // where the old one was configured.
+    let failing = TestServer::start(ServerSpec {
+        default: Step::Status(500, "must not be called", None),
+        ..ServerSpec::default()
+    });
+    let mut cache = open_cache(dir.path());
+    assert_eq!(cache.len(), 2);
+    assert_eq!(cache.recovered_partial_lines(), 0);
+    let client = LlmClient::new(LlmConfig {
+        base_url: failing.base_url.clone(),
+        ..config
+    })
+    .unwrap();
+    let results = client.complete_all(&prompts, &mut cache);
+    assert_eq!(failing.requests(), 0);
+    for (p, r) in prompts.iter().zip(&results) {
+        assert_eq!(
+            answer(r),
+            &Answer {
+                text: format!("echo: {p}"),
+                from_cache: true
+            }
+        );
+    }
+}
+
+fn entry(prompt: &str, response: &str) -> (CacheKey, CacheEntry) {
+    let params = SamplingParams {
+        temperature: 0.0,
+        max_tokens: 64,
+        seed: Some(1),
+    };
+    (
+        CacheKey::new("m", RequestKind::Chat, prompt, &params),
+        CacheEntry::new(
+            "m",
+            RequestKind::Chat,
+            prompt,
+            &params,
+            response.into(),
+            "llm",
+        ),
+    )
+}
+
+#[test]
+fn partial_last_line_is_recovered_and_truncated() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("responses.jsonl");
+    {
+        let mut cache = ResponseCache::open(&path).unwrap();
+        for i in 0..3 {
+            let (k, e) = entry(&format!("prompt {i}"), &format!("answer {i}"));
+            cache.insert(k, e).unwrap();
+        }
+    }
+    let complete = std::fs::read(&path).unwrap();
+    assert_eq!(complete.iter().filter(|&&b| b == b'\n').count(), 3);
+    // A crash mid-append: half of a fourth record, no newline.
+    let (k, e) = entry("prompt 3", "answer 3");
+    let mut line = serde_json::to_vec(&json!({"key": k.as_str(), "response": e.response})).unwrap();
+    line.truncate(line.len() / 2);
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(&path)
+        .unwrap()
+        .write_all(&line)
+        .unwrap();
+
+    let mut cache = ResponseCache::open(&path).unwrap();
+    assert_eq!(cache.recovered_partial_lines(), 1);
+    assert_eq!(cache.corrupt_lines(), 0);
+    assert_eq!(cache.len(), 3);
+    for i in 0..3 {
+        let (k, _) = entry(&format!("prompt {i}"), "");
+        assert_eq!(cache.get(&k), Some(format!("answer {i}").as_str()));
+    }
+    assert_eq!(std::fs::read(&path).unwrap(), complete, "torn line cut off");
+
+    // Appending after recovery yields a file that reopens cleanly.
+    cache.insert(k.clone(), e).unwrap();
+    drop(cache);
+    let cache = ResponseCache::open(&path).unwrap();
+    assert_eq!(cache.recovered_partial_lines(), 0);
+    assert_eq!(cache.len(), 4);
+    assert_eq!(cache.get(&k), Some("answer 3"));
+}
+
+#[test]
+fn record_missing_only_its_newline_is_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("responses.jsonl");
+    {
+        let mut cache = ResponseCache::open(&path).unwrap();
+        let (k, e) = entry("a", "first");
+        cache.insert(k, e).unwrap();
+        let (k, e) = entry("b", "second");
+        cache.insert(k, e).unwrap();
+    }
+    let mut bytes = std::fs::read(&path).unwrap();
+    assert_eq!(bytes.pop(), Some(b'\n'));
+    std::fs::write(&path, &bytes).unwrap();
+    let cache = ResponseCache::open(&path).unwrap();
+    assert_eq!(cache.recovered_partial_lines(), 0);
+    assert_eq!(cache.len(), 2);
+    assert!(std::fs::read(&path).unwrap().ends_with(b"}\n"));
+}
+
+#[test]
+fn later_entries_win_and_corrupt_lines_are_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir
+        .path()
+        .join("nested")
+        .join("deeper")
+        .join("responses.jsonl");
+    {
+        let mut cache = ResponseCache::open(&path).unwrap();
+        let (k, e) = entry("a", "old");
+        cache.insert(k, e).unwrap();
+    }
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(&path)
+        .unwrap()
+        .write_all(b"this is not json\n")
+        .unwrap();
+    {
+        let mut cache = ResponseCache::open(&path).unwrap();
+        assert_eq!(cache.corrupt_lines(), 1);
+        let (k, e) = entry("a", "new");
+        cache.insert(k, e).unwrap();
+    }
+    let cache = ResponseCache::open(&path).unwrap();
+    assert_eq!(cache.len(), 1);
+    assert_eq!(cache.corrupt_lines(), 1);
+    assert_eq!(cache.get(&entry("a", "").0), Some("new"));
+}
+
+#[test]
+fn cache_keys_separate_every_field() {
+    let p = SamplingParams {
+        temperature: 0.0,
+        max_tokens: 64,
+        seed: None,
+    };
+    let base = CacheKey::new("m", RequestKind::Chat, "ab", &p);
+    assert_eq!(base, CacheKey::new("m", RequestKind::Chat, "ab", &p));
+    assert_eq!(base.as_str().len(), 64);
+    let others = [
+        CacheKey::new("ma", RequestKind::Chat, "b", &p),
+        CacheKey::new("m", RequestKind::Completion, "ab", &p),
+        CacheKey::new("m", RequestKind::Chat, "ab ", &p),
+        CacheKey::new(
+            "m",
+            RequestKind::Chat,
+            "ab",
+            &SamplingParams {
+                temperature: 0.7,
+                ..p
+            },
+        ),
+        CacheKey::new(
+            "m",
+            RequestKind::Chat,
+            "ab",
+            &SamplingParams {
+                max_tokens: 65,
+                ..p
+            },
+        ),
+        CacheKey::new(
+            "m",
+            RequestKind::Chat,
+            "ab",
+            &SamplingParams { seed: Some(0), ..p },
+        ),
+    ];
+    for k in others {
+        assert_ne!(base, k);
+    }
+}
+
+#[test]
+fn api_key_is_sent_as_bearer() {
+    const VAR: &str = "MOTIONFORGE_TEST_LLM_CLIENT_API_KEY";
+    // SAFETY: the variable is used by this test only, and Rust's own environment accesses
+    // (std::env::var, also used by reqwest) are serialised by std's lock.
+    unsafe { std::env::set_var(VAR, "sk-test-123") };
+    let server = TestServer::start(ServerSpec {
+        expected_auth: Some("Bearer sk-test-123".into()),
+        ..ServerSpec::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let config = LlmConfig {
+        api_key_env: Some(VAR.into()),
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let results = client.complete_all(&strings(&["p"]), &mut cache);
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    assert_eq!(server.seen()[0].auth.as_deref(), Some("Bearer sk-test-123"));
+    assert!(!format!("{client:?}").contains("sk-test-123"));
+}
+
+#[test]
+fn missing_api_key_variable_is_an_error() {
+    let mut config = LlmConfig::new("http://127.0.0.1:9/v1", "m");
+    config.api_key_env = Some("MOTIONFORGE_TEST_LLM_KEY_THAT_IS_NEVER_SET".into());
+    match LlmClient::new(config) {
+        Err(LlmError::MissingApiKey { var }) => {
+            assert_eq!(var, "MOTIONFORGE_TEST_LLM_KEY_THAT_IS_NEVER_SET")
+        }
+        other => panic!("expected MissingApiKey, got {other:?}"),
+    }
+}
+
+#[test]
+fn config_defaults_and_validation() {
+    let config: LlmConfig =
+        serde_json::from_str(r#"{"base_url": "http://127.0.0.1:8080/v1", "model": "qwen"}"#)
+            .unwrap();
+    assert_eq!(config, LlmConfig::new("http://127.0.0.1:8080/v1", "qwen"));
+    assert_eq!(config.kind, RequestKind::Chat);
+    assert_eq!(config.max_tokens, 256);
+    assert_eq!(config.concurrency, 4);
+    assert_eq!(config.requests_per_minute, 60);
+    assert_eq!(config.max_retries, 5);
+    assert_eq!(config.timeout_seconds, 60.0);
+    assert_eq!(config.backoff_seconds, 1.0);
+    assert_eq!(config.max_retry_after_seconds, 60.0);
+    let kind: LlmConfig = serde_json::from_str(
+        r#"{"base_url": "http://h/v1", "model": "m", "kind": "completion", "seed": 3}"#,
+    )
+    .unwrap();
+    assert_eq!(kind.kind, RequestKind::Completion);
+    assert_eq!(kind.seed, Some(3));
+    assert!(
+        serde_json::from_str::<LlmConfig>(r#"{"base_url": "x", "model": "m", "temprature": 1}"#)
+            .is_err(),
+        "unknown fields are rejected"
+    );
+    let bad = [
+        LlmConfig::new("ftp://h/v1", "m"),
+        LlmConfig::new("http://h/v1", " "),
+        LlmConfig {
+            concurrency: 0,
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+        LlmConfig {
+            requests_per_minute: 0,
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+        LlmConfig {
+            timeout_seconds: 0.0,
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+        LlmConfig {
+            backoff_seconds: f64::NAN,
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+        LlmConfig {
+            temperature: -1.0,
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+    ];
+    for config in bad {
+        assert!(
+            matches!(LlmClient::new(config.clone()), Err(LlmError::Config { .. })),
+            "{config:?} accepted"
+        );
+    }
+}
+
+#[test]
+fn works_when_called_from_inside_a_runtime() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let client = LlmClient::new(server.config()).unwrap();
+    let outer = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let results = outer.block_on(async {
+        let results = client.complete_all(&strings(&["p"]), &mut cache);
+        // Dropping the client inside an async context must not panic either.
+        drop(client);
+        results
+    });
+    assert_eq!(answer(&results[0]).text, "echo: p");
+}
