@@ -290,15 +290,18 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .json(&fingerprints)
         .json(&crate::io::schema::SCHEMA_VERSION)
         .finish();
+    let table = Table {
+        clips: &clips,
+        profiles: &profiles,
+        skeletons: &skeletons,
+        rejects: &rejects,
+    };
     let write_ran = write_outputs(
         options.force,
         &output,
         &shared.workspace,
         &table_fingerprint,
-        &clips,
-        &profiles,
-        &skeletons,
-        &rejects,
+        &table,
     )?;
     stages.push(StageRun {
         stage: "write".into(),
@@ -559,16 +562,27 @@ fn outputs_match(output: &Path, state: &State) -> bool {
 
 /// Writes the table and its companions unless the last build wrote the same; returns whether it
 /// wrote.
+/// What the write stage writes.
+struct Table<'a> {
+    clips: &'a [Clip],
+    profiles: &'a BTreeMap<String, Profile>,
+    skeletons: &'a BTreeMap<String, serde_json::Value>,
+    rejects: &'a [Reject],
+}
+
 fn write_outputs(
     force: bool,
     output: &Path,
     workspace: &Workspace,
     fingerprint: &str,
-    clips: &[Clip],
-    profiles: &BTreeMap<String, Profile>,
-    skeletons: &BTreeMap<String, serde_json::Value>,
-    rejects: &[Reject],
+    table: &Table<'_>,
 ) -> Result<bool, BuildError> {
+    let Table {
+        clips,
+        profiles,
+        skeletons,
+        rejects,
+    } = *table;
     let state_path = workspace.root().join("state.json");
     let state: State = std::fs::read(&state_path)
         .ok()
