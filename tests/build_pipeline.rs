@@ -151,7 +151,14 @@ fn same_inputs_give_byte_identical_tables() {
     assert!(ta == tb, "tables differ between identical builds");
     // And a forced rebuild reproduces the same bytes.
     let config = Config::load(&a.config_path()).unwrap();
-    build(&config, &BuildOptions { force: true }).unwrap();
+    build(
+        &config,
+        &BuildOptions {
+            force: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert!(fs::read(a.out().join("clips.parquet")).unwrap() == ta);
 }
 

@@ -591,10 +591,11 @@ fn request_starts_are_spaced_by_the_rate_limit() {
     times.sort();
     for pair in times.windows(2) {
         let gap = pair[1] - pair[0];
-        // Arrival jitter on loopback is well under the 20 ms slack.
-        assert!(gap >= Duration::from_millis(80), "starts {gap:?} apart");
+        // The limiter spaces starts 100 ms apart on the client; the slack absorbs scheduling
+        // delays between a start and its arrival on a loaded machine.
+        assert!(gap >= Duration::from_millis(50), "starts {gap:?} apart");
     }
-    assert!(times[4] - times[0] >= Duration::from_millis(380));
+    assert!(times[4] - times[0] >= Duration::from_millis(350));
 }
 
 #[test]
@@ -921,4 +922,23 @@ fn works_when_called_from_inside_a_runtime() {
         results
     });
     assert_eq!(answer(&results[0]).text, "echo: p");
+}
+
+#[test]
+fn docs_config_examples_parse() {
+    let doc = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/llm-servers.md"),
+    )
+    .unwrap();
+    let blocks: Vec<&str> = doc
+        .split("```toml\n")
+        .skip(1)
+        .map(|rest| rest.split("```").next().unwrap())
+        .collect();
+    assert_eq!(blocks.len(), 5, "one example per server");
+    for block in blocks {
+        let config: LlmConfig =
+            toml::from_str(block).unwrap_or_else(|e| panic!("{e}\nin:\n{block}"));
+        assert!(config.base_url.ends_with("/v1"), "{block}");
+    }
 }

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::annotate::span::Hand;
 use crate::motion::Motion;
+use crate::parts::PartSet;
 
 /// Where a clip came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -91,6 +92,13 @@ pub struct Clip {
     pub goal_pelvis: Option<[f64; 2]>,
     /// Reaching goal: the hand at the grasp (or last) frame, (x, y, z) canonical, metres.
     pub goal_hand: Option<[f64; 3]>,
+    /// Body parts involved (SINC's six), when labelled.
+    pub parts: Option<PartSet>,
+    /// Which labeller produced `parts` (`embedded:lexicon`, `embedded:velocity`, `llm:<model>`,
+    /// `import:<file>`).
+    pub label_source: Option<String>,
+    /// Alternative descriptions of `text` (LLM, side words checked).
+    pub paraphrases: Vec<String>,
     /// Extra fields from the annotation (file-name groups, sidecar keys).
     pub attributes: BTreeMap<String, String>,
     /// Skeleton profile name.

@@ -53,6 +53,24 @@ pub struct Config {
     /// Motion types: taxonomy and how dataset labels map to it.
     #[serde(default)]
     pub motion_types: crate::annotate::taxonomy::TypeMapConfig,
+    /// Body-part labelling.
+    #[serde(default)]
+    pub part_labels: PartLabelConfig,
+    /// LINGO task plans for action texts.
+    #[serde(default)]
+    pub task_plans: TaskPlanConfig,
+    /// Alternative descriptions of action texts.
+    #[serde(default)]
+    pub paraphrases: ParaphraseConfig,
+    /// The LLM server; without it no request is ever sent (cached answers are still used).
+    #[serde(default)]
+    pub llm: Option<crate::llm::client::LlmConfig>,
+    /// Response cache shared by the LLM stages; default `<output>/llm-cache.jsonl`.
+    #[serde(default)]
+    pub llm_cache: Option<PathBuf>,
+    /// A folder of edited prompt templates and data (`part_labels.j2`, ...); bundled ones otherwise.
+    #[serde(default)]
+    pub prompts_dir: Option<PathBuf>,
     /// Capture sources.
     #[serde(rename = "sources")]
     pub sources: Vec<SourceConfig>,
@@ -79,6 +97,88 @@ pub struct DatasetConfig {
 
 fn default_fps() -> f64 {
     30.0
+}
+
+/// Who labels body parts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Labeller {
+    /// The embedded labeller: lexicon, then motion velocity; offline and deterministic.
+    #[default]
+    Embedded,
+    /// The LLM (through the response cache), with SINC's prompt.
+    Llm,
+}
+
+/// What to do with a text whose LLM answer is not in the cache and cannot be asked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum OnMiss {
+    /// Label it with the embedded labeller (and say so in `label_source`).
+    #[default]
+    Embedded,
+    /// Fail the build, listing the missing texts.
+    Fail,
+}
+
+/// Body-part labelling settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct PartLabelConfig {
+    /// `embedded` (default) or `llm`.
+    #[serde(default)]
+    pub labeller: Labeller,
+    /// SINC Table 1 prompt variant for the LLM.
+    #[serde(default)]
+    pub variant: crate::llm::prompt::PartPromptVariant,
+    /// Never send requests; answers come from the cache only.
+    #[serde(default)]
+    pub offline: bool,
+    /// Cache misses that cannot be asked: `embedded` (default) or `fail`.
+    #[serde(default)]
+    pub on_miss: OnMiss,
+}
+
+/// Task-plan settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskPlanConfig {
+    /// Plan every unique action text (with an LLM or cached answers; skipped and reported
+    /// otherwise).
+    #[serde(default = "yes")]
+    pub enabled: bool,
+}
+
+impl Default for TaskPlanConfig {
+    fn default() -> Self {
+        TaskPlanConfig { enabled: true }
+    }
+}
+
+/// Paraphrase settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParaphraseConfig {
+    /// Ask for alternatives of every unique action text (LLM or cache; skipped and reported
+    /// otherwise).
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// Alternatives asked for per text.
+    #[serde(default = "default_paraphrases")]
+    pub n: usize,
+}
+
+fn default_paraphrases() -> usize {
+    3
+}
+
+impl Default for ParaphraseConfig {
+    fn default() -> Self {
+        ParaphraseConfig {
+            enabled: true,
+            n: default_paraphrases(),
+        }
+    }
 }
 
 /// Mirroring settings.
@@ -406,6 +506,14 @@ impl Config {
     /// The output folder.
     pub fn output_dir(&self) -> PathBuf {
         self.resolve(&self.dataset.output)
+    }
+
+    /// The LLM response cache file.
+    pub fn llm_cache_path(&self) -> PathBuf {
+        match &self.llm_cache {
+            Some(p) => self.resolve(p),
+            None => self.output_dir().join("llm-cache.jsonl"),
+        }
     }
 }
 

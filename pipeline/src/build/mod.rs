@@ -1,11 +1,14 @@
 //! The build runner: runs the stages over every capture, reuses cached work whose fingerprint is
 //! unchanged, writes outputs atomically and records what it rejected and why.
 
+mod capture;
+mod output;
 mod reject;
+mod text;
 pub mod workspace;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -15,15 +18,17 @@ pub use workspace::{
     Fingerprint, Workspace, WorkspaceError, sha256_hex, temp_path, write_atomic, write_atomic_with,
 };
 
-use crate::annotate::filename::filename_annotation;
+use capture::{Item, Shared};
+use output::{Table, skeleton_json, write_outputs};
+
 use crate::annotate::span::Note;
 use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
 use crate::clip::{Clip, SourceKind};
 use crate::config::Config;
-use crate::io::parquet::{TableError, write_clips};
+use crate::io::parquet::TableError;
 use crate::motion::{Profile, ProfileSpec};
-use crate::source::{self, CaptureFile, SourceAnnotations, SourceError};
-use crate::stages::segment::{self, SegmentOutput};
+use crate::source::{self, SourceAnnotations, SourceError};
+use crate::stages::segment;
 use crate::stages::{ingest, mirror};
 
 /// Name of the clip table inside the output folder.
@@ -34,9 +39,11 @@ pub const SKELETONS_FILE: &str = "skeletons.json";
 pub const REJECTS_FILE: &str = "rejects.jsonl";
 /// What the last build did.
 pub const REPORT_FILE: &str = "build-report.json";
+/// Task plans, one row per step.
+pub const PLANS_FILE: &str = "plans.parquet";
 
 /// Version of the table-writing stage.
-const WRITE_VERSION: u32 = 1;
+const WRITE_VERSION: u32 = 2;
 
 /// Errors that stop a build (bad inputs do not: they become rejects).
 #[derive(Debug, thiserror::Error)]
@@ -47,6 +54,9 @@ pub enum BuildError {
     /// The workspace or an output cannot be written.
     #[error(transparent)]
     Workspace(#[from] WorkspaceError),
+    /// An LLM stage cannot run (templates, cache file, missing answers with `on_miss = "fail"`).
+    #[error("{0}")]
+    Llm(String),
     /// The motion-type taxonomy or mapping is invalid.
     #[error(transparent)]
     Taxonomy(#[from] TaxonomyError),
@@ -106,6 +116,12 @@ pub struct BuildReport {
     pub rejects_by_reason: BTreeMap<String, usize>,
     /// Every rejected input.
     pub rejects: Vec<Reject>,
+    /// Body-part labelling: sources, requests, cache hits, flagged answers.
+    pub labels: crate::stages::label::LabelReport,
+    /// Paraphrases: answered, skipped by reason, rejected lines.
+    pub paraphrases: crate::stages::augment::AugmentReport,
+    /// Task plans: answered, skipped by reason, rejected plans.
+    pub plans: crate::stages::augment::AugmentReport,
     /// Fingerprint of the written table's inputs.
     pub table_fingerprint: String,
 }
@@ -117,39 +133,13 @@ impl BuildReport {
     }
 }
 
-#[derive(Debug, Default, Serialize, Deserialize)]
-struct State {
-    table_fingerprint: String,
-    outputs: BTreeMap<String, String>,
-}
-
 /// Options of a build.
 #[derive(Debug, Clone, Default)]
 pub struct BuildOptions {
     /// Ignore the cache and recompute everything.
     pub force: bool,
-}
-
-/// What the per-capture stages produced for one capture.
-#[derive(Default)]
-struct Item {
-    ran: [bool; 3],
-    fingerprints: Vec<(&'static str, String)>,
-    clips: Vec<Clip>,
-    rejects: Vec<Reject>,
-    segment: SegmentOutput,
-}
-
-/// Everything the per-capture stages share.
-struct Shared<'a> {
-    config: &'a Config,
-    workspace: Workspace,
-    specs: Vec<ProfileSpec>,
-    annotations: Vec<SourceAnnotations>,
-    fps_tables: Vec<BTreeMap<String, f64>>,
-    types: TypeMap,
-    /// Digest of the taxonomy's content and the mapping config: a taxonomy edit re-runs segments.
-    types_digest: String,
+    /// Send no LLM request: answers come from the response cache only.
+    pub offline: bool,
 }
 
 /// Runs every stage of the build described by `config`.
@@ -186,16 +176,26 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         types_digest,
     };
 
-    let items: Vec<Item> = files
+    let mut items: Vec<Item> = files
         .par_iter()
-        .map(|file| run_capture(&shared, file))
+        .map(|file| capture::segment_capture(&shared, file))
         .collect::<Result<_, _>>()?;
+    let text = text::run(&shared, &mut items, options.offline)?;
+    if config.mirror.enabled {
+        items
+            .par_iter_mut()
+            .map(|item| capture::mirror_capture(&shared, item))
+            .collect::<Result<Vec<()>, _>>()?;
+    }
 
     let mut stages = Vec::new();
     let names = [ingest::NAME, segment::NAME, mirror::NAME];
     for (k, name) in names.iter().enumerate() {
         if k == 2 && !config.mirror.enabled {
             continue;
+        }
+        if k == 2 {
+            stages.extend(text.runs.iter().cloned());
         }
         let covered: Vec<&Item> = items
             .iter()
@@ -221,16 +221,19 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         shared.workspace.prune(name, &live);
     }
 
+    if !config.mirror.enabled {
+        stages.extend(text.runs.iter().cloned());
+    }
+
     let mut clips: Vec<Clip> = Vec::new();
     let mut rejects: Vec<Reject> = Vec::new();
-    let mut fingerprints: Vec<String> = Vec::new();
     let mut drops_by_reason = BTreeMap::new();
     let mut unmapped_labels = BTreeMap::new();
     let mut notes: Vec<Note> = Vec::new();
     for item in items {
         clips.extend(item.clips);
+        clips.extend(item.mirrored);
         rejects.extend(item.rejects);
-        fingerprints.extend(item.fingerprints.into_iter().map(|(_, f)| f));
         add_counts(&mut drops_by_reason, item.segment.drops);
         add_counts(&mut unmapped_labels, item.segment.unmapped);
         notes.extend(item.segment.notes);
@@ -286,11 +289,19 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             profiles.insert(clip.profile.clone(), bound);
         }
     }
+    // The table's input is exactly its rows (and the plans): their encoding is the fingerprint.
+    let encoded = postcard::to_stdvec(&clips).map_err(|e| WorkspaceError::Encode {
+        what: "clip table".into(),
+        message: e.to_string(),
+    })?;
     let table_fingerprint = Fingerprint::new("write", WRITE_VERSION)
-        .json(&fingerprints)
+        .text(&sha256_hex(&encoded))
+        .json(&text.plans)
         .json(&crate::io::schema::SCHEMA_VERSION)
         .finish();
+    drop(encoded);
     let table = Table {
+        plans: &text.plans,
         clips: &clips,
         profiles: &profiles,
         skeletons: &skeletons,
@@ -351,6 +362,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         notes,
         rejects_by_reason,
         rejects,
+        labels: text.label,
+        paraphrases: text.paraphrase,
+        plans: text.plan,
         table_fingerprint,
     };
     let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
@@ -388,248 +402,4 @@ fn load_types(config: &Config) -> Result<(TypeMap, String), BuildError> {
         TypeMap::new(taxonomy.with_extra(cfg.extra.clone())?, cfg)?,
         digest,
     ))
-}
-
-/// Runs ingest, segment and mirror for one capture, reusing cached outputs.
-fn run_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result<Item, BuildError> {
-    let config = shared.config;
-    let source = &config.sources[file.source];
-    let spec = &shared.specs[file.source];
-    let mut item = Item::default();
-    let bytes = match std::fs::read(&file.path) {
-        Ok(b) => b,
-        Err(e) => {
-            item.rejects.push(ingest::reject(
-                ingest::NAME,
-                file,
-                "io",
-                format!("cannot read: {e}"),
-                None,
-                None,
-            ));
-            return Ok(item);
-        }
-    };
-    let input = ingest::CaptureInput {
-        file,
-        bytes: &bytes,
-        source: &source.name,
-        profile: spec,
-        fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
-    };
-    let ingest_fp = ingest::fingerprint(&input);
-    let (ingested, ran): (ingest::IngestOutput, bool) =
-        shared
-            .workspace
-            .cached(ingest::NAME, &ingest_fp, || ingest::run(&input))?;
-    item.ran[0] = ran;
-    item.fingerprints.push((ingest::NAME, ingest_fp.clone()));
-    item.rejects.extend(ingested.rejects);
-    let Some(capture) = ingested.capture else {
-        return Ok(item);
-    };
-    drop(bytes);
-
-    let annotation = match &shared.annotations[file.source] {
-        SourceAnnotations::Filename {
-            pattern,
-            action,
-            text,
-            sidecar,
-        } => {
-            let side = if *sidecar {
-                std::fs::read(file.path.with_extension("json")).ok()
-            } else {
-                None
-            };
-            match filename_annotation(pattern, action, text, &capture.stem, side.as_deref()) {
-                Ok(a) => a,
-                Err(refusal) => {
-                    item.rejects.push(ingest::reject(
-                        segment::NAME,
-                        file,
-                        refusal.reason,
-                        refusal.message,
-                        None,
-                        None,
-                    ));
-                    return Ok(item);
-                }
-            }
-        }
-        SourceAnnotations::Indexed { by_key, .. } => match by_key.get(&capture.stem) {
-            Some(a) => a.clone(),
-            None => {
-                let message = format!(
-                    "no annotation for capture `{}` in the source's {} files",
-                    capture.stem,
-                    source.labels.kind()
-                );
-                item.rejects.push(ingest::reject(
-                    segment::NAME,
-                    file,
-                    "no_annotation",
-                    message,
-                    None,
-                    None,
-                ));
-                return Ok(item);
-            }
-        },
-    };
-    let profile = match spec.bind(&capture.motion.skeleton) {
-        Ok(p) => p,
-        Err(e) => {
-            item.rejects.push(ingest::reject(
-                segment::NAME,
-                file,
-                "profile",
-                e.to_string(),
-                None,
-                None,
-            ));
-            return Ok(item);
-        }
-    };
-    let seg_input = segment::SegmentInput {
-        capture: &capture,
-        annotation: &annotation,
-        kind: source.labels.kind(),
-        config: &source.segment,
-        types: &shared.types,
-        profile: &profile,
-        fps: config.dataset.fps,
-    };
-    let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &shared.types_digest);
-    let (segmented, ran): (SegmentOutput, bool) =
-        shared
-            .workspace
-            .cached(segment::NAME, &seg_fp, || segment::run(&seg_input))?;
-    item.ran[1] = ran;
-    item.fingerprints.push((segment::NAME, seg_fp.clone()));
-
-    if config.mirror.enabled {
-        let fp = mirror::fingerprint(&seg_fp, spec, &shared.types_digest);
-        let (mirrored, ran): (mirror::MirrorOutput, bool) =
-            shared.workspace.cached(mirror::NAME, &fp, || {
-                mirror::run(&segmented.clips, spec, shared.types.taxonomy())
-            })?;
-        item.ran[2] = ran;
-        item.fingerprints.push((mirror::NAME, fp));
-        item.clips.extend(mirrored.clips);
-        item.rejects.extend(mirrored.rejects);
-    }
-    item.clips.extend(segmented.clips.iter().cloned());
-    item.segment = segmented;
-    item.segment.clips.clear();
-    Ok(item)
-}
-
-fn skeleton_json(skeleton: &crate::motion::Skeleton, profile: &Profile) -> serde_json::Value {
-    let joints: Vec<serde_json::Value> = skeleton
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(j, joint)| {
-            let o = joint.offset * profile.unit_scale;
-            serde_json::json!({
-                "name": joint.name,
-                "parent": joint.parent,
-                "offset_m": [o.x, o.y, o.z],
-                "mirror": skeleton.joints[profile.swap[j]].name,
-                "part": profile.part_of[j],
-                "role": profile.roles[j],
-            })
-        })
-        .collect();
-    serde_json::json!({
-        "profile": profile.name,
-        "root": skeleton.joints[profile.root].name,
-        "capture_axes": { "up": profile.up.to_string(), "forward": profile.forward.to_string() },
-        "unit_scale": profile.unit_scale,
-        "joints": joints,
-    })
-}
-
-fn outputs_match(output: &Path, state: &State) -> bool {
-    !state.outputs.is_empty()
-        && state.outputs.iter().all(|(name, sha)| {
-            std::fs::read(output.join(name))
-                .map(|b| &sha256_hex(&b) == sha)
-                .unwrap_or(false)
-        })
-}
-
-/// Writes the table and its companions unless the last build wrote the same; returns whether it
-/// wrote.
-/// What the write stage writes.
-struct Table<'a> {
-    clips: &'a [Clip],
-    profiles: &'a BTreeMap<String, Profile>,
-    skeletons: &'a BTreeMap<String, serde_json::Value>,
-    rejects: &'a [Reject],
-}
-
-fn write_outputs(
-    force: bool,
-    output: &Path,
-    workspace: &Workspace,
-    fingerprint: &str,
-    table: &Table<'_>,
-) -> Result<bool, BuildError> {
-    let Table {
-        clips,
-        profiles,
-        skeletons,
-        rejects,
-    } = *table;
-    let state_path = workspace.root().join("state.json");
-    let state: State = std::fs::read(&state_path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .unwrap_or_default();
-    if !force && state.table_fingerprint == fingerprint && outputs_match(output, &state) {
-        return Ok(false);
-    }
-    let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
-    let table = output.join(CLIPS_FILE);
-    let mut table_error = None;
-    write_atomic_with(&table, |file| {
-        let f = file.try_clone()?;
-        write_clips(f, clips, profiles, &skeletons_json)
-            .map(|_| ())
-            .map_err(|e| {
-                table_error = Some(e);
-                std::io::Error::other("table encoding failed")
-            })
-    })
-    .map_err(|e| match table_error.take() {
-        Some(source) => BuildError::Table {
-            path: table.clone(),
-            source,
-        },
-        None => BuildError::Workspace(e),
-    })?;
-    write_atomic(&output.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
-    let mut lines = String::new();
-    for r in rejects {
-        lines.push_str(&serde_json::to_string(r).unwrap_or_default());
-        lines.push('\n');
-    }
-    write_atomic(&output.join(REJECTS_FILE), lines.as_bytes())?;
-    let mut outputs = BTreeMap::new();
-    for name in [CLIPS_FILE, SKELETONS_FILE, REJECTS_FILE] {
-        let bytes =
-            std::fs::read(output.join(name)).map_err(workspace::io_err(&output.join(name)))?;
-        outputs.insert(name.to_string(), sha256_hex(&bytes));
-    }
-    let state = State {
-        table_fingerprint: fingerprint.to_string(),
-        outputs,
-    };
-    write_atomic(
-        &state_path,
-        &serde_json::to_vec_pretty(&state).unwrap_or_default(),
-    )?;
-    Ok(true)
 }

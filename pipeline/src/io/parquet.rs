@@ -7,7 +7,9 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::sync::Arc;
 
-use arrow_array::builder::{Float32Builder, ListBuilder, MapBuilder, MapFieldNames, StringBuilder};
+use arrow_array::builder::{
+    BooleanBuilder, Float32Builder, ListBuilder, MapBuilder, MapFieldNames, StringBuilder,
+};
 use arrow_array::{
     ArrayRef, BooleanArray, Float32Array, Float64Array, Int32Array, Int64Array, ListArray,
     RecordBatch, StringArray, StructArray,
@@ -152,6 +154,27 @@ fn optional_f32_lists(rows: impl Iterator<Item = Option<Vec<f64>>>) -> ArrayRef 
     Arc::new(b.finish())
 }
 
+/// Six booleans per row in SINC's order: global, torso, left arm, right arm, left leg, right leg.
+fn part_lists(rows: impl Iterator<Item = Option<crate::parts::PartSet>>) -> ArrayRef {
+    let mut b = ListBuilder::new(BooleanBuilder::new()).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Boolean,
+        false,
+    )));
+    for row in rows {
+        match row {
+            Some(parts) => {
+                for v in parts.to_vec6() {
+                    b.values().append_value(v);
+                }
+                b.append(true);
+            }
+            None => b.append(false),
+        }
+    }
+    Arc::new(b.finish())
+}
+
 /// Builds one record batch from clips.
 pub fn clips_to_batch(
     clips: &[Clip],
@@ -250,6 +273,14 @@ pub fn clips_to_batch(
         )),
         optional_f32_lists(clips.iter().map(|c| c.goal_pelvis.map(|g| g.to_vec()))),
         optional_f32_lists(clips.iter().map(|c| c.goal_hand.map(|g| g.to_vec()))),
+        part_lists(clips.iter().map(|c| c.parts)),
+        Arc::new(StringArray::from(
+            clips
+                .iter()
+                .map(|c| c.label_source.as_deref())
+                .collect::<Vec<_>>(),
+        )),
+        string_lists(clips.iter().map(|c| c.paraphrases.as_slice())),
         Arc::new(attributes.finish()),
         Arc::new(StringArray::from_iter_values(clips.iter().map(skeleton_id))),
         Arc::new(Float64Array::from_iter_values(
@@ -299,5 +330,50 @@ pub fn write_clips(
         writer.write(&clips_to_batch(chunk, profiles)?)?;
         writer.flush()?;
     }
+    Ok(writer.into_inner()?)
+}
+
+/// Writes task plans, one row per step: `text`, `step_id`, `step`, `category`.
+pub fn write_plans(
+    file: File,
+    plans: &BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
+) -> Result<File, TableError> {
+    let schema = Arc::new(arrow_schema::Schema::new(vec![
+        Field::new("text", DataType::Utf8, false),
+        Field::new("step_id", DataType::Int32, false),
+        Field::new("step", DataType::Utf8, false),
+        Field::new("category", DataType::Utf8, false),
+    ]));
+    let rows: Vec<(&String, &crate::llm::plans::PlanStep)> = plans
+        .iter()
+        .flat_map(|(t, steps)| steps.iter().map(move |s| (t, s)))
+        .collect();
+    let category = |s: &crate::llm::plans::PlanStep| match s.category {
+        crate::llm::plans::StepCategory::Locomotion => "locomotion",
+        crate::llm::plans::StepCategory::Grasp => "grasp",
+        crate::llm::plans::StepCategory::Interaction => "interaction",
+    };
+    let batch = RecordBatch::try_new(
+        Arc::clone(&schema),
+        vec![
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|(t, _)| t.as_str()),
+            )),
+            Arc::new(Int32Array::from_iter_values(
+                rows.iter().map(|(_, s)| s.step_id as i32),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|(_, s)| s.step.as_str()),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|(_, s)| category(s)),
+            )),
+        ],
+    )?;
+    let props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
+        .build();
+    let mut writer = ArrowWriter::try_new(file, schema, Some(props))?;
+    writer.write(&batch)?;
     Ok(writer.into_inner()?)
 }

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use arrow_schema::{DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
@@ -69,6 +69,13 @@ pub fn clip_schema() -> Schema {
         Field::new("object", DataType::Utf8, true),
         goal("goal_pelvis"),
         goal("goal_hand"),
+        Field::new(
+            "parts",
+            DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
+            true,
+        ),
+        Field::new("label_source", DataType::Utf8, true),
+        list_utf8("paraphrases"),
         Field::new("attributes", attributes, false),
         Field::new("skeleton", DataType::Utf8, false),
         Field::new("fps", DataType::Float64, false),

@@ -280,6 +280,37 @@ impl ResponseCache {
         Ok(())
     }
 
+    /// Appends many entries with one write and one sync (imports of thousands of answers would
+    /// otherwise spend seconds in fsync). All or nothing, like [`ResponseCache::insert`].
+    pub fn insert_many(&mut self, entries: Vec<(CacheKey, CacheEntry)>) -> Result<(), CacheError> {
+        let mut buffer = Vec::new();
+        for (key, entry) in &entries {
+            serde_json::to_writer(&mut buffer, &RecordOut { key: &key.0, entry }).map_err(|e| {
+                CacheError::Encode {
+                    path: self.path.clone(),
+                    message: e.to_string(),
+                }
+            })?;
+            buffer.push(b'\n');
+        }
+        let written = self
+            .file
+            .write_all(&buffer)
+            .and_then(|()| self.file.sync_data());
+        if let Err(source) = written {
+            let _ = self.file.set_len(self.len_bytes);
+            return Err(CacheError::Io {
+                path: self.path.clone(),
+                source,
+            });
+        }
+        self.len_bytes += buffer.len() as u64;
+        for (key, entry) in entries {
+            self.entries.insert(key.0, entry);
+        }
+        Ok(())
+    }
+
     /// Number of distinct keys cached.
     pub fn len(&self) -> usize {
         self.entries.len()

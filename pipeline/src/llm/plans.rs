@@ -1,1 +1,266 @@
-//! Work in progress.
+//! Answers that are not part labels: LINGO task plans (a JSON list of steps) and paraphrases.
+//! Invalid answers are explained, never patched up: the caller retries with [`repair_message`]
+//! or rejects the item with the reason.
+
+use serde::{Deserialize, Serialize};
+
+use crate::text::{mirror_text, rotation_words, side_words};
+
+/// A step's category in LINGO's planner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StepCategory {
+    /// Moving the person's position.
+    Locomotion,
+    /// Grabbing or touching an object.
+    Grasp,
+    /// Operating an object or appliance.
+    Interaction,
+}
+
+/// One step of a task plan.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PlanStep {
+    /// What to do.
+    pub step: String,
+    /// 1-based position.
+    pub step_id: u32,
+    /// Category.
+    pub category: StepCategory,
+}
+
+/// Why a task-plan answer is not valid.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PlanError {
+    /// No JSON array in the answer.
+    #[error("the answer contains no JSON array of steps")]
+    NoArray,
+    /// The array does not parse.
+    #[error("the JSON array does not parse: {0}")]
+    Json(String),
+    /// The array is empty.
+    #[error("the plan has no steps")]
+    Empty,
+    /// A step is malformed.
+    #[error("step {index}: {message}")]
+    Step {
+        /// 1-based position in the array.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// The text between the first `[` and the last `]`: models wrap JSON in prose or code fences.
+fn json_array(answer: &str) -> Option<&str> {
+    let start = answer.find('[')?;
+    let end = answer.rfind(']')?;
+    (end > start).then(|| &answer[start..=end])
+}
+
+/// Parses and validates a task plan: a JSON array of `{step, step_id, category}` with ids 1..n in
+/// order, categories `locomotion`, `grasp` or `interaction`, and non-empty steps.
+pub fn parse_task_plan(answer: &str) -> Result<Vec<PlanStep>, PlanError> {
+    let array = json_array(answer).ok_or(PlanError::NoArray)?;
+    let values: Vec<serde_json::Value> =
+        serde_json::from_str(array).map_err(|e| PlanError::Json(e.to_string()))?;
+    if values.is_empty() {
+        return Err(PlanError::Empty);
+    }
+    let mut steps = Vec::with_capacity(values.len());
+    for (i, v) in values.iter().enumerate() {
+        let index = i + 1;
+        let bad = |message: String| PlanError::Step { index, message };
+        let obj = v
+            .as_object()
+            .ok_or_else(|| bad("expected an object {step, step_id, category}".into()))?;
+        let step = obj
+            .get("step")
+            .and_then(|s| s.as_str())
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .ok_or_else(|| bad("`step` must be a non-empty string".into()))?;
+        let id = obj
+            .get("step_id")
+            .and_then(|s| {
+                s.as_u64()
+                    .or_else(|| s.as_str().and_then(|t| t.trim().parse().ok()))
+            })
+            .ok_or_else(|| bad("`step_id` must be a whole number".into()))?;
+        if id != index as u64 {
+            return Err(bad(format!(
+                "`step_id` is {id}, expected {index} (ids run 1..n in order)"
+            )));
+        }
+        let category = match obj
+            .get("category")
+            .and_then(|c| c.as_str())
+            .map(|c| c.trim().to_ascii_lowercase())
+        {
+            Some(c) if c == "locomotion" => StepCategory::Locomotion,
+            Some(c) if c == "grasp" => StepCategory::Grasp,
+            Some(c) if c == "interaction" => StepCategory::Interaction,
+            other => {
+                return Err(bad(format!(
+                    "`category` is {}, expected locomotion, grasp or interaction",
+                    other
+                        .map(|c| format!("`{c}`"))
+                        .unwrap_or_else(|| "missing".into())
+                )));
+            }
+        };
+        steps.push(PlanStep {
+            step: step.to_string(),
+            step_id: index as u32,
+            category,
+        });
+    }
+    Ok(steps)
+}
+
+/// The follow-up message asking the model to fix an invalid plan.
+pub fn repair_message(error: &PlanError) -> String {
+    format!(
+        "Your answer was not valid: {error}. Answer again with only the JSON array \
+         [{{\"step\": ..., \"step_id\": 1, \"category\": ...}}, ...], step ids 1..n in order, \
+         each category one of locomotion, grasp, interaction; no other text."
+    )
+}
+
+/// Paraphrases kept and dropped, with reasons.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Paraphrases {
+    /// Accepted alternatives, in answer order, de-duplicated.
+    pub accepted: Vec<String>,
+    /// Dropped lines and why.
+    pub rejected: Vec<(String, String)>,
+}
+
+fn strip_list_marker(line: &str) -> &str {
+    let t = line.trim();
+    let t = t.trim_start_matches(|c: char| c.is_ascii_digit());
+    let t = t.strip_prefix(['.', ')', ':']).unwrap_or(t);
+    let t = t.trim_start_matches(['-', '*', '•', ' ']);
+    t.trim().trim_matches(['"', '\u{201c}', '\u{201d}']).trim()
+}
+
+/// Splits a paraphrase answer into lines and keeps those that describe the same sides and turning
+/// directions as `original`: a paraphrase that introduces `left` where the original says `right`,
+/// or drops a side word, is rejected. Duplicates and restatements of the original are dropped.
+pub fn parse_paraphrases(original: &str, answer: &str) -> Paraphrases {
+    let mut out = Paraphrases::default();
+    let key = |s: &str| {
+        s.to_lowercase()
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let mut seen = vec![key(original)];
+    let (sides, turns) = (
+        sorted(side_words(original)),
+        sorted(rotation_words(original)),
+    );
+    for line in answer.lines() {
+        let text = strip_list_marker(line);
+        if text.is_empty() {
+            continue;
+        }
+        let k = key(text);
+        if seen.contains(&k) {
+            out.rejected.push((text.to_string(), "duplicate".into()));
+            continue;
+        }
+        if sorted(side_words(text)) != sides {
+            out.rejected.push((
+                text.to_string(),
+                "changes the side words (left/right)".into(),
+            ));
+            continue;
+        }
+        if sorted(rotation_words(text)) != turns {
+            out.rejected
+                .push((text.to_string(), "changes the turning direction".into()));
+            continue;
+        }
+        seen.push(k);
+        out.accepted.push(text.to_string());
+    }
+    out
+}
+
+fn sorted<T: Ord>(mut v: Vec<T>) -> Vec<T> {
+    v.sort();
+    v
+}
+
+/// Paraphrases of a mirrored clip: each mirrored like its text.
+pub fn mirror_paraphrases(paraphrases: &[String]) -> Vec<String> {
+    paraphrases.iter().map(|p| mirror_text(p)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lingo_example_plan_parses() {
+        let answer = r#"Sure! ```json
+[ {"step": "walk to the sofa", "step_id": 1, "category": "locomotion"}, {"step": "sit down on the sofa", "step_id": 2, "category": "locomotion"},
+  {"step": "pick up remote with left hand", "step_id": 3, "category": "grasp"}, {"step": "turn on TV with left hand", "step_id": 4, "category": "interaction"},
+  {"step": "watch TV", "step_id": 5, "category": "interaction"} ]
+```"#;
+        let plan = parse_task_plan(answer).unwrap();
+        assert_eq!(plan.len(), 5);
+        assert_eq!(plan[2].category, StepCategory::Grasp);
+    }
+
+    #[test]
+    fn invalid_plans_say_why() {
+        let e = |s: &str| parse_task_plan(s).unwrap_err().to_string();
+        assert!(e("no json here").contains("no JSON array"));
+        assert!(e("[]").contains("no steps"));
+        assert!(
+            e(r#"[{"step": "walk", "step_id": 2, "category": "locomotion"}]"#)
+                .contains("expected 1")
+        );
+        assert!(e(r#"[{"step": "walk", "step_id": 1, "category": "dance"}]"#).contains("`dance`"));
+        assert!(e(r#"[{"step": " ", "step_id": 1, "category": "grasp"}]"#).contains("non-empty"));
+        assert!(
+            e(r#"[{"step": "walk", "step_id": 1, "category": "grasp"},]"#)
+                .contains("does not parse")
+        );
+        assert!(repair_message(&PlanError::Empty).contains("only the JSON array"));
+    }
+
+    #[test]
+    fn paraphrases_keep_their_sides() {
+        let p = parse_paraphrases(
+            "wave with the left hand",
+            "1. Wave using the left hand.\n2. wave with the right hand\n- raise the left hand and wave it\n3. Wave using the left hand.\n\nwave\nwave with the left hand",
+        );
+        assert_eq!(
+            p.accepted,
+            vec![
+                "Wave using the left hand.",
+                "raise the left hand and wave it"
+            ]
+        );
+        let reasons: Vec<&str> = p.rejected.iter().map(|(_, r)| r.as_str()).collect();
+        assert_eq!(
+            reasons,
+            vec![
+                "changes the side words (left/right)",
+                "duplicate",
+                "changes the side words (left/right)",
+                "duplicate"
+            ]
+        );
+        assert_eq!(
+            mirror_paraphrases(&p.accepted),
+            vec![
+                "Wave using the right hand.",
+                "raise the right hand and wave it"
+            ]
+        );
+    }
+}

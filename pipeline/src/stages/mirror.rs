@@ -7,7 +7,9 @@ use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::Taxonomy;
 use crate::build::{Fingerprint, Reject};
 use crate::clip::Clip;
+use crate::llm::plans::mirror_paraphrases;
 use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};
+use crate::parts::PartSet;
 use crate::text::mirror_text;
 
 /// Stage name.
@@ -85,6 +87,8 @@ pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> Clip 
         hand: clip.hand.map(Hand::mirrored),
         goal_pelvis: clip.goal_pelvis.map(|[x, y]| [-x, y]),
         goal_hand: clip.goal_hand.map(|[x, y, z]| [-x, y, z]),
+        parts: clip.parts.map(PartSet::mirrored),
+        paraphrases: mirror_paraphrases(&clip.paraphrases),
         motion: plan.mirror(&clip.motion, OffsetPolicy::Keep),
         ..clip.clone()
     }

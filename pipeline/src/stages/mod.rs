@@ -1,6 +1,8 @@
 //! Stages: each a function from typed inputs to typed outputs, with a fingerprint of what it read.
 //! The build runner (`crate::build`) handles caching, atomic writes and reporting.
 
+pub mod augment;
 pub mod ingest;
+pub mod label;
 pub mod mirror;
 pub mod segment;

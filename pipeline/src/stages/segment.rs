@@ -235,6 +235,9 @@ impl ClipMaker<'_, '_> {
             object: None,
             goal_pelvis: None,
             goal_hand: None,
+            parts: None,
+            label_source: None,
+            paraphrases: Vec::new(),
             motion,
         })
     }

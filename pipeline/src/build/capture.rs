@@ -1,0 +1,199 @@
+//! Per-capture stages: ingest and segment, then (after the text stages) mirror.
+
+use std::collections::BTreeMap;
+
+use super::{BuildError, Reject, Workspace, WorkspaceError, sha256_hex};
+use crate::annotate::filename::filename_annotation;
+use crate::annotate::taxonomy::TypeMap;
+use crate::clip::Clip;
+use crate::config::Config;
+use crate::motion::ProfileSpec;
+use crate::source::{self, CaptureFile, SourceAnnotations};
+use crate::stages::segment::{self, SegmentOutput};
+use crate::stages::{ingest, mirror};
+
+/// What the per-capture stages produced for one capture.
+#[derive(Default)]
+pub(super) struct Item {
+    pub(super) ran: [bool; 3],
+    pub(super) fingerprints: Vec<(&'static str, String)>,
+    /// The capture's original clips (labelled by the text stages before mirroring).
+    pub(super) clips: Vec<Clip>,
+    /// Mirrored copies.
+    pub(super) mirrored: Vec<Clip>,
+    pub(super) rejects: Vec<Reject>,
+    /// Segmentation counts and notes (its clips moved to `clips`).
+    pub(super) segment: SegmentOutput,
+}
+
+/// Everything the per-capture stages share.
+pub(super) struct Shared<'a> {
+    pub(super) config: &'a Config,
+    pub(super) workspace: Workspace,
+    pub(super) specs: Vec<ProfileSpec>,
+    pub(super) annotations: Vec<SourceAnnotations>,
+    pub(super) fps_tables: Vec<BTreeMap<String, f64>>,
+    pub(super) types: TypeMap,
+    /// Digest of the taxonomy's content and the mapping config: a taxonomy edit re-runs segments.
+    pub(super) types_digest: String,
+}
+
+impl Shared<'_> {
+    /// The bound profile of a clip's skeleton.
+    pub(super) fn profile_of(&self, clip: &Clip) -> Option<crate::motion::Profile> {
+        self.specs
+            .iter()
+            .find(|s| s.name == clip.profile)?
+            .bind(&clip.motion.skeleton)
+            .ok()
+    }
+}
+
+/// Runs ingest and segment for one capture, reusing cached outputs.
+pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result<Item, BuildError> {
+    let config = shared.config;
+    let source = &config.sources[file.source];
+    let spec = &shared.specs[file.source];
+    let mut item = Item::default();
+    let bytes = match std::fs::read(&file.path) {
+        Ok(b) => b,
+        Err(e) => {
+            item.rejects.push(ingest::reject(
+                ingest::NAME,
+                file,
+                "io",
+                format!("cannot read: {e}"),
+                None,
+                None,
+            ));
+            return Ok(item);
+        }
+    };
+    let input = ingest::CaptureInput {
+        file,
+        bytes: &bytes,
+        source: &source.name,
+        profile: spec,
+        fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
+    };
+    let ingest_fp = ingest::fingerprint(&input);
+    let (ingested, ran): (ingest::IngestOutput, bool) =
+        shared
+            .workspace
+            .cached(ingest::NAME, &ingest_fp, || ingest::run(&input))?;
+    item.ran[0] = ran;
+    item.fingerprints.push((ingest::NAME, ingest_fp.clone()));
+    item.rejects.extend(ingested.rejects);
+    let Some(capture) = ingested.capture else {
+        return Ok(item);
+    };
+    drop(bytes);
+
+    let annotation = match &shared.annotations[file.source] {
+        SourceAnnotations::Filename {
+            pattern,
+            action,
+            text,
+            sidecar,
+        } => {
+            let side = if *sidecar {
+                std::fs::read(file.path.with_extension("json")).ok()
+            } else {
+                None
+            };
+            match filename_annotation(pattern, action, text, &capture.stem, side.as_deref()) {
+                Ok(a) => a,
+                Err(refusal) => {
+                    item.rejects.push(ingest::reject(
+                        segment::NAME,
+                        file,
+                        refusal.reason,
+                        refusal.message,
+                        None,
+                        None,
+                    ));
+                    return Ok(item);
+                }
+            }
+        }
+        SourceAnnotations::Indexed { by_key, .. } => match by_key.get(&capture.stem) {
+            Some(a) => a.clone(),
+            None => {
+                let message = format!(
+                    "no annotation for capture `{}` in the source's {} files",
+                    capture.stem,
+                    source.labels.kind()
+                );
+                item.rejects.push(ingest::reject(
+                    segment::NAME,
+                    file,
+                    "no_annotation",
+                    message,
+                    None,
+                    None,
+                ));
+                return Ok(item);
+            }
+        },
+    };
+    let profile = match spec.bind(&capture.motion.skeleton) {
+        Ok(p) => p,
+        Err(e) => {
+            item.rejects.push(ingest::reject(
+                segment::NAME,
+                file,
+                "profile",
+                e.to_string(),
+                None,
+                None,
+            ));
+            return Ok(item);
+        }
+    };
+    let seg_input = segment::SegmentInput {
+        capture: &capture,
+        annotation: &annotation,
+        kind: source.labels.kind(),
+        config: &source.segment,
+        types: &shared.types,
+        profile: &profile,
+        fps: config.dataset.fps,
+    };
+    let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &shared.types_digest);
+    let (segmented, ran): (SegmentOutput, bool) =
+        shared
+            .workspace
+            .cached(segment::NAME, &seg_fp, || segment::run(&seg_input))?;
+    item.ran[1] = ran;
+    item.fingerprints.push((segment::NAME, seg_fp.clone()));
+
+    item.clips = segmented.clips.clone();
+    item.segment = segmented;
+    item.segment.clips.clear();
+    Ok(item)
+}
+
+/// Mirrors a capture's labelled clips, reusing the cached copies when the clips are unchanged.
+pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(), BuildError> {
+    let Some(first) = item.clips.first() else {
+        return Ok(());
+    };
+    let Some(spec) = shared.specs.iter().find(|s| s.name == first.profile) else {
+        return Ok(());
+    };
+    // The stage's input is exactly the clips, labels included: their encoding is the fingerprint.
+    let encoded = postcard::to_stdvec(&item.clips).map_err(|e| WorkspaceError::Encode {
+        what: "clips to mirror".into(),
+        message: e.to_string(),
+    })?;
+    let fp = mirror::fingerprint(&sha256_hex(&encoded), spec, &shared.types_digest);
+    let (mirrored, ran): (mirror::MirrorOutput, bool) =
+        shared.workspace.cached(mirror::NAME, &fp, || {
+            mirror::run(&item.clips, spec, shared.types.taxonomy())
+        })?;
+    item.ran[2] = ran;
+    item.fingerprints.push((mirror::NAME, fp));
+    item.mirrored = mirrored.clips;
+    item.rejects.extend(mirrored.rejects);
+    Ok(())
+}

@@ -1,0 +1,190 @@
+//! Text stages over the whole dataset (each unique text is asked once, however many clips share
+//! it): part labels, paraphrases, task plans. They run between segmentation and mirroring, so
+//! mirrors inherit mirrored labels and paraphrases.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::{Deserialize, Serialize};
+
+use super::capture::{Item, Shared};
+use super::{BuildError, Fingerprint, StageRun};
+use crate::clip::{Clip, SourceKind};
+use crate::config::Labeller;
+use crate::llm::cache::ResponseCache;
+use crate::llm::plans::PlanStep;
+use crate::llm::prompt::Prompts;
+use crate::parts::PartSet;
+use crate::stages::augment::{self, AugmentReport};
+use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
+
+/// Bump when label assignment changes for the same inputs.
+const LABEL_VERSION: u32 = 1;
+
+/// What the text stages produced.
+#[derive(Debug, Default)]
+pub(super) struct TextOutcome {
+    /// Per-stage work.
+    pub(super) runs: Vec<StageRun>,
+    /// Labelling counts.
+    pub(super) label: LabelReport,
+    /// Paraphrase counts and skips.
+    pub(super) paraphrase: AugmentReport,
+    /// Plan counts and skips.
+    pub(super) plan: AugmentReport,
+    /// Task plans by text.
+    pub(super) plans: BTreeMap<String, Vec<PlanStep>>,
+}
+
+/// Per-clip labels as cached.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+struct ClipLabels {
+    by_clip: BTreeMap<String, (Option<PartSet>, Option<String>)>,
+    report: LabelReport,
+}
+
+fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> {
+    let config = shared.config;
+    let wanted = config.llm.is_some() || config.part_labels.labeller == Labeller::Llm;
+    if !wanted {
+        return Ok(None);
+    }
+    let path = config.llm_cache_path();
+    ResponseCache::open(&path)
+        .map(Some)
+        .map_err(|e| BuildError::Llm(format!("{}: {e}", path.display())))
+}
+
+/// Runs the text stages and puts their results on the items' clips.
+pub(super) fn run(
+    shared: &Shared<'_>,
+    items: &mut [Item],
+    offline: bool,
+) -> Result<TextOutcome, BuildError> {
+    let config = shared.config;
+    let prompts = match &config.prompts_dir {
+        Some(dir) => Prompts::with_overrides(&config.resolve(dir)),
+        None => Prompts::bundled(),
+    }
+    .map_err(|e| BuildError::Llm(e.to_string()))?;
+    let mut cache = open_cache(shared)?;
+    let mut outcome = TextOutcome::default();
+
+    // Part labels.
+    let mut report = LabelReport::default();
+    let clips: Vec<&Clip> = items.iter().flat_map(|i| i.clips.iter()).collect();
+    let input = LabelInput {
+        config: &config.part_labels,
+        llm: config.llm.as_ref(),
+        prompts: &prompts,
+        offline,
+    };
+    let labels = label::label_texts(&clips, &input, cache.as_mut(), &mut report)
+        .map_err(|e| BuildError::Llm(e.to_string()))?;
+    let segment_fps: Vec<&str> = items
+        .iter()
+        .flat_map(|i| {
+            i.fingerprints
+                .iter()
+                .filter(|(s, _)| *s == crate::stages::segment::NAME)
+                .map(|(_, f)| f.as_str())
+        })
+        .collect();
+    let fp = Fingerprint::new(label::NAME, LABEL_VERSION)
+        .json(&labels)
+        .json(&segment_fps)
+        .finish();
+    let n_clips = clips.len();
+    let (assigned, ran): (ClipLabels, bool) = shared.workspace.cached(label::NAME, &fp, || {
+        let mut all: Vec<Clip> = items.iter().flat_map(|i| i.clips.iter().cloned()).collect();
+        let mut report = report.clone();
+        label::apply_labels(&mut all, &labels, |c| shared.profile_of(c), &mut report);
+        ClipLabels {
+            by_clip: all
+                .into_iter()
+                .map(|c| (c.clip_id, (c.parts, c.label_source)))
+                .collect(),
+            report,
+        }
+    })?;
+    shared.workspace.prune(label::NAME, &BTreeSet::from([fp]));
+    for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+        if let Some((parts, source)) = assigned.by_clip.get(&clip.clip_id) {
+            clip.parts = *parts;
+            clip.label_source = source.clone();
+        }
+    }
+    // Requests and cache hits are this build's; the rest of the report is the cached assignment's.
+    outcome.label = LabelReport {
+        requests: report.requests,
+        cache_hits: report.cache_hits,
+        missing: report.missing,
+        ..assigned.report
+    };
+    outcome.runs.push(StageRun {
+        stage: label::NAME.into(),
+        items: n_clips,
+        ran: if ran { n_clips } else { report.requests },
+        reused: if ran { 0 } else { n_clips },
+    });
+
+    // Paraphrases of every clip's caption.
+    if config.paraphrases.enabled {
+        let texts: BTreeSet<String> = items
+            .iter()
+            .flat_map(|i| i.clips.iter().map(|c| normalize_text(&c.text)))
+            .collect();
+        let mut report = AugmentReport::default();
+        let found = augment::paraphrase(
+            &texts,
+            config.paraphrases.n,
+            &prompts,
+            config.llm.as_ref(),
+            offline,
+            cache.as_mut(),
+            &mut report,
+        )
+        .map_err(|e| BuildError::Llm(e.to_string()))?;
+        for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+            clip.paraphrases = found
+                .get(&normalize_text(&clip.text))
+                .cloned()
+                .unwrap_or_default();
+        }
+        outcome.runs.push(augment_run("paraphrase", &report));
+        outcome.paraphrase = report;
+    }
+    // Task plans of every single action.
+    if config.task_plans.enabled {
+        let texts: BTreeSet<String> = items
+            .iter()
+            .flat_map(|i| {
+                i.clips
+                    .iter()
+                    .filter(|c| c.kind == SourceKind::RealSingle)
+                    .map(|c| normalize_text(&c.text))
+            })
+            .collect();
+        let mut report = AugmentReport::default();
+        outcome.plans = augment::plan(
+            &texts,
+            &prompts,
+            config.llm.as_ref(),
+            offline,
+            cache.as_mut(),
+            &mut report,
+        )
+        .map_err(|e| BuildError::Llm(e.to_string()))?;
+        outcome.runs.push(augment_run("plan", &report));
+        outcome.plan = report;
+    }
+    Ok(outcome)
+}
+
+fn augment_run(stage: &str, report: &AugmentReport) -> StageRun {
+    StageRun {
+        stage: stage.into(),
+        items: report.texts,
+        ran: report.requests,
+        reused: report.answered.saturating_sub(report.requests),
+    }
+}

@@ -1,0 +1,1736 @@
+//! The embedded part labeller: an action text to SINC's six parts from a lexicon, offline,
+//! instant and deterministic. It stands in for the GPT-3 query of SINC section 3.1.
+//!
+//! # How a text is read
+//!
+//! 1. **Tokens.** Lowercase words (letters and digits; apostrophes vanish so `arm's` is `arms`).
+//!    Verbs are lemmatised against the lexicon (`waving` -> `wave`, `ran` -> `run`); body-part nouns
+//!    keep their number (`hand` and `hands` differ). Clauses break at punctuation and at `and`,
+//!    `then`, `while`, `before`, `after`, `during`, `when`, `or`, `but`.
+//! 2. **Entries.** At each position the longest lexicon phrase wins (`stand up` over `stand`).
+//!    An entry is a body-part noun, an action, an object noun or a face feature.
+//! 3. **Body-part nouns** (`left hand`, `knees`, `head`, `waist`...). A side word just before the
+//!    noun (over `the`, `upper`, `both`, ... ) gives the side; plural or `both` means both sides;
+//!    a singular limb with no side (`wave hand`, `one leg`) also means both sides, because the text
+//!    does not say which and GPT-3's answers on BABEL's texts do the same. A noun after a location
+//!    preposition (`to the head`, `hands on hips`, `in front of chest`) or as the object of a
+//!    contact verb (`scratch head`, `hold left leg`) is a *target*: it does not move, the hand that
+//!    reaches it does. Two exceptions, both from how bodies work: a hand, arm, wrist, elbow or
+//!    finger is involved even as a target (`touch left hand with right hand` moves both arms to
+//!    meet), and a leg after `on` with no hand before it is a support (`stand on left leg`,
+//!    `hop on one foot`). A noun followed by `level`, `height`, `width`, ... is a measure
+//!    (`waist level`) and ignored. Face features (`face`, `mouth`, `chin`, `ear`...) are never
+//!    parts: they are what a hand touches.
+//! 4. **Actions** have a strength:
+//!    * *strong* actions always add their parts (`walk`: global + both legs; `look`: torso);
+//!    * *limb* actions (`wave`, `punch`, `kick`, `throw`, contact verbs such as `grab`) name a limb
+//!      but not which one: a moving limb noun in the same clause says which (`wave right hand`,
+//!      `kick with left foot`, `tap foot`), else a side word next to the verb (`right front kick`,
+//!      `punch left`), else `with the left`, else the side of what an arm action touches
+//!      (`scratch right ear`: right arm; a shoulder is reached by the other hand), else both;
+//!    * *generic* verbs (`raise`, `lift`, `move`, `bend`, `turn`, `stretch`...) take their parts
+//!      from the nouns of their clause and fall back to a default only when the clause has none
+//!      (`bend` alone: global + torso; `bend knees`: both legs; `turn left`: global + both legs;
+//!      `turn head`: torso); right after a preposition they are nouns (`walk in circles`,
+//!      `squat in place`);
+//!    * *weak* words (`stand`, `pose`, `exercise`, `talk`) count only when nothing else in the
+//!      whole text does.
+//! 5. **Objects** (`object`, `phone`, `ball`, `cup`...) mean the hands in a clause with no action
+//!    and no body part, and turn a whole-body generic verb into a hand action (`move item`); not
+//!    after a location preposition (`sit on chair`).
+//! 6. The text's parts are the union over clauses. A text where nothing fires is *unknown*
+//!    ([`TextLabel::known`] is `false`) and gets [`UNKNOWN_DEFAULT`], both arms: the most common
+//!    answer of GPT-3 on BABEL's 6,518 texts, and the majority on the two parts (the arms) that
+//!    GPT-3 marks for more than half of them.
+//!
+//! Conventions chosen (and where they come from): parts are the ones the action needs, not the
+//! ones that may come along (walking swings the arms; SINC's annotators mark such parts
+//! "sometimes", which does not count); global (the pelvis: root translation and orientation) comes
+//! with every action that moves or turns the whole body or lowers the hips (walk, jump, turn
+//! around, sit, kneel, bow, lean); torso comes with looking, nodding, bending, leaning, bowing and
+//! twisting, not with arm actions. Defaults were checked against GPT-3's answers on BABEL's texts
+//! (training data); the manual gold labels were not used to build the lexicon (see
+//! `docs/part-labels.md`).
+
+use std::collections::HashMap;
+use std::sync::LazyLock;
+
+use super::PartSet;
+use crate::motion::BodyPart;
+
+/// What an unknown text gets: both arms (see the module doc).
+pub const UNKNOWN_DEFAULT: PartSet = PartSet::ARMS;
+
+/// The embedded labeller's answer for one text.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct TextLabel {
+    /// The parts involved.
+    pub parts: PartSet,
+    /// The lexicon entries that contributed, in text order (`walk`, `left hand`, ...).
+    pub matched: Vec<String>,
+    /// `false` when no entry fired and `parts` is [`UNKNOWN_DEFAULT`].
+    pub known: bool,
+}
+
+const G: u8 = 1;
+const T: u8 = 2;
+const LA: u8 = 4;
+const RA: u8 = 8;
+const LL: u8 = 16;
+const RL: u8 = 32;
+const ARMS: u8 = LA | RA;
+const LEGS: u8 = LL | RL;
+const ALL: u8 = 63;
+const LOCO: u8 = G | LEGS;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Limb {
+    Arm,
+    Leg,
+}
+
+impl Limb {
+    fn parts(self, side: Side) -> PartSet {
+        let (l, r) = match self {
+            Limb::Arm => (BodyPart::LeftArm, BodyPart::RightArm),
+            Limb::Leg => (BodyPart::LeftLeg, BodyPart::RightLeg),
+        };
+        match side {
+            Side::Left => PartSet::from(l),
+            Side::Right => PartSet::from(r),
+            Side::Both => PartSet::from_parts(&[l, r]),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Side {
+    Left,
+    Right,
+    Both,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Strength {
+    /// Always adds its parts.
+    Strong,
+    /// Adds its default only when its clause names no moving body part.
+    Generic,
+    /// Counts only when nothing else in the text does.
+    Weak,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    /// A limb noun: `hand` (plural false) or `hands` (plural true).
+    Limb {
+        limb: Limb,
+        plural: bool,
+        /// Involved even when a hand reaches it (hands and arms); shoulders and legs are not.
+        self_moving: bool,
+    },
+    /// A torso/global noun with fixed parts; `hip` adds the leg of its side when it has one.
+    Trunk { parts: u8, hip: bool },
+    /// An action.
+    Act {
+        strength: Strength,
+        limb: Option<Limb>,
+        extra: u8,
+        /// A verb whose direct object is touched, not moved (`scratch head`).
+        contact: bool,
+    },
+    /// An object a hand would handle.
+    Object,
+    /// A face feature: never a part.
+    Feature,
+}
+
+const fn strong(extra: u8) -> Kind {
+    Kind::Act {
+        strength: Strength::Strong,
+        limb: None,
+        extra,
+        contact: false,
+    }
+}
+const fn arm_act() -> Kind {
+    Kind::Act {
+        strength: Strength::Strong,
+        limb: Some(Limb::Arm),
+        extra: 0,
+        contact: false,
+    }
+}
+const fn contact() -> Kind {
+    Kind::Act {
+        strength: Strength::Strong,
+        limb: Some(Limb::Arm),
+        extra: 0,
+        contact: true,
+    }
+}
+const fn leg_act(extra: u8) -> Kind {
+    Kind::Act {
+        strength: Strength::Strong,
+        limb: Some(Limb::Leg),
+        extra,
+        contact: false,
+    }
+}
+const fn generic(extra: u8) -> Kind {
+    Kind::Act {
+        strength: Strength::Generic,
+        limb: None,
+        extra,
+        contact: false,
+    }
+}
+const fn generic_arm(extra: u8) -> Kind {
+    Kind::Act {
+        strength: Strength::Generic,
+        limb: Some(Limb::Arm),
+        extra,
+        contact: false,
+    }
+}
+const fn weak(extra: u8) -> Kind {
+    Kind::Act {
+        strength: Strength::Weak,
+        limb: None,
+        extra,
+        contact: false,
+    }
+}
+const fn arm(plural: bool) -> Kind {
+    Kind::Limb {
+        limb: Limb::Arm,
+        plural,
+        self_moving: true,
+    }
+}
+const fn shoulder(plural: bool) -> Kind {
+    Kind::Limb {
+        limb: Limb::Arm,
+        plural,
+        self_moving: false,
+    }
+}
+const fn leg(plural: bool) -> Kind {
+    Kind::Limb {
+        limb: Limb::Leg,
+        plural,
+        self_moving: false,
+    }
+}
+const fn trunk(parts: u8) -> Kind {
+    Kind::Trunk { parts, hip: false }
+}
+
+/// The lexicon: phrase (lemmas, space separated) and what it means.
+const LEXICON: &[(&str, Kind)] = &[
+    // --- body parts: arms (hands included; SINC's arm chain runs from collar to hand) ---
+    ("hand", arm(false)),
+    ("hands", arm(true)),
+    ("handed", arm(false)),
+    ("arm", arm(false)),
+    ("arms", arm(true)),
+    ("upper arm", arm(false)),
+    ("forearm", arm(false)),
+    ("forearms", arm(true)),
+    ("wrist", arm(false)),
+    ("wrists", arm(true)),
+    ("elbow", arm(false)),
+    ("elbows", arm(true)),
+    ("fist", arm(false)),
+    ("fists", arm(true)),
+    ("palm", arm(false)),
+    ("palms", arm(true)),
+    ("finger", arm(false)),
+    ("fingers", arm(true)),
+    ("fingertips", arm(true)),
+    ("thumb", arm(false)),
+    ("thumbs", arm(true)),
+    ("knuckles", arm(true)),
+    ("bicep", arm(false)),
+    ("biceps", arm(true)),
+    ("shoulder", shoulder(false)),
+    ("shoulders", shoulder(true)),
+    // --- legs ---
+    ("leg", leg(false)),
+    ("legs", leg(true)),
+    ("foot", leg(false)),
+    ("feet", leg(true)),
+    ("knee", leg(false)),
+    ("knees", leg(true)),
+    ("ankle", leg(false)),
+    ("ankles", leg(true)),
+    ("toe", leg(false)),
+    ("toes", leg(true)),
+    ("thigh", leg(false)),
+    ("thighs", leg(true)),
+    ("calf", leg(false)),
+    ("calves", leg(true)),
+    ("heel", leg(false)),
+    ("heels", leg(true)),
+    ("shin", leg(false)),
+    ("shins", leg(true)),
+    // --- trunk ---
+    ("torso", trunk(T)),
+    ("upper body", trunk(T)),
+    ("upper torso", trunk(T)),
+    ("trunk", trunk(T)),
+    ("chest", trunk(T)),
+    ("spine", trunk(T)),
+    ("abdomen", trunk(T)),
+    ("stomach", trunk(T)),
+    ("belly", trunk(T)),
+    ("lower back", trunk(T)),
+    ("upper back", trunk(T)),
+    ("head", trunk(T)),
+    ("neck", trunk(T)),
+    ("body", trunk(G | T)),
+    ("lower body", trunk(G | LEGS)),
+    ("whole body", trunk(ALL)),
+    ("full body", trunk(ALL)),
+    ("entire body", trunk(ALL)),
+    ("waist", trunk(G)),
+    ("pelvis", trunk(G)),
+    ("buttocks", trunk(G)),
+    ("butt", trunk(G)),
+    ("hips", trunk(G)),
+    (
+        "hip",
+        Kind::Trunk {
+            parts: G,
+            hip: true,
+        },
+    ),
+    // --- face features: touched, not moved ---
+    ("face", Kind::Feature),
+    ("mouth", Kind::Feature),
+    ("chin", Kind::Feature),
+    ("nose", Kind::Feature),
+    ("ear", Kind::Feature),
+    ("ears", Kind::Feature),
+    ("eye", Kind::Feature),
+    ("eyes", Kind::Feature),
+    ("forehead", Kind::Feature),
+    ("brow", Kind::Feature),
+    ("hair", Kind::Feature),
+    ("lip", Kind::Feature),
+    ("lips", Kind::Feature),
+    ("cheek", Kind::Feature),
+    ("cheeks", Kind::Feature),
+    ("jaw", Kind::Feature),
+    ("teeth", Kind::Feature),
+    ("armpit", Kind::Feature),
+    ("armpits", Kind::Feature),
+    ("rib", Kind::Feature),
+    ("ribs", Kind::Feature),
+    ("heart", Kind::Feature),
+    // --- locomotion: global + both legs ---
+    ("walk", strong(LOCO)),
+    ("run", strong(LOCO)),
+    ("jog", strong(LOCO)),
+    ("sprint", strong(LOCO)),
+    ("dash", strong(LOCO)),
+    ("step", strong(LOCO)),
+    ("stride", strong(LOCO)),
+    ("march", strong(LOCO)),
+    ("stroll", strong(LOCO)),
+    ("saunter", strong(LOCO)),
+    ("strut", strong(LOCO)),
+    ("pace", strong(LOCO)),
+    ("wander", strong(LOCO)),
+    ("sneak", strong(LOCO)),
+    ("tiptoe", strong(LOCO)),
+    ("creep", strong(LOCO)),
+    ("limp", strong(LOCO)),
+    ("hobble", strong(LOCO)),
+    ("shuffle", strong(LOCO)),
+    ("stumble", strong(LOCO)),
+    ("stagger", strong(LOCO)),
+    ("trip", strong(LOCO)),
+    ("skip", strong(LOCO)),
+    ("gallop", strong(LOCO)),
+    ("waddle", strong(LOCO)),
+    ("sidestep", strong(LOCO)),
+    ("side step", strong(LOCO)),
+    ("sidle", strong(LOCO)),
+    ("jump", strong(LOCO)),
+    ("leap", strong(LOCO)),
+    ("bounce", strong(LOCO)),
+    ("hop", leg_act(G)),
+    ("climb", strong(LOCO)),
+    ("descend", strong(LOCO)),
+    ("ascend", strong(LOCO)),
+    ("stairs", strong(LOCO)),
+    ("stair", strong(LOCO)),
+    ("staircase", strong(LOCO)),
+    ("upstairs", strong(LOCO)),
+    ("downstairs", strong(LOCO)),
+    ("lunge", strong(LOCO)),
+    ("squat", strong(LOCO)),
+    ("crouch", strong(LOCO)),
+    ("kneel", strong(LOCO)),
+    ("sit", strong(LOCO)),
+    ("sit down", strong(LOCO)),
+    ("stand up", strong(LOCO)),
+    ("get up", strong(LOCO)),
+    ("rise", generic(LOCO)),
+    ("dodge", strong(LOCO)),
+    ("back off", strong(LOCO)),
+    ("back away", strong(LOCO)),
+    ("moonwalk", strong(LOCO)),
+    ("skate", strong(LOCO)),
+    ("sit up", strong(G | T)),
+    ("fall", strong(G | T | LEGS)),
+    ("lie", strong(G | T | LEGS)),
+    ("lay down", strong(G | T | LEGS)),
+    ("lay back", strong(G | T | LEGS)),
+    ("duck", strong(G | T | LEGS)),
+    ("go", generic(LOCO)),
+    ("approach", generic(LOCO)),
+    ("advance", generic(LOCO)),
+    ("retreat", generic(LOCO)),
+    ("enter", generic(LOCO)),
+    ("exit", generic(LOCO)),
+    ("leave", generic(LOCO)),
+    ("come", generic(LOCO)),
+    ("balance", generic(LOCO)),
+    ("stance", weak(LOCO)),
+    ("stand", weak(LOCO)),
+    // --- turning the whole body: the pelvis turns and the feet step ---
+    ("turn", generic(LOCO)),
+    ("spin", generic(LOCO)),
+    ("twirl", generic(LOCO)),
+    ("pivot", generic(LOCO)),
+    ("rotate", generic(LOCO)),
+    ("turn on", arm_act()),
+    ("turn off", arm_act()),
+    // --- whole-body activities ---
+    ("dance", strong(ALL)),
+    ("waltz", strong(ALL)),
+    ("ballet", strong(ALL)),
+    ("breakdance", strong(ALL)),
+    ("crawl", strong(ALL)),
+    ("swim", strong(ALL)),
+    ("cartwheel", strong(ALL)),
+    ("somersault", strong(ALL)),
+    ("handstand", strong(ALL)),
+    ("hand stand", strong(ALL)),
+    ("push up", strong(ALL)),
+    ("pushup", strong(ALL)),
+    ("jump jack", strong(ALL)),
+    ("jack", strong(ALL)),
+    ("all fours", strong(ALL)),
+    ("fight", strong(ALL)),
+    ("karate", strong(ALL)),
+    ("kung fu", strong(ALL)),
+    ("martial art", strong(ALL)),
+    ("tai chi", strong(ALL)),
+    ("yoga", weak(ALL)),
+    ("exercise", weak(ALL)),
+    ("workout", weak(ALL)),
+    ("warm up", weak(ALL)),
+    ("roll over", strong(ALL)),
+    ("jump rope", strong(LOCO | ARMS)),
+    // --- torso and head ---
+    ("look", strong(T)),
+    ("glance", strong(T)),
+    ("gaze", strong(T)),
+    ("stare", strong(T)),
+    ("peek", strong(T)),
+    ("peer", strong(T)),
+    ("scan", strong(T)),
+    ("nod", strong(T)),
+    ("watch", strong(T)),
+    ("bow", generic(G | T)),
+    ("bend", generic(G | T)),
+    ("bend over", strong(G | T)),
+    ("lean", generic(G | T)),
+    ("stoop", generic(G | T)),
+    ("sway", generic(G | T)),
+    ("twist", generic(T)),
+    ("tilt", generic(T)),
+    ("hunch", generic(T)),
+    ("slouch", generic(T)),
+    ("arch", generic(T)),
+    ("cough", weak(T)),
+    ("sneeze", weak(T)),
+    ("yawn", weak(T)),
+    ("laugh", weak(T)),
+    ("talk", weak(T)),
+    ("speak", weak(T)),
+    ("shout", weak(T)),
+    ("yell", weak(T)),
+    ("sing", weak(T)),
+    ("listen", weak(T)),
+    ("shrug", strong(ARMS)),
+    ("stretch", generic_arm(T)),
+    // --- leg actions ---
+    ("kick", leg_act(0)),
+    ("stomp", leg_act(0)),
+    ("stamp", leg_act(0)),
+    // --- arm actions (side from the text, else both) ---
+    ("wave", arm_act()),
+    ("bye", arm_act()),
+    ("byebye", arm_act()),
+    ("goodbye", arm_act()),
+    ("hello", arm_act()),
+    ("greet", arm_act()),
+    ("salute", arm_act()),
+    ("beckon", arm_act()),
+    ("signal", arm_act()),
+    ("gesture", arm_act()),
+    ("guide", arm_act()),
+    ("call", arm_act()),
+    ("clap", arm_act()),
+    ("applaud", arm_act()),
+    ("cheer", arm_act()),
+    ("punch", arm_act()),
+    ("jab", arm_act()),
+    ("uppercut", arm_act()),
+    ("box", arm_act()),
+    ("shadow box", arm_act()),
+    ("slash", arm_act()),
+    ("stab", arm_act()),
+    ("swat", arm_act()),
+    ("swipe", arm_act()),
+    ("chop", arm_act()),
+    ("throw", arm_act()),
+    ("toss", arm_act()),
+    ("pitch", arm_act()),
+    ("catch", arm_act()),
+    ("juggle", arm_act()),
+    ("dribble", arm_act()),
+    ("serve", arm_act()),
+    ("shoot", arm_act()),
+    ("aim", arm_act()),
+    ("flap", arm_act()),
+    ("fly", arm_act()),
+    ("conduct", arm_act()),
+    ("drink", arm_act()),
+    ("eat", arm_act()),
+    ("sip", arm_act()),
+    ("smoke", arm_act()),
+    ("pour", arm_act()),
+    ("stir", arm_act()),
+    ("mix", arm_act()),
+    ("cut", arm_act()),
+    ("write", arm_act()),
+    ("draw", arm_act()),
+    ("paint", arm_act()),
+    ("type", arm_act()),
+    ("text", arm_act()),
+    ("dial", arm_act()),
+    ("phone", arm_act()),
+    ("read", arm_act()),
+    ("sweep", arm_act()),
+    ("mop", arm_act()),
+    ("vacuum", arm_act()),
+    ("scrub", arm_act()),
+    ("polish", arm_act()),
+    ("dust", arm_act()),
+    ("iron", arm_act()),
+    ("cook", arm_act()),
+    ("hammer", arm_act()),
+    ("saw", arm_act()),
+    ("dig", arm_act()),
+    ("shovel", arm_act()),
+    ("rake", arm_act()),
+    ("row", arm_act()),
+    ("paddle", arm_act()),
+    ("steer", arm_act()),
+    ("strum", arm_act()),
+    ("drum", arm_act()),
+    ("play", generic_arm(0)),
+    ("pick", arm_act()),
+    ("pick up", arm_act()),
+    ("take", arm_act()),
+    ("give", arm_act()),
+    ("pass", arm_act()),
+    ("receive", arm_act()),
+    ("carry", arm_act()),
+    ("fetch", arm_act()),
+    ("push", arm_act()),
+    ("pull", arm_act()),
+    ("drag", arm_act()),
+    ("shove", arm_act()),
+    ("press", arm_act()),
+    ("knock", arm_act()),
+    ("open", arm_act()),
+    ("close", arm_act()),
+    ("shut", arm_act()),
+    ("unscrew", arm_act()),
+    ("screw", arm_act()),
+    ("tie", arm_act()),
+    ("untie", arm_act()),
+    ("button", arm_act()),
+    ("zip", arm_act()),
+    ("fold", generic_arm(0)),
+    ("release", arm_act()),
+    ("check watch", arm_act()),
+    ("check time", arm_act()),
+    ("check the time", arm_act()),
+    ("t pose", strong(ARMS)),
+    ("t position", strong(ARMS)),
+    // --- more locomotion, from BABEL's vocabulary ---
+    ("backpedal", strong(LOCO)),
+    ("back pedal", strong(LOCO)),
+    ("back peddle", strong(LOCO)),
+    ("backtrack", strong(LOCO)),
+    ("back up", strong(LOCO)),
+    ("catwalk", strong(LOCO)),
+    ("charge", strong(LOCO)),
+    ("hurry", strong(LOCO)),
+    ("rush", strong(LOCO)),
+    ("scamper", strong(LOCO)),
+    ("scoot", strong(LOCO)),
+    ("toddle", strong(LOCO)),
+    ("prance", strong(LOCO)),
+    ("sleepwalk", strong(LOCO)),
+    ("strafe", strong(LOCO)),
+    ("swagger", strong(LOCO)),
+    ("glide", strong(LOCO)),
+    ("slide", strong(LOCO)),
+    ("slip", strong(LOCO)),
+    ("ski", strong(LOCO)),
+    ("land", strong(LOCO)),
+    ("tread", strong(LOCO)),
+    ("trot", strong(LOCO)),
+    ("amble", strong(LOCO)),
+    ("trudge", strong(LOCO)),
+    ("plod", strong(LOCO)),
+    ("sidewalk", strong(LOCO)),
+    ("walkaway", strong(LOCO)),
+    ("chase", strong(LOCO)),
+    ("flee", strong(LOCO)),
+    ("escape", strong(LOCO)),
+    ("evade", strong(LOCO)),
+    ("avoid", strong(LOCO)),
+    ("ride", strong(LOCO)),
+    ("curtsy", strong(LOCO)),
+    ("get down", strong(LOCO)),
+    ("lay on", strong(G | T | LEGS)),
+    ("shift", generic(LOCO)),
+    ("stop", weak(LOCO)),
+    ("halt", weak(LOCO)),
+    ("slow down", weak(LOCO)),
+    // --- more whole-body activities ---
+    ("dive", strong(ALL)),
+    ("flip", strong(ALL)),
+    ("tumble", strong(ALL)),
+    ("roll", generic(ALL)),
+    ("headstand", strong(ALL)),
+    ("bridge", strong(ALL)),
+    ("plank", strong(ALL)),
+    ("aerobics", strong(ALL)),
+    ("kickbox", strong(ALL)),
+    ("kickboxing", strong(ALL)),
+    ("salsa", strong(ALL)),
+    ("crunch", strong(G | T)),
+    ("attack", weak(ALL)),
+    ("chicken", weak(ALL)),
+    ("monkey", weak(ALL)),
+    ("gorilla", weak(ALL)),
+    ("robot", weak(ALL)),
+    ("animal", weak(ALL)),
+    ("elephant", weak(ALL)),
+    ("bird", weak(ALL)),
+    ("zombie", weak(ALL)),
+    // --- trunk motions ---
+    ("gyrate", generic(G | T)),
+    ("wiggle", generic(G | T)),
+    ("rock", generic(G | T)),
+    ("wobble", generic(G | T)),
+    ("jerk", generic(G | T)),
+    ("lurch", generic(G | T)),
+    ("shimmy", generic(T | ARMS)),
+    ("see", strong(T)),
+    ("view", strong(T)),
+    ("observe", strong(T)),
+    ("notice", strong(T)),
+    ("peck", strong(T)),
+    ("vomit", strong(T)),
+    ("kiss", weak(T)),
+    ("smell", weak(T)),
+    ("sniff", weak(T)),
+    ("taste", weak(T)),
+    ("flinch", weak(T | ARMS)),
+    ("startle", weak(T | ARMS)),
+    ("cower", weak(T | ARMS)),
+    ("shiver", weak(T | ARMS)),
+    ("tremble", weak(T | ARMS)),
+    ("quiver", weak(T | ARMS)),
+    ("shudder", weak(T | ARMS)),
+    ("twitch", weak(T | ARMS)),
+    ("fidget", weak(T | ARMS)),
+    // --- more arm actions ---
+    ("hook", arm_act()),
+    ("shadowbox", arm_act()),
+    ("flail", arm_act()),
+    ("block", arm_act()),
+    ("guard", arm_act()),
+    ("defend", arm_act()),
+    ("pray", arm_act()),
+    ("surrender", arm_act()),
+    ("wear", arm_act()),
+    ("dress", arm_act()),
+    ("measure", arm_act()),
+    ("build", arm_act()),
+    ("stack", arm_act()),
+    ("sort", arm_act()),
+    ("arrange", arm_act()),
+    ("rearrange", arm_act()),
+    ("hang", arm_act()),
+    ("gather", arm_act()),
+    ("knead", arm_act()),
+    ("milk", arm_act()),
+    ("putt", arm_act()),
+    ("golf", arm_act()),
+    ("bowling", arm_act()),
+    ("volley", arm_act()),
+    ("spike", arm_act()),
+    ("slam", arm_act()),
+    ("rinse", arm_act()),
+    ("reel", arm_act()),
+    ("cast", arm_act()),
+    ("pump", arm_act()),
+    ("count", arm_act()),
+    ("sign", arm_act()),
+    ("manipulate", arm_act()),
+    ("operate", arm_act()),
+    ("drive", arm_act()),
+    ("straighten", generic_arm(0)),
+    ("roundhouse", leg_act(0)),
+    ("a pose", strong(ARMS)),
+    // --- contact verbs: the noun after them is touched ---
+    ("touch", contact()),
+    ("scratch", contact()),
+    ("rub", contact()),
+    ("pat", contact()),
+    ("grab", contact()),
+    ("grasp", contact()),
+    ("hold", contact()),
+    ("hit", contact()),
+    ("slap", contact()),
+    ("wipe", contact()),
+    ("clean", contact()),
+    ("wash", contact()),
+    ("massage", contact()),
+    ("brush", contact()),
+    ("cover", contact()),
+    ("stroke", contact()),
+    ("shave", contact()),
+    ("comb", contact()),
+    ("hug", contact()),
+    ("clasp", contact()),
+    ("squeeze", contact()),
+    ("pinch", contact()),
+    ("poke", contact()),
+    ("itch", contact()),
+    ("feel", contact()),
+    ("adjust", contact()),
+    ("fix", contact()),
+    ("tickle", contact()),
+    ("support", contact()),
+    // --- generic verbs: parts from their nouns, else the hands ---
+    ("reach down", generic_arm(G | T)),
+    ("raise", generic_arm(0)),
+    ("lift", generic_arm(0)),
+    ("lower", generic_arm(0)),
+    ("extend", generic_arm(0)),
+    ("reach", generic_arm(0)),
+    ("swing", generic_arm(0)),
+    ("shake", generic_arm(0)),
+    ("circle", generic_arm(0)),
+    ("put", generic_arm(0)),
+    ("place", generic_arm(0)),
+    ("set", generic_arm(0)),
+    ("drop", generic_arm(0)),
+    ("bring", generic_arm(0)),
+    ("cross", generic_arm(0)),
+    ("spread", generic_arm(0)),
+    ("flex", generic_arm(0)),
+    ("point", generic_arm(0)),
+    ("tap", generic_arm(0)),
+    ("move", generic(LOCO)),
+    ("pose", weak(ARMS)),
+];
+
+/// Words that join clauses; parts of one clause do not decide for another.
+const CLAUSE_WORDS: &[&str] = &[
+    "and", "then", "while", "before", "after", "during", "when", "or", "but", "whilst",
+];
+
+/// Prepositions after which a part is a place, not a mover.
+const LOCATION: &[&str] = &[
+    "to",
+    "toward",
+    "towards",
+    "on",
+    "onto",
+    "at",
+    "above",
+    "below",
+    "over",
+    "under",
+    "underneath",
+    "behind",
+    "near",
+    "beside",
+    "besides",
+    "around",
+    "across",
+    "against",
+    "of",
+    "till",
+    "until",
+    "by",
+    "between",
+    "past",
+    "from",
+    "off",
+    "along",
+    "through",
+    "into",
+    "in",
+    "up",
+    "down",
+    "next",
+    "beneath",
+    "inside",
+    "outside",
+    "within",
+    "about",
+];
+
+/// Words allowed between a side (or preposition) and its noun.
+const MODIFIERS: &[&str] = &[
+    "the",
+    "a",
+    "an",
+    "his",
+    "her",
+    "their",
+    "its",
+    "own",
+    "my",
+    "your",
+    "upper",
+    "lower",
+    "front",
+    "bent",
+    "straight",
+    "extended",
+    "outstretched",
+    "stretched",
+    "raised",
+    "open",
+    "opened",
+    "closed",
+    "inner",
+    "outer",
+    "whole",
+    "entire",
+    "full",
+    "top",
+    "bottom",
+    "side",
+    "back",
+    "palm",
+    "one",
+    "other",
+    "opposite",
+    "each",
+    "either",
+    "single",
+    "both",
+    "two",
+    "flat",
+    "big",
+    "little",
+    "index",
+    "middle",
+    "ring",
+    "pinky",
+    "low",
+    "high",
+    "rear",
+    "lead",
+    "leading",
+    "trailing",
+    "supporting",
+    "free",
+    "left",
+    "right",
+];
+
+/// Words allowed between a side and a limb action (`right front kick`, `left axe kick`).
+const ACT_MODIFIERS: &[&str] = &[
+    "front",
+    "back",
+    "side",
+    "high",
+    "low",
+    "axe",
+    "round",
+    "roundhouse",
+    "spinning",
+    "spin",
+    "straight",
+    "cross",
+    "hard",
+    "small",
+    "big",
+    "large",
+    "quick",
+    "slow",
+    "soft",
+    "crescent",
+    "snap",
+    "power",
+    "drop",
+    "hand",
+    "arm",
+    "foot",
+    "leg",
+    "the",
+    "a",
+];
+
+/// Nouns followed by these are measures (`waist level`, `shoulder width`).
+const MEASURES: &[&str] = &[
+    "level", "height", "high", "width", "wide", "length", "deep", "distance", "apart",
+];
+
+/// Things handled with the hands.
+const OBJECTS: &[&str] = &[
+    "object",
+    "objects",
+    "item",
+    "items",
+    "something",
+    "thing",
+    "things",
+    "phone",
+    "cellphone",
+    "ball",
+    "cup",
+    "glass",
+    "bottle",
+    "box",
+    "bag",
+    "door",
+    "drawer",
+    "handle",
+    "book",
+    "paper",
+    "pen",
+    "knife",
+    "spoon",
+    "cloth",
+    "rag",
+    "towel",
+    "hat",
+    "cap",
+    "bowl",
+    "plate",
+    "tray",
+    "container",
+    "jar",
+    "lid",
+    "key",
+    "keys",
+    "remote",
+    "camera",
+    "racket",
+    "bat",
+    "club",
+    "stick",
+    "rope",
+    "barbell",
+    "dumbbell",
+    "weight",
+    "weights",
+    "guitar",
+    "violin",
+    "piano",
+    "drums",
+    "flute",
+    "trumpet",
+    "instrument",
+    "microphone",
+    "sword",
+    "gun",
+    "bow",
+    "arrow",
+    "flashlight",
+    "hairdryer",
+    "bulb",
+    "cards",
+    "shelf",
+    "beverage",
+    "food",
+    "soda",
+    "toothbrush",
+    "broom",
+    "mirror",
+    "wheel",
+    "baseball",
+    "basketball",
+    "football",
+    "volleyball",
+    "frisbee",
+    "rail",
+    "railing",
+    "handrail",
+    "watch",
+];
+
+/// Irregular verb forms and spellings to their lemma.
+const IRREGULAR: &[(&str, &str)] = &[
+    ("ran", "run"),
+    ("sat", "sit"),
+    ("stood", "stand"),
+    ("threw", "throw"),
+    ("thrown", "throw"),
+    ("caught", "catch"),
+    ("lying", "lie"),
+    ("lay", "lay"),
+    ("laid", "lay"),
+    ("fell", "fall"),
+    ("fallen", "fall"),
+    ("took", "take"),
+    ("taken", "take"),
+    ("gave", "give"),
+    ("went", "go"),
+    ("goes", "go"),
+    ("came", "come"),
+    ("rose", "rise"),
+    ("swam", "swim"),
+    ("swung", "swing"),
+    ("shook", "shake"),
+    ("held", "hold"),
+    ("bent", "bend"),
+    ("leant", "lean"),
+    ("knelt", "kneel"),
+    ("leapt", "leap"),
+    ("drew", "draw"),
+    ("wrote", "write"),
+    ("ate", "eat"),
+    ("drank", "drink"),
+    ("hit", "hit"),
+    ("put", "put"),
+    ("set", "set"),
+    ("cut", "cut"),
+    ("jumpingjack", "jack"),
+    ("jumpingjacks", "jack"),
+    ("tpose", "t pose"),
+    ("apose", "a pose"),
+    ("situp", "sit up"),
+    ("situps", "sit up"),
+    ("pushups", "pushup"),
+    ("handstands", "handstand"),
+    ("jumprope", "jump rope"),
+];
+
+struct Lexicon {
+    /// First word of a phrase -> (words, kind), longest first.
+    by_first: HashMap<&'static str, Vec<(Vec<&'static str>, Kind)>>,
+    /// Every word that appears in an action phrase: the targets of lemmatisation.
+    verbs: std::collections::HashSet<&'static str>,
+    /// One-word body-part and feature nouns.
+    nouns: std::collections::HashSet<&'static str>,
+}
+
+static LEX: LazyLock<Lexicon> = LazyLock::new(|| {
+    let mut by_first: HashMap<&'static str, Vec<(Vec<&'static str>, Kind)>> = HashMap::new();
+    let mut verbs = std::collections::HashSet::new();
+    let mut nouns = std::collections::HashSet::new();
+    for (phrase, kind) in LEXICON {
+        let words: Vec<&'static str> = phrase.split(' ').collect();
+        if matches!(kind, Kind::Act { .. }) {
+            verbs.extend(words.iter().copied());
+        } else if words.len() == 1 {
+            nouns.insert(*phrase);
+        }
+        if let Some(first) = words.first() {
+            by_first.entry(first).or_default().push((words, *kind));
+        }
+    }
+    for list in by_first.values_mut() {
+        list.sort_by_key(|(w, _)| std::cmp::Reverse(w.len()));
+    }
+    Lexicon {
+        by_first,
+        verbs,
+        nouns,
+    }
+});
+
+/// The lemma of a word for matching actions: irregular forms, then suffix stripping until a known
+/// action word comes out; other words stay as they are.
+fn lemma(word: &str) -> String {
+    if let Some((_, l)) = IRREGULAR.iter().find(|(w, _)| *w == word) {
+        return (*l).to_string();
+    }
+    let lex = &*LEX;
+    // Nouns keep their number (`hands` is not `hand`), and known verbs are their own lemma.
+    if lex.verbs.contains(word) || lex.nouns.contains(word) {
+        return word.to_string();
+    }
+    let mut candidates: Vec<String> = Vec::new();
+    for (suffix, add) in [
+        ("ing", ""),
+        ("ing", "e"),
+        ("ies", "y"),
+        ("ied", "y"),
+        ("es", ""),
+        ("s", ""),
+        ("ed", ""),
+        ("ed", "e"),
+        ("d", ""),
+    ] {
+        if let Some(stem) = word.strip_suffix(suffix)
+            && stem.len() >= 2
+        {
+            candidates.push(format!("{stem}{add}"));
+            // running -> run, stepped -> step: a doubled final consonant.
+            let b = stem.as_bytes();
+            if add.is_empty() && b.len() >= 3 && b[b.len() - 1] == b[b.len() - 2] {
+                candidates.push(stem[..stem.len() - 1].to_string());
+            }
+        }
+    }
+    candidates
+        .into_iter()
+        .find(|c| lex.verbs.contains(c.as_str()))
+        .unwrap_or_else(|| word.to_string())
+}
+
+#[derive(Debug, Clone)]
+struct Token {
+    raw: String,
+    lemma: String,
+    clause: usize,
+}
+
+fn tokenize(text: &str) -> Vec<Token> {
+    let mut tokens = Vec::new();
+    let mut clause = 0;
+    let mut word = String::new();
+    for c in text.chars().flat_map(char::to_lowercase) {
+        if c.is_alphanumeric() {
+            word.push(c);
+        } else if c == '\'' || c == '’' {
+            // `arm's` -> `arms`
+        } else {
+            push_word(&mut word, &mut tokens, &mut clause);
+            if matches!(c, ',' | ';' | '.' | '!' | '?' | '(' | ')' | '/' | ':') {
+                clause += 1;
+            }
+        }
+    }
+    push_word(&mut word, &mut tokens, &mut clause);
+    tokens
+}
+
+fn push_word(word: &mut String, tokens: &mut Vec<Token>, clause: &mut usize) {
+    if word.is_empty() {
+        return;
+    }
+    let raw = std::mem::take(word);
+    if CLAUSE_WORDS.contains(&raw.as_str()) {
+        *clause += 1;
+    }
+    // Irregular forms may expand to two words (`tpose` -> `t pose`).
+    let l = lemma(&raw);
+    let mut parts = l.split(' ');
+    let first = parts.next().unwrap_or_default().to_string();
+    tokens.push(Token {
+        raw: raw.clone(),
+        lemma: first,
+        clause: *clause,
+    });
+    for extra in parts {
+        tokens.push(Token {
+            raw: extra.to_string(),
+            lemma: extra.to_string(),
+            clause: *clause,
+        });
+    }
+}
+
+/// One lexicon hit.
+#[derive(Debug, Clone)]
+struct Hit {
+    /// First token.
+    start: usize,
+    /// One past the last token.
+    end: usize,
+    kind: Kind,
+    phrase: String,
+}
+
+fn find_hits(tokens: &[Token]) -> Vec<Hit> {
+    let lex = &*LEX;
+    let mut hits = Vec::new();
+    let mut i = 0;
+    while i < tokens.len() {
+        let mut best: Option<(usize, Kind, String)> = None;
+        for key in [tokens[i].raw.as_str(), tokens[i].lemma.as_str()] {
+            let Some(list) = lex.by_first.get(key) else {
+                continue;
+            };
+            for (words, kind) in list {
+                let n = words.len();
+                if i + n > tokens.len() || best.as_ref().is_some_and(|(m, _, _)| *m >= n) {
+                    continue;
+                }
+                let fits = words.iter().enumerate().all(|(k, w)| {
+                    let t = &tokens[i + k];
+                    t.raw == *w || t.lemma == *w
+                });
+                // A phrase may not straddle clauses (`walk and turn` is two).
+                let same_clause = tokens[i..i + n]
+                    .iter()
+                    .all(|t| t.clause == tokens[i].clause);
+                if fits && same_clause {
+                    best = Some((n, *kind, words.join(" ")));
+                }
+            }
+        }
+        if let Some((n, kind, phrase)) = best {
+            hits.push(Hit {
+                start: i,
+                end: i + n,
+                kind,
+                phrase,
+            });
+            i += n;
+        } else {
+            if OBJECTS.contains(&tokens[i].raw.as_str()) {
+                hits.push(Hit {
+                    start: i,
+                    end: i + 1,
+                    kind: Kind::Object,
+                    phrase: tokens[i].raw.clone(),
+                });
+            }
+            i += 1;
+        }
+    }
+    reinterpret(tokens, &mut hits);
+    hits
+}
+
+const DIRECTIONS: &[&str] = &[
+    "left",
+    "right",
+    "forward",
+    "forwards",
+    "front",
+    "back",
+    "backward",
+    "backwards",
+    "away",
+    "up",
+    "down",
+    "around",
+    "sideways",
+    "side",
+    "rear",
+    "ahead",
+    "towards",
+    "toward",
+    "to",
+    "the",
+    "camera",
+    "wall",
+    "other",
+    "opposite",
+    "north",
+    "south",
+    "east",
+    "west",
+    "off",
+];
+
+/// Words whose sense depends on their neighbours.
+fn reinterpret(tokens: &[Token], hits: &mut Vec<Hit>) {
+    let raw = |i: usize| tokens.get(i).map(|t| t.raw.as_str()).unwrap_or("");
+    for hit in hits.iter_mut() {
+        let prev = if hit.start > 0 {
+            raw(hit.start - 1)
+        } else {
+            ""
+        };
+        let next = raw(hit.end);
+        match hit.phrase.as_str() {
+            // `face left`, `face to the wall`, `about face`: turning to face is the torso (SINC's
+            // own few-shot example "face to the left" -> torso, neck).
+            "face"
+                if (DIRECTIONS.contains(&next) && !DIRECTIONS.contains(&prev))
+                    || prev == "about" =>
+            {
+                hit.kind = strong(T);
+            }
+            // `watch` the noun (wrist watch, check watch, look at watch) is an object.
+            "watch"
+                if matches!(
+                    prev,
+                    "wrist" | "at" | "check" | "checks" | "the" | "a" | "his" | "her" | "on"
+                ) || next == "on" =>
+            {
+                hit.kind = Kind::Object;
+            }
+            _ => {}
+        }
+    }
+    let mut keep = vec![true; hits.len()];
+    for k in 0..hits.len() {
+        let hit = &hits[k];
+        // `in circles`, `in a circle`, `in place`, `on the turn`: a generic verb after a
+        // preposition is a noun, not the action.
+        if matches!(
+            hit.kind,
+            Kind::Act {
+                strength: Strength::Generic,
+                ..
+            }
+        ) {
+            let mut j = hit.start;
+            while j > 0 && matches!(raw(j - 1), "a" | "an" | "the" | "small" | "big" | "large") {
+                j -= 1;
+            }
+            if j > 0 && matches!(raw(j - 1), "in" | "into" | "on" | "at") {
+                keep[k] = false;
+            }
+        }
+        // `take a step`, `take two steps`: the step is the action, not taking.
+        if hit.phrase == "take"
+            && hits[k + 1..].iter().any(|h| {
+                h.phrase == "step"
+                    && h.start <= hit.end + 3
+                    && tokens[h.start].clause == tokens[hit.start].clause
+            })
+        {
+            keep[k] = false;
+        }
+    }
+    let mut k = 0;
+    hits.retain(|_| {
+        k += 1;
+        keep[k - 1]
+    });
+}
+
+/// Side named by the words just before `start` (over `skip` words), if any. `left and right
+/// hands` looks past the conjunction, which otherwise ends a clause.
+fn side_before(tokens: &[Token], start: usize, skip: &[&str]) -> Option<Side> {
+    let mut left = false;
+    let mut right = false;
+    let mut both = false;
+    let mut clause = tokens.get(start).map(|t| t.clause);
+    let mut j = start;
+    while j > 0 {
+        j -= 1;
+        let w = tokens[j].raw.as_str();
+        if matches!(w, "and" | "or") {
+            let side_before_it = j > 0 && matches!(tokens[j - 1].raw.as_str(), "left" | "right");
+            if (left || right) && side_before_it {
+                clause = Some(tokens[j - 1].clause);
+                continue;
+            }
+            break;
+        }
+        if Some(tokens[j].clause) != clause {
+            break;
+        }
+        match w {
+            "left" => left = true,
+            "right" => right = true,
+            "both" | "two" | "each" | "either" | "one" | "other" | "opposite" | "single" => {
+                both = true
+            }
+            _ if skip.contains(&w) => {}
+            _ => break,
+        }
+    }
+    match (left, right, both) {
+        (true, true, _) => Some(Side::Both),
+        (true, false, false) => Some(Side::Left),
+        (false, true, false) => Some(Side::Right),
+        (_, _, true) => Some(Side::Both),
+        _ => None,
+    }
+}
+
+/// Index of the first token before the noun phrase that ends at `start` (skipping modifiers
+/// and sides), or `None` at the start of the text.
+fn word_before_phrase(tokens: &[Token], start: usize) -> Option<usize> {
+    let mut j = start;
+    while j > 0 {
+        j -= 1;
+        let w = tokens[j].raw.as_str();
+        if !MODIFIERS.contains(&w) {
+            return Some(j);
+        }
+    }
+    None
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Moving,
+    Target,
+    Ignored,
+}
+
+/// Labels an action text with SINC's six parts (see the module doc for the rules).
+///
+/// ```
+/// use motionforge::parts::lexicon::label_text;
+///
+/// assert_eq!(label_text("walk forward").parts.to_string(), "global, left_leg, right_leg");
+/// assert_eq!(label_text("wave with left hand").parts.to_string(), "left_arm");
+/// assert_eq!(label_text("right front kick").parts.to_string(), "right_leg");
+/// assert_eq!(label_text("scratch head").parts.to_string(), "left_arm, right_arm");
+/// assert_eq!(label_text("look to the right").parts.to_string(), "torso");
+/// let unknown = label_text("xyzzy");
+/// assert!(!unknown.known);
+/// ```
+pub fn label_text(text: &str) -> TextLabel {
+    let tokens = tokenize(text);
+    let hits = find_hits(&tokens);
+    let clauses = tokens.last().map(|t| t.clause + 1).unwrap_or(0);
+
+    // Roles of the part nouns.
+    let mut roles = vec![Role::Ignored; hits.len()];
+    let mut previous_part_is_arm = vec![false; clauses];
+    for (k, hit) in hits.iter().enumerate() {
+        let clause = tokens[hit.start].clause;
+        let is_noun = matches!(hit.kind, Kind::Limb { .. } | Kind::Trunk { .. });
+        if !is_noun {
+            continue;
+        }
+        let next = tokens.get(hit.end).map(|t| t.raw.as_str()).unwrap_or("");
+        if MEASURES.contains(&next) {
+            roles[k] = Role::Ignored;
+            continue;
+        }
+        let before = word_before_phrase(&tokens, hit.start)
+            .filter(|&j| tokens[j].clause == clause)
+            .map(|j| (tokens[j].raw.as_str(), j));
+        let after_contact = before.is_some_and(|(_, j)| {
+            hits.iter()
+                .any(|h| h.end == j + 1 && matches!(h.kind, Kind::Act { contact: true, .. }))
+        });
+        let after_location = before.is_some_and(|(w, _)| LOCATION.contains(&w));
+        let support = before.is_some_and(|(w, _)| w == "on" || w == "onto")
+            && matches!(
+                hit.kind,
+                Kind::Limb {
+                    limb: Limb::Leg,
+                    ..
+                }
+            )
+            && !previous_part_is_arm[clause];
+        let target = (after_contact || after_location) && !support;
+        roles[k] = match hit.kind {
+            Kind::Limb {
+                self_moving: true, ..
+            } => Role::Moving,
+            _ if target => Role::Target,
+            _ => Role::Moving,
+        };
+        if let Kind::Limb { limb, .. } = hit.kind {
+            previous_part_is_arm[clause] = limb == Limb::Arm;
+        }
+    }
+
+    let mut parts = PartSet::EMPTY;
+    let mut matched: Vec<String> = Vec::new();
+    let mut weak = PartSet::EMPTY;
+    let mut weak_matched: Vec<String> = Vec::new();
+
+    for clause in 0..clauses {
+        let in_clause: Vec<usize> = (0..hits.len())
+            .filter(|&k| tokens[hits[k].start].clause == clause)
+            .collect();
+        let mut moving_limb = false;
+        let mut moving_any = false;
+        let mut acted = false;
+        // "with the left" / "use the right": an instrument side for the clause's limb action.
+        let mut instrument_side: Option<Side> = None;
+        // `scratch right ear`, `touch left shoulder`: with no hand named, the target's side
+        // says which hand; the same side, except for a shoulder, which the other hand reaches.
+        let mut target_side: Option<Side> = None;
+        for &k in &in_clause {
+            let hit = &hits[k];
+            let shoulder = match hit.kind {
+                Kind::Feature => false,
+                Kind::Limb {
+                    self_moving: false,
+                    limb: Limb::Arm,
+                    ..
+                } if roles[k] == Role::Target => true,
+                Kind::Limb { .. } | Kind::Trunk { .. } if roles[k] == Role::Target => false,
+                _ => continue,
+            };
+            let side = side_before(&tokens, hit.start, MODIFIERS).or_else(|| {
+                // `right side of face`
+                let j = word_before_phrase(&tokens, hit.start)?;
+                (j >= 1 && tokens[j].raw == "of" && tokens[j - 1].raw == "side")
+                    .then(|| side_before(&tokens, j - 1, MODIFIERS))
+                    .flatten()
+            });
+            let side = match (side, shoulder) {
+                (Some(Side::Left), true) => Side::Right,
+                (Some(Side::Right), true) => Side::Left,
+                (Some(s), _) => s,
+                (None, _) => continue,
+            };
+            target_side = match target_side {
+                Some(t) if t != side => Some(Side::Both),
+                _ => Some(side),
+            };
+        }
+        for (i, t) in tokens.iter().enumerate() {
+            if t.clause != clause || !matches!(t.raw.as_str(), "with" | "use" | "using") {
+                continue;
+            }
+            let mut j = i + 1;
+            while j < tokens.len() && matches!(tokens[j].raw.as_str(), "the" | "his" | "her") {
+                j += 1;
+            }
+            let side_word = tokens.get(j).map(|t| t.raw.as_str());
+            let then_noun = hits.iter().any(|h| h.start == j + 1);
+            if !then_noun {
+                instrument_side = match side_word {
+                    Some("left") => Some(Side::Left),
+                    Some("right") => Some(Side::Right),
+                    Some("both") => Some(Side::Both),
+                    _ => instrument_side,
+                };
+            }
+        }
+
+        for &k in &in_clause {
+            let hit = &hits[k];
+            if roles[k] != Role::Moving {
+                continue;
+            }
+            match hit.kind {
+                Kind::Limb { limb, plural, .. } => {
+                    let side = if plural {
+                        Side::Both
+                    } else {
+                        side_before(&tokens, hit.start, MODIFIERS).unwrap_or(Side::Both)
+                    };
+                    let name = side_name(side, plural, &hit.phrase);
+                    add(limb.parts(side), &name, &mut matched, &mut parts);
+                    moving_limb = true;
+                    moving_any = true;
+                }
+                Kind::Trunk { parts: p, hip } => {
+                    let mut set = PartSet(p);
+                    let mut name = hit.phrase.clone();
+                    if hip && let Some(side) = side_before(&tokens, hit.start, MODIFIERS) {
+                        set |= Limb::Leg.parts(side);
+                        name = side_name(side, false, &hit.phrase);
+                    }
+                    add(set, &name, &mut matched, &mut parts);
+                    moving_any = true;
+                }
+                _ => {}
+            }
+        }
+
+        // An object handled in the clause (`move item`, `roll the ball`): a generic verb then
+        // means the hands, not its whole-body default.
+        let object = in_clause.iter().copied().find(|&k| {
+            hits[k].kind == Kind::Object
+                && word_before_phrase(&tokens, hits[k].start)
+                    .is_none_or(|j| !LOCATION.contains(&tokens[j].raw.as_str()))
+        });
+        for &k in &in_clause {
+            let hit = &hits[k];
+            let Kind::Act {
+                strength,
+                limb,
+                extra,
+                ..
+            } = hit.kind
+            else {
+                continue;
+            };
+            let limb_parts = |absorbed: bool| -> PartSet {
+                match limb {
+                    Some(l) if !absorbed => {
+                        // A side after a locomotion-like limb action (`hop right`) is a
+                        // direction, after a pure limb action (`kick right`) the limb.
+                        let after = if extra == 0 {
+                            side_after(&tokens, &hits, hit.end)
+                        } else {
+                            None
+                        };
+                        let side = side_before(&tokens, hit.start, ACT_MODIFIERS)
+                            .or(after)
+                            .or(instrument_side)
+                            .or(if l == Limb::Arm { target_side } else { None })
+                            .unwrap_or(Side::Both);
+                        l.parts(side)
+                    }
+                    _ => PartSet::EMPTY,
+                }
+            };
+            match strength {
+                Strength::Strong => {
+                    let set = PartSet(extra) | limb_parts(moving_limb);
+                    add(set, &hit.phrase, &mut matched, &mut parts);
+                    acted = true;
+                }
+                Strength::Generic => {
+                    if !moving_any && object.is_some() && limb.is_none() {
+                        let side = instrument_side.unwrap_or(Side::Both);
+                        add(Limb::Arm.parts(side), &hit.phrase, &mut matched, &mut parts);
+                    } else if !moving_any {
+                        let set = PartSet(extra) | limb_parts(false);
+                        add(set, &hit.phrase, &mut matched, &mut parts);
+                    }
+                    acted = true;
+                }
+                Strength::Weak => {
+                    weak |= PartSet(extra) | limb_parts(moving_limb);
+                    if !weak_matched.contains(&hit.phrase) {
+                        weak_matched.push(hit.phrase.clone());
+                    }
+                }
+            }
+        }
+
+        if !acted
+            && !moving_any
+            && let Some(k) = object
+        {
+            let set = Limb::Arm.parts(instrument_side.unwrap_or(Side::Both));
+            add(set, &hits[k].phrase, &mut matched, &mut parts);
+        }
+    }
+
+    if parts.is_empty() && !weak.is_empty() {
+        parts = weak;
+        matched = weak_matched;
+    }
+    let known = !parts.is_empty();
+    TextLabel {
+        parts: if known { parts } else { UNKNOWN_DEFAULT },
+        matched,
+        known,
+    }
+}
+
+/// A side word right after a limb action that ends its clause or precedes no noun: `kick right`,
+/// `punch left`, but not `kick to the right` or `wave right hand` (the noun takes it).
+fn side_after(tokens: &[Token], hits: &[Hit], end: usize) -> Option<Side> {
+    let t = tokens.get(end)?;
+    let side = match t.raw.as_str() {
+        "left" => Side::Left,
+        "right" => Side::Right,
+        _ => return None,
+    };
+    let next_is_noun = hits
+        .iter()
+        .any(|h| h.start == end + 1 && !matches!(h.kind, Kind::Act { .. }));
+    let next_same_clause = tokens.get(end + 1).is_some_and(|n| n.clause == t.clause);
+    let next = tokens.get(end + 1).map(|n| n.raw.as_str()).unwrap_or("");
+    if next_is_noun || (next_same_clause && matches!(next, "side" | "of")) {
+        return None;
+    }
+    Some(side)
+}
+
+fn add(set: PartSet, name: &str, matched: &mut Vec<String>, parts: &mut PartSet) {
+    *parts |= set;
+    if !matched.iter().any(|m| m == name) {
+        matched.push(name.to_string());
+    }
+}
+
+fn side_name(side: Side, plural: bool, phrase: &str) -> String {
+    match (side, plural) {
+        (_, true) => phrase.to_string(),
+        (Side::Left, false) => format!("left {phrase}"),
+        (Side::Right, false) => format!("right {phrase}"),
+        (Side::Both, false) => phrase.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parts(text: &str) -> String {
+        label_text(text).parts.to_string()
+    }
+
+    #[test]
+    fn lemmas() {
+        assert_eq!(lemma("waving"), "wave");
+        assert_eq!(lemma("running"), "run");
+        assert_eq!(lemma("walks"), "walk");
+        assert_eq!(lemma("stepped"), "step");
+        assert_eq!(lemma("ran"), "run");
+        assert_eq!(lemma("hands"), "hands");
+    }
+
+    #[test]
+    fn locomotion_and_direction_words() {
+        assert_eq!(parts("walk to the left"), "global, left_leg, right_leg");
+        assert_eq!(parts("Running"), "global, left_leg, right_leg");
+        assert_eq!(parts("turn around"), "global, left_leg, right_leg");
+    }
+
+    #[test]
+    fn sides_bind_to_nouns_and_limb_actions() {
+        assert_eq!(parts("raise right hand"), "right_arm");
+        assert_eq!(parts("wave"), "left_arm, right_arm");
+        assert_eq!(parts("kick right"), "right_leg");
+        assert_eq!(parts("kick to the right"), "left_leg, right_leg");
+        assert_eq!(parts("hop on left foot"), "global, left_leg");
+        assert_eq!(parts("throw with the left"), "left_arm");
+        assert_eq!(parts("left and right hands up"), "left_arm, right_arm");
+    }
+
+    #[test]
+    fn targets_do_not_move() {
+        assert_eq!(parts("hands on hips"), "left_arm, right_arm");
+        assert_eq!(parts("touch left knee with right hand"), "right_arm");
+        assert_eq!(parts("raise right hand to mouth"), "right_arm");
+        assert_eq!(parts("look over right shoulder"), "torso");
+        assert_eq!(parts("bend at the waist"), "global, torso");
+        assert_eq!(parts("stand on left leg"), "left_leg");
+        assert_eq!(parts("place object at waist level"), "left_arm, right_arm");
+    }
+
+    #[test]
+    fn clauses_combine() {
+        assert_eq!(
+            parts("walk forward while waving right hand"),
+            "global, right_arm, left_leg, right_leg"
+        );
+        assert_eq!(parts("turn head left"), "torso");
+    }
+
+    #[test]
+    fn unknown_gets_the_default_and_a_flag() {
+        let l = label_text("");
+        assert!(!l.known);
+        assert_eq!(l.parts, UNKNOWN_DEFAULT);
+        assert!(l.matched.is_empty());
+        assert!(label_text("stand").known);
+    }
+}

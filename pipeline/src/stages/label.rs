@@ -1,0 +1,404 @@
+//! `label`: body parts for every clip. Each unique normalised text is labelled once: by the
+//! embedded labeller (lexicon, then the clip's part velocities when the lexicon does not know the
+//! text), or by the LLM through the response cache with SINC's prompt. Every label records which
+//! labeller produced it.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::{Deserialize, Serialize};
+
+use crate::clip::{Clip, SourceKind};
+use crate::config::{Labeller, OnMiss, PartLabelConfig};
+use crate::llm::cache::ResponseCache;
+use crate::llm::client::{LlmClient, LlmConfig};
+use crate::llm::prompt::{PromptError, Prompts};
+use crate::motion::Profile;
+use crate::parts::PartSet;
+use crate::parts::answer::parse_part_answer;
+use crate::parts::lexicon::label_text;
+use crate::parts::velocity::motion_parts;
+
+/// Stage name.
+pub const NAME: &str = "label";
+
+/// How texts are compared and asked: lowercase, single spaces, trimmed.
+pub fn normalize_text(text: &str) -> String {
+    text.to_lowercase()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The label of one text.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TextParts {
+    /// Parts; `None` when the labeller had no answer (embedded: text unknown, the clip's motion
+    /// decides; LLM: an answer with no part at all).
+    pub parts: Option<PartSet>,
+    /// `embedded:lexicon`, `llm:<model>`, `import:<file>`, ...
+    pub source: String,
+    /// Why the answer needs a look (off-list words, no part), if it does.
+    pub flag: Option<String>,
+}
+
+/// What the stage did, for the build report.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct LabelReport {
+    /// Unique texts labelled.
+    pub texts: usize,
+    /// Requests sent to the LLM.
+    pub requests: usize,
+    /// Answers found in the cache.
+    pub cache_hits: usize,
+    /// Clips per label source.
+    pub sources: BTreeMap<String, usize>,
+    /// Flagged answers: text and reason.
+    pub flagged: Vec<(String, String)>,
+    /// Texts the LLM could not answer (after retries) or the cache lacked, with the reason.
+    pub missing: Vec<(String, String)>,
+    /// On clips labelled by the lexicon: mean fraction of the six parts on which the motion's
+    /// velocity evidence agrees (SINC's baseline), and how many clips that covers.
+    pub velocity_agreement: Option<(f64, usize)>,
+}
+
+/// Why labelling stops the build.
+#[derive(Debug, thiserror::Error)]
+pub enum LabelError {
+    /// A prompt does not render.
+    #[error(transparent)]
+    Prompt(#[from] PromptError),
+    /// `on_miss = "fail"` and some texts have no answer.
+    #[error("{} texts have no cached LLM answer and cannot be asked ({}): {}", texts.len(), reason, preview(texts))]
+    Missing {
+        /// Why they cannot be asked.
+        reason: String,
+        /// The texts.
+        texts: Vec<String>,
+    },
+    /// The LLM client cannot be created.
+    #[error("LLM client: {0}")]
+    Client(String),
+}
+
+fn preview(texts: &[String]) -> String {
+    let shown: Vec<&str> = texts.iter().take(10).map(String::as_str).collect();
+    let more = texts.len().saturating_sub(shown.len());
+    format!(
+        "{}{}",
+        shown.join("; "),
+        if more > 0 {
+            format!("; and {more} more")
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// Everything the stage needs.
+pub struct LabelInput<'a> {
+    /// Stage settings.
+    pub config: &'a PartLabelConfig,
+    /// The LLM server, if configured.
+    pub llm: Option<&'a LlmConfig>,
+    /// Prompt templates.
+    pub prompts: &'a Prompts,
+    /// Force offline (the build's `--offline`).
+    pub offline: bool,
+}
+
+fn embedded(text: &str) -> TextParts {
+    let l = label_text(text);
+    TextParts {
+        parts: l.known.then_some(l.parts),
+        source: "embedded:lexicon".into(),
+        flag: None,
+    }
+}
+
+/// Labels every unique text of `clips` (their `texts`).
+pub fn label_texts(
+    clips: &[&Clip],
+    input: &LabelInput<'_>,
+    cache: Option<&mut ResponseCache>,
+    report: &mut LabelReport,
+) -> Result<BTreeMap<String, TextParts>, LabelError> {
+    let texts: BTreeSet<String> = clips
+        .iter()
+        .flat_map(|c| c.texts.iter().map(|t| normalize_text(t)))
+        .collect();
+    let texts: Vec<String> = texts.into_iter().collect();
+    report.texts = texts.len();
+    let mut out = BTreeMap::new();
+    let (cfg, cache) = match (input.config.labeller, input.llm, cache) {
+        (Labeller::Embedded, _, _) => {
+            for t in texts {
+                out.insert(t.clone(), embedded(&t));
+            }
+            return Ok(out);
+        }
+        (Labeller::Llm, Some(cfg), Some(cache)) => (cfg, cache),
+        (Labeller::Llm, _, _) => {
+            let reason =
+                "part_labels.labeller = \"llm\" but the config has no [llm] section".to_string();
+            return fallback_all(&texts, input.config.on_miss, reason, report);
+        }
+    };
+    let prompts: Vec<String> = texts
+        .iter()
+        .map(|t| input.prompts.part_labels(t, input.config.variant))
+        .collect::<Result<_, _>>()?;
+    let offline = input.offline || input.config.offline;
+    let mut answers: Vec<Option<(String, String)>> = Vec::with_capacity(texts.len());
+    let mut missing: Vec<(String, String)> = Vec::new();
+    if offline {
+        for (t, p) in texts.iter().zip(&prompts) {
+            match cache.get_entry(&cfg.cache_key(p)) {
+                Some(e) => {
+                    report.cache_hits += 1;
+                    answers.push(Some((e.response.clone(), source_name(&e.source, cfg))));
+                }
+                None => {
+                    missing.push((t.clone(), "offline and not in the cache".into()));
+                    answers.push(None);
+                }
+            }
+        }
+    } else {
+        let client = LlmClient::new(cfg.clone()).map_err(|e| LabelError::Client(e.to_string()))?;
+        for ((t, p), result) in texts
+            .iter()
+            .zip(&prompts)
+            .zip(client.complete_all(&prompts, cache))
+        {
+            match result {
+                Ok(a) => {
+                    if a.from_cache {
+                        report.cache_hits += 1;
+                    } else {
+                        report.requests += 1;
+                    }
+                    let source = cache
+                        .get_entry(&cfg.cache_key(p))
+                        .map(|e| e.source.clone())
+                        .unwrap_or_default();
+                    answers.push(Some((a.text, source_name(&source, cfg))));
+                }
+                Err(e) => {
+                    missing.push((t.clone(), e.to_string()));
+                    answers.push(None);
+                }
+            }
+        }
+    }
+    if !missing.is_empty() && input.config.on_miss == OnMiss::Fail {
+        return Err(LabelError::Missing {
+            reason: missing[0].1.clone(),
+            texts: missing.into_iter().map(|(t, _)| t).collect(),
+        });
+    }
+    for (t, answer) in texts.iter().zip(answers) {
+        let label = match answer {
+            Some((text, source)) => {
+                let parsed = parse_part_answer(&text);
+                let flag = parsed.is_flagged().then(|| {
+                    if parsed.empty {
+                        format!("no body part in the answer `{}`", text.trim())
+                    } else {
+                        format!("words outside the list: {}", parsed.off_list.join(", "))
+                    }
+                });
+                if let Some(f) = &flag {
+                    report.flagged.push((t.clone(), f.clone()));
+                }
+                TextParts {
+                    parts: (!parsed.empty).then_some(parsed.parts),
+                    source,
+                    flag,
+                }
+            }
+            None => embedded(t),
+        };
+        out.insert(t.clone(), label);
+    }
+    report.missing = missing;
+    Ok(out)
+}
+
+fn source_name(cache_source: &str, cfg: &LlmConfig) -> String {
+    match cache_source.strip_prefix("import:") {
+        Some(file) => format!("import:{file}"),
+        None => format!("llm:{}", cfg.model),
+    }
+}
+
+fn fallback_all(
+    texts: &[String],
+    on_miss: OnMiss,
+    reason: String,
+    report: &mut LabelReport,
+) -> Result<BTreeMap<String, TextParts>, LabelError> {
+    if on_miss == OnMiss::Fail {
+        return Err(LabelError::Missing {
+            reason,
+            texts: texts.to_vec(),
+        });
+    }
+    report.missing = texts.iter().map(|t| (t.clone(), reason.clone())).collect();
+    Ok(texts.iter().map(|t| (t.clone(), embedded(t))).collect())
+}
+
+/// Puts labels on clips: a single clip takes its text's label (or its motion's velocity evidence
+/// when the labeller had none); a real pair takes the union of its texts' labels.
+pub fn apply_labels(
+    clips: &mut [Clip],
+    labels: &BTreeMap<String, TextParts>,
+    profile: impl Fn(&Clip) -> Option<Profile>,
+    report: &mut LabelReport,
+) {
+    let mut agreement = (0.0, 0usize);
+    for clip in clips.iter_mut() {
+        let found: Vec<Option<&TextParts>> = clip
+            .texts
+            .iter()
+            .map(|t| labels.get(&normalize_text(t)))
+            .collect();
+        let all_known = found.iter().all(|f| f.is_some_and(|l| l.parts.is_some()));
+        if all_known && !found.is_empty() {
+            let parts = found
+                .iter()
+                .flatten()
+                .filter_map(|l| l.parts)
+                .fold(PartSet::default(), |a, b| a | b);
+            let sources: BTreeSet<&str> =
+                found.iter().flatten().map(|l| l.source.as_str()).collect();
+            clip.parts = Some(parts);
+            clip.label_source = Some(sources.into_iter().collect::<Vec<_>>().join("+"));
+            if clip.kind == SourceKind::RealSingle
+                && clip.label_source.as_deref() == Some("embedded:lexicon")
+                && let Some(p) = profile(clip)
+            {
+                agreement.0 +=
+                    crate::parts::velocity::agreement(parts, motion_parts(&clip.motion, &p));
+                agreement.1 += 1;
+            }
+        } else if clip.kind == SourceKind::RealSingle
+            && let Some(p) = profile(clip)
+        {
+            // No answer for the text: the motion itself says which parts move (SINC's baseline).
+            clip.parts = Some(motion_parts(&clip.motion, &p));
+            clip.label_source = Some("embedded:velocity".into());
+        } else {
+            clip.parts = None;
+            clip.label_source = None;
+        }
+        let key = clip.label_source.clone().unwrap_or_else(|| "(none)".into());
+        *report.sources.entry(key).or_insert(0) += 1;
+    }
+    if agreement.1 > 0 {
+        report.velocity_agreement = Some((agreement.0 / agreement.1 as f64, agreement.1));
+    }
+}
+
+/// What an import did.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ImportReport {
+    /// Answers written to the cache.
+    pub imported: usize,
+    /// Answers already in the cache (same key), left as they were.
+    pub already: usize,
+    /// Texts whose record had no answer at the requested position.
+    pub without_answer: Vec<String>,
+    /// Answers using words outside the prompt's list, whether or not a synonym maps them: text
+    /// and the words.
+    pub outside_list: Vec<(String, String)>,
+    /// Answers flagged for a look (words no synonym maps, or no part): text, reason.
+    pub flagged: Vec<(String, String)>,
+}
+
+/// Why an import fails.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// The file is not a JSON object of text -> answers.
+    #[error(
+        "{file}: expected a JSON object of action text -> [answer, ...] (SINC's gpt3-labels-list.json): {message}"
+    )]
+    Format {
+        /// The file.
+        file: String,
+        /// What was wrong.
+        message: String,
+    },
+    /// A prompt does not render.
+    #[error(transparent)]
+    Prompt(#[from] PromptError),
+    /// The cache cannot be written.
+    #[error(transparent)]
+    Cache(#[from] crate::llm::cache::CacheError),
+}
+
+/// Imports existing answers, SINC's format `{text: [answer_v1, answer_v2, answer_v3]}`, into the
+/// response cache under the keys the label stage will look up: the prompt `variant` rendered for
+/// each text, with the model and sampling parameters of `llm`. `answer` picks the position in
+/// each list (SINC's third answer, index 2, is its Listing 1 prompt).
+pub fn import_answers(
+    json: &str,
+    file: &str,
+    answer: usize,
+    variant: crate::llm::prompt::PartPromptVariant,
+    prompts: &Prompts,
+    llm: &LlmConfig,
+    cache: &mut ResponseCache,
+) -> Result<ImportReport, ImportError> {
+    let format = |message: String| ImportError::Format {
+        file: file.to_string(),
+        message,
+    };
+    let map: BTreeMap<String, Vec<String>> =
+        serde_json::from_str(json).map_err(|e| format(e.to_string()))?;
+    let mut report = ImportReport::default();
+    let mut batch: Vec<(crate::llm::cache::CacheKey, crate::llm::cache::CacheEntry)> = Vec::new();
+    let mut batched: BTreeSet<String> = BTreeSet::new();
+    let source = format!("import:{}", file.rsplit(['/', '\\']).next().unwrap_or(file));
+    for (text, answers) in map {
+        let Some(a) = answers.get(answer) else {
+            report.without_answer.push(text);
+            continue;
+        };
+        let parsed = parse_part_answer(a);
+        if parsed.has_raw_off_list() {
+            let words: Vec<&str> = parsed
+                .synonyms
+                .iter()
+                .chain(&parsed.off_list)
+                .map(String::as_str)
+                .collect();
+            report.outside_list.push((text.clone(), words.join(", ")));
+        }
+        if parsed.is_flagged() {
+            let why = if parsed.empty {
+                "no body part".to_string()
+            } else {
+                format!("outside the list: {}", parsed.off_list.join(", "))
+            };
+            report.flagged.push((text.clone(), why));
+        }
+        let prompt = prompts.part_labels(&normalize_text(&text), variant)?;
+        let key = llm.cache_key(&prompt);
+        if cache.get(&key).is_some() || !batched.insert(key.as_str().to_string()) {
+            report.already += 1;
+            continue;
+        }
+        let entry = crate::llm::cache::CacheEntry::new(
+            &llm.model,
+            llm.kind,
+            &prompt,
+            &llm.sampling(),
+            a.clone(),
+            &source,
+        );
+        batch.push((key, entry));
+        report.imported += 1;
+    }
+    cache.insert_many(batch)?;
+    Ok(report)
+}

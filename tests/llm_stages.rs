@@ -1,0 +1,435 @@
+//! The LLM stages inside a build: a real OpenAI-compatible server on loopback, the response cache,
+//! `--offline`, imported SINC answers, and the embedded labeller when no LLM is configured.
+mod common;
+
+use std::fs;
+use std::path::Path;
+use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use axum::extract::State;
+use axum::routing::post;
+use axum::{Json, Router};
+use common::*;
+use motionforge::build::{BuildOptions, BuildReport, build};
+use motionforge::config::Config;
+use serde_json::{Value, json};
+
+/// A chat server that answers like a (well-behaved) model, by prompt kind, and counts requests.
+struct Server {
+    base_url: String,
+    requests: Arc<AtomicUsize>,
+    prompts: Arc<Mutex<Vec<String>>>,
+    _runtime: tokio::runtime::Runtime,
+}
+
+#[derive(Clone)]
+struct ServerState {
+    requests: Arc<AtomicUsize>,
+    prompts: Arc<Mutex<Vec<String>>>,
+}
+
+fn answer_for(prompt: &str) -> String {
+    if prompt.contains("body parts involved") {
+        // One answer with a word outside the list, to see it flagged.
+        if prompt.contains("action of: kick?") {
+            return "Answer: right leg\nhips and the soul".into();
+        }
+        return "Answer: right arm\nleft arm".into();
+    }
+    if prompt.contains("different descriptions") {
+        return "1. A person does it calmly.\n2. Someone turns to the left while doing it.\n3. A person does it calmly.\n4. The motion is performed once.".into();
+    }
+    if prompt.contains("target action") {
+        // The first answer for every text is invalid (ids from 0); the repair request is fixed.
+        if prompt.contains("Your answer was not valid") {
+            return r#"[{"step": "stand still", "step_id": 1, "category": "locomotion"}, {"step": "do it", "step_id": 2, "category": "interaction"}]"#.into();
+        }
+        return r#"[{"step": "stand still", "step_id": 0, "category": "locomotion"}]"#.into();
+    }
+    "I do not understand.".into()
+}
+
+async fn chat(State(state): State<ServerState>, Json(body): Json<Value>) -> Json<Value> {
+    state.requests.fetch_add(1, Ordering::SeqCst);
+    let prompt = body["messages"][0]["content"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    state.prompts.lock().unwrap().push(prompt.clone());
+    Json(
+        json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": answer_for(&prompt)}}]}),
+    )
+}
+
+impl Server {
+    fn start() -> Server {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .enable_all()
+            .build()
+            .unwrap();
+        let listener = runtime
+            .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+            .unwrap();
+        let addr = listener.local_addr().unwrap();
+        let state = ServerState {
+            requests: Arc::default(),
+            prompts: Arc::default(),
+        };
+        let app = Router::new()
+            .route("/v1/chat/completions", post(chat))
+            .with_state(state.clone());
+        runtime.spawn(async move { axum::serve(listener, app).await });
+        Server {
+            base_url: format!("http://{addr}/v1"),
+            requests: state.requests,
+            prompts: state.prompts,
+            _runtime: runtime,
+        }
+    }
+
+    fn requests(&self) -> usize {
+        self.requests.load(Ordering::SeqCst)
+    }
+}
+
+/// A scratch build of three real Bandai captures with the given extra config.
+fn scratch(extra: &str) -> (tempfile::TempDir, Config) {
+    let dir = tempfile::tempdir().unwrap();
+    fs::create_dir_all(dir.path().join("captures")).unwrap();
+    for name in [
+        "dataset-1_walk_normal_001",
+        "dataset-1_kick_normal_001",
+        "dataset-1_bye_normal_001",
+    ] {
+        let src = shared_data()
+            .join("bandai-namco-1/data")
+            .join(format!("{name}.bvh"));
+        fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
+    }
+    let text = format!(
+        r#"
+[dataset]
+name = "llm"
+output = "out"
+{extra}
+
+[[sources]]
+name = "bandai"
+captures = ["captures/*.bvh"]
+profile = "bandai-namco"
+[sources.labels]
+kind = "filename"
+pattern = "dataset-1_{{content}}_{{style}}_{{take}}"
+action = "{{content}}"
+text = "{{content}}"
+"#
+    );
+    let path = dir.path().join("build.toml");
+    fs::write(&path, text).unwrap();
+    let config = Config::load(&path).unwrap();
+    (dir, config)
+}
+
+fn llm_section(server: &Server) -> String {
+    format!(
+        "[part_labels]\nlabeller = \"llm\"\n\n[llm]\nbase_url = \"{}\"\nmodel = \"test-model\"\nrequests_per_minute = 6000\nbackoff_seconds = 0.01\n",
+        server.base_url
+    )
+}
+
+fn rows(table: &Path, columns: &str) -> Vec<String> {
+    let script = format!(
+        "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
+    );
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(table)
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+fn stage<'a>(report: &'a BuildReport, name: &str) -> &'a motionforge::build::StageRun {
+    report
+        .stages
+        .iter()
+        .find(|s| s.stage == name)
+        .unwrap_or_else(|| panic!("no stage {name}: {:?}", report.stages))
+}
+
+#[test]
+fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
+    let server = Server::start();
+    let (dir, config) = scratch(&llm_section(&server));
+    let first = build(&config, &BuildOptions::default()).unwrap();
+    // 3 texts x (labels + paraphrases + plans) + 3 plan repairs.
+    assert_eq!(
+        server.requests(),
+        12,
+        "{:?}",
+        server.prompts.lock().unwrap()
+    );
+    assert_eq!(first.labels.requests, 3);
+    assert_eq!(
+        first.labels.flagged.len(),
+        1,
+        "the kick answer has words outside the list"
+    );
+    // `hips` maps to global; `the soul` is flagged, not guessed.
+    assert!(
+        first.labels.flagged[0].1.contains("soul"),
+        "{:?}",
+        first.labels.flagged
+    );
+    assert_eq!(
+        first.plans.answered, 3,
+        "every plan valid after one repair: {:?}",
+        first.plans.rejected
+    );
+    let rejected: Vec<&str> = first
+        .paraphrases
+        .rejected
+        .iter()
+        .map(|(_, r)| r.as_str())
+        .collect();
+    assert!(
+        rejected.contains(&"duplicate")
+            && rejected.contains(&"changes the side words (left/right)"),
+        "{rejected:?}"
+    );
+
+    let out = dir.path().join("out");
+    let table = rows(
+        &out.join("clips.parquet"),
+        "clip_id,parts,label_source,paraphrases",
+    );
+    let walk = table
+        .iter()
+        .find(|r| r.contains("walk_normal_001:0-195|"))
+        .unwrap();
+    assert!(walk.contains("[False, False, True, True, False, False]|llm:test-model|['A person does it calmly.', 'The motion is performed once.']"), "{walk}");
+    let walk_m = table
+        .iter()
+        .find(|r| r.contains("walk_normal_001:0-195:m|"))
+        .unwrap();
+    assert!(
+        walk_m.contains("[False, False, True, True, False, False]|llm:test-model"),
+        "arms mirror onto arms: {walk_m}"
+    );
+    let plans = rows(&out.join("plans.parquet"), "text,step_id,step,category");
+    assert_eq!(plans.len(), 6, "{plans:?}");
+    assert!(
+        plans.contains(&"walk|2|do it|interaction".to_string()),
+        "{plans:?}"
+    );
+
+    // Nothing changed: no request, no stage re-run.
+    let second = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(server.requests(), 12);
+    assert!(second.nothing_ran(), "{:?}", second.stages);
+    assert_eq!(
+        stage(&second, "label").reused,
+        3,
+        "the three original clips keep their labels"
+    );
+
+    // A restart of everything but the cache file: still no request, same table.
+    let before = fs::read(out.join("clips.parquet")).unwrap();
+    fs::remove_dir_all(out.join(".motionforge")).unwrap();
+    build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(server.requests(), 12);
+    assert!(
+        fs::read(out.join("clips.parquet")).unwrap() == before,
+        "same answers, same bytes"
+    );
+}
+
+#[test]
+fn offline_sends_nothing_and_falls_back_as_configured() {
+    let server = Server::start();
+    let (_dir, config) = scratch(&llm_section(&server));
+    let report = build(
+        &config,
+        &BuildOptions {
+            offline: true,
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(server.requests(), 0);
+    assert_eq!(report.labels.missing.len(), 3);
+    assert!(
+        report
+            .labels
+            .sources
+            .keys()
+            .all(|s| s.starts_with("embedded:")),
+        "{:?}",
+        report.labels.sources
+    );
+    assert_eq!(
+        report
+            .paraphrases
+            .skipped
+            .get("offline and not in the cache"),
+        Some(&3)
+    );
+    // With on_miss = "fail", the build stops and lists the texts.
+    let (_dir, config) = scratch(&format!(
+        "{}\n",
+        llm_section(&server).replace(
+            "labeller = \"llm\"",
+            "labeller = \"llm\"\non_miss = \"fail\""
+        )
+    ));
+    let err = build(
+        &config,
+        &BuildOptions {
+            offline: true,
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("3 texts have no cached LLM answer") && err.contains("walk"),
+        "{err}"
+    );
+    assert_eq!(server.requests(), 0);
+}
+
+#[test]
+fn without_an_llm_the_embedded_labeller_labels_and_skips_are_reported() {
+    let (dir, config) = scratch("");
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(
+        report.paraphrases.skipped.get("no LLM configured"),
+        Some(&3)
+    );
+    assert_eq!(report.plans.skipped.get("no LLM configured"), Some(&3));
+    assert!(
+        !dir.path().join("out/llm-cache.jsonl").exists(),
+        "no cache file without an LLM"
+    );
+    let table = rows(
+        &dir.path().join("out/clips.parquet"),
+        "clip_id,parts,label_source",
+    );
+    for row in &table {
+        assert!(
+            row.contains("|embedded:"),
+            "every clip labelled by the embedded labeller: {row}"
+        );
+    }
+    let walk = table
+        .iter()
+        .find(|r| r.contains("walk_normal_001:0-195|"))
+        .unwrap();
+    assert!(
+        walk.contains("[True, False, False, False, True, True]"),
+        "walk: global and both legs: {walk}"
+    );
+}
+
+#[test]
+fn imported_sinc_answers_label_a_build_without_a_request() {
+    let dir = tempfile::tempdir().unwrap();
+    fs::create_dir_all(dir.path().join("captures")).unwrap();
+    fs::copy(
+        shared_data().join("cmu/01_01.bvh"),
+        dir.path().join("captures/01_01.bvh"),
+    )
+    .unwrap();
+    fs::copy(
+        repo().join("fixtures/humanml3d/index-cmu-01_01.csv"),
+        dir.path().join("index.csv"),
+    )
+    .unwrap();
+    // No server listens here: any request would fail the labels and show up as `missing`.
+    let config_text = r#"
+[dataset]
+name = "imported"
+output = "out"
+
+[part_labels]
+labeller = "llm"
+offline = true
+
+[llm]
+base_url = "http://127.0.0.1:9/v1"
+model = "text-davinci-003"
+kind = "completion"
+max_tokens = 256
+
+[[sources]]
+name = "cmu"
+captures = ["captures/*.bvh"]
+profile = "cmu"
+[sources.labels]
+kind = "frame_index"
+path = "index.csv"
+fps = 20
+default_text = "jump forward"
+[sources.segment]
+timeline_offset_frames = 1
+"#;
+    let config_path = dir.path().join("build.toml");
+    fs::write(&config_path, config_text).unwrap();
+    let import = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["labels", "import"])
+        .arg(shared_data().join("sinc/gpt3-labels-list.json"))
+        .arg("--config")
+        .arg(&config_path)
+        .output()
+        .unwrap();
+    assert!(
+        import.status.success(),
+        "{}",
+        String::from_utf8_lossy(&import.stderr)
+    );
+    let printed = String::from_utf8(import.stdout).unwrap();
+    // 6,518 texts; two differ only in case or spacing and share one prompt.
+    assert!(
+        printed.contains("imported 6517 answers") && printed.contains("(1 already there)"),
+        "{printed}"
+    );
+    assert!(
+        printed.contains("12 answers use words outside the prompt's list"),
+        "{printed}"
+    );
+    let config = Config::load(&config_path).unwrap();
+    let report = build(
+        &config,
+        &BuildOptions {
+            offline: true,
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(
+        report.labels.missing.is_empty(),
+        "{:?}",
+        report.labels.missing
+    );
+    assert_eq!(report.labels.cache_hits, 1);
+    // Both crops are labelled from the import (sources count originals; mirrors inherit them).
+    assert_eq!(
+        report.labels.sources.get("import:gpt3-labels-list.json"),
+        Some(&2),
+        "{:?}",
+        report.labels.sources
+    );
+}
