@@ -433,3 +433,61 @@ timeline_offset_frames = 1
         report.labels.sources
     );
 }
+
+#[test]
+fn labels_eval_puts_gpt3_and_the_embedded_labeller_side_by_side() {
+    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["labels", "eval", "--gold"])
+        .arg(shared_data().join("sinc/part-labels-gold-dev.json"))
+        .arg("--source")
+        .arg(shared_data().join("sinc/gpt3-labels-list.json"))
+        .args(["--source", "embedded", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mean = |source: &str| v[source]["mean"].as_f64().unwrap();
+    let gpt3 = shared_data()
+        .join("sinc/gpt3-labels-list.json")
+        .display()
+        .to_string();
+    assert!((mean(&gpt3) - 0.8913).abs() < 1e-3, "{v}");
+    assert!(
+        mean("embedded") >= mean(&gpt3),
+        "the embedded labeller reaches GPT-3's accuracy: {v}"
+    );
+}
+
+#[test]
+fn prompt_render_prints_the_exact_prompt_and_names_unknown_templates() {
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let out = run(&[
+        "prompt",
+        "render",
+        "part_labels",
+        "--text",
+        "wave with the right hand",
+    ]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.starts_with("The instructions for this task are to choose\n"));
+    assert!(text.ends_with("action of: wave with the right hand?\n"));
+    let out = run(&["prompt", "render", "task_plan", "--text", "watch TV"]);
+    assert!(
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .contains("The target action is: watch TV.")
+    );
+    let out = run(&["prompt", "render", "haiku", "--text", "x"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no prompt template `haiku`"));
+}

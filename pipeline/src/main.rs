@@ -301,6 +301,41 @@ fn print_report(report: &BuildReport) -> std::io::Result<()> {
     if !report.notes_by_kind.is_empty() {
         writeln!(out, "annotation notes: {}", counts(&report.notes_by_kind))?;
     }
+    let l = &report.labels;
+    writeln!(
+        out,
+        "part labels: {} ({} texts, {} requests, {} cache hits, {} flagged)",
+        counts(&l.sources),
+        l.texts,
+        l.requests,
+        l.cache_hits,
+        l.flagged.len()
+    )?;
+    if let Some((agreement, n)) = l.velocity_agreement {
+        writeln!(
+            out,
+            "  motion velocity agrees with the lexicon on {:.0}% of parts ({n} clips)",
+            agreement * 100.0
+        )?;
+    }
+    for (name, r) in [
+        ("paraphrases", &report.paraphrases),
+        ("task plans", &report.plans),
+    ] {
+        let skipped = if r.skipped.is_empty() {
+            String::new()
+        } else {
+            format!("; skipped: {}", counts(&r.skipped))
+        };
+        writeln!(
+            out,
+            "{name}: {} of {} texts answered, {} requests, {} rejected{skipped}",
+            r.answered,
+            r.texts,
+            r.requests,
+            r.rejected.len()
+        )?;
+    }
     if report.rejects.is_empty() {
         writeln!(out, "rejects: none")?;
     } else {
@@ -580,9 +615,10 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
             let mut rows: Vec<(String, motionforge::parts::eval::Evaluation)> = Vec::new();
             for source in &sources {
                 let evaluation = match source.as_str() {
+                    // Gold files hold texts only: an unknown text gets the lexicon's default, as a
+                    // clip would without motion to look at.
                     "embedded" => motionforge::parts::eval::evaluate(&gold_set, |t| {
-                        let l = motionforge::parts::lexicon::label_text(t);
-                        l.known.then_some(l.parts)
+                        Some(motionforge::parts::lexicon::label_text(t).parts)
                     }),
                     "cache" => {
                         let path = config.as_ref().context("--source cache needs --config")?;

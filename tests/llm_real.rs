@@ -1,0 +1,83 @@
+//! Once, against a real LLM server (llama.cpp with Gemma 3 270M; recipe in docs/llm-real-run.md).
+//! Ignored by default: run with
+//! `MOTIONFORGE_LLM_URL=http://127.0.0.1:8081/v1 cargo test --test llm_real -- --ignored --nocapture`.
+mod common;
+
+use std::fs;
+
+use common::*;
+use motionforge::build::{BuildOptions, build};
+use motionforge::config::Config;
+
+#[test]
+#[ignore = "needs a local OpenAI-compatible server; see docs/llm-real-run.md"]
+fn a_real_server_labels_paraphrases_and_plans_and_a_rebuild_asks_nothing() {
+    let url = std::env::var("MOTIONFORGE_LLM_URL")
+        .expect("set MOTIONFORGE_LLM_URL, e.g. http://127.0.0.1:8081/v1");
+    let model = std::env::var("MOTIONFORGE_LLM_MODEL").unwrap_or_else(|_| "gemma-3-270m".into());
+    let dir = tempfile::tempdir().unwrap();
+    fs::create_dir_all(dir.path().join("captures")).unwrap();
+    for name in [
+        "dataset-1_walk_normal_001",
+        "dataset-1_kick_normal_001",
+        "dataset-1_bye_normal_001",
+    ] {
+        let src = shared_data()
+            .join("bandai-namco-1/data")
+            .join(format!("{name}.bvh"));
+        fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
+    }
+    let config_text = format!(
+        r#"
+[dataset]
+name = "real-llm"
+output = "out"
+
+[part_labels]
+labeller = "llm"
+
+[paraphrases]
+n = 3
+
+[llm]
+base_url = "{url}"
+model = "{model}"
+temperature = 0
+max_tokens = 200
+seed = 7
+concurrency = 1
+requests_per_minute = 600
+timeout_seconds = 120
+
+[[sources]]
+name = "bandai"
+captures = ["captures/*.bvh"]
+profile = "bandai-namco"
+[sources.labels]
+kind = "filename"
+pattern = "dataset-1_{{content}}_{{style}}_{{take}}"
+action = "{{content}}"
+text = "a person does a {{content}}"
+"#
+    );
+    let path = dir.path().join("build.toml");
+    fs::write(&path, config_text).unwrap();
+    let config = Config::load(&path).unwrap();
+    let first = build(&config, &BuildOptions::default()).unwrap();
+    println!(
+        "labels: {:#?}\nparaphrases: {:#?}\nplans: {:#?}",
+        first.labels, first.paraphrases, first.plans
+    );
+    assert_eq!(first.labels.requests, 3, "one request per unique text");
+    assert!(
+        first.labels.sources.keys().any(|s| s.starts_with("llm:"))
+            || !first.labels.flagged.is_empty()
+    );
+    assert!(first.paraphrases.requests >= 3 && first.plans.requests >= 3);
+    let second = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(
+        second.labels.requests + second.paraphrases.requests + second.plans.requests,
+        0
+    );
+    assert!(second.nothing_ran(), "{:?}", second.stages);
+}
