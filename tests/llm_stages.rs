@@ -28,6 +28,8 @@ struct Server {
 struct ServerState {
     requests: Arc<AtomicUsize>,
     prompts: Arc<Mutex<Vec<String>>>,
+    /// Answer every part-label request with a 500.
+    fail_labels: bool,
 }
 
 fn answer_for(prompt: &str) -> String {
@@ -51,20 +53,31 @@ fn answer_for(prompt: &str) -> String {
     "I do not understand.".into()
 }
 
-async fn chat(State(state): State<ServerState>, Json(body): Json<Value>) -> Json<Value> {
+async fn chat(
+    State(state): State<ServerState>,
+    Json(body): Json<Value>,
+) -> axum::response::Response {
+    use axum::response::IntoResponse;
     state.requests.fetch_add(1, Ordering::SeqCst);
     let prompt = body["messages"][0]["content"]
         .as_str()
         .unwrap_or_default()
         .to_string();
     state.prompts.lock().unwrap().push(prompt.clone());
-    Json(
-        json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": answer_for(&prompt)}}]}),
-    )
+    if state.fail_labels && prompt.contains("body parts involved") {
+        return (axum::http::StatusCode::INTERNAL_SERVER_ERROR, "overloaded").into_response();
+    }
+    let content = answer_for(&prompt);
+    Json(json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": content}}]}))
+        .into_response()
 }
 
 impl Server {
     fn start() -> Server {
+        Server::start_with(false)
+    }
+
+    fn start_with(fail_labels: bool) -> Server {
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .enable_all()
@@ -77,6 +90,7 @@ impl Server {
         let state = ServerState {
             requests: Arc::default(),
             prompts: Arc::default(),
+            fail_labels,
         };
         let app = Router::new()
             .route("/v1/chat/completions", post(chat))
@@ -490,4 +504,46 @@ fn prompt_render_prints_the_exact_prompt_and_names_unknown_templates() {
     let out = run(&["prompt", "render", "haiku", "--text", "x"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no prompt template `haiku`"));
+}
+
+#[test]
+fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
+    let server = Server::start_with(true);
+    let extra = llm_section(&server).replace(
+        "backoff_seconds = 0.01",
+        "backoff_seconds = 0.01\nmax_retries = 2",
+    );
+    let (_dir, config) = scratch(&extra);
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    let label_rejects: Vec<_> = report
+        .rejects
+        .iter()
+        .filter(|r| r.stage == "label")
+        .collect();
+    assert_eq!(
+        label_rejects.len(),
+        3,
+        "{:?} / missing {:?} / sources {:?}",
+        report.rejects,
+        report.labels.missing,
+        report.labels.sources
+    );
+    assert!(
+        label_rejects
+            .iter()
+            .all(|r| r.reason == "llm_request" && r.message.contains("500")),
+        "{label_rejects:?}"
+    );
+    // The clips were still labelled, by the configured fallback, and the other stages ran.
+    assert!(
+        report
+            .labels
+            .sources
+            .keys()
+            .all(|s| s.starts_with("embedded:")),
+        "{:?}",
+        report.labels.sources
+    );
+    assert_eq!(report.clips, 6);
+    assert_eq!(report.plans.answered, 3);
 }

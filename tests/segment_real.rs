@@ -482,3 +482,57 @@ fn hand_goals_sit_at_the_grasp_frame_and_mirror_with_the_hand() {
     assert_eq!(mirrored.goal_hand, Some([-goal[0], goal[1], goal[2]]));
     assert_eq!(mirrored.texts, vec!["raise the left hand and take the cup"]);
 }
+
+#[test]
+fn leading_trim_and_pair_exclusions_drop_what_they_should_and_count_it() {
+    let records = read_babel(&babel_like_index_rows(), "test.json").unwrap();
+    let cmu = capture(&shared_data().join("cmu/01_01.bvh"), "cmu");
+    // A 1 s trim cuts the first label's start (frame 115) to frame 120; the second is untouched.
+    let trimmed = SegmentConfig {
+        trim_start_seconds: 1.0,
+        ..cmu_config()
+    };
+    let out = segment_with(
+        &cmu,
+        &records[0].annotation,
+        "babel",
+        &trimmed,
+        &demo_types(),
+    );
+    assert_eq!(
+        ranges(&out.clips, SourceKind::RealSingle),
+        vec![(120, 1315), (1207, 2407)]
+    );
+    // A trim past a label's end drops it, counted as trimmed.
+    let long_trim = SegmentConfig {
+        trim_start_seconds: 11.0,
+        ..cmu_config()
+    };
+    let out = segment_with(
+        &cmu,
+        &records[0].annotation,
+        "babel",
+        &long_trim,
+        &demo_types(),
+    );
+    assert_eq!(out.drops.get("trimmed"), Some(&1), "{:?}", out.drops);
+    // Pairs that involve an excluded word are dropped (SINC drops pairs with `stand`).
+    let exclude = SegmentConfig {
+        pair_exclude: vec!["walk".into()],
+        ..cmu_config()
+    };
+    let out = segment_with(
+        &cmu,
+        &records[0].annotation,
+        "babel",
+        &exclude,
+        &demo_types(),
+    );
+    assert!(ranges(&out.clips, SourceKind::RealPair).is_empty());
+    assert_eq!(out.drops.get("excluded_pair"), Some(&1));
+    assert_eq!(
+        ranges(&out.clips, SourceKind::RealSingle).len(),
+        2,
+        "singles are kept"
+    );
+}

@@ -264,6 +264,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         }
     }
 
+    rejects.extend(text.rejects.iter().cloned());
     // Row order: by clip id, so the table does not depend on scheduling or glob order.
     clips.sort_by(|a, b| {
         a.clip_id

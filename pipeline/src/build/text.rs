@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::{Deserialize, Serialize};
 
 use super::capture::{Item, Shared};
-use super::{BuildError, Fingerprint, StageRun};
+use super::{BuildError, Fingerprint, Reject, StageRun};
 use crate::clip::{Clip, SourceKind};
 use crate::config::Labeller;
 use crate::llm::cache::ResponseCache;
@@ -33,6 +33,19 @@ pub(super) struct TextOutcome {
     pub(super) plan: AugmentReport,
     /// Task plans by text.
     pub(super) plans: BTreeMap<String, Vec<PlanStep>>,
+    /// Texts whose LLM request failed after its last retry, and plans still invalid after repair.
+    pub(super) rejects: Vec<Reject>,
+}
+
+fn text_reject(stage: &str, text: &str, reason: &str, message: String) -> Reject {
+    Reject {
+        stage: stage.to_string(),
+        file: format!("text: {text}"),
+        line: None,
+        frame: None,
+        reason: reason.to_string(),
+        message,
+    }
 }
 
 /// Per-clip labels as cached.
@@ -113,6 +126,18 @@ pub(super) fn run(
             clip.label_source = source.clone();
         }
     }
+    // A request that failed after its last retry is a reject (the text fell back as configured);
+    // an offline cache miss is not: it is what offline means.
+    for (text, reason) in &report.missing {
+        if !reason.starts_with("offline") && !reason.contains("no [llm] section") {
+            outcome.rejects.push(text_reject(
+                label::NAME,
+                text,
+                "llm_request",
+                reason.clone(),
+            ));
+        }
+    }
     // Requests and cache hits are this build's; the rest of the report is the cached assignment's.
     outcome.label = LabelReport {
         requests: report.requests,
@@ -174,6 +199,11 @@ pub(super) fn run(
             &mut report,
         )
         .map_err(|e| BuildError::Llm(e.to_string()))?;
+        for (text, reason) in &report.rejected {
+            outcome
+                .rejects
+                .push(text_reject("plan", text, "invalid_plan", reason.clone()));
+        }
         outcome.runs.push(augment_run("plan", &report));
         outcome.plan = report;
     }
