@@ -17,3 +17,4 @@ pub use motion::{Motion, WorldPose};
 pub use profile::{BodyPart, Profile, ProfileSpec, Reflection, Role, SignedAxis};
 pub use skeleton::{Channel, Joint, Skeleton};
 pub mod canonical;
+pub mod compose;
