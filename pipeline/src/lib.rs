@@ -7,6 +7,7 @@ pub mod io;
 pub mod llm;
 pub mod motion;
 pub mod parts;
+pub mod quality;
 pub mod source;
 pub mod stages;
 pub mod text;
