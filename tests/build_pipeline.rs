@@ -96,7 +96,11 @@ fn build_writes_originals_and_mirrors_and_reuses_unchanged_work() {
     let s = Scratch::new(&THREE);
     let first = s.build();
     assert_eq!(first.captures, 3);
-    assert_eq!(first.clips, 6);
+    assert_eq!(
+        first.kinds.get("real_single"),
+        Some(&6),
+        "3 clips and their mirrors"
+    );
     assert_eq!(first.mirrored, 3);
     assert!(first.rejects.is_empty(), "{:?}", first.rejects);
     assert_eq!(
@@ -202,7 +206,8 @@ fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
 
     let report = s.build();
     assert_eq!(
-        report.clips, 6,
+        report.kinds.get("real_single"),
+        Some(&6),
         "good captures still built; rejects: {:#?}",
         report.rejects
     );
@@ -376,7 +381,10 @@ fn demo_build_segments_the_long_capture_and_prints_counts() {
     let report: serde_json::Value =
         serde_json::from_slice(&fs::read(out.path().join("build-report.json")).unwrap()).unwrap();
     assert_eq!(report["captures"], 9);
-    assert_eq!(report["clips"], 20);
+    assert_eq!(
+        report["clips"], 29,
+        "10 clips, their mirrors, 9 synthetic pairs"
+    );
     let rows = read_rows(
         &out.path().join("clips.parquet"),
         "clip_id,annotation_source,frame_range",

@@ -342,7 +342,7 @@ fn without_an_llm_the_embedded_labeller_labels_and_skips_are_reported() {
         &dir.path().join("out/clips.parquet"),
         "clip_id,parts,label_source",
     );
-    for row in &table {
+    for row in table.iter().filter(|r| !r.starts_with("synthetic/")) {
         assert!(
             row.contains("|embedded:"),
             "every clip labelled by the embedded labeller: {row}"
@@ -499,7 +499,8 @@ fn prompt_render_prints_the_exact_prompt_and_names_unknown_templates() {
     assert!(
         String::from_utf8(out.stdout)
             .unwrap()
-            .contains("The target action is: watch TV.")
+            // Texts are asked normalised (lowercase, single spaces), as the build asks them.
+            .contains("The target action is: watch tv.")
     );
     let out = run(&["prompt", "render", "haiku", "--text", "x"]);
     assert_eq!(out.status.code(), Some(2));
@@ -544,6 +545,6 @@ fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
         "{:?}",
         report.labels.sources
     );
-    assert_eq!(report.clips, 6);
+    assert_eq!(report.kinds.get("real_single"), Some(&6));
     assert_eq!(report.plans.answered, 3);
 }

@@ -60,7 +60,8 @@ pub struct Capture {
 /// A clip: motion at the dataset frame rate on its capture's skeleton, its texts and provenance.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Clip {
-    /// Stable identifier: `<capture stem>:<start>-<end>`, with `:m` for mirrors.
+    /// Stable identifier: `<source>/<capture stem>:<start>-<end>` (capture frames), `:pair` for a
+    /// real pair, `:m` appended for a mirror, `synthetic/<a>+<b>` for a synthetic pair.
     pub clip_id: String,
     /// Real single, real pair or synthetic.
     pub kind: SourceKind,
@@ -99,6 +100,12 @@ pub struct Clip {
     pub label_source: Option<String>,
     /// Alternative descriptions of `text` (LLM, side words checked).
     pub paraphrases: Vec<String>,
+    /// For a synthetic pair: the two source clips.
+    pub composed_from: Vec<String>,
+    /// For a synthetic pair: the parts taken from each source clip, in `composed_from` order.
+    pub composed_parts: Vec<PartSet>,
+    /// Plausibility metrics (foot skating, ground and self penetration, lean).
+    pub plausibility: Option<crate::quality::Plausibility>,
     /// Extra fields from the annotation (file-name groups, sidecar keys).
     pub attributes: BTreeMap<String, String>,
     /// Skeleton profile name.

@@ -53,6 +53,9 @@ pub struct Config {
     /// Motion types: taxonomy and how dataset labels map to it.
     #[serde(default)]
     pub motion_types: crate::annotate::taxonomy::TypeMapConfig,
+    /// Synthetic simultaneous pairs and their plausibility checks.
+    #[serde(default)]
+    pub synthetic: crate::stages::compose::SyntheticConfig,
     /// Body-part labelling.
     #[serde(default)]
     pub part_labels: PartLabelConfig,
@@ -408,6 +411,21 @@ impl Config {
                 "dataset.fps",
                 d.fps.to_string(),
                 "a frame rate between 0 and 1000",
+            ));
+        }
+        if self.paraphrases.n == 0 || self.paraphrases.n > 50 {
+            return Err(invalid(
+                "paraphrases.n",
+                self.paraphrases.n.to_string(),
+                "between 1 and 50 alternatives",
+            ));
+        }
+        let p = self.synthetic.probability;
+        if !(0.0..=1.0).contains(&p) {
+            return Err(invalid(
+                "synthetic.probability",
+                p.to_string(),
+                "a probability between 0 and 1",
             ));
         }
         if self.sources.is_empty() {

@@ -2,6 +2,7 @@
 pub mod annotate;
 pub mod build;
 pub mod clip;
+pub mod compose_text;
 pub mod config;
 pub mod io;
 pub mod llm;

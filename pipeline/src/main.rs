@@ -69,6 +69,22 @@ enum Command {
         #[arg(required = true)]
         captures: Vec<PathBuf>,
     },
+    /// Write one clip (real, mirrored or synthetic) as a BVH file on its source skeleton, at full
+    /// precision, for inspection in Blender.
+    ExportBvh {
+        /// Build configuration; stages reuse their cached outputs.
+        #[arg(long, short, default_value = "motionforge.toml")]
+        config: PathBuf,
+        /// The clip id, as in the table's `clip_id` column.
+        #[arg(long)]
+        clip: String,
+        /// Output file; default `<clip id with / and : replaced>.bvh` in the working folder.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
+        /// Send no LLM request while re-running stages.
+        #[arg(long)]
+        offline: bool,
+    },
     /// Print the clip table schema (columns, types, version) as JSON.
     Schema,
     /// Work with prompt templates.
@@ -206,7 +222,7 @@ fn exit_code(err: &anyhow::Error) -> u8 {
                 .is_some()
             || matches!(
                 e.downcast_ref::<BuildError>(),
-                Some(BuildError::Source(_) | BuildError::Taxonomy(_))
+                Some(BuildError::Source(_) | BuildError::Taxonomy(_) | BuildError::Prompt(_))
             )
     });
     if usage { 2 } else { 1 }
@@ -228,7 +244,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             let report = build(&config, &BuildOptions { force, offline })?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
+                writeln!(
+                    std::io::stdout(),
+                    "{}",
+                    serde_json::to_string_pretty(&report)?
+                )?;
             } else {
                 print_report(&report)?;
             }
@@ -238,12 +258,19 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::MirrorText { file } => mirror_text(file.as_deref())?,
         Command::CalibrateMirror { profile, captures } => calibrate_mirror(&profile, &captures)?,
+        Command::ExportBvh {
+            config,
+            clip,
+            output,
+            offline,
+        } => export_bvh(&config, &clip, output, offline)?,
         Command::Prompt { command } => prompt_command(command)?,
         Command::Labels { command } => labels_command(command)?,
-        Command::Schema => println!(
+        Command::Schema => writeln!(
+            std::io::stdout(),
             "{}",
             serde_json::to_string_pretty(&motionforge::io::schema::clip_schema_json())?
-        ),
+        )?,
         Command::Bench {
             data,
             profile,
@@ -274,7 +301,7 @@ fn print_report(report: &BuildReport) -> std::io::Result<()> {
                 stage.ran, stage.items, stage.reused
             )
         };
-        writeln!(out, "{:>8}  {what}", stage.stage)?;
+        writeln!(out, "{:>10}  {what}", stage.stage)?;
     }
     writeln!(
         out,
@@ -336,6 +363,16 @@ fn print_report(report: &BuildReport) -> std::io::Result<()> {
             r.rejected.len()
         )?;
     }
+    let c = &report.synthetic;
+    writeln!(
+        out,
+        "synthetic pairs: {} candidates, {} compatible pairs, {} sampled, {} composed, dropped: {}",
+        c.candidates,
+        c.compatible,
+        c.sampled,
+        c.composed,
+        counts(&c.dropped)
+    )?;
     if report.rejects.is_empty() {
         writeln!(out, "rejects: none")?;
     } else {
@@ -418,16 +455,18 @@ fn calibrate_mirror(profile: &str, captures: &[PathBuf]) -> Result<()> {
         .filter_map(|p| p.file_name())
         .map(|n| n.to_string_lossy().into_owned())
         .collect();
-    println!(
+    writeln!(
+        std::io::stdout(),
         "# Calibrated on {} with `motionforge calibrate-mirror`.\n[reflections]",
         names.join(", ")
-    );
+    )?;
     for (joint, r) in skeleton.joints.iter().zip(&reflections) {
-        println!(
+        writeln!(
+            std::io::stdout(),
             "{} = \"{}\"",
             joint.name,
             serde_json::to_value(r)?.as_str().unwrap_or_default()
-        );
+        )?;
     }
     Ok(())
 }
@@ -476,22 +515,33 @@ fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
         total_s = total_s.min(p + f + m);
     }
     let mb = bytes as f64 / 1e6;
-    println!(
+    writeln!(
+        std::io::stdout(),
         "{} files, {frames} frames, {mb:.1} MB, one thread, best of {repeat}",
         files.len()
-    );
-    println!(
+    )?;
+    writeln!(
+        std::io::stdout(),
         "read      {:>10.0} frames/s  {:>7.1} MB/s",
         frames as f64 / parse_s,
         mb / parse_s
-    );
-    println!("fk        {:>10.0} frames/s", frames as f64 / fk_s);
-    println!("mirror    {:>10.0} frames/s", frames as f64 / mirror_s);
-    println!(
+    )?;
+    writeln!(
+        std::io::stdout(),
+        "fk        {:>10.0} frames/s",
+        frames as f64 / fk_s
+    )?;
+    writeln!(
+        std::io::stdout(),
+        "mirror    {:>10.0} frames/s",
+        frames as f64 / mirror_s
+    )?;
+    writeln!(
+        std::io::stdout(),
         "read+fk+mirror {:>10.0} frames/s  {:>7.1} MB/s",
         frames as f64 / total_s,
         mb / total_s
-    );
+    )?;
     Ok(())
 }
 
@@ -519,6 +569,8 @@ fn prompt_command(command: PromptCommand) -> Result<()> {
         Some(dir) => Prompts::with_overrides(&dir)?,
         None => Prompts::bundled()?,
     };
+    // The build asks about normalised texts; show the prompt it would send.
+    let text = motionforge::stages::label::normalize_text(&text);
     let rendered = match template.as_str() {
         "part_labels" => prompts.part_labels(&text, part_variant(&variant)?)?,
         "task_plan" => prompts.task_plan(&text)?,
@@ -683,5 +735,47 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+fn export_bvh(config: &Path, clip_id: &str, output: Option<PathBuf>, offline: bool) -> Result<()> {
+    let config = Config::load(config)?;
+    let clips = motionforge::build::collect_clips(
+        &config,
+        &BuildOptions {
+            force: false,
+            offline,
+        },
+    )?;
+    let Some(clip) = clips.iter().find(|c| c.clip_id == clip_id) else {
+        let near: Vec<&str> = clips
+            .iter()
+            .map(|c| c.clip_id.as_str())
+            .filter(|id| id.contains(clip_id) || clip_id.contains(*id))
+            .take(5)
+            .collect();
+        let hint = if near.is_empty() {
+            String::new()
+        } else {
+            format!("; did you mean {}", near.join(", "))
+        };
+        bail!(
+            "no clip `{clip_id}` in this build ({} clips){hint}",
+            clips.len()
+        );
+    };
+    let text = motionforge::motion::write_bvh(&clip.motion)
+        .with_context(|| format!("clip `{clip_id}`"))?;
+    let path = output
+        .unwrap_or_else(|| PathBuf::from(format!("{}.bvh", clip_id.replace(['/', ':', '+'], "_"))));
+    motionforge::build::write_atomic(&path, text.as_bytes())?;
+    writeln!(
+        std::io::stdout(),
+        "wrote {} ({} frames at {} fps, skeleton {})",
+        path.display(),
+        clip.motion.num_frames(),
+        clip.motion.fps,
+        clip.profile
+    )?;
     Ok(())
 }

@@ -12,7 +12,9 @@ use glam::DVec3;
 use crate::motion::{BodyPart, Profile, Role};
 
 /// Height above a foot joint's floor level (metres) below which it may be in ground contact.
-pub const CONTACT_HEIGHT: f64 = 0.05;
+pub const CONTACT_HEIGHT: f64 = 0.03;
+/// Quantile of a foot role's heights over the clip taken as its floor level.
+pub const FLOOR_QUANTILE: f64 = 0.02;
 /// Vertical speed (m/s) below which a low foot joint counts as in contact; landing and lifting
 /// feet move vertically and are not planted yet.
 pub const CONTACT_VERTICAL_SPEED: f64 = 0.3;
@@ -22,37 +24,58 @@ pub const VELOCITY_RATE: f64 = 30.0;
 /// Padding (metres) added to each chain's joint bounding box: a generous limb radius, so boxes
 /// that do not overlap are at least twice this apart and need no bone-to-bone test.
 pub const LIMB_RADIUS: f64 = 0.1;
+/// Joints within this height (metres) of a frame's lowest body joint form its base of support:
+/// the feet when standing, knees and hands when kneeling.
+pub const SUPPORT_BAND: f64 = 0.1;
+/// Smallest height (metres) of the centre of mass above the base of support for lean to be
+/// measured; lower, the body lies or sits on the floor and the angle is meaningless.
+pub const MIN_LEVER: f64 = 0.25;
+/// Lean is averaged over windows of this many seconds before taking the maximum.
+pub const LEAN_WINDOW: f64 = 0.5;
 
 /// Plausibility metrics of one clip. Distances in metres, speeds in m/s, angles in degrees.
+///
+/// Non-finite input positions make every metric NaN, so such a clip fails every threshold.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct Plausibility {
-    /// Mean horizontal speed of the feet while in ground contact (m/s); 0 without contact.
+    /// Mean horizontal speed of the supporting foot while a foot is planted (m/s); 0 when no foot
+    /// is ever planted. Per frame step the slowest planted foot is the support.
     pub foot_skate: f64,
-    /// Largest horizontal speed of a foot in contact (m/s); single frames at touch-down are noisy,
-    /// so this is reported, not thresholded.
+    /// Largest horizontal speed of the supporting foot (m/s). Single steps at touch-down are
+    /// noisy, so this is reported, not thresholded.
     pub foot_skate_max: f64,
-    /// The foot (left or right leg) with the larger mean contact speed; `None` without contact.
+    /// The foot (left or right leg) that contributes most of the skating (largest sum of its
+    /// speeds as the support); `None` when no foot is ever planted.
     pub foot_skate_foot: Option<BodyPart>,
-    /// Share of measured frame steps in which at least one foot is in contact, in `[0, 1]`.
+    /// Share of measured frame steps with at least one planted foot, in `[0, 1]`.
     pub contact_fraction: f64,
     /// Depth (metres, `>= 0`) of the lowest body joint below the floor `z = 0`; 0 if none is below.
     pub ground_penetration: f64,
     /// Frame of the deepest joint (0 when nothing is below the floor).
     pub ground_penetration_frame: usize,
-    /// Minimum bone-to-bone distance (metres) between different body-part chains over all frames.
-    /// Exact below `2 * LIMB_RADIUS`; chains whose padded boxes never overlap report that cap.
+    /// Minimum bone-to-bone distance (metres) between a limb chain (arm or leg) and the spine
+    /// chain over all frames: a limb bone this close to the spine is inside the torso. Capped at
+    /// `2 * LIMB_RADIUS` (the value when no limb box ever overlaps the spine's).
     pub self_distance: f64,
-    /// Frame of the minimum bone-to-bone distance.
+    /// Frame of [`Plausibility::self_distance`].
     pub self_distance_frame: usize,
-    /// The two chains (body parts; `Torso` is the spine) that come closest; `None` when no pair of
-    /// boxes overlapped.
-    pub self_distance_parts: Option<(BodyPart, BodyPart)>,
-    /// Largest lean (degrees) over frames: the angle between the vertical and the line from the
-    /// base of support to the centre of mass.
+    /// The limb that comes closest to the spine; `None` when no limb box overlapped the spine's.
+    pub self_distance_part: Option<BodyPart>,
+    /// Minimum bone-to-bone distance (metres) between two limb chains (arm-arm, leg-leg,
+    /// arm-leg). Reported, not thresholded: hands together and crossed feet bring real captures'
+    /// bones within millimetres (see `docs/plausibility.md`). Capped like `self_distance`.
+    pub limb_distance: f64,
+    /// Frame of [`Plausibility::limb_distance`].
+    pub limb_distance_frame: usize,
+    /// The two limbs that come closest; `None` when no pair of boxes overlapped.
+    pub limb_distance_parts: Option<(BodyPart, BodyPart)>,
+    /// Largest sustained lean (degrees): the angle between the vertical and the line from the base
+    /// of support to the centre of mass, averaged over [`LEAN_WINDOW`] seconds, maximum over the
+    /// clip.
     pub lean: f64,
-    /// Mean lean (degrees) over frames.
+    /// Mean per-frame lean (degrees) over the frames where it is measured.
     pub lean_mean: f64,
-    /// Frame of the largest lean.
+    /// Centre frame of the window with the largest lean.
     pub lean_frame: usize,
 }
 
@@ -74,10 +97,10 @@ pub struct Thresholds {
 impl Default for Thresholds {
     fn default() -> Self {
         Thresholds {
-            max_foot_skate: 0.3,
-            max_ground_penetration: 0.05,
+            max_foot_skate: 0.4,
+            max_ground_penetration: 0.03,
             min_self_distance: 0.03,
-            max_lean: 35.0,
+            max_lean: 25.0,
         }
     }
 }
@@ -111,36 +134,49 @@ fn at_most(a: f64, b: f64) -> bool {
 /// Plausibility metrics of a clip from its world positions in dataset axes (z up, metres),
 /// frame-major with `joints` joints per frame, sampled at `fps`.
 ///
-/// Joints are identified through `profile` (roles and body parts). A trailing partial frame is
-/// ignored; an empty clip, `joints == 0`, or a profile with fewer joints than `joints` gives
-/// metrics only for what can be measured (missing parts contribute nothing). Foot skating needs a
-/// positive, finite `fps` and is 0 otherwise.
+/// Joints are identified through `profile` (roles and body parts); joints the profile does not
+/// describe are ignored. A trailing partial frame is ignored. Missing pieces contribute nothing:
+/// without feet there is no skating, without chains no self-distance (the cap is reported), and a
+/// non-positive or non-finite `fps` gives no skating and an unsmoothed lean.
 pub fn plausibility(
     positions: &[DVec3],
     joints: usize,
     fps: f64,
     profile: &Profile,
 ) -> Plausibility {
+    let cap = 2.0 * LIMB_RADIUS;
+    let mut out = Plausibility {
+        self_distance: cap,
+        limb_distance: cap,
+        ..Plausibility::default()
+    };
     let frames = positions.len().checked_div(joints).unwrap_or(0);
-    if frames == 0 {
-        return Plausibility {
-            self_distance: 2.0 * LIMB_RADIUS,
-            ..Plausibility::default()
-        };
-    }
     let clip = Clip {
         positions: &positions[..frames * joints],
         joints,
         frames,
     };
-    let body: Vec<usize> = (0..joints)
-        .filter(|&j| profile.roles.get(j).is_some_and(|r| *r != Role::Root))
-        .collect();
-    let mut out = Plausibility::default();
+    if !clip.positions.iter().all(|p| p.is_finite()) {
+        return Plausibility {
+            foot_skate: f64::NAN,
+            foot_skate_max: f64::NAN,
+            contact_fraction: f64::NAN,
+            ground_penetration: f64::NAN,
+            self_distance: f64::NAN,
+            limb_distance: f64::NAN,
+            lean: f64::NAN,
+            lean_mean: f64::NAN,
+            ..out
+        };
+    }
+    if frames == 0 {
+        return out;
+    }
+    let body = body_joints(profile, joints);
     skating(&clip, fps, profile, &mut out);
     penetration(&clip, &body, &mut out);
     self_distance(&clip, profile, &mut out);
-    lean(&clip, &body, profile, &mut out);
+    lean(&clip, &body, fps, &mut out);
     out
 }
 
@@ -155,6 +191,18 @@ impl Clip<'_> {
     fn at(&self, f: usize, j: usize) -> DVec3 {
         self.positions[f * self.joints + j]
     }
+
+    fn frame(&self, f: usize) -> &[DVec3] {
+        &self.positions[f * self.joints..(f + 1) * self.joints]
+    }
+}
+
+/// Joints that are part of the body: all but static auxiliary roots (Bandai's `joint_Root` stays
+/// at the origin while the actor walks away).
+fn body_joints(profile: &Profile, joints: usize) -> Vec<usize> {
+    (0..joints)
+        .filter(|&j| profile.roles.get(j).is_some_and(|r| *r != Role::Root))
+        .collect()
 }
 
 /// Joints of `part` with `role`, within the clip's joint count.
@@ -165,94 +213,89 @@ fn joints_where(profile: &Profile, joints: usize, part: BodyPart, role: Role) ->
         .collect()
 }
 
-/// A low quantile of `values` (sorted in place); robust against a few glitched frames.
-fn low_quantile(values: &mut [f64], q: f64) -> Option<f64> {
+/// The `q` quantile of `values` (sorted in place), `None` when empty.
+fn quantile(values: &mut [f64], q: f64) -> Option<f64> {
     values.sort_by(f64::total_cmp);
-    let k = ((values.len() as f64 - 1.0) * q).round() as usize;
+    let k = ((values.len().checked_sub(1)? as f64) * q).round() as usize;
     values.get(k).copied()
 }
+
+const FEET: [BodyPart; 2] = [BodyPart::LeftLeg, BodyPart::RightLeg];
+const FOOT_ROLES: [Role; 2] = [Role::Ankle, Role::Toe];
 
 fn skating(clip: &Clip, fps: f64, profile: &Profile, out: &mut Plausibility) {
     if !(fps.is_finite() && fps > 0.0) {
         return;
     }
-    let sides = [BodyPart::LeftLeg, BodyPart::RightLeg];
-    let roles = [Role::Ankle, Role::Toe];
     // Floor level per role, shared by both feet: an ankle rests higher than a toe, and a foot held
-    // up for the whole clip must not define its own floor.
-    let levels: Vec<Option<f64>> = roles
-        .iter()
-        .map(|&role| {
-            let mut z: Vec<f64> = sides
-                .iter()
-                .flat_map(|&s| joints_where(profile, clip.joints, s, role))
-                .flat_map(|j| (0..clip.frames).map(move |f| (f, j)))
-                .map(|(f, j)| clip.at(f, j).z)
-                .collect();
-            low_quantile(&mut z, 0.02)
-        })
-        .collect();
-    let feet: Vec<Vec<(usize, f64)>> = sides
-        .iter()
-        .map(|&side| {
-            roles
-                .iter()
-                .zip(&levels)
-                .filter_map(|(&role, level)| level.map(|l| (role, l)))
-                .flat_map(|(role, level)| {
-                    joints_where(profile, clip.joints, side, role)
-                        .into_iter()
-                        .map(move |j| (j, level))
-                })
-                .collect()
-        })
-        .collect();
-    let step = ((fps / VELOCITY_RATE).round() as usize).max(1);
-    let dt = step as f64 / fps;
-    let (mut sum, mut count, mut steps, mut in_contact) = ([0.0; 2], [0usize; 2], 0usize, 0usize);
-    for f in 0..clip.frames.saturating_sub(step) {
-        steps += 1;
-        let mut any = false;
-        for (side, foot) in feet.iter().enumerate() {
-            // A rolling foot (heel off, toe planted) is planted at its stillest contact joint, so
-            // the foot's speed is the smallest over its joints in contact.
-            let speed = foot
-                .iter()
-                .filter_map(|&(j, level)| {
-                    let (a, b) = (clip.at(f, j), clip.at(f + step, j));
-                    let low = a.z.max(b.z) - level < CONTACT_HEIGHT;
-                    let still = ((b.z - a.z) / dt).abs() < CONTACT_VERTICAL_SPEED;
-                    (low && still).then(|| (b - a).truncate().length() / dt)
-                })
-                .min_by(f64::total_cmp);
-            if let Some(v) = speed {
-                any = true;
-                sum[side] += v;
-                count[side] += 1;
-                out.foot_skate_max = out.foot_skate_max.max(v);
+    // up for the whole clip must not define its own floor. A low quantile rather than the minimum
+    // keeps a glitched frame from lifting every contact out of reach.
+    let mut feet: [Vec<(usize, f64)>; 2] = [Vec::new(), Vec::new()];
+    for role in FOOT_ROLES {
+        let per_side: Vec<Vec<usize>> = FEET
+            .iter()
+            .map(|&side| joints_where(profile, clip.joints, side, role))
+            .collect();
+        let mut heights: Vec<f64> = per_side
+            .iter()
+            .flatten()
+            .flat_map(|&j| (0..clip.frames).map(move |f| clip.at(f, j).z))
+            .collect();
+        if let Some(level) = quantile(&mut heights, FLOOR_QUANTILE) {
+            for (foot, joints) in feet.iter_mut().zip(per_side) {
+                foot.extend(joints.into_iter().map(|j| (j, level)));
             }
         }
-        in_contact += usize::from(any);
     }
-    let total = count[0] + count[1];
-    if total > 0 {
-        out.foot_skate = (sum[0] + sum[1]) / total as f64;
-        let mean = |s: usize| {
-            if count[s] > 0 {
-                sum[s] / count[s] as f64
-            } else {
-                0.0
-            }
-        };
-        out.foot_skate_foot = Some(if mean(1) > mean(0) {
-            sides[1]
+    let step = ((fps / VELOCITY_RATE).round() as usize).max(1);
+    let dt = step as f64 / fps;
+    let (mut sum, mut by_foot, mut steps, mut planted) = (0.0, [0.0; 2], 0usize, 0usize);
+    for f in 0..clip.frames.saturating_sub(step) {
+        steps += 1;
+        let support = feet
+            .iter()
+            .enumerate()
+            .filter_map(|(side, foot)| Some((side, foot_speed(clip, foot, f, step, dt)?)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((side, v)) = support {
+            planted += 1;
+            sum += v;
+            by_foot[side] += v;
+            out.foot_skate_max = out.foot_skate_max.max(v);
+        }
+    }
+    if planted > 0 {
+        out.foot_skate = sum / planted as f64;
+        out.foot_skate_foot = Some(if by_foot[1] > by_foot[0] {
+            FEET[1]
         } else {
-            sides[0]
+            FEET[0]
         });
     }
     if steps > 0 {
-        out.contact_fraction = in_contact as f64 / steps as f64;
+        out.contact_fraction = planted as f64 / steps as f64;
     }
+}
+
+/// Horizontal speed of a planted foot over frames `f..f + step`, `None` when it is not planted.
+///
+/// Planted means every joint of the foot (ankle and toe) is within [`CONTACT_HEIGHT`] of its floor
+/// level and moves vertically slower than [`CONTACT_VERTICAL_SPEED`]: a heel sweeping in to land
+/// and a swing toe skimming the floor come within a centimetre of it, but never both at once. The
+/// foot's speed is its slower joint's, so a foot pivoting on its heel or toe stays still.
+fn foot_speed(clip: &Clip, foot: &[(usize, f64)], f: usize, step: usize, dt: f64) -> Option<f64> {
+    let mut speed: Option<f64> = None;
+    for &(j, level) in foot {
+        let (a, b) = (clip.at(f, j), clip.at(f + step, j));
+        let low = a.z.max(b.z) - level < CONTACT_HEIGHT;
+        let still = ((b.z - a.z) / dt).abs() < CONTACT_VERTICAL_SPEED;
+        if !(low && still) {
+            return None;
+        }
+        let v = (b - a).truncate().length() / dt;
+        speed = Some(speed.map_or(v, |s| s.min(v)));
+    }
+    speed
 }
 
 fn penetration(clip: &Clip, body: &[usize], out: &mut Plausibility) {
@@ -271,16 +314,18 @@ fn penetration(clip: &Clip, body: &[usize], out: &mut Plausibility) {
 struct Chain {
     part: BodyPart,
     joints: Vec<usize>,
-    /// Limbs attach to the spine by their first bone; the spine itself has none.
-    limb: bool,
 }
 
-/// The five chains of CODA's penetration test, from roles: arms collar to hand (fingers are left
-/// out: they branch), legs hip to toe, spine pelvis to head. Joints are ordered by role along the
-/// chain, then by index (parents precede children in every supported skeleton).
+impl Chain {
+    fn is_spine(&self) -> bool {
+        self.part == BodyPart::Torso
+    }
+}
+
+/// The five chains of CODA's penetration test, from roles: spine pelvis to head, arms collar to
+/// hand (fingers branch off the hand and are left out), legs hip to toe. Joints are ordered by
+/// role along the chain, then by index (parents precede children in every supported skeleton).
 fn chains(profile: &Profile, joints: usize) -> Vec<Chain> {
-    let arm = [Role::Collar, Role::Shoulder, Role::Elbow, Role::Hand];
-    let leg = [Role::Hip, Role::Knee, Role::Ankle, Role::Toe];
     let ordered = |part: BodyPart, roles: &[Role]| -> Vec<usize> {
         roles
             .iter()
@@ -296,10 +341,11 @@ fn chains(profile: &Profile, joints: usize) -> Vec<Chain> {
         BodyPart::Torso,
         &[Role::Spine, Role::Neck, Role::Head],
     ));
+    let arm = [Role::Collar, Role::Shoulder, Role::Elbow, Role::Hand];
+    let leg = [Role::Hip, Role::Knee, Role::Ankle, Role::Toe];
     let mut out = vec![Chain {
         part: BodyPart::Torso,
         joints: spine,
-        limb: false,
     }];
     for (part, roles) in [
         (BodyPart::LeftArm, &arm),
@@ -310,96 +356,106 @@ fn chains(profile: &Profile, joints: usize) -> Vec<Chain> {
         out.push(Chain {
             part,
             joints: ordered(part, roles),
-            limb: true,
         });
     }
     out.retain(|c| c.joints.len() >= 2);
     out
 }
 
-/// A bone of a chain pair to compare: indices of the bone's joints in each chain.
-#[derive(Clone, Copy)]
-struct BonePair {
-    a: (usize, usize),
-    b: (usize, usize),
-}
+/// Two bones to compare, as joint index pairs.
+type BonePair = ((usize, usize), (usize, usize));
 
 /// Bone pairs of two chains that are not close by construction. A limb's first bone (clavicle,
-/// thigh) starts a few centimetres from the spine and from its partner's first bone whatever the
-/// pose, so it is compared with neither; its later bones are compared with everything.
+/// thigh) is anchored on or beside the spine (CMU's clavicles start exactly on a spine joint,
+/// Bandai's thighs 10 cm from the pelvis) and beside its partner's first bone, so it is compared
+/// with neither the spine nor another limb's first bone. Bones sharing a joint are skipped too.
 fn bone_pairs(a: &Chain, b: &Chain) -> Vec<BonePair> {
+    let bones = |c: &Chain| -> Vec<(bool, (usize, usize))> {
+        c.joints
+            .windows(2)
+            .enumerate()
+            .map(|(i, w)| (i == 0 && !c.is_spine(), (w[0], w[1])))
+            .collect()
+    };
     let mut out = Vec::new();
-    for i in 0..a.joints.len() - 1 {
-        for k in 0..b.joints.len() - 1 {
-            let a_root = a.limb && i == 0;
-            let b_root = b.limb && k == 0;
-            let attached = (a_root && (!b.limb || b_root)) || (b_root && !a.limb);
-            let shared = a.joints[i..=i + 1]
-                .iter()
-                .any(|j| b.joints[k..=k + 1].contains(j));
-            if !attached && !shared {
-                out.push(BonePair {
-                    a: (a.joints[i], a.joints[i + 1]),
-                    b: (b.joints[k], b.joints[k + 1]),
-                });
+    for (a_root, x) in bones(a) {
+        for &(b_root, y) in &bones(b) {
+            let anchored = (a_root && (b_root || b.is_spine())) || (b_root && a.is_spine());
+            let shared = [x.0, x.1].iter().any(|j| *j == y.0 || *j == y.1);
+            if !anchored && !shared {
+                out.push((x, y));
             }
         }
     }
     out
 }
 
+/// A chain's joint bounding box in frame `f`, padded by [`LIMB_RADIUS`].
+fn padded_box(clip: &Clip, chain: &Chain, f: usize) -> (DVec3, DVec3) {
+    let (lo, hi) = chain.joints.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &j| (lo.min(clip.at(f, j)), hi.max(clip.at(f, j))),
+    );
+    (lo - LIMB_RADIUS, hi + LIMB_RADIUS)
+}
+
 fn self_distance(clip: &Clip, profile: &Profile, out: &mut Plausibility) {
     let chains = chains(profile, clip.joints);
-    let mut pairs = Vec::new();
-    for (i, a) in chains.iter().enumerate() {
-        for b in &chains[i + 1..] {
-            let bones = bone_pairs(a, b);
+    let mut pairs: Vec<(usize, usize, Vec<BonePair>)> = Vec::new();
+    for a in 0..chains.len() {
+        for b in a + 1..chains.len() {
+            let bones = bone_pairs(&chains[a], &chains[b]);
             if !bones.is_empty() {
                 pairs.push((a, b, bones));
             }
         }
     }
-    out.self_distance = 2.0 * LIMB_RADIUS;
+    let mut self_best: Option<(f64, usize, BodyPart)> = None;
+    let mut limb_best: Option<(f64, usize, (BodyPart, BodyPart))> = None;
     for f in 0..clip.frames {
-        let boxes: Vec<(DVec3, DVec3)> = chains
-            .iter()
-            .map(|c| {
-                let (lo, hi) = c.joints.iter().fold(
-                    (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-                    |(lo, hi), &j| (lo.min(clip.at(f, j)), hi.max(clip.at(f, j))),
-                );
-                (lo - LIMB_RADIUS, hi + LIMB_RADIUS)
-            })
-            .collect();
+        let boxes: Vec<(DVec3, DVec3)> = chains.iter().map(|c| padded_box(clip, c, f)).collect();
         for (a, b, bones) in &pairs {
-            let (ia, ib) = (index_of(&chains, a), index_of(&chains, b));
-            let (ba, bb) = (boxes[ia], boxes[ib]);
-            // Broad phase (CODA): only chains whose padded boxes overlap get the bone test.
-            if ba.0.cmpgt(bb.1).any() || bb.0.cmpgt(ba.1).any() {
+            let ((a_lo, a_hi), (b_lo, b_hi)) = (boxes[*a], boxes[*b]);
+            // Broad phase (CODA): only chains whose padded boxes overlap get the bone test; boxes
+            // apart are more than 2 * LIMB_RADIUS apart, the reported cap.
+            if a_lo.cmpgt(b_hi).any() || b_lo.cmpgt(a_hi).any() {
                 continue;
             }
-            for bone in bones {
-                let d = segment_distance(
-                    clip.at(f, bone.a.0),
-                    clip.at(f, bone.a.1),
-                    clip.at(f, bone.b.0),
-                    clip.at(f, bone.b.1),
-                );
-                if d < out.self_distance || out.self_distance_parts.is_none() {
-                    out.self_distance = out.self_distance.min(d);
-                    out.self_distance_frame = f;
-                    out.self_distance_parts = Some((a.part, b.part));
+            let d = bones
+                .iter()
+                .map(|&((p0, p1), (q0, q1))| {
+                    segment_distance(
+                        clip.at(f, p0),
+                        clip.at(f, p1),
+                        clip.at(f, q0),
+                        clip.at(f, q1),
+                    )
+                })
+                .fold(f64::INFINITY, f64::min);
+            let (ca, cb) = (&chains[*a], &chains[*b]);
+            if ca.is_spine() || cb.is_spine() {
+                let limb = if ca.is_spine() { cb.part } else { ca.part };
+                if self_best.is_none_or(|(best, _, _)| d < best) {
+                    self_best = Some((d, f, limb));
                 }
+            } else if limb_best.is_none_or(|(best, _, _)| d < best) {
+                limb_best = Some((d, f, (ca.part, cb.part)));
             }
         }
     }
-}
-
-fn index_of(chains: &[Chain], c: &Chain) -> usize {
-    chains
-        .iter()
-        .position(|x| std::ptr::eq(x, c))
-        .unwrap_or_default()
+    // Distances past the cap are only computed when boxes happen to overlap; clamping keeps the
+    // value comparable between clips.
+    let cap = 2.0 * LIMB_RADIUS;
+    if let Some((d, f, part)) = self_best {
+        out.self_distance = d.min(cap);
+        out.self_distance_frame = f;
+        out.self_distance_part = Some(part);
+    }
+    if let Some((d, f, parts)) = limb_best {
+        out.limb_distance = d.min(cap);
+        out.limb_distance_frame = f;
+        out.limb_distance_parts = Some(parts);
+    }
 }
 
 /// Distance between segments `p0 p1` and `q0 q1` (closest points by clamped parameters, after
@@ -444,6 +500,72 @@ pub fn segment_distance(p0: DVec3, p1: DVec3, q0: DVec3, q1: DVec3) -> f64 {
     ((p0 + d1 * s) - (q0 + d2 * t)).length()
 }
 
-fn lean(clip: &Clip, body: &[usize], profile: &Profile, out: &mut Plausibility) {
-    let _ = (clip, body, profile, out);
+/// Per-frame lean (degrees): the angle between the vertical and the line from the base of
+/// support to the centre of mass (the mean of the body joints, every joint weighing 1 as in CODA).
+/// The base of support is the mean of the body joints within [`SUPPORT_BAND`] of the frame's
+/// lowest one. `None` for frames whose centre of mass is less than [`MIN_LEVER`] above the base
+/// (the body lies or sits on the floor; balance is not at stake).
+pub fn lean_per_frame(positions: &[DVec3], joints: usize, profile: &Profile) -> Vec<Option<f64>> {
+    let frames = positions.len().checked_div(joints).unwrap_or(0);
+    let body = body_joints(profile, joints);
+    (0..frames)
+        .map(|f| frame_lean(&positions[f * joints..(f + 1) * joints], &body))
+        .collect()
+}
+
+fn frame_lean(frame: &[DVec3], body: &[usize]) -> Option<f64> {
+    let mean = |points: &mut dyn Iterator<Item = DVec3>| {
+        let (sum, n) = points.fold((DVec3::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
+        (n > 0).then(|| sum / n as f64)
+    };
+    let com = mean(&mut body.iter().map(|&j| frame[j]))?;
+    let lowest = body
+        .iter()
+        .map(|&j| frame[j].z)
+        .fold(f64::INFINITY, f64::min);
+    let base = mean(
+        &mut body
+            .iter()
+            .map(|&j| frame[j])
+            .filter(|p| p.z < lowest + SUPPORT_BAND),
+    )?;
+    let lever = com - base;
+    (lever.z >= MIN_LEVER).then(|| lever.truncate().length().atan2(lever.z).to_degrees())
+}
+
+fn lean(clip: &Clip, body: &[usize], fps: f64, out: &mut Plausibility) {
+    let per_frame: Vec<Option<f64>> = (0..clip.frames)
+        .map(|f| frame_lean(clip.frame(f), body))
+        .collect();
+    let (sum, n) = per_frame
+        .iter()
+        .flatten()
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if n == 0 {
+        return;
+    }
+    out.lean_mean = sum / n as f64;
+    // The artefact is a sustained lean; single frames of a sprint start or a stumble lean further.
+    let half = if fps.is_finite() && fps > 0.0 {
+        (LEAN_WINDOW * fps / 2.0).round() as usize
+    } else {
+        0
+    };
+    // Prefix sums of the measured values and of their count, so each window costs O(1).
+    let mut prefix = vec![(0.0, 0usize); per_frame.len() + 1];
+    for (f, v) in per_frame.iter().enumerate() {
+        let (s, n) = prefix[f];
+        prefix[f + 1] = match v {
+            Some(v) => (s + v, n + 1),
+            None => (s, n),
+        };
+    }
+    for f in 0..per_frame.len() {
+        let (lo, hi) = (f.saturating_sub(half), (f + half + 1).min(per_frame.len()));
+        let (sum, n) = (prefix[hi].0 - prefix[lo].0, prefix[hi].1 - prefix[lo].1);
+        if n > 0 && sum / n as f64 > out.lean {
+            out.lean = sum / n as f64;
+            out.lean_frame = f;
+        }
+    }
 }

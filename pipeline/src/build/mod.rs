@@ -54,7 +54,10 @@ pub enum BuildError {
     /// The workspace or an output cannot be written.
     #[error(transparent)]
     Workspace(#[from] WorkspaceError),
-    /// An LLM stage cannot run (templates, cache file, missing answers with `on_miss = "fail"`).
+    /// A prompt template does not load or render.
+    #[error(transparent)]
+    Prompt(#[from] crate::llm::prompt::PromptError),
+    /// An LLM stage cannot run (cache file, missing answers with `on_miss = "fail"`).
     #[error("{0}")]
     Llm(String),
     /// The motion-type taxonomy or mapping is invalid.
@@ -122,6 +125,8 @@ pub struct BuildReport {
     pub paraphrases: crate::stages::augment::AugmentReport,
     /// Task plans: answered, skipped by reason, rejected plans.
     pub plans: crate::stages::augment::AugmentReport,
+    /// Synthetic pairs: candidates, compatible, sampled, composed, dropped by reason.
+    pub synthetic: crate::stages::compose::ComposeReport,
     /// Fingerprint of the written table's inputs.
     pub table_fingerprint: String,
 }
@@ -142,8 +147,7 @@ pub struct BuildOptions {
     pub offline: bool,
 }
 
-/// Runs every stage of the build described by `config`.
-pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, BuildError> {
+fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'a>, BuildError> {
     let output = config.output_dir();
     let workspace = Workspace::new(&output);
     if options.force {
@@ -274,20 +278,120 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
     notes.sort();
 
+    // Synthetic pairs from the labelled originals and mirrors, and plausibility for every clip.
+    let all: Vec<&Clip> = clips.iter().collect();
+    let encoded = postcard::to_stdvec(&all).map_err(|e| WorkspaceError::Encode {
+        what: "clips to compose".into(),
+        message: e.to_string(),
+    })?;
+    let fp = Fingerprint::new(
+        crate::stages::compose::NAME,
+        crate::stages::compose::VERSION,
+    )
+    .text(&sha256_hex(&encoded))
+    .json(&config.synthetic)
+    .json(&config.dataset.seed)
+    .finish();
+    drop(encoded);
+    let (composed, ran): (crate::stages::compose::ComposeOutput, bool) =
+        shared
+            .workspace
+            .cached(crate::stages::compose::NAME, &fp, || {
+                crate::stages::compose::run(
+                    &all,
+                    &config.synthetic,
+                    config.dataset.seed,
+                    |_| "all".to_string(),
+                    |c| shared.profile_of(c),
+                )
+            })?;
+    shared
+        .workspace
+        .prune(crate::stages::compose::NAME, &BTreeSet::from([fp]));
+    stages.push(StageRun {
+        stage: crate::stages::compose::NAME.into(),
+        items: composed.report.sampled,
+        ran: if ran {
+            composed.report.sampled.max(1)
+        } else {
+            0
+        },
+        reused: if ran { 0 } else { composed.report.sampled },
+    });
+    for clip in &mut clips {
+        clip.plausibility = composed.real_metrics.get(&clip.clip_id).copied();
+    }
+    clips.extend(composed.clips);
+    clips.sort_by(|a, b| {
+        a.clip_id
+            .cmp(&b.clip_id)
+            .then(a.capture.path.cmp(&b.capture.path))
+    });
+    Ok(Staged {
+        output,
+        files: files.len(),
+        stages,
+        clips,
+        rejects,
+        notes,
+        drops_by_reason,
+        unmapped_labels,
+        text,
+        compose: composed.report,
+        shared,
+    })
+}
+
+/// What the stages produced, before anything is written.
+struct Staged<'a> {
+    shared: Shared<'a>,
+    output: PathBuf,
+    files: usize,
+    stages: Vec<StageRun>,
+    clips: Vec<Clip>,
+    rejects: Vec<Reject>,
+    notes: Vec<Note>,
+    drops_by_reason: BTreeMap<String, usize>,
+    unmapped_labels: BTreeMap<String, usize>,
+    text: text::TextOutcome,
+    compose: crate::stages::compose::ComposeReport,
+}
+
+/// Every clip a build would write (synthetic pairs included), from cached stage outputs where
+/// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
+pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip>, BuildError> {
+    Ok(run_stages(config, options)?.clips)
+}
+
+/// Runs every stage of the build described by `config` and writes the dataset.
+pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, BuildError> {
+    let Staged {
+        shared,
+        output,
+        files,
+        mut stages,
+        clips,
+        rejects,
+        notes,
+        drops_by_reason,
+        unmapped_labels,
+        text,
+        compose,
+    } = run_stages(config, options)?;
+    let workspace = &shared.workspace;
+    let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
     for clip in &clips {
-        if profiles.contains_key(&clip.profile) {
+        let id = crate::io::parquet::skeleton_id(clip);
+        if skeletons.contains_key(&id) {
             continue;
         }
-        if let Some(spec) = shared.specs.iter().find(|s| s.name == clip.profile)
+        if let Some(spec) = specs.iter().find(|s| s.name == clip.profile)
             && let Ok(bound) = spec.bind(&clip.motion.skeleton)
         {
-            skeletons.insert(
-                clip.profile.clone(),
-                skeleton_json(&clip.motion.skeleton, &bound),
-            );
-            profiles.insert(clip.profile.clone(), bound);
+            skeletons.insert(id, skeleton_json(&clip.motion.skeleton, &bound));
+            profiles.entry(clip.profile.clone()).or_insert(bound);
         }
     }
     // The table's input is exactly its rows (and the plans): their encoding is the fingerprint.
@@ -311,7 +415,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let write_ran = write_outputs(
         options.force,
         &output,
-        &shared.workspace,
+        workspace,
         &table_fingerprint,
         &table,
     )?;
@@ -351,7 +455,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         dataset: config.dataset.name.clone(),
         output: output.clone(),
         stages,
-        captures: files.len(),
+        captures: files,
         clips: clips.len(),
         mirrored: clips.iter().filter(|c| c.mirrored).count(),
         kinds,
@@ -366,6 +470,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         labels: text.label,
         paraphrases: text.paraphrase,
         plans: text.plan,
+        synthetic: compose,
         table_fingerprint,
     };
     let json = serde_json::to_vec_pretty(&report).unwrap_or_default();

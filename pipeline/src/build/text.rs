@@ -77,8 +77,7 @@ pub(super) fn run(
     let prompts = match &config.prompts_dir {
         Some(dir) => Prompts::with_overrides(&config.resolve(dir)),
         None => Prompts::bundled(),
-    }
-    .map_err(|e| BuildError::Llm(e.to_string()))?;
+    }?;
     let mut cache = open_cache(shared)?;
     let mut outcome = TextOutcome::default();
 
@@ -91,8 +90,11 @@ pub(super) fn run(
         prompts: &prompts,
         offline,
     };
-    let labels = label::label_texts(&clips, &input, cache.as_mut(), &mut report)
-        .map_err(|e| BuildError::Llm(e.to_string()))?;
+    let labels =
+        label::label_texts(&clips, &input, cache.as_mut(), &mut report).map_err(|e| match e {
+            label::LabelError::Prompt(p) => BuildError::Prompt(p),
+            other => BuildError::Llm(other.to_string()),
+        })?;
     let segment_fps: Vec<&str> = items
         .iter()
         .flat_map(|i| {
@@ -167,8 +169,7 @@ pub(super) fn run(
             offline,
             cache.as_mut(),
             &mut report,
-        )
-        .map_err(|e| BuildError::Llm(e.to_string()))?;
+        )?;
         for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
             clip.paraphrases = found
                 .get(&normalize_text(&clip.text))
@@ -197,8 +198,7 @@ pub(super) fn run(
             offline,
             cache.as_mut(),
             &mut report,
-        )
-        .map_err(|e| BuildError::Llm(e.to_string()))?;
+        )?;
         for (text, reason) in &report.rejected {
             outcome
                 .rejects

@@ -175,6 +175,41 @@ fn part_lists(rows: impl Iterator<Item = Option<crate::parts::PartSet>>) -> Arra
     Arc::new(b.finish())
 }
 
+/// A list of 6-boolean part lists per row (the parts each source of a synthetic pair gave).
+fn nested_part_lists<'a>(rows: impl Iterator<Item = &'a [crate::parts::PartSet]>) -> ArrayRef {
+    let inner = ListBuilder::new(BooleanBuilder::new()).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Boolean,
+        false,
+    )));
+    let inner_field = Arc::new(Field::new(
+        "item",
+        DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
+        false,
+    ));
+    let mut b = ListBuilder::new(inner).with_field(inner_field);
+    for row in rows {
+        for parts in row {
+            for v in parts.to_vec6() {
+                b.values().values().append_value(v);
+            }
+            b.values().append(true);
+        }
+        b.append(true);
+    }
+    Arc::new(b.finish())
+}
+
+/// One plausibility metric per row, null when not computed.
+fn metric(clips: &[Clip], f: impl Fn(&crate::quality::Plausibility) -> f64) -> ArrayRef {
+    Arc::new(Float32Array::from(
+        clips
+            .iter()
+            .map(|c| c.plausibility.as_ref().map(|p| f(p) as f32))
+            .collect::<Vec<_>>(),
+    ))
+}
+
 /// Builds one record batch from clips.
 pub fn clips_to_batch(
     clips: &[Clip],
@@ -281,6 +316,12 @@ pub fn clips_to_batch(
                 .collect::<Vec<_>>(),
         )),
         string_lists(clips.iter().map(|c| c.paraphrases.as_slice())),
+        string_lists(clips.iter().map(|c| c.composed_from.as_slice())),
+        nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice())),
+        metric(clips, |p| p.foot_skate),
+        metric(clips, |p| p.ground_penetration),
+        metric(clips, |p| p.self_distance),
+        metric(clips, |p| p.lean),
         Arc::new(attributes.finish()),
         Arc::new(StringArray::from_iter_values(clips.iter().map(skeleton_id))),
         Arc::new(Float64Array::from_iter_values(

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use arrow_schema::{DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 3;
+pub const SCHEMA_VERSION: u32 = 4;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
@@ -76,6 +76,20 @@ pub fn clip_schema() -> Schema {
         ),
         Field::new("label_source", DataType::Utf8, true),
         list_utf8("paraphrases"),
+        list_utf8("composed_from"),
+        Field::new(
+            "composed_parts",
+            DataType::List(Arc::new(Field::new(
+                "item",
+                DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
+                false,
+            ))),
+            false,
+        ),
+        Field::new("foot_skate", DataType::Float32, true),
+        Field::new("ground_penetration", DataType::Float32, true),
+        Field::new("self_distance", DataType::Float32, true),
+        Field::new("lean", DataType::Float32, true),
         Field::new("attributes", attributes, false),
         Field::new("skeleton", DataType::Utf8, false),
         Field::new("fps", DataType::Float64, false),

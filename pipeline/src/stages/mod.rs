@@ -2,6 +2,7 @@
 //! The build runner (`crate::build`) handles caching, atomic writes and reporting.
 
 pub mod augment;
+pub mod compose;
 pub mod ingest;
 pub mod label;
 pub mod mirror;

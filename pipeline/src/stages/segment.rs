@@ -238,6 +238,9 @@ impl ClipMaker<'_, '_> {
             parts: None,
             label_source: None,
             paraphrases: Vec::new(),
+            composed_from: Vec::new(),
+            composed_parts: Vec::new(),
+            plausibility: None,
             motion,
         })
     }

@@ -1,0 +1,298 @@
+//! `compose`: synthetic simultaneous pairs (SINC 3.1, appendix C). Compatible labelled single
+//! clips (disjoint part sets, same skeleton profile, same split, different captures) are stitched by
+//! body part; every composite is checked for plausibility before it reaches the dataset, and the
+//! same metrics are computed for real clips so the two distributions can be compared.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::{Deserialize, Serialize};
+
+use crate::clip::{Clip, SourceKind};
+use crate::compose_text::compose_variants;
+use crate::motion::canonical::dataset_positions;
+use crate::motion::compose::{Trim, compose};
+use crate::motion::{BodyPart, Profile};
+use crate::parts::PartSet;
+use crate::quality::{Plausibility, Thresholds, plausibility};
+
+/// Stage name.
+pub const NAME: &str = "compose";
+/// Bump when the stage's output for the same input changes.
+pub const VERSION: u32 = 1;
+
+/// Synthetic-pair settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SyntheticConfig {
+    /// Build synthetic pairs at all.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// Chance that an eligible clip is paired with a random compatible partner (SINC: 0.5).
+    #[serde(default = "half")]
+    pub probability: f64,
+    /// Most composites one clip may take part in (none when absent).
+    #[serde(default)]
+    pub max_per_clip: Option<usize>,
+    /// Compose every compatible pair instead of sampling (small sets).
+    #[serde(default)]
+    pub exhaustive: bool,
+    /// Trim the longer clip from its start (SINC) or from a seeded random offset.
+    #[serde(default)]
+    pub random_offset: bool,
+    /// Plausibility thresholds; composites that fail are dropped, counted by reason.
+    #[serde(default)]
+    pub thresholds: Thresholds,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn half() -> f64 {
+    0.5
+}
+
+impl Default for SyntheticConfig {
+    fn default() -> Self {
+        SyntheticConfig {
+            enabled: true,
+            probability: half(),
+            max_per_clip: None,
+            exhaustive: false,
+            random_offset: false,
+            thresholds: Thresholds::default(),
+        }
+    }
+}
+
+/// Counts for the build report: candidates, compatible pairs, composed, dropped by reason.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct ComposeReport {
+    /// Labelled single clips that may be composed.
+    pub candidates: usize,
+    /// Unordered candidate pairs that are compatible (disjoint parts, same profile and split,
+    /// different captures).
+    pub compatible: usize,
+    /// Pairs drawn by the sampler.
+    pub sampled: usize,
+    /// Composites kept.
+    pub composed: usize,
+    /// Composites dropped, by plausibility reason.
+    pub dropped: BTreeMap<String, usize>,
+}
+
+/// The stage's output.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ComposeOutput {
+    /// The synthetic clips.
+    pub clips: Vec<Clip>,
+    /// Plausibility metrics of every input clip, by clip id.
+    pub real_metrics: BTreeMap<String, Plausibility>,
+    /// Counts.
+    pub report: ComposeReport,
+}
+
+/// A deterministic generator (SplitMix64) seeded per decision, so a clip's draw does not depend on
+/// which other clips exist or how work was scheduled.
+struct Rng(u64);
+
+impl Rng {
+    fn new(seed: u64, key: &str) -> Rng {
+        let mut h: u64 = seed ^ 0x9e37_79b9_7f4a_7c15;
+        for b in key.bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        Rng(h)
+    }
+
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+fn mask(parts: PartSet) -> u8 {
+    parts.iter().map(crate::motion::compose::part_bit).sum()
+}
+
+fn part_set(mask: u8) -> PartSet {
+    BodyPart::ALL
+        .into_iter()
+        .filter(|p| mask & crate::motion::compose::part_bit(*p) != 0)
+        .collect()
+}
+
+/// Runs the stage. `split_of` names each clip's split (pairs never cross splits); `profile_of`
+/// binds a clip's skeleton profile.
+pub fn run(
+    clips: &[&Clip],
+    config: &SyntheticConfig,
+    seed: u64,
+    split_of: impl Fn(&Clip) -> String,
+    profile_of: impl Fn(&Clip) -> Option<Profile>,
+) -> ComposeOutput {
+    let mut out = ComposeOutput::default();
+    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
+    let mut bound = |c: &Clip| -> Option<Profile> {
+        let key = crate::io::parquet::skeleton_id(c);
+        if let Some(p) = profiles.get(&key) {
+            return Some(p.clone());
+        }
+        let p = profile_of(c)?;
+        profiles.insert(key, p.clone());
+        Some(p)
+    };
+    for c in clips {
+        if let Some(p) = bound(c) {
+            let positions = dataset_positions(&c.motion, &p);
+            out.real_metrics.insert(
+                c.clip_id.clone(),
+                plausibility(&positions, c.motion.num_joints(), c.motion.fps, &p),
+            );
+        }
+    }
+    if !config.enabled {
+        return out;
+    }
+    let mut candidates: Vec<&Clip> = clips
+        .iter()
+        .copied()
+        .filter(|c| c.kind == SourceKind::RealSingle && c.parts.is_some_and(|p| !p.is_empty()))
+        .collect();
+    candidates.sort_by(|a, b| a.clip_id.cmp(&b.clip_id));
+    out.report.candidates = candidates.len();
+    let group = |c: &Clip| (c.profile.clone(), split_of(c));
+    let compatible = |a: &Clip, b: &Clip| {
+        group(a) == group(b)
+            && a.capture.path != b.capture.path
+            && a.parts.zip(b.parts).is_some_and(|(x, y)| x.is_disjoint(y))
+    };
+    let n = candidates.len();
+    let mut partners: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for i in 0..n {
+        for j in i + 1..n {
+            if compatible(candidates[i], candidates[j]) {
+                partners[i].push(j);
+                partners[j].push(i);
+                out.report.compatible += 1;
+            }
+        }
+    }
+    let mut used: BTreeSet<(usize, usize)> = BTreeSet::new();
+    let mut count = vec![0usize; n];
+    let cap = config.max_per_clip.unwrap_or(usize::MAX);
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    if config.exhaustive {
+        for (i, ps) in partners.iter().enumerate() {
+            for &j in ps.iter().filter(|&&j| j > i) {
+                if count[i] < cap && count[j] < cap {
+                    count[i] += 1;
+                    count[j] += 1;
+                    pairs.push((i, j));
+                }
+            }
+        }
+    } else {
+        for i in 0..n {
+            let mut rng = Rng::new(seed, &candidates[i].clip_id);
+            if rng.unit() >= config.probability || count[i] >= cap {
+                continue;
+            }
+            let open: Vec<usize> = partners[i]
+                .iter()
+                .copied()
+                .filter(|&j| count[j] < cap && !used.contains(&(i.min(j), i.max(j))))
+                .collect();
+            if open.is_empty() {
+                continue;
+            }
+            let j = open[rng.below(open.len())];
+            used.insert((i.min(j), i.max(j)));
+            count[i] += 1;
+            count[j] += 1;
+            pairs.push((i, j));
+        }
+    }
+    out.report.sampled = pairs.len();
+    for (i, j) in pairs {
+        let (a, b) = (candidates[i], candidates[j]);
+        let Some(profile) = bound(a) else { continue };
+        let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
+        let trim = if config.random_offset {
+            let spare = a.motion.num_frames().abs_diff(b.motion.num_frames());
+            Trim::At(rng.below(spare + 1))
+        } else {
+            Trim::Start
+        };
+        let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
+        let composite = compose(&a.motion, mask(pa), &b.motion, mask(pb), &profile, trim);
+        let positions = dataset_positions(&composite.motion, &profile);
+        let metrics = plausibility(
+            &positions,
+            composite.motion.num_joints(),
+            composite.motion.fps,
+            &profile,
+        );
+        let failures = metrics.failures(&config.thresholds);
+        if !failures.is_empty() {
+            for f in failures {
+                *out.report.dropped.entry(f.to_string()).or_insert(0) += 1;
+            }
+            continue;
+        }
+        let variants = compose_variants(&a.text, &b.text);
+        let chosen = variants
+            .get(rng.below(variants.len()))
+            .map(|v| v.text.clone())
+            .unwrap_or_default();
+        let legs_from_a =
+            composite.parts_from_first & crate::motion::compose::part_bit(BodyPart::Global) != 0;
+        let base = if legs_from_a { a } else { b };
+        out.clips.push(Clip {
+            clip_id: format!("synthetic/{}+{}", a.clip_id, b.clip_id),
+            kind: SourceKind::Synthetic,
+            capture: base.capture.clone(),
+            frame_range: base.frame_range,
+            mirrored: false,
+            action: format!("{} + {}", a.action, b.action),
+            text: chosen,
+            texts: variants.into_iter().map(|v| v.text).collect(),
+            labels: a.labels.iter().chain(&b.labels).cloned().collect(),
+            annotation: "synthetic".into(),
+            annotation_origin: format!("{} + {}", a.annotation_origin, b.annotation_origin),
+            attributes: BTreeMap::from([
+                ("start_a".to_string(), composite.starts[0].to_string()),
+                ("start_b".to_string(), composite.starts[1].to_string()),
+            ]),
+            profile: a.profile.clone(),
+            motion_type: None,
+            hand: None,
+            object: None,
+            goal_pelvis: None,
+            goal_hand: None,
+            parts: Some(pa | pb),
+            label_source: Some("composed".into()),
+            paraphrases: Vec::new(),
+            composed_from: vec![a.clip_id.clone(), b.clip_id.clone()],
+            composed_parts: vec![
+                part_set(composite.parts_from_first),
+                part_set(composite.parts_from_second),
+            ],
+            plausibility: Some(metrics),
+            motion: composite.motion,
+        });
+        out.report.composed += 1;
+    }
+    out
+}
