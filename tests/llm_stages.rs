@@ -43,6 +43,14 @@ fn answer_for(prompt: &str) -> String {
     if prompt.contains("different descriptions") {
         return "1. A person does it calmly.\n2. Someone turns to the left while doing it.\n3. A person does it calmly.\n4. The motion is performed once.".into();
     }
+    if prompt.contains("at the same time:") {
+        // The kick uses the legs: say no to any pair with it.
+        return if prompt.contains("kick") {
+            "No.".into()
+        } else {
+            "Yes".into()
+        };
+    }
     if prompt.contains("target action") {
         // The first answer for every text is invalid (ids from 0); the repair request is fixed.
         if prompt.contains("Your answer was not valid") {
@@ -547,4 +555,32 @@ fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
     );
     assert_eq!(report.kinds.get("real_single"), Some(&6));
     assert_eq!(report.plans.answered, 3);
+}
+
+#[test]
+fn the_optional_llm_pair_check_drops_pairs_it_says_no_to() {
+    let server = Server::start();
+    let extra = format!(
+        "[synthetic]\nexhaustive = true\nllm_check = true\n\n[task_plans]\nenabled = false\n\n[paraphrases]\nenabled = false\n\n{}",
+        llm_section(&server).replace("labeller = \"llm\"", "labeller = \"embedded\"")
+    );
+    let (_dir, config) = scratch(&extra);
+    let first = build(&config, &BuildOptions::default()).unwrap();
+    let asked = server.requests();
+    assert!(asked > 0, "pairs were asked about");
+    assert_eq!(first.pair_check.requests, asked);
+    let vetoed = first
+        .synthetic
+        .dropped
+        .get("llm_incompatible")
+        .copied()
+        .unwrap_or(0);
+    assert!(vetoed > 0, "{:?}", first.synthetic);
+    assert_eq!(
+        first.synthetic.sampled,
+        first.synthetic.composed + first.synthetic.dropped.values().sum::<usize>()
+    );
+    let again = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(server.requests(), asked, "answers come from the cache");
+    assert!(again.nothing_ran(), "{:?}", again.stages);
 }

@@ -373,6 +373,21 @@ fn print_report(report: &BuildReport) -> std::io::Result<()> {
         c.composed,
         counts(&c.dropped)
     )?;
+    let pc = &report.pair_check;
+    if pc.texts > 0 {
+        writeln!(
+            out,
+            "pair check (LLM): {} of {} pairs answered, {} requests{}",
+            pc.answered,
+            pc.texts,
+            pc.requests,
+            if pc.skipped.is_empty() {
+                String::new()
+            } else {
+                format!("; skipped: {}", counts(&pc.skipped))
+            }
+        )?;
+    }
     if report.rejects.is_empty() {
         writeln!(out, "rejects: none")?;
     } else {

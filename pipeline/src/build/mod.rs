@@ -28,8 +28,8 @@ use crate::config::Config;
 use crate::io::parquet::TableError;
 use crate::motion::{Profile, ProfileSpec};
 use crate::source::{self, SourceAnnotations, SourceError};
-use crate::stages::segment;
 use crate::stages::{ingest, mirror};
+use crate::stages::{label, segment};
 
 /// Name of the clip table inside the output folder.
 pub const CLIPS_FILE: &str = "clips.parquet";
@@ -127,6 +127,8 @@ pub struct BuildReport {
     pub plans: crate::stages::augment::AugmentReport,
     /// Synthetic pairs: candidates, compatible, sampled, composed, dropped by reason.
     pub synthetic: crate::stages::compose::ComposeReport,
+    /// The optional LLM check of sampled pairs: asked, answered, skipped.
+    pub pair_check: crate::stages::augment::AugmentReport,
     /// Fingerprint of the written table's inputs.
     pub table_fingerprint: String,
 }
@@ -284,6 +286,7 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
         what: "clips to compose".into(),
         message: e.to_string(),
     })?;
+    let vetoed = llm_vetoes(&shared, &all, options.offline)?;
     let fp = Fingerprint::new(
         crate::stages::compose::NAME,
         crate::stages::compose::VERSION,
@@ -291,6 +294,7 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
     .text(&sha256_hex(&encoded))
     .json(&config.synthetic)
     .json(&config.dataset.seed)
+    .json(&vetoed.0)
     .finish();
     drop(encoded);
     let (composed, ran): (crate::stages::compose::ComposeOutput, bool) =
@@ -303,6 +307,13 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
                     config.dataset.seed,
                     |_| "all".to_string(),
                     |c| shared.profile_of(c),
+                    |a, b| {
+                        let key = (
+                            label::normalize_text(&a.text),
+                            label::normalize_text(&b.text),
+                        );
+                        vetoed.0.contains(&key).then_some("llm_incompatible")
+                    },
                 )
             })?;
     shared
@@ -338,6 +349,7 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
         unmapped_labels,
         text,
         compose: composed.report,
+        pair_check: vetoed.1,
         shared,
     })
 }
@@ -355,6 +367,7 @@ struct Staged<'a> {
     unmapped_labels: BTreeMap<String, usize>,
     text: text::TextOutcome,
     compose: crate::stages::compose::ComposeReport,
+    pair_check: crate::stages::augment::AugmentReport,
 }
 
 /// Every clip a build would write (synthetic pairs included), from cached stage outputs where
@@ -377,6 +390,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         unmapped_labels,
         text,
         compose,
+        pair_check,
     } = run_stages(config, options)?;
     let workspace = &shared.workspace;
     let specs = &shared.specs;
@@ -471,11 +485,69 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         paraphrases: text.paraphrase,
         plans: text.plan,
         synthetic: compose,
+        pair_check,
         table_fingerprint,
     };
     let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
     write_atomic(&output.join(REPORT_FILE), &json)?;
     Ok(report)
+}
+
+/// Text pairs the LLM says cannot be done at once, for the sampled pairs (when `llm_check` is on),
+/// and what asking did.
+fn llm_vetoes(
+    shared: &Shared<'_>,
+    clips: &[&Clip],
+    offline: bool,
+) -> Result<
+    (
+        BTreeSet<(String, String)>,
+        crate::stages::augment::AugmentReport,
+    ),
+    BuildError,
+> {
+    let config = shared.config;
+    let mut report = crate::stages::augment::AugmentReport::default();
+    if !config.synthetic.enabled || !config.synthetic.llm_check {
+        return Ok((BTreeSet::new(), report));
+    }
+    let (pairs, _) =
+        crate::stages::compose::sample(clips, &config.synthetic, config.dataset.seed, |_| {
+            "all".to_string()
+        });
+    let texts: BTreeSet<(String, String)> = pairs
+        .iter()
+        .map(|(a, b)| {
+            (
+                label::normalize_text(&a.text),
+                label::normalize_text(&b.text),
+            )
+        })
+        .collect();
+    let texts: Vec<(String, String)> = texts.into_iter().collect();
+    let prompts = match &config.prompts_dir {
+        Some(dir) => crate::llm::prompt::Prompts::with_overrides(&config.resolve(dir)),
+        None => crate::llm::prompt::Prompts::bundled(),
+    }?;
+    let mut cache = match &config.llm {
+        Some(_) => {
+            let path = config.llm_cache_path();
+            Some(
+                crate::llm::cache::ResponseCache::open(&path)
+                    .map_err(|e| BuildError::Llm(format!("{}: {e}", path.display())))?,
+            )
+        }
+        None => None,
+    };
+    let vetoed = crate::stages::augment::incompatible_pairs(
+        &texts,
+        &prompts,
+        config.llm.as_ref(),
+        offline,
+        cache.as_mut(),
+        &mut report,
+    )?;
+    Ok((vetoed, report))
 }
 
 fn add_counts(into: &mut BTreeMap<String, usize>, from: BTreeMap<String, usize>) {

@@ -27,7 +27,7 @@ pub struct AugmentReport {
 }
 
 /// Answers for `prompts`: from the cache when offline or without a server, else asked.
-fn answers(
+pub(crate) fn answers(
     prompts: &[String],
     llm: Option<&LlmConfig>,
     offline: bool,
@@ -113,6 +113,45 @@ pub fn paraphrase(
             report.rejected.push((format!("{t} -> {line}"), reason));
         }
         out.insert((*t).clone(), parsed.accepted);
+    }
+    Ok(out)
+}
+
+/// Pairs an LLM says a person cannot do at once (SINC's optional semantic check): `pair_compat`
+/// asked once per pair of normalised texts, through the cache. Pairs without an answer are not
+/// vetoed; the report counts them as skipped.
+pub fn incompatible_pairs(
+    pairs: &[(String, String)],
+    prompts: &Prompts,
+    llm: Option<&LlmConfig>,
+    offline: bool,
+    cache: Option<&mut ResponseCache>,
+    report: &mut AugmentReport,
+) -> Result<BTreeSet<(String, String)>, PromptError> {
+    report.texts = pairs.len();
+    let rendered: Vec<String> = pairs
+        .iter()
+        .map(|(a, b)| prompts.pair_compat(a, b))
+        .collect::<Result<_, _>>()?;
+    let mut out = BTreeSet::new();
+    for (pair, answer) in pairs
+        .iter()
+        .zip(answers(&rendered, llm, offline, cache, report))
+    {
+        let Some(answer) = answer else { continue };
+        report.answered += 1;
+        let first = answer
+            .trim()
+            .trim_start_matches(|c: char| !c.is_alphabetic())
+            .to_lowercase();
+        if first.starts_with("no") {
+            out.insert(pair.clone());
+        } else if !first.starts_with("yes") {
+            report.rejected.push((
+                format!("{} + {}", pair.0, pair.1),
+                format!("answer is neither yes nor no: `{}`", answer.trim()),
+            ));
+        }
     }
     Ok(out)
 }

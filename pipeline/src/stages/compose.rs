@@ -42,6 +42,10 @@ pub struct SyntheticConfig {
     /// Plausibility thresholds; composites that fail are dropped, counted by reason.
     #[serde(default)]
     pub thresholds: Thresholds,
+    /// Ask the LLM (the `pair_compat` prompt, cached) whether a person can do both actions at
+    /// once, and drop the pairs it says no to. Off by default; needs an `[llm]` section.
+    #[serde(default)]
+    pub llm_check: bool,
 }
 
 fn yes() -> bool {
@@ -61,6 +65,7 @@ impl Default for SyntheticConfig {
             exhaustive: false,
             random_offset: false,
             thresholds: Thresholds::default(),
+            llm_check: false,
         }
     }
 }
@@ -133,45 +138,25 @@ fn part_set(mask: u8) -> PartSet {
         .collect()
 }
 
-/// Runs the stage. `split_of` names each clip's split (pairs never cross splits); `profile_of`
-/// binds a clip's skeleton profile.
-pub fn run(
-    clips: &[&Clip],
+/// The pairs the sampler draws, in order, and the candidate/compatible counts. Deterministic in
+/// `seed`; `split_of` names each clip's split (pairs never cross splits).
+pub fn sample<'c>(
+    clips: &[&'c Clip],
     config: &SyntheticConfig,
     seed: u64,
     split_of: impl Fn(&Clip) -> String,
-    profile_of: impl Fn(&Clip) -> Option<Profile>,
-) -> ComposeOutput {
-    let mut out = ComposeOutput::default();
-    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
-    let mut bound = |c: &Clip| -> Option<Profile> {
-        let key = crate::io::parquet::skeleton_id(c);
-        if let Some(p) = profiles.get(&key) {
-            return Some(p.clone());
-        }
-        let p = profile_of(c)?;
-        profiles.insert(key, p.clone());
-        Some(p)
-    };
-    for c in clips {
-        if let Some(p) = bound(c) {
-            let positions = dataset_positions(&c.motion, &p);
-            out.real_metrics.insert(
-                c.clip_id.clone(),
-                plausibility(&positions, c.motion.num_joints(), c.motion.fps, &p),
-            );
-        }
-    }
+) -> (Vec<(&'c Clip, &'c Clip)>, ComposeReport) {
+    let mut report = ComposeReport::default();
     if !config.enabled {
-        return out;
+        return (Vec::new(), report);
     }
-    let mut candidates: Vec<&Clip> = clips
+    let mut candidates: Vec<&'c Clip> = clips
         .iter()
         .copied()
         .filter(|c| c.kind == SourceKind::RealSingle && c.parts.is_some_and(|p| !p.is_empty()))
         .collect();
     candidates.sort_by(|a, b| a.clip_id.cmp(&b.clip_id));
-    out.report.candidates = candidates.len();
+    report.candidates = candidates.len();
     let group = |c: &Clip| (c.profile.clone(), split_of(c));
     let compatible = |a: &Clip, b: &Clip| {
         group(a) == group(b)
@@ -185,7 +170,7 @@ pub fn run(
             if compatible(candidates[i], candidates[j]) {
                 partners[i].push(j);
                 partners[j].push(i);
-                out.report.compatible += 1;
+                report.compatible += 1;
             }
         }
     }
@@ -224,9 +209,54 @@ pub fn run(
             pairs.push((i, j));
         }
     }
-    out.report.sampled = pairs.len();
-    for (i, j) in pairs {
-        let (a, b) = (candidates[i], candidates[j]);
+    report.sampled = pairs.len();
+    (
+        pairs
+            .into_iter()
+            .map(|(i, j)| (candidates[i], candidates[j]))
+            .collect(),
+        report,
+    )
+}
+
+/// Runs the stage: plausibility metrics for every clip, then the sampled pairs composed, checked
+/// and kept or dropped by reason. `veto` may refuse a pair before composition (the LLM check),
+/// naming the reason; `profile_of` binds a clip's skeleton profile.
+pub fn run(
+    clips: &[&Clip],
+    config: &SyntheticConfig,
+    seed: u64,
+    split_of: impl Fn(&Clip) -> String,
+    profile_of: impl Fn(&Clip) -> Option<Profile>,
+    veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
+) -> ComposeOutput {
+    let mut out = ComposeOutput::default();
+    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
+    let mut bound = |c: &Clip| -> Option<Profile> {
+        let key = crate::io::parquet::skeleton_id(c);
+        if let Some(p) = profiles.get(&key) {
+            return Some(p.clone());
+        }
+        let p = profile_of(c)?;
+        profiles.insert(key, p.clone());
+        Some(p)
+    };
+    for c in clips {
+        if let Some(p) = bound(c) {
+            let positions = dataset_positions(&c.motion, &p);
+            out.real_metrics.insert(
+                c.clip_id.clone(),
+                plausibility(&positions, c.motion.num_joints(), c.motion.fps, &p),
+            );
+        }
+    }
+    let (pairs, report) = sample(clips, config, seed, split_of);
+    out.report = report;
+    for (a, b) in pairs {
+        if let Some(reason) = veto(a, b) {
+            *out.report.dropped.entry(reason.to_string()).or_insert(0) += 1;
+            continue;
+        }
         let Some(profile) = bound(a) else { continue };
         let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
         let trim = if config.random_offset {
