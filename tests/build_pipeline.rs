@@ -66,8 +66,9 @@ sidecar = true
         self.dir.path().join("build.toml")
     }
 
+    /// The dataset folder, `<output>/<name>`.
     fn out(&self) -> PathBuf {
-        self.dir.path().join("out")
+        self.dir.path().join("out/scratch")
     }
 
     fn build(&self) -> BuildReport {
@@ -138,10 +139,11 @@ fn build_writes_originals_and_mirrors_and_reuses_unchanged_work() {
     );
 
     // A deleted output is noticed and rewritten even though no input changed.
-    fs::remove_file(s.out().join("clips.parquet")).unwrap();
+    let shard = shards(&s.out())[0].clone();
+    fs::remove_file(&shard).unwrap();
     let fourth = s.build();
     assert_eq!(ran(&fourth, "write"), 1);
-    assert!(s.out().join("clips.parquet").is_file());
+    assert!(shard.is_file());
 }
 
 #[test]
@@ -150,8 +152,8 @@ fn same_inputs_give_byte_identical_tables() {
     let b = Scratch::new(&[THREE[2], THREE[0], THREE[1]]);
     a.build();
     b.build();
-    let ta = fs::read(a.out().join("clips.parquet")).unwrap();
-    let tb = fs::read(b.out().join("clips.parquet")).unwrap();
+    let ta = table_bytes(&a.out());
+    let tb = table_bytes(&b.out());
     assert!(ta == tb, "tables differ between identical builds");
     // And a forced rebuild reproduces the same bytes.
     let config = Config::load(&a.config_path()).unwrap();
@@ -163,7 +165,7 @@ fn same_inputs_give_byte_identical_tables() {
         },
     )
     .unwrap();
-    assert!(fs::read(a.out().join("clips.parquet")).unwrap() == ta);
+    assert!(table_bytes(&a.out()) == ta);
 }
 
 #[test]
@@ -258,10 +260,7 @@ fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
 fn mirrored_rows_carry_mirrored_labels() {
     let s = Scratch::new(&THREE[..1]);
     s.build();
-    let rows = read_rows(
-        &s.out().join("clips.parquet"),
-        "clip_id,mirrored,action,text",
-    );
+    let rows = read_rows(&s.out().join("data"), "clip_id,mirrored,action,text");
     assert_eq!(
         rows,
         vec![
@@ -317,7 +316,7 @@ print('ok')
 "#;
     let out = Command::new("python3")
         .args(["-c", script])
-        .arg(s.out().join("clips.parquet"))
+        .arg(s.out().join("data"))
         .arg(report.clips.to_string())
         .output()
         .expect("python3 must be installed");
@@ -379,14 +378,15 @@ fn demo_build_segments_the_long_capture_and_prints_counts() {
     );
     assert!(printed.contains("dropped segments:"), "{printed}");
     let report: serde_json::Value =
-        serde_json::from_slice(&fs::read(out.path().join("build-report.json")).unwrap()).unwrap();
+        serde_json::from_slice(&fs::read(out.path().join("demo/build-report.json")).unwrap())
+            .unwrap();
     assert_eq!(report["captures"], 9);
     assert_eq!(
-        report["clips"], 29,
-        "10 clips, their mirrors, 9 synthetic pairs"
+        report["clips"], 25,
+        "10 clips, their mirrors, 5 synthetic pairs within splits"
     );
     let rows = read_rows(
-        &out.path().join("clips.parquet"),
+        &out.path().join("demo/data"),
         "clip_id,annotation_source,frame_range",
     );
     let cmu: Vec<&String> = rows

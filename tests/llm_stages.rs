@@ -233,11 +233,8 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
         "{rejected:?}"
     );
 
-    let out = dir.path().join("out");
-    let table = rows(
-        &out.join("clips.parquet"),
-        "clip_id,parts,label_source,paraphrases",
-    );
+    let out = dir.path().join("out/llm");
+    let table = rows(&out.join("data"), "clip_id,parts,label_source,paraphrases");
     let walk = table
         .iter()
         .find(|r| r.contains("walk_normal_001:0-195|"))
@@ -269,14 +266,11 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
     );
 
     // A restart of everything but the cache file: still no request, same table.
-    let before = fs::read(out.join("clips.parquet")).unwrap();
+    let before = table_bytes(&out);
     fs::remove_dir_all(out.join(".motionforge")).unwrap();
     build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(server.requests(), 12);
-    assert!(
-        fs::read(out.join("clips.parquet")).unwrap() == before,
-        "same answers, same bytes"
-    );
+    assert!(table_bytes(&out) == before, "same answers, same bytes");
 }
 
 #[test]
@@ -343,11 +337,11 @@ fn without_an_llm_the_embedded_labeller_labels_and_skips_are_reported() {
     );
     assert_eq!(report.plans.skipped.get("no LLM configured"), Some(&3));
     assert!(
-        !dir.path().join("out/llm-cache.jsonl").exists(),
+        !dir.path().join("out/llm/llm-cache.jsonl").exists(),
         "no cache file without an LLM"
     );
     let table = rows(
-        &dir.path().join("out/clips.parquet"),
+        &dir.path().join("out/llm/data"),
         "clip_id,parts,label_source",
     );
     for row in table.iter().filter(|r| !r.starts_with("synthetic/")) {
@@ -561,7 +555,7 @@ fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
 fn the_optional_llm_pair_check_drops_pairs_it_says_no_to() {
     let server = Server::start();
     let extra = format!(
-        "[synthetic]\nexhaustive = true\nllm_check = true\n\n[task_plans]\nenabled = false\n\n[paraphrases]\nenabled = false\n\n{}",
+        "[splits]\nratios = {{ train = 1.0 }}\n\n[synthetic]\nexhaustive = true\nllm_check = true\n\n[task_plans]\nenabled = false\n\n[paraphrases]\nenabled = false\n\n{}",
         llm_section(&server).replace("labeller = \"llm\"", "labeller = \"embedded\"")
     );
     let (_dir, config) = scratch(&extra);

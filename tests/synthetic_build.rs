@@ -68,7 +68,7 @@ fn same_seed_same_pairs_different_seed_different_sample() {
     let (dir_b, b) = scratch("probability = 0.5", 7);
     build(&a, &BuildOptions::default()).unwrap();
     build(&b, &BuildOptions::default()).unwrap();
-    let bytes = |d: &tempfile::TempDir| fs::read(d.path().join("out/clips.parquet")).unwrap();
+    let bytes = |d: &tempfile::TempDir| table_bytes(&d.path().join("out/synthetic"));
     assert!(
         bytes(&dir_a) == bytes(&dir_b),
         "same seed, byte-identical tables"

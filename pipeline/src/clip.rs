@@ -71,6 +71,8 @@ pub struct Clip {
     pub frame_range: (u64, u64),
     /// True for the mirrored copy.
     pub mirrored: bool,
+    /// The split of the source capture (`train`, `val`, `test`, ...).
+    pub split: String,
     /// Action label.
     pub action: String,
     /// Caption.

@@ -53,6 +53,9 @@ pub struct Config {
     /// Motion types: taxonomy and how dataset labels map to it.
     #[serde(default)]
     pub motion_types: crate::annotate::taxonomy::TypeMapConfig,
+    /// Train/validation/test splits.
+    #[serde(default)]
+    pub splits: crate::stages::split::SplitConfig,
     /// Synthetic simultaneous pairs and their plausibility checks.
     #[serde(default)]
     pub synthetic: crate::stages::compose::SyntheticConfig,
@@ -96,6 +99,13 @@ pub struct DatasetConfig {
     /// Seed for every random choice.
     #[serde(default)]
     pub seed: u64,
+    /// Target size of a Parquet shard in bytes (uncompressed estimate; default 256 MiB).
+    #[serde(default = "default_shard_bytes")]
+    pub shard_bytes: u64,
+}
+
+fn default_shard_bytes() -> u64 {
+    256 * 1024 * 1024
 }
 
 fn default_fps() -> f64 {
@@ -381,7 +391,9 @@ impl Config {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        config.base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        // Lexically normalised, so `a/../fixtures/x.toml` and `fixtures/x.toml` show the same
+        // capture paths (which splits are hashed from).
+        config.base_dir = path.parent().map(normalize).unwrap_or_default();
         config.validate(path)?;
         Ok(config)
     }
@@ -418,6 +430,37 @@ impl Config {
                 "paraphrases.n",
                 self.paraphrases.n.to_string(),
                 "between 1 and 50 alternatives",
+            ));
+        }
+        if self.dataset.shard_bytes < 1024 {
+            return Err(invalid(
+                "dataset.shard_bytes",
+                self.dataset.shard_bytes.to_string(),
+                "at least 1024 bytes",
+            ));
+        }
+        if self.splits.ratios.is_empty()
+            || self
+                .splits
+                .ratios
+                .values()
+                .any(|r| !(r.is_finite() && *r >= 0.0))
+            || self.splits.ratios.values().sum::<f64>() <= 0.0
+        {
+            return Err(invalid(
+                "splits.ratios",
+                format!("{:?}", self.splits.ratios),
+                "split names with non-negative shares that sum above 0",
+            ));
+        }
+        if let Some(p) = &self.splits.subject_pattern
+            && !regex::Regex::new(p)
+                .is_ok_and(|r| r.capture_names().flatten().any(|n| n == "subject"))
+        {
+            return Err(invalid(
+                "splits.subject_pattern",
+                format!("{p:?}"),
+                "a regex with a named group `subject`",
             ));
         }
         let p = self.synthetic.probability;
@@ -526,11 +569,17 @@ impl Config {
         self.resolve(&self.dataset.output)
     }
 
+    /// The dataset's folder, `<output>/<name>`: shards under `data/`, card, manifest, reports and
+    /// the build workspace.
+    pub fn dataset_dir(&self) -> PathBuf {
+        self.output_dir().join(&self.dataset.name)
+    }
+
     /// The LLM response cache file.
     pub fn llm_cache_path(&self) -> PathBuf {
         match &self.llm_cache {
             Some(p) => self.resolve(p),
-            None => self.output_dir().join("llm-cache.jsonl"),
+            None => self.dataset_dir().join("llm-cache.jsonl"),
         }
     }
 }

@@ -9,6 +9,7 @@ pub mod llm;
 pub mod motion;
 pub mod parts;
 pub mod quality;
+pub mod report;
 pub mod source;
 pub mod stages;
 pub mod text;

@@ -222,7 +222,12 @@ fn exit_code(err: &anyhow::Error) -> u8 {
                 .is_some()
             || matches!(
                 e.downcast_ref::<BuildError>(),
-                Some(BuildError::Source(_) | BuildError::Taxonomy(_) | BuildError::Prompt(_))
+                Some(
+                    BuildError::Source(_)
+                        | BuildError::Taxonomy(_)
+                        | BuildError::Prompt(_)
+                        | BuildError::Split(_)
+                )
             )
     });
     if usage { 2 } else { 1 }
@@ -305,11 +310,11 @@ fn print_report(report: &BuildReport) -> std::io::Result<()> {
     }
     writeln!(
         out,
-        "{} captures -> {} clips ({} mirrored) in {}",
+        "{} captures -> {} clips ({} mirrored) in {}/",
         report.captures,
         report.clips,
         report.mirrored,
-        report.output.join(motionforge::build::CLIPS_FILE).display()
+        report.output.join(motionforge::build::DATA_DIR).display()
     )?;
     writeln!(out, "by kind: {}", counts(&report.kinds))?;
     writeln!(

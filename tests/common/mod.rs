@@ -54,3 +54,22 @@ pub fn bandai2(content: &str, take: u32) -> PathBuf {
         "bandai-namco-2-subset/data/dataset-2_{content}_normal_{take:03}.bvh"
     ))
 }
+
+/// The Parquet shards of a built dataset folder, sorted by name.
+pub fn shards(dataset: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dataset.join("data"))
+        .unwrap_or_else(|e| panic!("{}: {e}", dataset.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "parquet"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// All shard bytes of a dataset, concatenated in name order: equal bytes, equal datasets.
+pub fn table_bytes(dataset: &Path) -> Vec<u8> {
+    shards(dataset)
+        .iter()
+        .flat_map(|p| std::fs::read(p).unwrap())
+        .collect()
+}

@@ -31,8 +31,12 @@ use crate::source::{self, SourceAnnotations, SourceError};
 use crate::stages::{ingest, mirror};
 use crate::stages::{label, segment};
 
-/// Name of the clip table inside the output folder.
-pub const CLIPS_FILE: &str = "clips.parquet";
+/// Folder of the Parquet shards inside the dataset folder (`<split>-NNNNN-of-NNNNN.parquet`).
+pub const DATA_DIR: &str = "data";
+/// Shard list, checksums, counts and provenance.
+pub const MANIFEST_FILE: &str = "manifest.json";
+/// Dataset card (Hugging Face style, YAML front matter).
+pub const CARD_FILE: &str = "README.md";
 /// Skeleton descriptions beside the table.
 pub const SKELETONS_FILE: &str = "skeletons.json";
 /// One JSON object per rejected input.
@@ -54,6 +58,19 @@ pub enum BuildError {
     /// The workspace or an output cannot be written.
     #[error(transparent)]
     Workspace(#[from] WorkspaceError),
+    /// Split assignment is inconsistent (a capture in two splits).
+    #[error(transparent)]
+    Split(#[from] crate::stages::split::SplitError),
+    /// The written shards put one capture in two splits.
+    #[error(
+        "capture `{capture}` appears in splits {splits:?} of the written shards; a capture must be in one split"
+    )]
+    SplitLeak {
+        /// The capture path.
+        capture: String,
+        /// The splits it appears in.
+        splits: Vec<String>,
+    },
     /// A prompt template does not load or render.
     #[error(transparent)]
     Prompt(#[from] crate::llm::prompt::PromptError),
@@ -150,7 +167,7 @@ pub struct BuildOptions {
 }
 
 fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'a>, BuildError> {
-    let output = config.output_dir();
+    let output = config.dataset_dir();
     let workspace = Workspace::new(&output);
     if options.force {
         let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
@@ -186,6 +203,30 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
         .par_iter()
         .map(|file| capture::segment_capture(&shared, file))
         .collect::<Result<_, _>>()?;
+    // Splits by capture: set before labelling so every later copy (mirror, pair) inherits it.
+    let split_text = match &config.splits.file {
+        Some(f) => {
+            let path = config.resolve(std::path::Path::new(f));
+            Some((
+                f.clone(),
+                std::fs::read_to_string(&path).map_err(workspace::io_err(&path))?,
+            ))
+        }
+        None => None,
+    };
+    let splits = crate::stages::split::Splits::new(
+        &config.splits,
+        split_text.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+    )?;
+    for item in &mut items {
+        for clip in &mut item.clips {
+            let stem = std::path::Path::new(&clip.capture.path)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            clip.split = splits.split_of(&clip.capture.path, &stem);
+        }
+    }
     let text = text::run(&shared, &mut items, options.offline)?;
     if config.mirror.enabled {
         items
@@ -305,7 +346,7 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
                     &all,
                     &config.synthetic,
                     config.dataset.seed,
-                    |_| "all".to_string(),
+                    |c| c.split.clone(),
                     |c| shared.profile_of(c),
                     |a, b| {
                         let key = (
@@ -426,20 +467,6 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         skeletons: &skeletons,
         rejects: &rejects,
     };
-    let write_ran = write_outputs(
-        options.force,
-        &output,
-        workspace,
-        &table_fingerprint,
-        &table,
-    )?;
-    stages.push(StageRun {
-        stage: "write".into(),
-        items: 1,
-        ran: usize::from(write_ran),
-        reused: usize::from(!write_ran),
-    });
-
     let mut actions = BTreeMap::new();
     let mut motion_types = BTreeMap::new();
     let mut kinds = BTreeMap::new();
@@ -461,6 +488,63 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     for r in &rejects {
         *rejects_by_reason.entry(r.reason.clone()).or_insert(0) += 1;
     }
+    let mut label_sources = BTreeMap::new();
+    for clip in &clips {
+        let key = clip.label_source.clone().unwrap_or_else(|| "(none)".into());
+        *label_sources.entry(key).or_insert(0) += 1;
+    }
+    let mut sources: Vec<serde_json::Value> = clips
+        .iter()
+        .map(|c| serde_json::json!({ "source": c.capture.source, "path": c.capture.path, "sha256": c.capture.sha256 }))
+        .collect();
+    sources.sort_by_key(|v| v.to_string());
+    sources.dedup();
+    let config_fingerprint = Fingerprint::new("config", 1).json(config).finish();
+    let manifest = serde_json::json!({
+        "schema_version": crate::io::schema::SCHEMA_VERSION,
+        "dataset": config.dataset.name,
+        "pipeline": format!("motionforge {}", env!("CARGO_PKG_VERSION")),
+        "config_fingerprint": config_fingerprint,
+        "table_fingerprint": table_fingerprint,
+        "seed": config.dataset.seed,
+        "fps": config.dataset.fps,
+        "files": { "skeletons": SKELETONS_FILE, "plans": PLANS_FILE, "rejects": REJECTS_FILE },
+        "sources": sources,
+        "counts": {
+            "source_kind": kinds,
+            "label_source": label_sources,
+            "motion_type": motion_types,
+            "drop_reason": drops_by_reason,
+            "reject_reason": rejects_by_reason,
+        },
+    });
+    let licences: Vec<String> = config
+        .sources
+        .iter()
+        .filter(|s| !s.licence.is_empty())
+        .map(|s| format!("{}: {}", s.name, s.licence))
+        .collect();
+    let companions = output::Companions {
+        card_body: output::card_body(config, &clips, &licences, &kinds),
+        manifest,
+        licences,
+        shard_bytes: config.dataset.shard_bytes,
+    };
+    let write_ran = write_outputs(
+        options.force,
+        &output,
+        workspace,
+        &table_fingerprint,
+        &table,
+        &companions,
+    )?;
+    stages.push(StageRun {
+        stage: "write".into(),
+        items: 1,
+        ran: usize::from(write_ran),
+        reused: usize::from(!write_ran),
+    });
+
     let mut notes_by_kind = BTreeMap::new();
     for n in &notes {
         *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;

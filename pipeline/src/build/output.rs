@@ -7,17 +7,19 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, CLIPS_FILE, PLANS_FILE, REJECTS_FILE, Reject, SKELETONS_FILE, Workspace,
-    sha256_hex, workspace, write_atomic, write_atomic_with,
+    BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, PLANS_FILE, REJECTS_FILE, Reject,
+    SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
 };
 use crate::clip::Clip;
 use crate::io::parquet::write_clips;
 use crate::motion::Profile;
 
-/// What the last write recorded: its inputs' fingerprint and the outputs' checksums.
+/// What the last write recorded: its inputs' fingerprint, each shard's content fingerprint, and
+/// the outputs' checksums.
 #[derive(Debug, Default, Serialize, Deserialize)]
 struct State {
     table_fingerprint: String,
+    shards: BTreeMap<String, String>,
     outputs: BTreeMap<String, String>,
 }
 
@@ -70,12 +72,202 @@ pub(super) struct Table<'a> {
     pub(super) rejects: &'a [Reject],
 }
 
+/// One planned shard: its file and the clips (indices into the sorted clip list) it holds.
+struct ShardPlan {
+    split: String,
+    file: String,
+    clips: Vec<usize>,
+}
+
+/// Rough uncompressed size of a clip's row: the motion arrays dominate.
+fn row_bytes(clip: &Clip) -> u64 {
+    let frames = clip.motion.num_frames() as u64;
+    let joints = clip.motion.num_joints() as u64;
+    frames * joints * (3 + 4) * 4 + frames * 3 * 4 + 2048
+}
+
+/// Shards per split, in split order, each filled up to `target` bytes (at least one clip).
+fn plan_shards(clips: &[Clip], target: u64) -> Vec<ShardPlan> {
+    let splits = crate::stages::split::split_order(clips.iter().map(|c| c.split.clone()));
+    let mut plans = Vec::new();
+    for split in splits {
+        let mut groups: Vec<Vec<usize>> = vec![Vec::new()];
+        let mut size = 0u64;
+        for (i, c) in clips.iter().enumerate().filter(|(_, c)| c.split == split) {
+            let b = row_bytes(c);
+            if size + b > target && groups.last().is_some_and(|g| !g.is_empty()) {
+                groups.push(Vec::new());
+                size = 0;
+            }
+            size += b;
+            if let Some(g) = groups.last_mut() {
+                g.push(i);
+            }
+        }
+        let n = groups.len();
+        for (index, group) in groups.into_iter().enumerate() {
+            plans.push(ShardPlan {
+                file: format!("{DATA_DIR}/{split}-{index:05}-of-{n:05}.parquet"),
+                split: split.clone(),
+                clips: group,
+            });
+        }
+    }
+    plans
+}
+
+/// Reads back `split` and `source_path` of every written shard and refuses a capture found in
+/// two splits: the guarantee is checked on what was written, not assumed.
+fn check_splits(output: &Path, plans: &[ShardPlan]) -> Result<(), BuildError> {
+    use arrow_array::{Array, StringArray};
+    use parquet::arrow::ProjectionMask;
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let mut seen: BTreeMap<String, std::collections::BTreeSet<String>> = BTreeMap::new();
+    for plan in plans {
+        let path = output.join(&plan.file);
+        let table_err = |e: parquet::errors::ParquetError| BuildError::Table {
+            path: path.clone(),
+            source: e.into(),
+        };
+        let file = std::fs::File::open(&path).map_err(workspace::io_err(&path))?;
+        let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(table_err)?;
+        let mask = ProjectionMask::columns(builder.parquet_schema(), ["split", "source_path"]);
+        let reader = builder.with_projection(mask).build().map_err(table_err)?;
+        for batch in reader {
+            let batch = batch.map_err(|e| BuildError::Table {
+                path: path.clone(),
+                source: e.into(),
+            })?;
+            let column = |name: &str| {
+                batch
+                    .column_by_name(name)
+                    .and_then(|c| c.as_any().downcast_ref::<StringArray>().cloned())
+            };
+            let (Some(splits), Some(paths)) = (column("split"), column("source_path")) else {
+                continue;
+            };
+            for r in 0..batch.num_rows() {
+                if splits.is_null(r) || paths.is_null(r) {
+                    continue;
+                }
+                seen.entry(paths.value(r).to_string())
+                    .or_default()
+                    .insert(splits.value(r).to_string());
+            }
+        }
+    }
+    if let Some((capture, splits)) = seen.into_iter().find(|(_, s)| s.len() > 1) {
+        return Err(BuildError::SplitLeak {
+            capture,
+            splits: splits.into_iter().collect(),
+        });
+    }
+    Ok(())
+}
+
+/// Everything written beside the shards that the build computes: manifest fields and card text.
+pub(super) struct Companions {
+    /// `manifest.json` without the per-shard entries (added here).
+    pub(super) manifest: serde_json::Value,
+    /// Dataset card body (Markdown after the YAML front matter).
+    pub(super) card_body: String,
+    /// Licences of the sources, for the card's front matter.
+    pub(super) licences: Vec<String>,
+    /// Target shard size.
+    pub(super) shard_bytes: u64,
+}
+
+/// The card's Markdown body: what the dataset is, where it came from, its columns.
+pub(super) fn card_body(
+    config: &crate::config::Config,
+    clips: &[Clip],
+    licences: &[String],
+    kinds: &BTreeMap<String, usize>,
+) -> String {
+    use std::fmt::Write as _;
+    let mut b = String::new();
+    let _ = writeln!(b, "# {}\n", config.dataset.name);
+    let _ = writeln!(
+        b,
+        "Text-to-motion clips built by motionforge {} from motion-capture recordings: {} rows at {} fps, joint positions in metres (x right, y forward, z up), local rotations as quaternions.\n",
+        env!("CARGO_PKG_VERSION"),
+        clips.len(),
+        config.dataset.fps
+    );
+    let _ = writeln!(b, "## Sources and licences\n");
+    for source in &config.sources {
+        let n = clips
+            .iter()
+            .filter(|c| c.capture.source == source.name && !c.mirrored)
+            .map(|c| &c.capture.path)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len();
+        let licence = if source.licence.is_empty() {
+            "licence not stated in the build config"
+        } else {
+            source.licence.as_str()
+        };
+        let _ = writeln!(b, "- `{}` ({} captures): {licence}", source.name, n);
+    }
+    if licences.is_empty() {
+        let _ = writeln!(
+            b,
+            "\nNo licence was given in the build config; check each source's terms before sharing."
+        );
+    }
+    let _ = writeln!(b, "\n## Rows by kind\n");
+    for (k, n) in kinds {
+        let _ = writeln!(b, "- {k}: {n}");
+    }
+    let _ = writeln!(
+        b,
+        "\n## Columns\n\n| column | type | nullable |\n|---|---|---|"
+    );
+    for f in crate::io::schema::clip_schema().fields() {
+        let _ = writeln!(
+            b,
+            "| `{}` | {} | {} |",
+            f.name(),
+            f.data_type(),
+            if f.is_nullable() { "yes" } else { "no" }
+        );
+    }
+    let _ = writeln!(
+        b,
+        "\nShards: `data/<split>-NNNNN-of-NNNNN.parquet`; checksums and provenance in `manifest.json`; skeletons in `skeletons.json`. Every mirror and synthetic pair is in the split of its source captures."
+    );
+    b
+}
+
+fn card(name: &str, splits: &BTreeMap<String, usize>, companions: &Companions) -> String {
+    let mut y = String::from("---\n");
+    y.push_str(&format!("pretty_name: {name}\nlicense: other\n"));
+    if !companions.licences.is_empty() {
+        y.push_str("license_details: >-\n");
+        y.push_str(&format!("  {}\n", companions.licences.join("; ")));
+    }
+    y.push_str("tags:\n- motion-capture\n- text-to-motion\n- motionforge\nconfigs:\n- config_name: default\n  data_files:\n");
+    for split in splits.keys() {
+        y.push_str(&format!(
+            "  - split: {split}\n    path: {DATA_DIR}/{split}-*.parquet\n"
+        ));
+    }
+    y.push_str("dataset_info:\n  splits:\n");
+    for (split, rows) in splits {
+        y.push_str(&format!("  - name: {split}\n    num_examples: {rows}\n"));
+    }
+    y.push_str("---\n\n");
+    y.push_str(&companions.card_body);
+    y
+}
+
 pub(super) fn write_outputs(
     force: bool,
     output: &Path,
     workspace: &Workspace,
     fingerprint: &str,
     table: &Table<'_>,
+    companions: &Companions,
 ) -> Result<bool, BuildError> {
     let Table {
         plans,
@@ -93,24 +285,71 @@ pub(super) fn write_outputs(
         return Ok(false);
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
-    let table = output.join(CLIPS_FILE);
-    let mut table_error = None;
-    write_atomic_with(&table, |file| {
-        let f = file.try_clone()?;
-        write_clips(f, clips, profiles, &skeletons_json)
-            .map(|_| ())
-            .map_err(|e| {
-                table_error = Some(e);
-                std::io::Error::other("table encoding failed")
+    let plans_for_shards = plan_shards(clips, companions.shard_bytes);
+    let mut shard_fingerprints = BTreeMap::new();
+    let mut shard_entries: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
+    for plan in &plans_for_shards {
+        let rows: Vec<Clip> = plan.clips.iter().map(|&i| clips[i].clone()).collect();
+        let encoded = postcard::to_stdvec(&rows).map_err(|e| super::WorkspaceError::Encode {
+            what: plan.file.clone(),
+            message: e.to_string(),
+        })?;
+        let fp = super::Fingerprint::new("shard", 1)
+            .text(&sha256_hex(&encoded))
+            .text(&skeletons_json)
+            .json(&crate::io::schema::SCHEMA_VERSION)
+            .finish();
+        let path = output.join(&plan.file);
+        let fresh = !force
+            && state.shards.get(&plan.file) == Some(&fp)
+            && state
+                .outputs
+                .get(&plan.file)
+                .is_some_and(|sha| std::fs::read(&path).is_ok_and(|b| &sha256_hex(&b) == sha));
+        if !fresh {
+            let mut table_error = None;
+            write_atomic_with(&path, |file| {
+                write_clips(file.try_clone()?, &rows, profiles, &skeletons_json)
+                    .map(|_| ())
+                    .map_err(|e| {
+                        table_error = Some(e);
+                        std::io::Error::other("table encoding failed")
+                    })
             })
-    })
-    .map_err(|e| match table_error.take() {
-        Some(source) => BuildError::Table {
-            path: table.clone(),
-            source,
-        },
-        None => BuildError::Workspace(e),
-    })?;
+            .map_err(|e| match table_error.take() {
+                Some(source) => BuildError::Table {
+                    path: path.clone(),
+                    source,
+                },
+                None => BuildError::Workspace(e),
+            })?;
+        }
+        let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
+        shard_entries
+            .entry(plan.split.clone())
+            .or_default()
+            .push(serde_json::json!({
+                "file": plan.file,
+                "rows": rows.len(),
+                "bytes": bytes.len(),
+                "sha256": sha256_hex(&bytes),
+            }));
+        *split_rows.entry(plan.split.clone()).or_insert(0) += rows.len();
+        shard_fingerprints.insert(plan.file.clone(), fp);
+    }
+    // Shards of an earlier layout (other split names or counts) would look like part of the set.
+    let planned: std::collections::BTreeSet<&str> =
+        plans_for_shards.iter().map(|p| p.file.as_str()).collect();
+    if let Ok(entries) = std::fs::read_dir(output.join(DATA_DIR)) {
+        for entry in entries.flatten() {
+            let name = format!("{DATA_DIR}/{}", entry.file_name().to_string_lossy());
+            if name.ends_with(".parquet") && !planned.contains(name.as_str()) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+    check_splits(output, &plans_for_shards)?;
     write_atomic(&output.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
     let mut lines = String::new();
     for r in rejects {
@@ -136,13 +375,44 @@ pub(super) fn write_outputs(
         },
         None => BuildError::Workspace(e),
     })?;
-    for name in [CLIPS_FILE, SKELETONS_FILE, REJECTS_FILE, PLANS_FILE] {
-        let bytes =
-            std::fs::read(output.join(name)).map_err(workspace::io_err(&output.join(name)))?;
-        outputs.insert(name.to_string(), sha256_hex(&bytes));
+    let mut manifest = companions.manifest.clone();
+    let splits_json: serde_json::Map<String, serde_json::Value> = split_rows
+        .iter()
+        .map(|(split, rows)| {
+            (split.clone(), serde_json::json!({ "rows": rows, "shards": shard_entries.get(split).cloned().unwrap_or_default() }))
+        })
+        .collect();
+    manifest["splits"] = serde_json::Value::Object(splits_json);
+    write_atomic(
+        &output.join(MANIFEST_FILE),
+        &serde_json::to_vec_pretty(&manifest).unwrap_or_default(),
+    )?;
+    let name = manifest["dataset"]
+        .as_str()
+        .unwrap_or("dataset")
+        .to_string();
+    write_atomic(
+        &output.join(CARD_FILE),
+        card(&name, &split_rows, companions).as_bytes(),
+    )?;
+    let mut names: Vec<String> = [
+        SKELETONS_FILE,
+        REJECTS_FILE,
+        PLANS_FILE,
+        MANIFEST_FILE,
+        CARD_FILE,
+    ]
+    .map(String::from)
+    .to_vec();
+    names.extend(plans_for_shards.iter().map(|p| p.file.clone()));
+    for name in names {
+        let path = output.join(&name);
+        let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
+        outputs.insert(name, sha256_hex(&bytes));
     }
     let state = State {
         table_fingerprint: fingerprint.to_string(),
+        shards: shard_fingerprints,
         outputs,
     };
     write_atomic(

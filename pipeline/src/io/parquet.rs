@@ -282,6 +282,7 @@ pub fn clips_to_batch(
         Arc::new(BooleanArray::from(
             clips.iter().map(|c| c.mirrored).collect::<Vec<_>>(),
         )),
+        strings(&|c| &c.split),
         strings(&|c| &c.action),
         strings(&|c| &c.text),
         string_lists(clips.iter().map(|c| c.texts.as_slice())),

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use arrow_schema::{DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 4;
+pub const SCHEMA_VERSION: u32 = 5;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
@@ -58,6 +58,7 @@ pub fn clip_schema() -> Schema {
         Field::new("source_fps", DataType::Float64, false),
         Field::new("frame_range", DataType::Struct(frame_range), false),
         Field::new("mirrored", DataType::Boolean, false),
+        Field::new("split", DataType::Utf8, false),
         Field::new("action", DataType::Utf8, false),
         Field::new("text", DataType::Utf8, false),
         list_utf8("texts"),

@@ -295,6 +295,7 @@ pub fn run(
             capture: base.capture.clone(),
             frame_range: base.frame_range,
             mirrored: false,
+            split: a.split.clone(),
             action: format!("{} + {}", a.action, b.action),
             text: chosen,
             texts: variants.into_iter().map(|v| v.text).collect(),

@@ -7,3 +7,4 @@ pub mod ingest;
 pub mod label;
 pub mod mirror;
 pub mod segment;
+pub mod split;

@@ -222,6 +222,7 @@ impl ClipMaker<'_, '_> {
             capture: capture.capture.clone(),
             frame_range: (start, end),
             mirrored: false,
+            split: String::new(),
             action: String::new(),
             text: String::new(),
             texts: Vec::new(),

@@ -1,0 +1,1226 @@
+//! The figures, drawn with plotters into SVG and PNG. PNG text goes through ab_glyph with the
+//! bundled DejaVu Sans, so rendering needs no system font and gives the same pixels everywhere.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use plotters::coord::Shift;
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use plotters::style::{FontStyle, FontTransform, register_font};
+
+use super::stats::{
+    Stats, TypeStats, kde, lengths_by_type, metric_values, quantile, silverman_bandwidth,
+    type_order, whiskers,
+};
+use super::{ClipRow, ReportError};
+use crate::build::{temp_path, write_atomic};
+
+/// A figure of the report: its file stem under `figures/`, caption and pixel size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FigureSpec {
+    /// File stem: the figure is written as `figures/<stem>.svg` and `figures/<stem>.png`.
+    pub stem: &'static str,
+    /// What the figure shows, for `report.md`.
+    pub caption: &'static str,
+    /// Width in pixels (SVG user units).
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+/// Every figure, in the order of the report.
+pub const FIGURES: [FigureSpec; 5] = [
+    FigureSpec {
+        stem: "motion_type_counts",
+        caption: "Clips per motion type, log scale (original single clips; LINGO Fig. 6)",
+        width: 1200,
+        height: 700,
+    },
+    FigureSpec {
+        stem: "motion_lengths",
+        caption: "Motion length per motion type: Gaussian KDE violins over box plots (LINGO Fig. A2)",
+        width: 1200,
+        height: 800,
+    },
+    FigureSpec {
+        stem: "goal_locations",
+        caption: "Locomotion goal locations in the first-frame canonical frame, over a 2D histogram (LINGO Fig. A3)",
+        width: 1000,
+        height: 900,
+    },
+    FigureSpec {
+        stem: "composition",
+        caption: "Composition of each split by source kind, mirrored copies lighter (SINC Fig. A.4)",
+        width: 1200,
+        height: 700,
+    },
+    FigureSpec {
+        stem: "plausibility",
+        caption: "Plausibility metrics of real versus synthetic clips (originals), box plots",
+        width: 1200,
+        height: 800,
+    },
+];
+
+type DrawResult<T = ()> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+const FONT: &str = "sans-serif";
+const FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+const TITLE: f64 = 30.0;
+const DESC: f64 = 24.0;
+const TICK: f64 = 20.0;
+const NOTE: f64 = 18.0;
+/// At most this many goal points are drawn; the histogram below them counts every goal. Keeps
+/// the SVG of a large dataset small.
+const MAX_SCATTER: usize = 5000;
+/// Individual values are drawn beside violins and box plots up to this many per category, and
+/// only when there are at most [`MAX_STRIP_CATEGORIES`] categories: more would bury the shapes.
+const MAX_STRIP: usize = 20;
+/// See [`MAX_STRIP`].
+const MAX_STRIP_CATEGORIES: usize = 12;
+
+const BLUE: RGBColor = RGBColor(31, 119, 180);
+const ORANGE: RGBColor = RGBColor(255, 127, 14);
+const GREEN: RGBColor = RGBColor(44, 160, 44);
+const RED: RGBColor = RGBColor(214, 39, 40);
+const PURPLE: RGBColor = RGBColor(148, 103, 189);
+const GREY: RGBColor = RGBColor(127, 127, 127);
+const DARK: RGBColor = RGBColor(50, 50, 50);
+const GRID: RGBColor = RGBColor(225, 225, 225);
+
+/// A linear f64 axis with explicit tick positions: plotters' `with_key_points` disables label
+/// formatters, and its own tick choice gives steps like 0.30000000000000004 or 2.5 clips.
+#[derive(Debug, Clone)]
+struct Axis {
+    lo: f64,
+    hi: f64,
+    bold: Vec<f64>,
+    light: Vec<f64>,
+}
+
+impl Axis {
+    fn new(range: std::ops::Range<f64>, bold: Vec<f64>) -> Axis {
+        Axis {
+            lo: range.start,
+            hi: range.end,
+            bold,
+            light: Vec::new(),
+        }
+    }
+
+    fn with_light(mut self, light: Vec<f64>) -> Axis {
+        self.light = light;
+        self
+    }
+
+    /// A categorical axis: categories at 0, 1, ..., n - 1, half a slot of room at both ends.
+    fn categories(n: usize) -> Axis {
+        Axis::new(-0.5..n as f64 - 0.5, (0..n).map(|i| i as f64).collect())
+    }
+}
+
+impl Ranged for Axis {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let span = self.hi - self.lo;
+        if span == 0.0 || !span.is_finite() {
+            return (limit.0 + limit.1) / 2;
+        }
+        let t = (value - self.lo) / span;
+        limit.0 + (f64::from(limit.1 - limit.0) * t).round() as i32
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            self.light.clone()
+        } else {
+            self.bold.clone()
+        }
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.lo..self.hi
+    }
+}
+
+/// Registers the bundled font once per process; every later call sees the first result.
+fn ensure_font() -> Result<(), ReportError> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| register_font(FONT, FontStyle::Normal, FONT_BYTES).is_ok());
+    if ok { Ok(()) } else { Err(ReportError::Font) }
+}
+
+fn font(size: f64) -> TextStyle<'static> {
+    TextStyle::from((FONT, size).into_font()).color(&BLACK)
+}
+
+/// Writes every figure of [`FIGURES`] as SVG and PNG into `dir`; returns the paths.
+pub(crate) fn write_figures(
+    rows: &[ClipRow],
+    stats: &Stats,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, ReportError> {
+    ensure_font()?;
+    fs::create_dir_all(dir).map_err(|source| ReportError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    for spec in &FIGURES {
+        let fail = |e: Box<dyn std::error::Error + Send + Sync>| ReportError::Figure {
+            figure: spec.stem.to_string(),
+            message: e.to_string(),
+        };
+        let svg_path = dir.join(format!("{}.svg", spec.stem));
+        let mut svg = String::new();
+        {
+            let root =
+                SVGBackend::with_string(&mut svg, (spec.width, spec.height)).into_drawing_area();
+            render(spec, &root, rows, stats)
+                .and_then(|()| root.present().map_err(Into::into))
+                .map_err(fail)?;
+        }
+        write_atomic(&svg_path, svg.as_bytes())?;
+        written.push(svg_path);
+
+        let png_path = dir.join(format!("{}.png", spec.stem));
+        // The bitmap backend writes a path and picks the encoder from its extension, so the
+        // temporary file keeps `.png` at the end; the rename makes the write atomic.
+        let tmp = PathBuf::from(format!("{}.png", temp_path(&png_path).display()));
+        let drawn = {
+            let root = BitMapBackend::new(&tmp, (spec.width, spec.height)).into_drawing_area();
+            render(spec, &root, rows, stats).and_then(|()| root.present().map_err(Into::into))
+        };
+        let finished = drawn.map_err(fail).and_then(|()| {
+            let io = |source| ReportError::Io {
+                path: png_path.clone(),
+                source,
+            };
+            fs::File::open(&tmp)
+                .and_then(|f| f.sync_all())
+                .map_err(io)?;
+            fs::rename(&tmp, &png_path).map_err(io)
+        });
+        if let Err(e) = finished {
+            let _ = fs::remove_file(&tmp);
+            return Err(e);
+        }
+        written.push(png_path);
+    }
+    Ok(written)
+}
+
+fn render<DB: DrawingBackend>(
+    spec: &FigureSpec,
+    root: &DrawingArea<DB, Shift>,
+    rows: &[ClipRow],
+    stats: &Stats,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    match spec.stem {
+        "motion_type_counts" => motion_type_counts(root, stats),
+        "motion_lengths" => motion_lengths(root, rows, stats),
+        "goal_locations" => goal_locations(root, rows, stats),
+        "composition" => composition(root, stats),
+        _ => plausibility(root, rows, stats),
+    }
+}
+
+/// Draws the figure title with room above it (glyphs rise above plotters' text box) and returns
+/// the area below.
+fn titled<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    text: &str,
+) -> DrawResult<DrawingArea<DB, Shift>>
+where
+    DB::ErrorType: 'static,
+{
+    // A long dataset name must not push the title off the figure: shrink it to fit.
+    let width = f64::from(root.dim_in_pixel().0) - 20.0;
+    let mut size = TITLE;
+    while size > 16.0 && f64::from(root.estimate_text_size(text, &font(size))?.0) > width {
+        size -= 1.0;
+    }
+    Ok(root.margin(12, 0, 0, 0).titled(text, font(size))?)
+}
+
+fn with_title(title: &str, what: &str) -> String {
+    if title.is_empty() {
+        what.to_string()
+    } else {
+        format!("{title}: {what}")
+    }
+}
+
+/// Readable source-kind names: `real_single` -> `real single`.
+pub(crate) fn kind_label(kind: &str) -> String {
+    kind.replace('_', " ")
+}
+
+fn kind_color(kind: &str) -> RGBColor {
+    match kind {
+        "real_single" => BLUE,
+        "real_pair" => ORANGE,
+        "synthetic" => GREEN,
+        _ => PURPLE,
+    }
+}
+
+/// `c` mixed with white: `t = 0` is `c`, `t = 1` white.
+fn lighten(c: RGBColor, t: f64) -> RGBColor {
+    let m = |v: u8| (f64::from(v) + (255.0 - f64::from(v)) * t).round() as u8;
+    RGBColor(m(c.0), m(c.1), m(c.2))
+}
+
+/// The motion types in the order of both type figures: most clips first, ties by name.
+fn types_by_count(stats: &Stats) -> Vec<&TypeStats> {
+    let mut types: Vec<&TypeStats> = stats.motion_types.iter().collect();
+    types.sort_by(|a, b| {
+        b.clips
+            .cmp(&a.clips)
+            .then(type_order(&a.motion_type, &b.motion_type))
+    });
+    types
+}
+
+/// Category labels under a categorical x axis: wrapped onto lines that fit the slot, or rotated
+/// to read upwards when some word is wider than the slot.
+struct Categories {
+    lines: Vec<Vec<String>>,
+    rotated: bool,
+    /// Font size: [`TICK`], or [`NOTE`] when rotated (many categories, long names).
+    size: f64,
+    line_height: u32,
+    /// Pixels the labels need below the axis.
+    height: u32,
+}
+
+fn layout_categories<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    labels: &[(String, Option<String>)],
+    slot: f64,
+) -> DrawResult<Categories>
+where
+    DB::ErrorType: 'static,
+{
+    let style = &font(TICK);
+    let (_, line_height) = area.estimate_text_size("Ag", style)?;
+    let line_height = line_height + 4;
+    let fits = |s: &str| -> DrawResult<bool> {
+        Ok(f64::from(area.estimate_text_size(s, style)?.0) <= slot * 0.92)
+    };
+    let mut all = Vec::new();
+    let mut rotated = false;
+    'labels: for (name, sub) in labels {
+        let mut lines: Vec<String> = Vec::new();
+        for word in name.split_whitespace() {
+            if !fits(word)? {
+                rotated = true;
+                break 'labels;
+            }
+            match lines.last_mut() {
+                Some(last) if fits(&format!("{last} {word}"))? => {
+                    last.push(' ');
+                    last.push_str(word);
+                }
+                _ => lines.push(word.to_string()),
+            }
+        }
+        if let Some(sub) = sub {
+            if !fits(sub)? {
+                rotated = true;
+                break;
+            }
+            lines.push(sub.clone());
+        }
+        if lines.len() > 4 {
+            rotated = true;
+            break;
+        }
+        all.push(lines);
+    }
+    if rotated {
+        let style = &font(NOTE);
+        let mut lines = Vec::new();
+        let mut widest = 0;
+        for (name, sub) in labels {
+            let text = match sub {
+                Some(sub) => format!("{name} {sub}"),
+                None => name.clone(),
+            };
+            widest = widest.max(area.estimate_text_size(&text, style)?.0);
+            lines.push(vec![text]);
+        }
+        return Ok(Categories {
+            lines,
+            rotated: true,
+            size: NOTE,
+            line_height,
+            height: widest + 16,
+        });
+    }
+    let most = all.iter().map(Vec::len).max().unwrap_or(1) as u32;
+    Ok(Categories {
+        lines: all,
+        rotated: false,
+        size: TICK,
+        line_height,
+        height: most * line_height + 16,
+    })
+}
+
+/// Draws category labels below the axis points `anchors` (backend pixels) on the whole figure.
+fn draw_categories<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    anchors: &[(i32, i32)],
+    cats: &Categories,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let style = &font(cats.size);
+    let (x0, y0) = (
+        root.get_pixel_range().0.start,
+        root.get_pixel_range().1.start,
+    );
+    for (lines, &(x, y)) in cats.lines.iter().zip(anchors) {
+        let (x, y) = (x - x0, y - y0);
+        if cats.rotated {
+            let s = style
+                .transform(FontTransform::Rotate270)
+                .pos(Pos::new(HPos::Right, VPos::Center));
+            if let Some(text) = lines.first() {
+                root.draw_text(text, &s, (x, y + 10))?;
+            }
+        } else {
+            let s = style.pos(Pos::new(HPos::Center, VPos::Top));
+            for (k, line) in lines.iter().enumerate() {
+                // Clear of the tick marks (5 px) below the axis.
+                root.draw_text(line, &s, (x, y + 12 + (k as u32 * cats.line_height) as i32))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A note in an empty plot, centred across and at `height` (0 top, 1 bottom) down.
+fn draw_note<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    text: &str,
+    height: f64,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let (w, h) = area.dim_in_pixel();
+    let s = font(DESC)
+        .color(&GREY)
+        .pos(Pos::new(HPos::Center, VPos::Center));
+    area.draw_text(text, &s, (w as i32 / 2, (f64::from(h) * height) as i32))?;
+    Ok(())
+}
+
+/// Count as a tick label: `1`, `10`, `100`, `1000`, `10k`, `100k`, `1M`.
+fn count_label(v: f64) -> String {
+    let v = v.round();
+    if v >= 1e6 {
+        format!("{}M", (v / 1e6).round())
+    } else if v >= 1e4 {
+        format!("{}k", (v / 1e3).round())
+    } else {
+        format!("{v}")
+    }
+}
+
+/// Tick label of a linear axis with step `step`: as many decimals as the step has (0.025 needs
+/// three), so ticks are written exactly.
+fn tick_label(v: f64, step: f64) -> String {
+    let decimals = if step > 0.0 && step.is_finite() {
+        (0..=6usize)
+            .find(|d| {
+                let scaled = step * 10f64.powi(*d as i32);
+                (scaled - scaled.round()).abs() < 1e-6 * scaled.max(1.0)
+            })
+            .unwrap_or(6)
+    } else {
+        2
+    };
+    let s = format!("{v:.decimals$}");
+    // "-0.0" reads like a value below zero.
+    if s.trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        s.trim_start_matches('-').to_string()
+    } else {
+        s
+    }
+}
+
+/// Evenly spaced "nice" ticks (1, 2, 2.5, 5 x 10^k) covering `[lo, hi]`, about `target` of them.
+fn nice_ticks(lo: f64, hi: f64, target: usize) -> (Vec<f64>, f64) {
+    let span = (hi - lo).max(1e-9);
+    let raw = span / target.max(1) as f64;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    let ticks = (first..=last).map(|k| k as f64 * step).collect();
+    (ticks, step)
+}
+
+/// Horizontal offset of the `k`-th point of a strip, in category units: a fixed low-discrepancy
+/// sequence instead of random jitter, so figures are reproducible.
+fn jitter(k: usize, width: f64) -> f64 {
+    ((k as f64 * 0.618_033_988_75).fract() - 0.5) * width
+}
+
+// ---------------------------------------------------------------------------------------------
+// Figure 1: occurrences per motion type (LINGO Fig. 6).
+
+fn motion_type_counts<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    stats: &Stats,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let types = types_by_count(stats);
+    let area = titled(
+        root,
+        &with_title(
+            &stats.title,
+            &format!(
+                "clips per motion type (original single clips, n = {})",
+                stats.motion_types_total.clips
+            ),
+        ),
+    )?;
+    let n = types.len().max(1);
+    let max = types.iter().map(|t| t.clips).max().unwrap_or(1).max(1) as f64;
+    // Bars rise from 0.5 so a type with one clip still shows a bar on the log axis; the top
+    // leaves room for the count above the tallest bar.
+    let (lo, hi) = (0.5f64.log10(), (max * 2.5).log10().max(1.0));
+    // Few decades: 1-2-5 ticks, so a small dataset's axis is not just "1" and "10".
+    let mantissas: &[f64] = if hi - lo <= 2.5 {
+        &[1.0, 2.0, 5.0]
+    } else {
+        &[1.0]
+    };
+    let bold: Vec<f64> = (lo.floor() as i32..=hi.ceil() as i32)
+        .flat_map(|k| mantissas.iter().map(move |m| (m * 10f64.powi(k)).log10()))
+        // No tick below one clip: the axis only starts at 0.5 to give a count of 1 a bar.
+        .filter(|v| *v >= -1e-9 && *v <= hi + 1e-9)
+        .collect();
+    let light: Vec<f64> = (lo.floor() as i32..=hi.ceil() as i32)
+        .flat_map(|k| (2..10).map(move |m| (f64::from(m) * 10f64.powi(k)).log10()))
+        .filter(|v| *v > lo && *v < hi)
+        .collect();
+    let (margin, y_area) = (20u32, 90u32);
+    let slot = f64::from(
+        area.dim_in_pixel()
+            .0
+            .saturating_sub(2 * margin + y_area)
+            .max(1),
+    ) / n as f64;
+    let labels: Vec<(String, Option<String>)> = types
+        .iter()
+        .map(|t| (t.motion_type.clone(), None))
+        .collect();
+    let cats = layout_categories(&area, &labels, slot)?;
+    let mut chart = ChartBuilder::on(&area)
+        .margin(margin)
+        .x_label_area_size(cats.height + 40)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(
+            Axis::categories(n),
+            Axis::new(lo..hi, bold).with_light(light),
+        )?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .bold_line_style(GRID)
+        .light_line_style(RGBColor(242, 242, 242))
+        .x_label_formatter(&|_| String::new())
+        .y_label_formatter(&|v| count_label(10f64.powf(*v)))
+        .label_style(font(TICK))
+        .axis_desc_style(font(DESC))
+        .x_desc("motion type")
+        .y_desc("clips (log scale)")
+        .draw()?;
+    if types.is_empty() {
+        draw_note(&area, "no original single clips", 0.45)?;
+        return Ok(());
+    }
+    chart.draw_series(types.iter().enumerate().map(|(i, t)| {
+        let x = i as f64;
+        Rectangle::new(
+            [(x - 0.36, lo), (x + 0.36, (t.clips as f64).log10())],
+            BLUE.filled(),
+        )
+    }))?;
+    chart.draw_series(types.iter().enumerate().map(|(i, t)| {
+        Text::new(
+            t.clips.to_string(),
+            (i as f64, (t.clips as f64).log10()),
+            // Narrow bars get smaller numbers so neighbours' counts do not run together.
+            font(NOTE.min(slot / 2.2).max(10.0)).pos(Pos::new(HPos::Center, VPos::Bottom)),
+        )
+    }))?;
+    let anchors: Vec<(i32, i32)> = (0..types.len())
+        .map(|i| chart.backend_coord(&(i as f64, lo)))
+        .collect();
+    draw_categories(root, &anchors, &cats)?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Figure 2: motion length violins (LINGO Fig. A2).
+
+fn motion_lengths<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    rows: &[ClipRow],
+    stats: &Stats,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let order = types_by_count(stats);
+    let lengths = lengths_by_type(rows);
+    let data: Vec<(&str, &[f64])> = order
+        .iter()
+        .filter_map(|t| {
+            lengths
+                .iter()
+                .find(|(name, _)| *name == t.motion_type)
+                .map(|(name, v)| (name.as_str(), v.as_slice()))
+        })
+        .collect();
+    let area = titled(
+        root,
+        &with_title(
+            &stats.title,
+            "motion length per motion type (original single clips)",
+        ),
+    )?;
+    // Each violin is a KDE polygon on [min - 2h, max + 2h] (cut at 0: lengths are positive),
+    // scaled to the same maximum width so narrow and wide types stay comparable in shape.
+    struct Violin {
+        outline: Vec<(f64, f64)>,
+    }
+    let mut violins = Vec::new();
+    let mut top: f64 = 0.0;
+    for (i, (_, values)) in data.iter().enumerate() {
+        top = top.max(values.last().copied().unwrap_or(0.0));
+        let Some(h) = silverman_bandwidth(values) else {
+            violins.push(None);
+            continue;
+        };
+        let (Some(&min), Some(&max)) = (values.first(), values.last()) else {
+            violins.push(None);
+            continue;
+        };
+        let (a, b) = ((min - 2.0 * h).max(0.0), max + 2.0 * h);
+        top = top.max(b);
+        let grid: Vec<f64> = (0..=160)
+            .map(|k| a + (b - a) * f64::from(k) / 160.0)
+            .collect();
+        let density = kde(values, h, &grid);
+        let peak = density.iter().copied().fold(0.0, f64::max);
+        if peak <= 0.0 {
+            violins.push(None);
+            continue;
+        }
+        let x = i as f64;
+        let mut outline: Vec<(f64, f64)> = grid
+            .iter()
+            .zip(&density)
+            .map(|(y, d)| (x + 0.4 * d / peak, *y))
+            .collect();
+        outline.extend(
+            grid.iter()
+                .zip(&density)
+                .rev()
+                .map(|(y, d)| (x - 0.4 * d / peak, *y)),
+        );
+        violins.push(Some(Violin { outline }));
+    }
+    let top = if top > 0.0 { top * 1.05 } else { 1.0 };
+    let n = data.len().max(1);
+    let (margin, y_area) = (20u32, 90u32);
+    let slot = f64::from(
+        area.dim_in_pixel()
+            .0
+            .saturating_sub(2 * margin + y_area)
+            .max(1),
+    ) / n as f64;
+    let labels: Vec<(String, Option<String>)> = data
+        .iter()
+        .map(|(name, v)| (name.to_string(), Some(format!("(n = {})", v.len()))))
+        .collect();
+    let cats = layout_categories(&area, &labels, slot)?;
+    let (ticks, step) = nice_ticks(0.0, top, 8);
+    let mut chart = ChartBuilder::on(&area)
+        .margin(margin)
+        .x_label_area_size(cats.height + 40)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(Axis::categories(n), Axis::new(0.0..top, ticks))?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .bold_line_style(GRID)
+        .x_label_formatter(&|_| String::new())
+        .y_label_formatter(&|v| tick_label(*v, step))
+        .label_style(font(TICK))
+        .axis_desc_style(font(DESC))
+        .x_desc("motion type")
+        .y_desc("motion length (s)")
+        .draw()?;
+    if data.is_empty() {
+        draw_note(&area, "no original single clips", 0.45)?;
+        return Ok(());
+    }
+    for v in violins.iter().flatten() {
+        {
+            chart.draw_series(std::iter::once(Polygon::new(
+                v.outline.clone(),
+                BLUE.mix(0.3).filled(),
+            )))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                v.outline
+                    .iter()
+                    .copied()
+                    .chain(v.outline.first().copied())
+                    .collect::<Vec<_>>(),
+                BLUE.stroke_width(2),
+            )))?;
+        }
+    }
+    // At least a few pixels wide, however many types share the axis.
+    let half = 0.06f64.max(4.0 / slot).min(0.25);
+    for (i, (_, values)) in data.iter().enumerate() {
+        draw_box(&mut chart, values, i as f64, half, DARK)?;
+        if values.len() <= MAX_STRIP && data.len() <= MAX_STRIP_CATEGORIES {
+            chart.draw_series(values.iter().enumerate().map(|(k, v)| {
+                Circle::new(
+                    (i as f64 + 0.18 + jitter(k, 0.1), *v),
+                    4,
+                    BLACK.mix(0.55).filled(),
+                )
+            }))?;
+        }
+    }
+    let anchors: Vec<(i32, i32)> = (0..data.len())
+        .map(|i| chart.backend_coord(&(i as f64, 0.0)))
+        .collect();
+    draw_categories(root, &anchors, &cats)?;
+    Ok(())
+}
+
+/// Draws a box plot of ascending `sorted` at `x` with box half-width `half`: a filled quartile
+/// box, a white median bar, Tukey whiskers and outliers. One value draws as a single bar.
+fn draw_box<DB: DrawingBackend, X, Y>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    sorted: &[f64],
+    x: f64,
+    half: f64,
+    color: RGBColor,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    if sorted.is_empty() {
+        return Ok(());
+    }
+    let (q1, med, q3) = (
+        quantile(sorted, 0.25),
+        quantile(sorted, 0.5),
+        quantile(sorted, 0.75),
+    );
+    let (lo, hi) = whiskers(sorted, q1, q3);
+    chart.draw_series([
+        PathElement::new(vec![(x, lo), (x, q1)], color.stroke_width(2)),
+        PathElement::new(vec![(x, q3), (x, hi)], color.stroke_width(2)),
+        PathElement::new(
+            vec![(x - half * 0.6, lo), (x + half * 0.6, lo)],
+            color.stroke_width(2),
+        ),
+        PathElement::new(
+            vec![(x - half * 0.6, hi), (x + half * 0.6, hi)],
+            color.stroke_width(2),
+        ),
+    ])?;
+    chart.draw_series(std::iter::once(Rectangle::new(
+        [(x - half, q1), (x + half, q3)],
+        color.filled(),
+    )))?;
+    // A box of no height (one value, or identical quartiles) would hide a white median.
+    let (median_color, reach) = if q3 > q1 {
+        (WHITE, half)
+    } else {
+        (color, half * 1.4)
+    };
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(x - reach, med), (x + reach, med)],
+        median_color.stroke_width(3),
+    )))?;
+    chart.draw_series(
+        sorted
+            .iter()
+            .filter(|v| **v < lo || **v > hi)
+            .map(|v| Circle::new((x, *v), 4, color.stroke_width(1))),
+    )?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Figure 3: locomotion goal locations (LINGO Fig. A3).
+
+/// A "nice" step (1, 2, 2.5 or 5 x 10^k) at least `raw`.
+fn nice_step(raw: f64) -> f64 {
+    let raw = if raw > 0.0 && raw.is_finite() {
+        raw
+    } else {
+        1.0
+    };
+    let mag = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw * (1.0 - 1e-9))
+        .unwrap_or(10.0 * mag)
+}
+
+/// ColorBrewer's YlGnBu, light to dark: low counts stay close to the white background.
+fn heat_color(t: f64) -> RGBColor {
+    const STOPS: [(u8, u8, u8); 9] = [
+        (255, 255, 217),
+        (237, 248, 177),
+        (199, 233, 180),
+        (127, 205, 187),
+        (65, 182, 196),
+        (29, 145, 192),
+        (34, 94, 168),
+        (37, 52, 148),
+        (8, 29, 88),
+    ];
+    let t = t.clamp(0.0, 1.0) * (STOPS.len() - 1) as f64;
+    let i = (t.floor() as usize).min(STOPS.len() - 2);
+    let f = t - i as f64;
+    let (a, b) = (STOPS[i], STOPS[i + 1]);
+    let m = |x: u8, y: u8| (f64::from(x) + (f64::from(y) - f64::from(x)) * f).round() as u8;
+    RGBColor(m(a.0, b.0), m(a.1, b.1), m(a.2, b.2))
+}
+
+fn goal_locations<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    rows: &[ClipRow],
+    stats: &Stats,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let goals: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.is_original())
+        .filter_map(|r| r.goal_pelvis)
+        .map(|g| (f64::from(g[0]), f64::from(g[1])))
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    let area = titled(
+        root,
+        &with_title(
+            &stats.title,
+            &format!(
+                "locomotion goals in the first-frame canonical frame (n = {})",
+                goals.len()
+            ),
+        ),
+    )?;
+    let (aw, _) = area.dim_in_pixel();
+    let bar_width = 140;
+    let (main, bar) = area.split_horizontally(aw.saturating_sub(bar_width));
+    let (margin, x_area, y_area) = (20u32, 80u32, 90u32);
+    let (mw, mh) = main.dim_in_pixel();
+    let pw = f64::from(mw.saturating_sub(2 * margin + y_area).max(1));
+    let ph = f64::from(mh.saturating_sub(2 * margin + x_area).max(1));
+
+    // The extent always holds the start (0, 0); equal axes: one metre is as long on x as on y,
+    // so the range of the shorter side grows to the plot's pixel aspect.
+    let fold = |f: fn(f64, f64) -> f64, init: f64, pick: fn(&(f64, f64)) -> f64| {
+        goals.iter().map(pick).fold(init, f)
+    };
+    let (mut x0, mut x1) = (fold(f64::min, 0.0, |g| g.0), fold(f64::max, 0.0, |g| g.0));
+    let (mut y0, mut y1) = (fold(f64::min, 0.0, |g| g.1), fold(f64::max, 0.0, |g| g.1));
+    // At least 2 m each way, so a few nearby goals (or none) do not zoom in to centimetres.
+    for (lo, hi) in [(&mut x0, &mut x1), (&mut y0, &mut y1)] {
+        let grow = (2.0 - (*hi - *lo)).max(0.0) / 2.0;
+        *lo -= grow;
+        *hi += grow;
+    }
+    let span = (x1 - x0).max(y1 - y0);
+    let pad = 0.08 * span;
+    x0 -= pad;
+    x1 += pad;
+    y0 -= pad;
+    y1 += pad;
+    let scale = ((x1 - x0) / pw).max((y1 - y0) / ph);
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let (hx, hy) = (scale * pw / 2.0, scale * ph / 2.0);
+    let (x0, x1, y0, y1) = (cx - hx, cx + hx, cy - hy, cy + hy);
+
+    let step = nice_step((x1 - x0).max(y1 - y0) / (pw.max(ph) / 110.0));
+    let ticks = |lo: f64, hi: f64| -> Vec<f64> {
+        ((lo / step).ceil() as i64..=(hi / step).floor() as i64)
+            .map(|k| k as f64 * step)
+            .collect()
+    };
+    let mut chart = ChartBuilder::on(&main)
+        .margin(margin)
+        .x_label_area_size(x_area)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(
+            Axis::new(x0..x1, ticks(x0, x1)),
+            Axis::new(y0..y1, ticks(y0, y1)),
+        )?;
+
+    // Histogram bins: square, about 30 across the larger data extent, aligned to the origin.
+    let bin = nice_step(span / 30.0);
+    let mut bins: std::collections::BTreeMap<(i64, i64), usize> = Default::default();
+    for (x, y) in &goals {
+        *bins
+            .entry(((x / bin).floor() as i64, (y / bin).floor() as i64))
+            .or_insert(0) += 1;
+    }
+    let max_count = bins.values().copied().max().unwrap_or(1).max(1);
+    chart.draw_series(bins.iter().map(|(&(i, j), &c)| {
+        let (bx, by) = (i as f64 * bin, j as f64 * bin);
+        Rectangle::new(
+            [(bx, by), (bx + bin, by + bin)],
+            heat_color(c as f64 / max_count as f64).filled(),
+        )
+    }))?;
+    chart
+        .configure_mesh()
+        .bold_line_style(GRID.mix(0.8))
+        .x_label_formatter(&|v| tick_label(*v, step))
+        .y_label_formatter(&|v| tick_label(*v, step))
+        .label_style(font(TICK))
+        .axis_desc_style(font(DESC))
+        .x_desc("lateral (m, + right)")
+        .y_desc("forward (m)")
+        .draw()?;
+
+    // Points over the bins; a very large set is thinned by a fixed stride (the bins count all).
+    let stride = goals.len().div_ceil(MAX_SCATTER).max(1);
+    let shown: Vec<(f64, f64)> = goals.iter().copied().step_by(stride).collect();
+    // Many points shrink and lose their outline so the histogram below stays visible.
+    let radius = match shown.len() {
+        0..=100 => 5,
+        101..=1000 => 3,
+        _ => 2,
+    };
+    let label = if stride > 1 {
+        format!("goal of a clip (every {stride}th of {})", goals.len())
+    } else {
+        format!("goal of a clip (n = {})", goals.len())
+    };
+    chart
+        .draw_series(
+            shown
+                .iter()
+                .map(|p| Circle::new(*p, radius, RED.mix(0.85).filled())),
+        )?
+        .label(label)
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+    if shown.len() <= 100 {
+        chart.draw_series(
+            shown
+                .iter()
+                .map(|p| Circle::new(*p, radius, BLACK.stroke_width(1))),
+        )?;
+    }
+    let s = 0.02 * (y1 - y0);
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            vec![(0.0, 2.0 * s), (-s, -s), (s, -s)],
+            BLACK.filled(),
+        )))?
+        .label("start, facing +y")
+        .legend(|(x, y)| {
+            Polygon::new(
+                vec![(x + 10, y - 8), (x + 4, y + 6), (x + 16, y + 6)],
+                BLACK.filled(),
+            )
+        });
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.9))
+        .border_style(GREY)
+        .label_font(font(NOTE))
+        .draw()?;
+    if goals.is_empty() {
+        draw_note(
+            &chart.plotting_area().strip_coord_spec(),
+            "no clips with a goal_pelvis",
+            0.3,
+        )?;
+    }
+
+    // Colour bar, aligned with the plot's vertical extent.
+    let mut cbar = ChartBuilder::on(&bar)
+        .margin_top(margin)
+        .margin_bottom(margin + x_area)
+        .margin_left(10)
+        .margin_right(10)
+        .set_label_area_size(LabelAreaPosition::Right, 85)
+        .build_cartesian_2d(0.0..1.0, 0.0..max_count as f64)?;
+    let cstep = nice_step(max_count as f64 / 6.0).max(1.0);
+    cbar.draw_series((0..100).map(|k| {
+        let (a, b) = (f64::from(k) / 100.0, f64::from(k + 1) / 100.0);
+        Rectangle::new(
+            [(0.0, a * max_count as f64), (1.0, b * max_count as f64)],
+            heat_color((a + b) / 2.0).filled(),
+        )
+    }))?;
+    cbar.configure_mesh()
+        .disable_mesh()
+        .y_labels((max_count as f64 / cstep) as usize + 1)
+        .y_label_formatter(&|v| {
+            if (v / cstep).fract().abs() < 1e-9 {
+                format!("{v:.0}")
+            } else {
+                String::new()
+            }
+        })
+        .label_style(font(TICK))
+        .axis_desc_style(font(NOTE))
+        .y_desc(format!("clips per {} m bin", tick_label(bin, bin)))
+        .draw()?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Figure 4: composition by source kind per split (SINC Fig. A.4).
+
+fn composition<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, stats: &Stats) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let splits = &stats.composition;
+    let area = titled(
+        root,
+        &with_title(
+            &stats.title,
+            &format!(
+                "composition by source kind ({} rows, {} mirrored)",
+                stats.overview.rows, stats.overview.mirrored
+            ),
+        ),
+    )?;
+    let n = splits.len().max(1);
+    let k = splits.first().map_or(1, |s| s.kinds.len()).max(1);
+    let max = splits
+        .iter()
+        .flat_map(|s| s.kinds.iter().map(|c| c.total))
+        .max()
+        .unwrap_or(0)
+        .max(1) as f64;
+    let top = max * 1.2;
+    let (ticks, step) = nice_ticks(0.0, top, 8);
+    let ticks: Vec<f64> = ticks.into_iter().filter(|t| t.fract() == 0.0).collect();
+    let (margin, y_area) = (20u32, 100u32);
+    let slot = f64::from(
+        area.dim_in_pixel()
+            .0
+            .saturating_sub(2 * margin + y_area)
+            .max(1),
+    ) / n as f64;
+    let labels: Vec<(String, Option<String>)> = splits
+        .iter()
+        .map(|s| (s.split.clone(), Some(format!("(n = {})", s.total))))
+        .collect();
+    let cats = layout_categories(&area, &labels, slot)?;
+    let mut chart = ChartBuilder::on(&area)
+        .margin(margin)
+        .x_label_area_size(cats.height + 40)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(Axis::categories(n), Axis::new(0.0..top, ticks))?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .bold_line_style(GRID)
+        .x_label_formatter(&|_| String::new())
+        .y_label_formatter(&|v| tick_label(*v, step.max(1.0)))
+        .label_style(font(TICK))
+        .axis_desc_style(font(DESC))
+        .x_desc("split")
+        .y_desc("clips (rows)")
+        .draw()?;
+    let width = 0.8 / k as f64;
+    let bar_x = |s: usize, j: usize| s as f64 - 0.4 + (j as f64 + 0.5) * width;
+    for (s, split) in splits.iter().enumerate() {
+        for (j, c) in split.kinds.iter().enumerate() {
+            let (x, half) = (bar_x(s, j), width * 0.42);
+            let color = kind_color(&c.source_kind);
+            chart.draw_series([
+                Rectangle::new(
+                    [(x - half, 0.0), (x + half, c.originals as f64)],
+                    color.filled(),
+                ),
+                Rectangle::new(
+                    [(x - half, c.originals as f64), (x + half, c.total as f64)],
+                    lighten(color, 0.55).filled(),
+                ),
+            ])?;
+            let at = (x, c.total as f64);
+            let style = font(NOTE).pos(Pos::new(HPos::Center, VPos::Bottom));
+            // An empty bar gets its zero only: "0.0%" under every missing kind is clutter.
+            if c.total == 0 {
+                chart.draw_series([
+                    EmptyElement::at(at) + Text::new("0".to_string(), (0, -4), style)
+                ])?;
+            } else {
+                chart.draw_series([
+                    EmptyElement::at(at) + Text::new(c.total.to_string(), (0, -24), style.clone()),
+                    EmptyElement::at(at)
+                        + Text::new(format!("{:.1}%", c.share * 100.0), (0, -4), style),
+                ])?;
+            }
+        }
+    }
+    if let Some(first) = splits.first() {
+        for c in &first.kinds {
+            let color = kind_color(&c.source_kind);
+            chart
+                .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
+                .label(kind_label(&c.source_kind))
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 7), (x + 20, y + 7)], color.filled())
+                });
+        }
+        chart
+            .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
+            .label("mirrored copies (lighter)")
+            .legend(|(x, y)| {
+                Rectangle::new([(x, y - 7), (x + 20, y + 7)], lighten(GREY, 0.55).filled())
+            });
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.9))
+            .border_style(GREY)
+            .label_font(font(NOTE))
+            .draw()?;
+    } else {
+        draw_note(&area, "no clips", 0.45)?;
+    }
+    let anchors: Vec<(i32, i32)> = (0..splits.len())
+        .map(|i| chart.backend_coord(&(i as f64, 0.0)))
+        .collect();
+    draw_categories(root, &anchors, &cats)?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Figure 5: plausibility, real versus synthetic.
+
+fn plausibility<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    rows: &[ClipRow],
+    stats: &Stats,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let area = titled(
+        root,
+        &with_title(
+            &stats.title,
+            "plausibility of real versus synthetic clips (originals)",
+        ),
+    )?;
+    let panels = area.split_evenly((2, 2));
+    for (k, (panel, metric)) in panels.iter().zip(&stats.plausibility).enumerate() {
+        let info = &metric.info;
+        let groups = [
+            ("real", metric_values(rows, k, false).0, BLUE),
+            ("synthetic", metric_values(rows, k, true).0, GREEN),
+        ];
+        let max = groups
+            .iter()
+            .flat_map(|g| g.1.last().copied())
+            .fold(0.0, f64::max);
+        // An all-zero metric (no penetration anywhere) still gets a readable axis.
+        let top = if max > 0.0 { max * 1.12 } else { 0.01 };
+        let (ticks, step) = nice_ticks(0.0, top, 5);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                if info.name == info.column {
+                    info.name.to_string()
+                } else {
+                    format!("{} ({})", info.name, info.column)
+                },
+                font(DESC),
+            )
+            .margin(14)
+            .x_label_area_size(70)
+            .y_label_area_size(95)
+            .build_cartesian_2d(Axis::categories(2), Axis::new(0.0..top, ticks))?;
+        let names: Vec<String> = groups
+            .iter()
+            .map(|(name, v, _)| format!("{name} (n = {})", v.len()))
+            .collect();
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .bold_line_style(GRID)
+            .x_label_formatter(&|v| {
+                names
+                    .get(v.round().max(0.0) as usize)
+                    .cloned()
+                    .unwrap_or_default()
+            })
+            .y_label_formatter(&|v| tick_label(*v, step))
+            .label_style(font(NOTE))
+            .axis_desc_style(font(NOTE))
+            .x_desc("clips")
+            .y_desc(format!("{} ({})", info.name, info.unit))
+            .draw()?;
+        for (g, (_, values, color)) in groups.iter().enumerate() {
+            let x = g as f64;
+            if values.is_empty() {
+                chart.draw_series(std::iter::once(Text::new(
+                    "no values",
+                    (x, top / 2.0),
+                    font(NOTE)
+                        .color(&GREY)
+                        .pos(Pos::new(HPos::Center, VPos::Center)),
+                )))?;
+                continue;
+            }
+            draw_box(&mut chart, values, x, 0.12, *color)?;
+            if values.len() <= MAX_STRIP {
+                chart.draw_series(values.iter().enumerate().map(|(i, v)| {
+                    Circle::new((x + 0.3 + jitter(i, 0.16), *v), 4, color.mix(0.7).filled())
+                }))?;
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,199 @@
+//! Dataset statistics for papers: the numbers and figures of LINGO's appendix B.2 (occurrences per
+//! motion type, motion-length violins, locomotion goal locations), LAMA's Table 3 (per-category
+//! length range, count and total frames) and SINC's figure A.4 (training-set composition), plus
+//! label sources, plausibility of real versus synthetic clips, and drop/reject counts.
+//!
+//! [`read_rows`] reads the few columns needed from clip tables, [`statistics`] reduces them to a
+//! serialisable [`Stats`], and [`write_report`] writes `stats.json`, `tables.tex` (booktabs),
+//! `report.md` and `figures/*.svg` + `figures/*.png` into a folder. The same rows always give the
+//! same bytes: categories are sorted, floats have fixed formatting, nothing records the time.
+
+mod figures;
+mod read;
+mod stats;
+mod tables;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+pub use figures::{FIGURES, FigureSpec};
+pub use read::{find_clip_tables, read_build_counts, read_rows};
+pub use stats::{
+    GoalStats, KNOWN_KINDS, KindCount, METRICS, MetricInfo, MetricStats, NO_LABEL, NO_SPLIT,
+    NULL_SPLIT, Overview, SplitComposition, Stats, Summary, TypeStats, UNMAPPED, quantile,
+    silverman_bandwidth, statistics,
+};
+pub use tables::{latex_escape, markdown_escape};
+
+use crate::build::WorkspaceError;
+
+/// What a report is made from besides the clip rows.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReportInput {
+    /// Parquet clip tables the rows were read from (only their file names reach the report, so
+    /// the output does not depend on where the dataset lies).
+    pub tables: Vec<PathBuf>,
+    /// Segments dropped by the build, by reason (`drops_by_reason` of `build-report.json`).
+    pub drops: BTreeMap<String, usize>,
+    /// Items rejected by the build, by reason (`rejects_by_reason` of `build-report.json`).
+    pub rejects: BTreeMap<String, usize>,
+    /// Title of the report and of its figures, usually the dataset name.
+    pub title: String,
+}
+
+/// One clip, reduced to what the statistics need.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipRow {
+    /// `clip_id` column.
+    pub clip_id: String,
+    /// `split` column; [`NO_SPLIT`] (`"all"`) when the table has no such column, `"(none)"` for a
+    /// null value.
+    pub split: String,
+    /// `source_kind` column: `real_single`, `real_pair` or `synthetic`.
+    pub source_kind: String,
+    /// `mirrored` column.
+    pub mirrored: bool,
+    /// `motion_type` column (null for pairs, synthetic clips and unmapped labels).
+    pub motion_type: Option<String>,
+    /// Length in seconds: `num_frames / fps`.
+    pub seconds: f64,
+    /// `num_frames` column.
+    pub frames: usize,
+    /// `goal_pelvis` column: `[x, y]` metres in the first-frame canonical frame.
+    pub goal_pelvis: Option<[f32; 2]>,
+    /// `label_source` column.
+    pub label_source: Option<String>,
+    /// `[foot_skate, ground_penetration, self_distance, lean]` (m/s, m, m, degrees); `None` when
+    /// all four are null or the table has none of these columns. A single null metric is NaN.
+    pub plausibility: Option<[f32; 4]>,
+}
+
+impl ClipRow {
+    /// True for rows counted as originals: everything but mirrored copies.
+    pub fn is_original(&self) -> bool {
+        !self.mirrored
+    }
+
+    /// True for synthetic compositions (`source_kind == "synthetic"`).
+    pub fn is_synthetic(&self) -> bool {
+        self.source_kind == "synthetic"
+    }
+}
+
+/// Errors of reading tables and writing a report; each names the file involved.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// A file or folder could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A Parquet file could not be opened or decoded.
+    #[error("{path}: {source}")]
+    Parquet {
+        /// The table.
+        path: PathBuf,
+        /// The error.
+        source: parquet::errors::ParquetError,
+    },
+    /// A record batch could not be decoded.
+    #[error("{path}: {source}")]
+    Arrow {
+        /// The table.
+        path: PathBuf,
+        /// The error.
+        source: arrow_schema::ArrowError,
+    },
+    /// A required column is missing.
+    #[error("{path}: no column `{column}` (is this a motionforge clip table?)")]
+    MissingColumn {
+        /// The table.
+        path: PathBuf,
+        /// The column.
+        column: String,
+    },
+    /// A column has a type the reader does not accept.
+    #[error("{path}: column `{column}` has type {found}, expected {expected}")]
+    ColumnType {
+        /// The table.
+        path: PathBuf,
+        /// The column.
+        column: String,
+        /// Its Arrow type.
+        found: String,
+        /// What the reader accepts.
+        expected: String,
+    },
+    /// A value that the statistics cannot use (a null in a required column, a negative frame
+    /// count, a non-positive frame rate, a goal that is not `[x, y]`).
+    #[error("{path}: row {row} ({clip_id}): {message}")]
+    InvalidValue {
+        /// The table.
+        path: PathBuf,
+        /// Row index in the table, from 0.
+        row: usize,
+        /// The row's clip id, when it could be read.
+        clip_id: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A JSON file (the build report) could not be parsed.
+    #[error("{path}: {message}")]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message.
+        message: String,
+    },
+    /// A figure could not be drawn.
+    #[error("figure {figure}: {message}")]
+    Figure {
+        /// The figure's file stem.
+        figure: String,
+        /// The plotting library's message.
+        message: String,
+    },
+    /// The bundled font could not be registered with the plotting library.
+    #[error("the bundled font could not be loaded")]
+    Font,
+    /// An output file could not be written.
+    #[error(transparent)]
+    Write(#[from] WorkspaceError),
+}
+
+/// Writes the report of `rows` and `stats` into `out_dir` (created if needed): `stats.json`,
+/// `tables.tex`, `report.md` and, under `figures/`, an SVG and a PNG of every figure in
+/// [`FIGURES`]. Every file is written atomically (temporary file in the same folder, then rename).
+/// Returns the written paths in a fixed order.
+pub fn write_report(
+    rows: &[ClipRow],
+    stats: &Stats,
+    out_dir: &Path,
+) -> Result<Vec<PathBuf>, ReportError> {
+    let mut written = Vec::new();
+    let rows = stats::sorted_rows(rows);
+
+    let json_path = out_dir.join("stats.json");
+    let mut json = serde_json::to_string_pretty(stats).map_err(|e| ReportError::Json {
+        path: json_path.clone(),
+        message: e.to_string(),
+    })?;
+    json.push('\n');
+    crate::build::write_atomic(&json_path, json.as_bytes())?;
+    written.push(json_path);
+
+    let tex_path = out_dir.join("tables.tex");
+    crate::build::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
+    written.push(tex_path);
+
+    let figure_dir = out_dir.join("figures");
+    written.extend(figures::write_figures(&rows, stats, &figure_dir)?);
+
+    let md_path = out_dir.join("report.md");
+    crate::build::write_atomic(&md_path, tables::markdown(stats).as_bytes())?;
+    written.push(md_path);
+    Ok(written)
+}

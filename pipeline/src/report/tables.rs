@@ -1,0 +1,543 @@
+//! `tables.tex` (booktabs tables ready to `\input`) and `report.md` (the same tables in Markdown,
+//! with every figure embedded).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use super::figures::{FIGURES, kind_label};
+use super::stats::{MetricInfo, MetricStats, Stats, Summary, TypeStats};
+
+/// Escapes LaTeX's special characters (`\ & % $ # _ { } ~ ^`) so any name typesets as written.
+pub fn latex_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '\\' => out.push_str("\\textbackslash{}"),
+            '&' | '%' | '$' | '#' | '_' | '{' | '}' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '~' => out.push_str("\\textasciitilde{}"),
+            '^' => out.push_str("\\textasciicircum{}"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// Escapes characters that would break a Markdown table cell or start emphasis or code.
+pub fn markdown_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '\\' | '|' | '*' | '_' | '`' | '<' | '>' | '[' | ']' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '\n' | '\r' => out.push(' '),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// Seconds with two decimals.
+fn secs(v: f64) -> String {
+    format!("{v:.2}")
+}
+
+/// A metric value with the decimals its unit needs (millimetres for metres, tenths of degrees).
+fn metric(info: &MetricInfo, v: f64) -> String {
+    if info.column == "lean" {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+fn pct(share: f64) -> String {
+    format!("{:.1}", share * 100.0)
+}
+
+/// The five length columns of a type row; dashes without clips.
+fn length_cells(s: &Option<Summary>) -> [String; 5] {
+    match s {
+        Some(s) => [
+            secs(s.min),
+            secs(s.q1),
+            secs(s.median),
+            secs(s.q3),
+            secs(s.max),
+        ],
+        None => std::array::from_fn(|_| "--".to_string()),
+    }
+}
+
+fn summary_cells(info: &MetricInfo, s: &Option<Summary>) -> [String; 6] {
+    match s {
+        Some(s) => [
+            s.n.to_string(),
+            metric(info, s.min),
+            metric(info, s.q1),
+            metric(info, s.median),
+            metric(info, s.q3),
+            metric(info, s.max),
+        ],
+        None => [
+            "0".to_string(),
+            "--".into(),
+            "--".into(),
+            "--".into(),
+            "--".into(),
+            "--".into(),
+        ],
+    }
+}
+
+fn title_or(stats: &Stats, fallback: &str) -> String {
+    if stats.title.is_empty() {
+        fallback.to_string()
+    } else {
+        stats.title.clone()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// LaTeX.
+
+fn tex_table(out: &mut String, caption: &str, label: &str, spec: &str, body: &str) {
+    let _ = writeln!(out, "\\begin{{table}}[tbp]");
+    let _ = writeln!(out, "\\centering");
+    let _ = writeln!(out, "\\caption{{{caption}}}");
+    let _ = writeln!(out, "\\label{{{label}}}");
+    let _ = writeln!(out, "\\begin{{tabular}}{{{spec}}}");
+    let _ = writeln!(out, "\\toprule");
+    out.push_str(body);
+    let _ = writeln!(out, "\\bottomrule");
+    let _ = writeln!(out, "\\end{{tabular}}");
+    let _ = writeln!(out, "\\end{{table}}");
+    out.push('\n');
+}
+
+fn tex_type_row(t: &TypeStats, name: &str) -> String {
+    let l = length_cells(&t.seconds);
+    format!(
+        "{name} & {} & {} & {} & {} & {} & {} & {} \\\\\n",
+        t.clips, l[0], l[1], l[2], l[3], l[4], t.total_frames
+    )
+}
+
+fn tex_counts(out: &mut String, heading: &str, counts: &BTreeMap<String, usize>) {
+    let _ = writeln!(out, "\\multicolumn{{2}}{{l}}{{\\emph{{{heading}}}}} \\\\");
+    if counts.is_empty() {
+        let _ = writeln!(out, "none & 0 \\\\");
+    }
+    for (reason, n) in counts {
+        let _ = writeln!(out, "{} & {n} \\\\", latex_escape(reason));
+    }
+}
+
+/// `tables.tex`: every table as a `table` float with caption and `tab:mf-*` label.
+pub(crate) fn latex(stats: &Stats) -> String {
+    let title = latex_escape(&title_or(stats, "the dataset"));
+    let mut out = String::new();
+    out.push_str("% Dataset statistics written by motionforge's report module.\n");
+    out.push_str("% Needs \\usepackage{booktabs}; place the tables with \\input{tables.tex}.\n\n");
+
+    // Motion types: LAMA Table 3's columns (segment length range, count, total frames) with the
+    // quartiles in between.
+    let mut body = String::new();
+    body.push_str(" & & \\multicolumn{5}{c}{Length (s)} & \\\\\n\\cmidrule(lr){3-7}\n");
+    body.push_str("Motion type & Clips & Min & $Q_1$ & Median & $Q_3$ & Max & Total frames \\\\\n");
+    body.push_str("\\midrule\n");
+    for t in &stats.motion_types {
+        body.push_str(&tex_type_row(t, &latex_escape(&t.motion_type)));
+    }
+    body.push_str("\\midrule\n");
+    body.push_str(&tex_type_row(&stats.motion_types_total, "All types"));
+    tex_table(
+        &mut out,
+        &format!(
+            "Motion types of {title}: clip count, motion length and total frames (original single clips; mirrored copies not counted)."
+        ),
+        "tab:mf-motion-types",
+        "lrrrrrrr",
+        &body,
+    );
+
+    // Composition: one row per split, one column per source kind.
+    let kinds: Vec<String> = stats
+        .composition
+        .first()
+        .map(|s| s.kinds.iter().map(|k| k.source_kind.clone()).collect())
+        .unwrap_or_default();
+    let mut body = String::new();
+    body.push_str("Split");
+    for k in &kinds {
+        let _ = write!(body, " & {}", latex_escape(&kind_label(k)));
+    }
+    body.push_str(" & Total \\\\\n\\midrule\n");
+    for s in &stats.composition {
+        body.push_str(&latex_escape(&s.split));
+        for k in &s.kinds {
+            let _ = write!(body, " & {} ({}\\%)", k.total, pct(k.share));
+        }
+        let _ = writeln!(body, " & {} \\\\", s.total);
+    }
+    tex_table(
+        &mut out,
+        &format!(
+            "Composition of {title} by source kind: clips per split, mirrored copies included (share of the split in parentheses)."
+        ),
+        "tab:mf-composition",
+        &format!("l{}r", "r".repeat(kinds.len())),
+        &body,
+    );
+
+    let mut body = String::from("Label source & Clips \\\\\n\\midrule\n");
+    for (source, n) in &stats.label_sources {
+        let _ = writeln!(body, "{} & {n} \\\\", latex_escape(source));
+    }
+    tex_table(
+        &mut out,
+        &format!("Sources of the body-part labels of {title} (original clips)."),
+        "tab:mf-label-sources",
+        "lr",
+        &body,
+    );
+
+    let mut body = String::new();
+    body.push_str(
+        "Metric & Clips & $n$ & Min & $Q_1$ & Median & $Q_3$ & Max & Threshold \\\\\n\\midrule\n",
+    );
+    for (i, m) in stats.plausibility.iter().enumerate() {
+        if i > 0 {
+            body.push_str("\\addlinespace\n");
+        }
+        body.push_str(&tex_metric_rows(m));
+    }
+    tex_table(
+        &mut out,
+        &format!(
+            "Plausibility of real and synthetic clips of {title} (originals). Thresholds are the build's defaults."
+        ),
+        "tab:mf-plausibility",
+        "llrrrrrrl",
+        &body,
+    );
+
+    let mut body = String::from("Reason & Count \\\\\n\\midrule\n");
+    tex_counts(&mut body, "Dropped segments", &stats.drops);
+    body.push_str("\\midrule\n");
+    tex_counts(&mut body, "Rejected items", &stats.rejects);
+    tex_table(
+        &mut out,
+        &format!("Segments dropped and items rejected while building {title}, by reason."),
+        "tab:mf-drops",
+        "lr",
+        &body,
+    );
+    out
+}
+
+fn tex_metric_rows(m: &MetricStats) -> String {
+    let info = &m.info;
+    let threshold = latex_escape(info.threshold)
+        .replace("<=", "$\\le$")
+        .replace(">=", "$\\ge$");
+    let mut out = String::new();
+    for (g, s) in [("real", &m.real), ("synthetic", &m.synthetic)] {
+        let c = summary_cells(info, s);
+        let (name, thr) = if g == "real" {
+            (
+                format!("{} ({})", latex_escape(info.name), info.unit_tex),
+                threshold.clone(),
+            )
+        } else {
+            (String::new(), String::new())
+        };
+        let _ = writeln!(
+            out,
+            "{name} & {g} & {} & {} & {} & {} & {} & {} & {thr} \\\\",
+            c[0], c[1], c[2], c[3], c[4], c[5]
+        );
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
+// Markdown.
+
+fn md_row(out: &mut String, cells: &[String]) {
+    out.push('|');
+    for c in cells {
+        let _ = write!(out, " {c} |");
+    }
+    out.push('\n');
+}
+
+fn md_header(out: &mut String, cells: &[&str], numeric_from: usize) {
+    md_row(
+        out,
+        &cells.iter().map(|c| c.to_string()).collect::<Vec<_>>(),
+    );
+    out.push('|');
+    for i in 0..cells.len() {
+        out.push_str(if i >= numeric_from { "---:|" } else { "---|" });
+    }
+    out.push('\n');
+}
+
+fn md_figure(out: &mut String, stem: &str) {
+    if let Some(f) = FIGURES.iter().find(|f| f.stem == stem) {
+        let _ = writeln!(
+            out,
+            "\n![{}](figures/{stem}.png)\n\n*{}.* Vector version: [figures/{stem}.svg](figures/{stem}.svg).\n",
+            f.caption, f.caption
+        );
+    }
+}
+
+fn md_counts(out: &mut String, heading: &str, counts: &BTreeMap<String, usize>) {
+    let _ = writeln!(out, "{heading}:\n");
+    if counts.is_empty() {
+        out.push_str("none.\n\n");
+        return;
+    }
+    md_header(out, &["reason", "count"], 1);
+    for (reason, n) in counts {
+        md_row(out, &[markdown_escape(reason), n.to_string()]);
+    }
+    out.push('\n');
+}
+
+/// `report.md`: overview, the tables, and every figure of [`FIGURES`] embedded as PNG with a link
+/// to its SVG.
+pub(crate) fn markdown(stats: &Stats) -> String {
+    let o = &stats.overview;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "# {}: dataset statistics\n",
+        markdown_escape(&title_or(stats, "Dataset"))
+    );
+    let tables: Vec<String> = stats.tables.iter().map(|t| format!("`{t}`")).collect();
+    let _ = writeln!(
+        out,
+        "Written by motionforge's report module from {} table{} ({}). The numbers are in \
+         `stats.json`, the LaTeX tables in `tables.tex` (booktabs).\n",
+        stats.tables.len(),
+        if stats.tables.len() == 1 { "" } else { "s" },
+        if tables.is_empty() {
+            "none named".to_string()
+        } else {
+            tables.join(", ")
+        }
+    );
+
+    out.push_str("## Overview\n\n");
+    md_header(&mut out, &["", "value"], 1);
+    let splits: Vec<String> = o.splits.iter().map(|s| markdown_escape(s)).collect();
+    for (k, v) in [
+        ("rows (clips)", o.rows.to_string()),
+        ("originals", o.originals.to_string()),
+        ("mirrored copies", o.mirrored.to_string()),
+        ("splits", splits.join(", ")),
+        ("hours of motion (all rows)", format!("{:.3}", o.hours)),
+        (
+            "hours of motion (originals)",
+            format!("{:.3}", o.hours_originals),
+        ),
+        (
+            "original single clips (motion-type statistics)",
+            o.typed_clips.to_string(),
+        ),
+    ] {
+        md_row(&mut out, &[k.to_string(), v]);
+    }
+
+    out.push_str(
+        "\n## Motion types\n\nOriginal `real_single` clips per motion type (pairs and synthetic \
+         compositions carry no type; mirrored copies would double every count). Lengths in \
+         seconds; quartiles interpolate linearly. LAMA Table 3's columns with the quartiles \
+         added.\n\n",
+    );
+    md_header(
+        &mut out,
+        &[
+            "motion type",
+            "clips",
+            "min (s)",
+            "Q1 (s)",
+            "median (s)",
+            "Q3 (s)",
+            "max (s)",
+            "total frames",
+        ],
+        1,
+    );
+    let type_row = |out: &mut String, t: &TypeStats, name: String| {
+        let l = length_cells(&t.seconds);
+        let mut cells = vec![name, t.clips.to_string()];
+        cells.extend(l);
+        cells.push(t.total_frames.to_string());
+        md_row(out, &cells);
+    };
+    for t in &stats.motion_types {
+        type_row(&mut out, t, markdown_escape(&t.motion_type));
+    }
+    type_row(
+        &mut out,
+        &stats.motion_types_total,
+        "**all types**".to_string(),
+    );
+    md_figure(&mut out, "motion_type_counts");
+    md_figure(&mut out, "motion_lengths");
+
+    let g = &stats.goals;
+    let _ = writeln!(
+        out,
+        "## Locomotion goals\n\n{} original clips have a `goal_pelvis` (where the pelvis ends, in \
+         the first-frame canonical frame: x right, y forward, metres).\n",
+        g.clips
+    );
+    if let (Some(x), Some(y), Some(d)) = (&g.x, &g.y, &g.distance) {
+        md_header(&mut out, &["", "min", "median", "max"], 1);
+        for (name, s) in [
+            ("lateral x (m)", x),
+            ("forward y (m)", y),
+            ("distance (m)", d),
+        ] {
+            md_row(
+                &mut out,
+                &[
+                    name.to_string(),
+                    format!("{:.2}", s.min),
+                    format!("{:.2}", s.median),
+                    format!("{:.2}", s.max),
+                ],
+            );
+        }
+        out.push('\n');
+        let per: Vec<String> = g
+            .per_type
+            .iter()
+            .map(|(t, n)| format!("{} {n}", markdown_escape(t)))
+            .collect();
+        let _ = writeln!(out, "Per motion type: {}.", per.join(", "));
+    }
+    md_figure(&mut out, "goal_locations");
+
+    out.push_str(
+        "## Composition\n\nRows per split and source kind, mirrored copies included (their \
+         share of the split in parentheses).\n\n",
+    );
+    let kinds: Vec<String> = stats
+        .composition
+        .first()
+        .map(|s| s.kinds.iter().map(|k| kind_label(&k.source_kind)).collect())
+        .unwrap_or_default();
+    let mut header: Vec<&str> = vec!["split"];
+    header.extend(kinds.iter().map(String::as_str));
+    header.push("total");
+    md_header(&mut out, &header, 1);
+    for s in &stats.composition {
+        let mut cells = vec![markdown_escape(&s.split)];
+        cells.extend(
+            s.kinds
+                .iter()
+                .map(|k| format!("{} ({}%; {} mirrored)", k.total, pct(k.share), k.mirrored)),
+        );
+        cells.push(s.total.to_string());
+        md_row(&mut out, &cells);
+    }
+    md_figure(&mut out, "composition");
+
+    out.push_str(
+        "## Label sources\n\nOriginal clips per `label_source` (`(none)`: unlabelled).\n\n",
+    );
+    md_header(&mut out, &["label source", "clips"], 1);
+    for (source, n) in &stats.label_sources {
+        md_row(&mut out, &[markdown_escape(source), n.to_string()]);
+    }
+
+    out.push_str(
+        "\n## Plausibility\n\nReal (`real_single`, `real_pair`) versus synthetic original clips. \
+         The threshold is the build's default (`quality::Thresholds`).\n\n",
+    );
+    md_header(
+        &mut out,
+        &[
+            "metric",
+            "clips",
+            "n",
+            "min",
+            "Q1",
+            "median",
+            "Q3",
+            "max",
+            "threshold",
+        ],
+        2,
+    );
+    for m in &stats.plausibility {
+        for (g, s, missing) in [
+            ("real", &m.real, m.real_missing),
+            ("synthetic", &m.synthetic, m.synthetic_missing),
+        ] {
+            let c = summary_cells(&m.info, s);
+            let name = if g == "real" {
+                format!("{} ({})", m.info.name, m.info.unit)
+            } else {
+                String::new()
+            };
+            let n = if missing > 0 {
+                format!("{} (+{missing} without a value)", c[0])
+            } else {
+                c[0].clone()
+            };
+            md_row(
+                &mut out,
+                &[
+                    name,
+                    g.to_string(),
+                    n,
+                    c[1].clone(),
+                    c[2].clone(),
+                    c[3].clone(),
+                    c[4].clone(),
+                    c[5].clone(),
+                    if g == "real" {
+                        m.info.threshold.replace("<=", "≤").replace(">=", "≥")
+                    } else {
+                        String::new()
+                    },
+                ],
+            );
+        }
+    }
+    md_figure(&mut out, "plausibility");
+
+    out.push_str("## Drops and rejects\n\n");
+    md_counts(&mut out, "Dropped segments", &stats.drops);
+    md_counts(&mut out, "Rejected items", &stats.rejects);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn latex_specials_are_escaped() {
+        assert_eq!(
+            latex_escape(r"a_b & 50% $x$ #1 {y} ~^\"),
+            r"a\_b \& 50\% \$x\$ \#1 \{y\} \textasciitilde{}\textasciicircum{}\textbackslash{}"
+        );
+    }
+
+    #[test]
+    fn markdown_cells_cannot_break_tables() {
+        assert_eq!(markdown_escape("a|b_c"), r"a\|b\_c");
+    }
+}

@@ -1,0 +1,275 @@
+//! `split`: which split every capture belongs to. Clips, their mirrors and synthetic pairs always
+//! land in the split of their source capture; the build checks that over the written shards.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+/// Split settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SplitConfig {
+    /// Split names and their share of captures (or subjects); normalised to sum to 1.
+    #[serde(default = "default_ratios")]
+    pub ratios: BTreeMap<String, f64>,
+    /// Regex with a named group `subject` matched against each capture's path: captures of one
+    /// subject share a split. Absent: each capture is its own unit.
+    #[serde(default)]
+    pub subject_pattern: Option<String>,
+    /// A CSV of `capture,split` rows (capture = file stem or path as shown in the table), relative
+    /// to the config; listed captures take that split, the rest are hashed.
+    #[serde(default)]
+    pub file: Option<String>,
+}
+
+fn default_ratios() -> BTreeMap<String, f64> {
+    BTreeMap::from([
+        ("train".to_string(), 0.8),
+        ("val".to_string(), 0.1),
+        ("test".to_string(), 0.1),
+    ])
+}
+
+impl Default for SplitConfig {
+    fn default() -> Self {
+        SplitConfig {
+            ratios: default_ratios(),
+            subject_pattern: None,
+            file: None,
+        }
+    }
+}
+
+/// Why splits cannot be assigned.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SplitError {
+    /// The split file names a capture twice with different splits.
+    #[error(
+        "{file}:{line}: capture `{capture}` is assigned to `{second}`, but line {first_line} assigns it to `{first}`; a capture must be in one split"
+    )]
+    Conflict {
+        /// The split file.
+        file: String,
+        /// Line of the second assignment.
+        line: usize,
+        /// Line of the first assignment.
+        first_line: usize,
+        /// The capture.
+        capture: String,
+        /// First split.
+        first: String,
+        /// Second split.
+        second: String,
+    },
+    /// A row of the split file is malformed.
+    #[error("{file}:{line}: expected `capture,split`, found `{found}`")]
+    Row {
+        /// The split file.
+        file: String,
+        /// 1-based line.
+        line: usize,
+        /// The row.
+        found: String,
+    },
+    /// The split file names a split the ratios do not.
+    #[error("{file}:{line}: split `{split}` is not one of the configured splits ({known})")]
+    UnknownSplit {
+        /// The split file.
+        file: String,
+        /// 1-based line.
+        line: usize,
+        /// The split.
+        split: String,
+        /// Configured split names.
+        known: String,
+    },
+}
+
+/// Assigns splits to captures.
+#[derive(Debug, Clone)]
+pub struct Splits {
+    order: Vec<(String, f64)>,
+    subject: Option<regex::Regex>,
+    listed: BTreeMap<String, String>,
+}
+
+/// Split names in a stable order: train, val(idation), test, then the rest alphabetically.
+pub fn split_order(names: impl IntoIterator<Item = String>) -> Vec<String> {
+    let rank = |n: &str| match n {
+        "train" => 0,
+        "val" | "validation" | "dev" => 1,
+        "test" => 2,
+        _ => 3,
+    };
+    let mut v: Vec<String> = names.into_iter().collect();
+    v.sort_by(|a, b| (rank(a), a).cmp(&(rank(b), b)));
+    v.dedup();
+    v
+}
+
+impl Splits {
+    /// Builds the assignment from the config and the split file's text (if any).
+    pub fn new(config: &SplitConfig, file: Option<(&str, &str)>) -> Result<Splits, SplitError> {
+        let total: f64 = config.ratios.values().filter(|r| **r > 0.0).sum();
+        let order: Vec<(String, f64)> = split_order(config.ratios.keys().cloned())
+            .into_iter()
+            .map(|n| {
+                let r = config.ratios.get(&n).copied().unwrap_or(0.0).max(0.0);
+                (n, if total > 0.0 { r / total } else { 0.0 })
+            })
+            .collect();
+        let subject = config
+            .subject_pattern
+            .as_deref()
+            .and_then(|p| regex::Regex::new(p).ok());
+        let mut listed: BTreeMap<String, (String, usize)> = BTreeMap::new();
+        if let Some((name, text)) = file {
+            let known = order
+                .iter()
+                .map(|(n, _)| n.as_str())
+                .collect::<Vec<_>>()
+                .join(", ");
+            for (i, row) in text.lines().enumerate() {
+                let line = i + 1;
+                let row = row.trim();
+                if row.is_empty()
+                    || row.starts_with('#')
+                    || (line == 1 && row.eq_ignore_ascii_case("capture,split"))
+                {
+                    continue;
+                }
+                let Some((capture, split)) = row.split_once(',').map(|(c, s)| (c.trim(), s.trim()))
+                else {
+                    return Err(SplitError::Row {
+                        file: name.into(),
+                        line,
+                        found: row.into(),
+                    });
+                };
+                if capture.is_empty() || split.is_empty() {
+                    return Err(SplitError::Row {
+                        file: name.into(),
+                        line,
+                        found: row.into(),
+                    });
+                }
+                if !order.iter().any(|(n, _)| n == split) {
+                    return Err(SplitError::UnknownSplit {
+                        file: name.into(),
+                        line,
+                        split: split.into(),
+                        known,
+                    });
+                }
+                if let Some((first, first_line)) = listed.get(capture)
+                    && first != split
+                {
+                    return Err(SplitError::Conflict {
+                        file: name.into(),
+                        line,
+                        first_line: *first_line,
+                        capture: capture.into(),
+                        first: first.clone(),
+                        second: split.into(),
+                    });
+                }
+                listed.insert(capture.to_string(), (split.to_string(), line));
+            }
+        }
+        Ok(Splits {
+            order,
+            subject,
+            listed: listed.into_iter().map(|(k, (s, _))| (k, s)).collect(),
+        })
+    }
+
+    /// The split of a capture, from its path as shown in the table and its file stem.
+    pub fn split_of(&self, path: &str, stem: &str) -> String {
+        if let Some(s) = self.listed.get(path).or_else(|| self.listed.get(stem)) {
+            return s.clone();
+        }
+        let unit = self
+            .subject
+            .as_ref()
+            .and_then(|re| {
+                re.captures(path)
+                    .and_then(|c| c.name("subject"))
+                    .map(|m| m.as_str().to_string())
+            })
+            .unwrap_or_else(|| path.to_string());
+        let digest = Sha256::digest(unit.as_bytes());
+        let mut head = [0u8; 8];
+        head.copy_from_slice(&digest[..8]);
+        let u = u64::from_be_bytes(head) as f64 / 2f64.powi(64);
+        let mut acc = 0.0;
+        for (name, share) in &self.order {
+            acc += share;
+            if u < acc {
+                return name.clone();
+            }
+        }
+        self.order
+            .last()
+            .map(|(n, _)| n.clone())
+            .unwrap_or_else(|| "train".into())
+    }
+
+    /// Configured split names, in order.
+    pub fn names(&self) -> Vec<String> {
+        self.order.iter().map(|(n, _)| n.clone()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hashing_follows_the_ratios_and_is_stable() {
+        let s = Splits::new(&SplitConfig::default(), None).unwrap();
+        let mut counts: BTreeMap<String, usize> = BTreeMap::new();
+        for i in 0..10_000 {
+            *counts
+                .entry(s.split_of(&format!("captures/take_{i}.bvh"), "x"))
+                .or_insert(0) += 1;
+        }
+        let share = |n: &str| counts[n] as f64 / 10_000.0;
+        assert!(
+            (share("train") - 0.8).abs() < 0.02 && (share("val") - 0.1).abs() < 0.02,
+            "{counts:?}"
+        );
+        assert_eq!(s.split_of("a/b.bvh", "b"), s.split_of("a/b.bvh", "b"));
+    }
+
+    #[test]
+    fn a_capture_in_two_splits_is_refused_with_both_lines() {
+        let err = Splits::new(
+            &SplitConfig::default(),
+            Some((
+                "splits.csv",
+                "capture,split\nwalk_001,train\nkick_001,val\nwalk_001,test\n",
+            )),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("splits.csv:4") && err.contains("line 2") && err.contains("walk_001"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn subjects_share_a_split() {
+        let cfg = SplitConfig {
+            subject_pattern: Some(r"(?P<subject>\d+)_\d+\.bvh$".into()),
+            ..SplitConfig::default()
+        };
+        let s = Splits::new(&cfg, None).unwrap();
+        for subject in 0..50 {
+            let a = s.split_of(&format!("cmu/{subject}_01.bvh"), "");
+            let b = s.split_of(&format!("cmu/{subject}_02.bvh"), "");
+            assert_eq!(a, b);
+        }
+    }
+}

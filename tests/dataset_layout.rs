@@ -1,0 +1,193 @@
+//! The sharded training set: layout any loader opens, manifest checksums, splits, rebuilds.
+mod common;
+
+use std::fs;
+use std::process::Command;
+
+use common::*;
+
+/// Builds the demo into a temp folder and returns (temp dir, dataset folder).
+fn demo() -> (tempfile::TempDir, std::path::PathBuf) {
+    let out = tempfile::tempdir().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(repo().join("fixtures/demo.toml"))
+        .arg("--output")
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let dataset = out.path().join("demo");
+    (out, dataset)
+}
+
+#[test]
+fn pyarrow_and_polars_read_the_demo_with_checked_manifest_and_splits() {
+    let (_out, dataset) = demo();
+    let script = r#"
+import glob, hashlib, json, os, sys
+import numpy as np, pyarrow.parquet as pq
+root = sys.argv[1]
+manifest = json.load(open(os.path.join(root, 'manifest.json')))
+assert manifest['schema_version'] == 5, manifest['schema_version']
+total = 0
+captures = {}
+for split, entry in manifest['splits'].items():
+    rows = 0
+    for shard in entry['shards']:
+        path = os.path.join(root, shard['file'])
+        data = open(path, 'rb').read()
+        assert hashlib.sha256(data).hexdigest() == shard['sha256'], path
+        assert len(data) == shard['bytes'], path
+        t = pq.read_table(path)
+        assert t.num_rows == shard['rows'], path
+        assert set(t.column('split').to_pylist()) == {split}, path
+        for p in t.column('source_path').to_pylist():
+            captures.setdefault(p, set()).add(split)
+        rows += t.num_rows
+    assert rows == entry['rows'], split
+    total += rows
+assert all(len(s) == 1 for s in captures.values()), 'a capture in two splits'
+files = sorted(glob.glob(os.path.join(root, 'data', '*.parquet')))
+listed = sorted(os.path.join(root, s['file']) for e in manifest['splits'].values() for s in e['shards'])
+assert files == listed, (files, listed)
+t = pq.read_table(os.path.join(root, 'data'))
+assert t.num_rows == total
+for i in range(t.num_rows):
+    n, j = t['num_frames'][i].as_py(), t['num_joints'][i].as_py()
+    np.asarray(t['joint_positions'][i].values).reshape(n, j, 3)
+card = open(os.path.join(root, 'README.md')).read()
+assert card.startswith('---\n') and 'data_files' in card and 'license' in card
+import polars as pl
+df = pl.read_parquet(os.path.join(root, 'data', '*.parquet'))
+assert df.height == total
+print(total)
+"#;
+    let out = Command::new("python3")
+        .args(["-c", script])
+        .arg(&dataset)
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn scratch(captures: &[&str], split_file: Option<&str>) -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    fs::create_dir_all(dir.path().join("captures")).unwrap();
+    for name in captures {
+        fs::copy(
+            shared_data()
+                .join("bandai-namco-1/data")
+                .join(format!("{name}.bvh")),
+            dir.path().join("captures").join(format!("{name}.bvh")),
+        )
+        .unwrap();
+    }
+    let split = match split_file {
+        Some(text) => {
+            fs::write(dir.path().join("splits.csv"), text).unwrap();
+            "[splits]\nfile = \"splits.csv\"\n"
+        }
+        None => "",
+    };
+    let config = format!(
+        "[dataset]\nname = \"ds\"\noutput = \"out\"\n\n{split}\n[[sources]]\nname = \"b\"\ncaptures = [\"captures/*.bvh\"]\nprofile = \"bandai-namco\"\n[sources.labels]\nkind = \"filename\"\npattern = \"dataset-1_{{content}}_{{style}}_{{take}}\"\naction = \"{{content}}\"\ntext = \"{{content}}\"\n"
+    );
+    fs::write(dir.path().join("build.toml"), config).unwrap();
+    let path = dir.path().join("build.toml");
+    (dir, path)
+}
+
+fn build(config: &std::path::Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(config)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn one_more_capture_rewrites_only_the_shards_of_its_split() {
+    let split_file = "capture,split\ndataset-1_walk_normal_001,train\ndataset-1_bye_normal_001,train\ndataset-1_kick_normal_001,test\ndataset-1_run_normal_001,train\n";
+    let (dir, config) = scratch(
+        &[
+            "dataset-1_walk_normal_001",
+            "dataset-1_bye_normal_001",
+            "dataset-1_kick_normal_001",
+        ],
+        Some(split_file),
+    );
+    assert!(build(&config).status.success());
+    let dataset = dir.path().join("out/ds");
+    let before: Vec<(std::path::PathBuf, Vec<u8>, std::time::SystemTime)> = shards(&dataset)
+        .into_iter()
+        .map(|p| {
+            (
+                p.clone(),
+                fs::read(&p).unwrap(),
+                fs::metadata(&p).unwrap().modified().unwrap(),
+            )
+        })
+        .collect();
+    fs::copy(
+        shared_data().join("bandai-namco-1/data/dataset-1_run_normal_001.bvh"),
+        dir.path().join("captures/dataset-1_run_normal_001.bvh"),
+    )
+    .unwrap();
+    assert!(build(&config).status.success());
+    for (path, bytes, modified) in before {
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let same = fs::read(&path).unwrap() == bytes;
+        if name.starts_with("test-") {
+            assert!(same, "{name} must not change");
+            assert_eq!(
+                fs::metadata(&path).unwrap().modified().unwrap(),
+                modified,
+                "{name} was not rewritten"
+            );
+        } else {
+            assert!(!same, "{name} gains the new capture");
+        }
+    }
+}
+
+#[test]
+fn a_capture_planted_in_two_splits_makes_the_build_refuse() {
+    let split_file = "capture,split\ndataset-1_walk_normal_001,train\ndataset-1_kick_normal_001,val\ndataset-1_walk_normal_001,test\n";
+    let (_dir, config) = scratch(
+        &["dataset-1_walk_normal_001", "dataset-1_kick_normal_001"],
+        Some(split_file),
+    );
+    let out = build(&config);
+    assert_eq!(out.status.code(), Some(2), "a config mistake");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("splits.csv:4")
+            && err.contains("dataset-1_walk_normal_001")
+            && err.contains("one split"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_way_the_config_path_is_spelled_does_not_change_the_dataset() {
+    let (_a, plain) = demo();
+    let out = tempfile::tempdir().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(repo().join("pipeline/../fixtures/./demo.toml"))
+        .arg("--output")
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(run.status.success());
+    assert!(table_bytes(&out.path().join("demo")) == table_bytes(&plain));
+}
