@@ -191,3 +191,37 @@ fn the_way_the_config_path_is_spelled_does_not_change_the_dataset() {
     assert!(run.status.success());
     assert!(table_bytes(&out.path().join("demo")) == table_bytes(&plain));
 }
+
+#[test]
+fn build_writes_the_report_and_the_report_command_redoes_it_from_the_shards_alone() {
+    let (_out, dataset) = demo();
+    let stats: serde_json::Value =
+        serde_json::from_slice(&fs::read(dataset.join("report/stats.json")).unwrap()).unwrap();
+    assert!(stats.is_object());
+    for f in [
+        "report/report.md",
+        "report/tables.tex",
+        "report/figures/motion_lengths.png",
+        "report/figures/goal_locations.svg",
+    ] {
+        assert!(dataset.join(f).is_file(), "{f}");
+    }
+    let elsewhere = tempfile::tempdir().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .arg("report")
+        .arg(&dataset)
+        .arg("--output")
+        .arg(elsewhere.path())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        fs::read(elsewhere.path().join("stats.json")).unwrap()
+            == fs::read(dataset.join("report/stats.json")).unwrap(),
+        "same shards, same report"
+    );
+}

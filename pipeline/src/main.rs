@@ -85,6 +85,15 @@ enum Command {
         #[arg(long)]
         offline: bool,
     },
+    /// Write the statistics report of a built dataset: tables (LaTeX, Markdown), figures (SVG,
+    /// PNG) and stats.json, from its shards and manifest alone.
+    Report {
+        /// The dataset folder (`<output>/<name>`, holding data/ and manifest.json).
+        dataset: PathBuf,
+        /// Where to write; default `<dataset>/report`.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
+    },
     /// Print the clip table schema (columns, types, version) as JSON.
     Schema,
     /// Work with prompt templates.
@@ -269,6 +278,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
             output,
             offline,
         } => export_bvh(&config, &clip, output, offline)?,
+        Command::Report { dataset, output } => {
+            let files = motionforge::report::report_dataset(&dataset, output.as_deref())?;
+            writeln!(
+                std::io::stdout(),
+                "wrote {} report files to {}",
+                files.len(),
+                output.unwrap_or_else(|| dataset.join("report")).display()
+            )?;
+        }
         Command::Prompt { command } => prompt_command(command)?,
         Command::Labels { command } => labels_command(command)?,
         Command::Schema => writeln!(

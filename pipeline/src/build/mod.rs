@@ -71,6 +71,9 @@ pub enum BuildError {
         /// The splits it appears in.
         splits: Vec<String>,
     },
+    /// The statistics report cannot be made.
+    #[error("report: {0}")]
+    Report(String),
     /// A prompt template does not load or render.
     #[error(transparent)]
     Prompt(#[from] crate::llm::prompt::PromptError),
@@ -543,6 +546,18 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         items: 1,
         ran: usize::from(write_ran),
         reused: usize::from(!write_ran),
+    });
+    // The report is derived from the shards: redo it when they changed or it is missing.
+    let report_ran = write_ran || !output.join("report/stats.json").is_file();
+    if report_ran {
+        crate::report::report_dataset(&output, None)
+            .map_err(|e| BuildError::Report(e.to_string()))?;
+    }
+    stages.push(StageRun {
+        stage: "report".into(),
+        items: 1,
+        ran: usize::from(report_ran),
+        reused: usize::from(!report_ran),
     });
 
     let mut notes_by_kind = BTreeMap::new();

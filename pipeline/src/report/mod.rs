@@ -197,3 +197,45 @@ pub fn write_report(
     written.push(md_path);
     Ok(written)
 }
+
+/// The report of a built dataset folder, from its shards (`data/`) and `manifest.json` alone,
+/// written to `out_dir` (default `<dataset>/report`). Returns the files written.
+pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<PathBuf>, ReportError> {
+    let manifest_path = dataset.join(crate::build::MANIFEST_FILE);
+    let manifest: serde_json::Value = std::fs::read(&manifest_path)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+        .unwrap_or(serde_json::Value::Null);
+    let counts = |key: &str| -> BTreeMap<String, usize> {
+        manifest["counts"][key]
+            .as_object()
+            .map(|m| {
+                m.iter()
+                    .filter_map(|(k, v)| Some((k.clone(), v.as_u64()? as usize)))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let tables = find_clip_tables(&dataset.join(crate::build::DATA_DIR))?;
+    let title = manifest["dataset"]
+        .as_str()
+        .map(str::to_string)
+        .unwrap_or_else(|| {
+            dataset
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        });
+    let input = ReportInput {
+        tables,
+        drops: counts("drop_reason"),
+        rejects: counts("reject_reason"),
+        title,
+    };
+    let rows = read_rows(&input.tables)?;
+    let stats = statistics(&rows, &input);
+    let out = out_dir
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| dataset.join("report"));
+    write_report(&rows, &stats, &out)
+}
