@@ -33,7 +33,7 @@ import glob, hashlib, json, os, sys
 import numpy as np, pyarrow.parquet as pq
 root = sys.argv[1]
 manifest = json.load(open(os.path.join(root, 'manifest.json')))
-assert manifest['schema_version'] == 5, manifest['schema_version']
+assert manifest['schema_version'] == 6, manifest['schema_version']
 total = 0
 captures = {}
 for split, entry in manifest['splits'].items():
@@ -60,6 +60,16 @@ assert t.num_rows == total
 for i in range(t.num_rows):
     n, j = t['num_frames'][i].as_py(), t['num_joints'][i].as_py()
     np.asarray(t['joint_positions'][i].values).reshape(n, j, 3)
+    np.asarray(t['rotations_6d'][i].values).reshape(n, j, 6)
+    np.asarray(t['joint_velocities'][i].values).reshape(n, j, 3)
+    np.asarray(t['foot_contacts'][i].values).reshape(n, 4)
+    np.asarray(t['future_root'][i].values).reshape(n, 3, 3)
+mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positions_mean.npy'))
+std = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positions_std.npy'))
+assert mean.shape == (22, 3) and std.shape == (22, 3) and (std > 0).all()
+train = t.filter(pq.read_table(os.path.join(root, 'data')).column('split').to_numpy(zero_copy_only=False) == 'train')
+pos = np.concatenate([np.asarray(train['joint_positions'][i].values).reshape(-1, 22, 3) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
+assert np.allclose(pos.mean(0), mean, atol=1e-4), 'mean over the training split'
 card = open(os.path.join(root, 'README.md')).read()
 assert card.startswith('---\n') and 'data_files' in card and 'license' in card
 import polars as pl

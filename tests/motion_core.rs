@@ -231,3 +231,64 @@ fn a_config_error_exits_with_code_2_and_names_the_key() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("dataset.fps"), "{err}");
 }
+
+#[test]
+fn derived_features_on_a_real_walk_look_like_walking() {
+    use motionforge::features::{FeatureConfig, features};
+    let bvh = load(&bandai1("walk", "normal"));
+    let profile = ProfileSpec::bundled("bandai-namco")
+        .unwrap()
+        .bind(&bvh.skeleton)
+        .unwrap();
+    let n = bvh.skeleton.len();
+    let positions: Vec<f32> =
+        motionforge::motion::canonical::dataset_positions(&bvh.motion, &profile)
+            .iter()
+            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
+    let rotations: Vec<f32> = bvh
+        .motion
+        .rotations
+        .iter()
+        .flat_map(|q| [q.x as f32, q.y as f32, q.z as f32, q.w as f32])
+        .collect();
+    let f = features(
+        &positions,
+        &rotations,
+        n,
+        30.0,
+        &profile,
+        &FeatureConfig::default(),
+    );
+    let future = f.future_root.unwrap();
+    let frames = bvh.motion.num_frames();
+    // Mid-walk, the root is about a second's walk ahead 30 frames later, and barely to the side.
+    let mid = frames / 2;
+    let (right, forward) = (future[mid * 9 + 6], future[mid * 9 + 7]);
+    assert!(
+        forward > 0.8 && forward < 2.5 && right.abs() < 0.3 * forward,
+        "+30 frames: right {right}, forward {forward}"
+    );
+    // Each foot is planted part of the time and moving part of the time.
+    let contacts = f.foot_contacts.unwrap();
+    for foot in 0..4 {
+        let share = (0..frames).filter(|&k| contacts[k * 4 + foot]).count() as f64 / frames as f64;
+        assert!(
+            share > 0.2 && share < 0.9,
+            "foot {foot} in contact {share:.2} of the time"
+        );
+    }
+    // 6D rotations are the first two columns of rotation matrices: unit and orthogonal.
+    let r6 = f.rotations_6d.unwrap();
+    for c in r6.chunks_exact(6).take(500) {
+        let (a, b) = (
+            glam::Vec3::new(c[0], c[1], c[2]),
+            glam::Vec3::new(c[3], c[4], c[5]),
+        );
+        assert!(
+            (a.length() - 1.0).abs() < 1e-4
+                && (b.length() - 1.0).abs() < 1e-4
+                && a.dot(b).abs() < 1e-4
+        );
+    }
+}

@@ -53,6 +53,9 @@ pub struct Config {
     /// Motion types: taxonomy and how dataset labels map to it.
     #[serde(default)]
     pub motion_types: crate::annotate::taxonomy::TypeMapConfig,
+    /// Derived feature columns (6D rotations, velocities, foot contacts, future root).
+    #[serde(default)]
+    pub features: crate::features::FeatureConfig,
     /// Train/validation/test splits.
     #[serde(default)]
     pub splits: crate::stages::split::SplitConfig,

@@ -4,6 +4,7 @@ pub mod build;
 pub mod clip;
 pub mod compose_text;
 pub mod config;
+pub mod features;
 pub mod io;
 pub mod llm;
 pub mod motion;

@@ -615,7 +615,9 @@ fn prompt_command(command: PromptCommand) -> Result<()> {
         "paraphrase" => prompts.paraphrase(&text, n)?,
         "pair_compat" => prompts.pair_compat(
             &text,
-            second.as_deref().context("pair_compat needs --second")?,
+            &motionforge::stages::label::normalize_text(
+                second.as_deref().context("pair_compat needs --second")?,
+            ),
         )?,
         other => {
             return Err(motionforge::llm::prompt::PromptError::Unknown(other.to_string()).into());

@@ -33,6 +33,8 @@ use crate::stages::{label, segment};
 
 /// Folder of the Parquet shards inside the dataset folder (`<split>-NNNNN-of-NNNNN.parquet`).
 pub const DATA_DIR: &str = "data";
+/// Normalisation statistics (mean/std per feature over the training split).
+pub const NORMALIZATION_DIR: &str = "normalization";
 /// Shard list, checksums, counts and provenance.
 pub const MANIFEST_FILE: &str = "manifest.json";
 /// Dataset card (Hugging Face style, YAML front matter).
@@ -366,11 +368,7 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
     stages.push(StageRun {
         stage: crate::stages::compose::NAME.into(),
         items: composed.report.sampled,
-        ran: if ran {
-            composed.report.sampled.max(1)
-        } else {
-            0
-        },
+        ran: if ran { composed.report.sampled } else { 0 },
         reused: if ran { 0 } else { composed.report.sampled },
     });
     for clip in &mut clips {
@@ -459,6 +457,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     })?;
     let table_fingerprint = Fingerprint::new("write", WRITE_VERSION)
         .text(&sha256_hex(&encoded))
+        .json(&config.features)
         .json(&text.plans)
         .json(&crate::io::schema::SCHEMA_VERSION)
         .finish();
@@ -532,6 +531,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         manifest,
         licences,
         shard_bytes: config.dataset.shard_bytes,
+        features: config.features,
     };
     let write_ran = write_outputs(
         options.force,

@@ -7,8 +7,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, PLANS_FILE, REJECTS_FILE, Reject,
-    SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
+    BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE,
+    Reject, SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
 };
 use crate::clip::Clip;
 use crate::io::parquet::write_clips;
@@ -175,6 +175,8 @@ pub(super) struct Companions {
     pub(super) licences: Vec<String>,
     /// Target shard size.
     pub(super) shard_bytes: u64,
+    /// Derived feature columns to write.
+    pub(super) features: crate::features::FeatureConfig,
 }
 
 /// The card's Markdown body: what the dataset is, where it came from, its columns.
@@ -299,6 +301,7 @@ pub(super) fn write_outputs(
             .text(&sha256_hex(&encoded))
             .text(&skeletons_json)
             .json(&crate::io::schema::SCHEMA_VERSION)
+            .json(&companions.features)
             .finish();
         let path = output.join(&plan.file);
         let fresh = !force
@@ -310,12 +313,18 @@ pub(super) fn write_outputs(
         if !fresh {
             let mut table_error = None;
             write_atomic_with(&path, |file| {
-                write_clips(file.try_clone()?, &rows, profiles, &skeletons_json)
-                    .map(|_| ())
-                    .map_err(|e| {
-                        table_error = Some(e);
-                        std::io::Error::other("table encoding failed")
-                    })
+                write_clips(
+                    file.try_clone()?,
+                    &rows,
+                    profiles,
+                    &skeletons_json,
+                    &companions.features,
+                )
+                .map(|_| ())
+                .map_err(|e| {
+                    table_error = Some(e);
+                    std::io::Error::other("table encoding failed")
+                })
             })
             .map_err(|e| match table_error.take() {
                 Some(source) => BuildError::Table {
@@ -350,6 +359,22 @@ pub(super) fn write_outputs(
         }
     }
     check_splits(output, &plans_for_shards)?;
+    // Normalisation statistics over the training split (the first split when there is no
+    // `train`), written whenever the shards are.
+    let stats_split = if split_rows.contains_key("train") {
+        Some("train".to_string())
+    } else {
+        plans_for_shards.first().map(|p| p.split.clone())
+    };
+    if let Some(split) = stats_split {
+        crate::io::normalization::write_normalization(
+            &output.join(NORMALIZATION_DIR),
+            clips,
+            &split,
+            profiles,
+            &companions.features,
+        )?;
+    }
     write_atomic(&output.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
     let mut lines = String::new();
     for r in rejects {

@@ -1,4 +1,5 @@
 //! Sinks: the clip table schema and its Parquet writer.
 
+pub mod normalization;
 pub mod parquet;
 pub mod schema;

@@ -25,6 +25,7 @@ use parquet::file::properties::WriterProperties;
 
 use super::schema::{SCHEMA_VERSION, clip_schema};
 use crate::clip::Clip;
+use crate::features::FeatureConfig;
 use crate::motion::Profile;
 
 /// Errors writing a table.
@@ -210,10 +211,31 @@ fn metric(clips: &[Clip], f: impl Fn(&crate::quality::Plausibility) -> f64) -> A
     ))
 }
 
+fn optional_bool_lists<'a>(rows: impl Iterator<Item = Option<&'a [bool]>>) -> ArrayRef {
+    let mut b = ListBuilder::new(BooleanBuilder::new()).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Boolean,
+        false,
+    )));
+    for row in rows {
+        match row {
+            Some(values) => {
+                for v in values {
+                    b.values().append_value(*v);
+                }
+                b.append(true);
+            }
+            None => b.append(false),
+        }
+    }
+    Arc::new(b.finish())
+}
+
 /// Builds one record batch from clips.
 pub fn clips_to_batch(
     clips: &[Clip],
     profiles: &BTreeMap<String, Profile>,
+    features: &FeatureConfig,
 ) -> Result<RecordBatch, TableError> {
     let schema = Arc::new(clip_schema());
     let strings = |f: &dyn Fn(&Clip) -> &str| -> ArrayRef {
@@ -223,6 +245,7 @@ pub fn clips_to_batch(
     let mut rotations = Vec::new();
     let mut roots = Vec::new();
     let (mut pl, mut rl, mut tl) = (Vec::new(), Vec::new(), Vec::new());
+    let mut derived: Vec<crate::features::Features> = Vec::with_capacity(clips.len());
     for clip in clips {
         let profile = profiles
             .get(&clip.profile)
@@ -231,6 +254,14 @@ pub fn clips_to_batch(
                 profile: clip.profile.clone(),
             })?;
         let m = dataset_motion(clip, profile);
+        derived.push(crate::features::features(
+            &m.positions,
+            &m.rotations,
+            clip.motion.num_joints(),
+            clip.motion.fps,
+            profile,
+            features,
+        ));
         pl.push(m.positions.len());
         rl.push(m.rotations.len());
         tl.push(m.root.len());
@@ -337,6 +368,22 @@ pub fn clips_to_batch(
         list(positions, pl)?,
         list(rotations, rl)?,
         list(roots, tl)?,
+        optional_f32_lists(derived.iter().map(|d| {
+            d.rotations_6d
+                .as_ref()
+                .map(|v| v.iter().map(|x| *x as f64).collect())
+        })),
+        optional_f32_lists(derived.iter().map(|d| {
+            d.velocities
+                .as_ref()
+                .map(|v| v.iter().map(|x| *x as f64).collect())
+        })),
+        optional_bool_lists(derived.iter().map(|d| d.foot_contacts.as_deref())),
+        optional_f32_lists(derived.iter().map(|d| {
+            d.future_root
+                .as_ref()
+                .map(|v| v.iter().map(|x| *x as f64).collect())
+        })),
     ];
     Ok(RecordBatch::try_new(schema, columns)?)
 }
@@ -352,6 +399,7 @@ pub fn write_clips(
     clips: &[Clip],
     profiles: &BTreeMap<String, Profile>,
     skeletons_json: &str,
+    features: &FeatureConfig,
 ) -> Result<File, TableError> {
     let props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
@@ -369,7 +417,7 @@ pub fn write_clips(
         .build();
     let mut writer = ArrowWriter::try_new(file, Arc::new(clip_schema()), Some(props))?;
     for chunk in clips.chunks(ROWS_PER_GROUP) {
-        writer.write(&clips_to_batch(chunk, profiles)?)?;
+        writer.write(&clips_to_batch(chunk, profiles, features)?)?;
         writer.flush()?;
     }
     Ok(writer.into_inner()?)

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use arrow_schema::{DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 5;
+pub const SCHEMA_VERSION: u32 = 6;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
@@ -99,6 +99,14 @@ pub fn clip_schema() -> Schema {
         list_f32("joint_positions"),
         list_f32("local_rotations"),
         list_f32("root_translation"),
+        goal("rotations_6d"),
+        goal("joint_velocities"),
+        Field::new(
+            "foot_contacts",
+            DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
+            true,
+        ),
+        goal("future_root"),
     ])
 }
 

@@ -144,9 +144,10 @@ pub fn incompatible_pairs(
             .trim()
             .trim_start_matches(|c: char| !c.is_alphabetic())
             .to_lowercase();
-        if first.starts_with("no") {
+        let word: String = first.chars().take_while(|c| c.is_alphabetic()).collect();
+        if word == "no" {
             out.insert(pair.clone());
-        } else if !first.starts_with("yes") {
+        } else if word != "yes" {
             report.rejected.push((
                 format!("{} + {}", pair.0, pair.1),
                 format!("answer is neither yes nor no: `{}`", answer.trim()),

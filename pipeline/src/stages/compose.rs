@@ -82,7 +82,7 @@ pub struct ComposeReport {
     pub sampled: usize,
     /// Composites kept.
     pub composed: usize,
-    /// Composites dropped, by plausibility reason.
+    /// Pairs dropped, each under one reason: the LLM veto or the first plausibility check it fails.
     pub dropped: BTreeMap<String, usize>,
 }
 
@@ -275,10 +275,9 @@ pub fn run(
             &profile,
         );
         let failures = metrics.failures(&config.thresholds);
-        if !failures.is_empty() {
-            for f in failures {
-                *out.report.dropped.entry(f.to_string()).or_insert(0) += 1;
-            }
+        // Counted once, under the first check it fails, so composed + dropped = sampled.
+        if let Some(first) = failures.first() {
+            *out.report.dropped.entry(first.to_string()).or_insert(0) += 1;
             continue;
         }
         let variants = compose_variants(&a.text, &b.text);

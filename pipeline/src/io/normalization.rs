@@ -1,0 +1,200 @@
+//! Normalisation statistics over the training split (HumanML3D's `Mean.npy` / `Std.npy`): mean and
+//! standard deviation per joint and dimension of each motion feature, per skeleton profile, as
+//! `.npy` files and one Parquet table.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow_array::{ArrayRef, Float32Array, Int32Array, RecordBatch, StringArray};
+use arrow_schema::{DataType, Field, Schema};
+use parquet::arrow::ArrowWriter;
+
+use super::parquet::{TableError, dataset_motion};
+use crate::build::{BuildError, write_atomic, write_atomic_with};
+use crate::clip::Clip;
+use crate::features::{FeatureConfig, features};
+use crate::motion::Profile;
+
+/// Running sums for one feature: per element (joint × dimension).
+struct Moments {
+    dims: usize,
+    count: u64,
+    sum: Vec<f64>,
+    sq: Vec<f64>,
+}
+
+impl Moments {
+    fn new(len: usize, dims: usize) -> Moments {
+        Moments {
+            dims,
+            count: 0,
+            sum: vec![0.0; len],
+            sq: vec![0.0; len],
+        }
+    }
+
+    fn add(&mut self, frame: &[f32]) {
+        self.count += 1;
+        for (k, v) in frame.iter().enumerate() {
+            let v = f64::from(*v);
+            self.sum[k] += v;
+            self.sq[k] += v * v;
+        }
+    }
+
+    /// Mean and standard deviation (population), the deviation floored at 1e-8 so dividing by it
+    /// never blows up a constant channel.
+    fn finish(&self) -> (Vec<f32>, Vec<f32>) {
+        let n = self.count.max(1) as f64;
+        let mean: Vec<f64> = self.sum.iter().map(|s| s / n).collect();
+        let std = self
+            .sq
+            .iter()
+            .zip(&mean)
+            .map(|(q, m)| (q / n - m * m).max(0.0).sqrt().max(1e-8) as f32)
+            .collect();
+        (mean.into_iter().map(|m| m as f32).collect(), std)
+    }
+}
+
+/// A `.npy` (format 1.0) of little-endian f32 with the given shape.
+pub fn npy_f32(values: &[f32], shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let shape_text = if dims.len() == 1 {
+        format!("({},)", dims[0])
+    } else {
+        format!("({})", dims.join(", "))
+    };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_text}, }}");
+    // Magic (6) + version (2) + length (2) + header + newline, padded to a multiple of 64.
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = Vec::with_capacity(10 + header.len() + values.len() * 4);
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for v in values {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
+/// Writes `<dir>/<profile>/<feature>_{mean,std}.npy` and `<dir>/normalization.parquet` from the
+/// clips of `split` (originals, mirrors and synthetic pairs alike, as training sees them).
+pub fn write_normalization(
+    dir: &Path,
+    clips: &[Clip],
+    split: &str,
+    profiles: &BTreeMap<String, Profile>,
+    config: &FeatureConfig,
+) -> Result<Vec<PathBuf>, BuildError> {
+    let mut stats: BTreeMap<(String, &'static str), Moments> = BTreeMap::new();
+    for clip in clips.iter().filter(|c| c.split == split) {
+        let Some(profile) = profiles.get(&clip.profile) else {
+            continue;
+        };
+        let n = clip.motion.num_joints();
+        let m = dataset_motion(clip, profile);
+        let f = features(
+            &m.positions,
+            &m.rotations,
+            n,
+            clip.motion.fps,
+            profile,
+            config,
+        );
+        let mut groups: Vec<(&'static str, usize, Vec<f32>)> =
+            vec![("joint_positions", 3, m.positions)];
+        if let Some(v) = f.rotations_6d {
+            groups.push(("rotations_6d", 6, v));
+        }
+        if let Some(v) = f.velocities {
+            groups.push(("joint_velocities", 3, v));
+        }
+        for (name, dims, values) in groups {
+            let entry = stats
+                .entry((clip.profile.clone(), name))
+                .or_insert_with(|| Moments::new(n * dims, dims));
+            if entry.sum.len() != n * dims {
+                continue;
+            }
+            for frame in values.chunks_exact(n * dims) {
+                entry.add(frame);
+            }
+        }
+    }
+    let mut written = Vec::new();
+    let (mut col_profile, mut col_feature, mut col_joint, mut col_dim, mut col_mean, mut col_std) = (
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+    );
+    for ((profile, feature), moments) in &stats {
+        let (mean, std) = moments.finish();
+        let shape = [mean.len() / moments.dims, moments.dims];
+        for (suffix, values) in [("mean", &mean), ("std", &std)] {
+            let path = dir.join(profile).join(format!("{feature}_{suffix}.npy"));
+            write_atomic(&path, &npy_f32(values, &shape))?;
+            written.push(path);
+        }
+        for k in 0..mean.len() {
+            col_profile.push(profile.clone());
+            col_feature.push(feature.to_string());
+            col_joint.push((k / moments.dims) as i32);
+            col_dim.push((k % moments.dims) as i32);
+            col_mean.push(mean[k]);
+            col_std.push(std[k]);
+        }
+    }
+    let schema = Arc::new(Schema::new(vec![
+        Field::new("profile", DataType::Utf8, false),
+        Field::new("feature", DataType::Utf8, false),
+        Field::new("joint", DataType::Int32, false),
+        Field::new("dim", DataType::Int32, false),
+        Field::new("mean", DataType::Float32, false),
+        Field::new("std", DataType::Float32, false),
+    ]));
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(col_profile)),
+        Arc::new(StringArray::from(col_feature)),
+        Arc::new(Int32Array::from(col_joint)),
+        Arc::new(Int32Array::from(col_dim)),
+        Arc::new(Float32Array::from(col_mean)),
+        Arc::new(Float32Array::from(col_std)),
+    ];
+    let path = dir.join("normalization.parquet");
+    let table = |e: TableError| BuildError::Table {
+        path: path.clone(),
+        source: e,
+    };
+    let batch = RecordBatch::try_new(Arc::clone(&schema), columns).map_err(|e| table(e.into()))?;
+    let mut failure = None;
+    write_atomic_with(&path, |file| {
+        let handle = file.try_clone()?;
+        let run = || -> Result<(), TableError> {
+            let mut w = ArrowWriter::try_new(handle, Arc::clone(&schema), None)?;
+            w.write(&batch)?;
+            w.close()?;
+            Ok(())
+        };
+        run().map_err(|e| {
+            failure = Some(e);
+            std::io::Error::other("normalization table encoding failed")
+        })
+    })
+    .map_err(|e| match failure.take() {
+        Some(source) => BuildError::Table {
+            path: path.clone(),
+            source,
+        },
+        None => BuildError::Workspace(e),
+    })?;
+    written.push(path);
+    Ok(written)
+}
