@@ -117,6 +117,10 @@ enum Command {
         /// Repeat the whole folder this many times and keep the fastest pass.
         #[arg(long, default_value_t = 3)]
         repeat: usize,
+        /// Instead, measure writing Parquet shards of at least this many frames (the folder's
+        /// clips and mirrors, repeated), with the write's peak memory.
+        #[arg(long)]
+        write_frames: Option<usize>,
     },
 }
 
@@ -298,7 +302,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             data,
             profile,
             repeat,
-        } => bench(&data, &profile, repeat.max(1))?,
+            write_frames,
+        } => match write_frames {
+            Some(frames) => bench_write(&data, &profile, frames)?,
+            None => bench(&data, &profile, repeat.max(1))?,
+        },
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -817,5 +825,94 @@ fn export_bvh(config: &Path, clip_id: &str, output: Option<PathBuf>, offline: bo
         clip.motion.fps,
         clip.profile
     )?;
+    Ok(())
+}
+
+/// Peak resident memory of this process in kB (Linux `VmHWM`), if readable.
+fn peak_rss_kb() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+}
+
+fn bench_write(data: &Path, profile: &str, target_frames: usize) -> Result<()> {
+    let work = std::env::temp_dir().join(format!("motionforge-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&work)?;
+    let data = std::path::absolute(data)?;
+    let config_text = format!(
+        "[dataset]\nname = \"bench\"\noutput = \"out\"\n\n[synthetic]\nenabled = false\n\n[[sources]]\nname = \"bench\"\ncaptures = [\"{}/*.bvh\"]\nprofile = \"{profile}\"\n[sources.labels]\nkind = \"filename\"\npattern = \"^(?P<name>.+)$\"\naction = \"{{name}}\"\ntext = \"{{name}}\"\n[sources.segment]\nmax_seconds = 600\n",
+        data.display()
+    );
+    let config_path = work.join("bench.toml");
+    std::fs::write(&config_path, config_text)?;
+    let config = Config::load(&config_path)?;
+    let base = motionforge::build::collect_clips(&config, &BuildOptions::default())?;
+    let base_frames: usize = base.iter().map(|c| c.motion.num_frames()).sum();
+    if base_frames == 0 {
+        bail!("no frames in {}", data.display());
+    }
+    let copies = target_frames.div_ceil(base_frames);
+    let spec = load_profile(profile)?;
+    let mut profiles = std::collections::BTreeMap::new();
+    profiles.insert(spec.name.clone(), spec.bind(&base[0].motion.skeleton)?);
+    let features = motionforge::features::FeatureConfig::default();
+    // Shards of about 64 MB of rows each, as a build would cut them.
+    let mut shards: Vec<Vec<motionforge::clip::Clip>> = vec![Vec::new()];
+    let mut size = 0u64;
+    for k in 0..copies {
+        for c in &base {
+            let bytes = (c.motion.num_frames() * c.motion.num_joints() * 7 * 4) as u64;
+            if size + bytes > 64 << 20 && shards.last().is_some_and(|s| !s.is_empty()) {
+                shards.push(Vec::new());
+                size = 0;
+            }
+            size += bytes;
+            let mut clip = c.clone();
+            clip.clip_id = format!("{}#{k}", c.clip_id);
+            if let Some(s) = shards.last_mut() {
+                s.push(clip);
+            }
+        }
+    }
+    let frames = base_frames * copies;
+    let before = peak_rss_kb();
+    // Reset the peak so what follows measures the write alone (Linux: 5 > clear_refs).
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+    let start = std::time::Instant::now();
+    let mut bytes = 0u64;
+    for (i, shard) in shards.iter().enumerate() {
+        let path = work.join(format!("shard-{i:05}.parquet"));
+        let file = std::fs::File::create(&path)?;
+        motionforge::io::parquet::write_clips(file, shard, &profiles, "{}", &features)?;
+        bytes += std::fs::metadata(&path)?.len();
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let peak = peak_rss_kb();
+    let _ = std::fs::remove_dir_all(&work);
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "{} clips, {frames} frames ({copies} copies of {} frames), {} shards, {:.1} MB written, one thread",
+        shards.iter().map(Vec::len).sum::<usize>(),
+        base_frames,
+        shards.len(),
+        bytes as f64 / 1e6
+    )?;
+    writeln!(
+        out,
+        "write     {:>10.0} frames/s  {:>7.1} MB/s  ({seconds:.2} s)",
+        frames as f64 / seconds,
+        bytes as f64 / 1e6 / seconds
+    )?;
+    if let (Some(b), Some(p)) = (before, peak) {
+        writeln!(
+            out,
+            "peak RSS  {:.0} MB before writing (clips in memory), {:.0} MB peak while writing",
+            b as f64 / 1024.0,
+            p as f64 / 1024.0
+        )?;
+    }
     Ok(())
 }
