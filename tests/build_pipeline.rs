@@ -260,7 +260,7 @@ fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
 fn mirrored_rows_carry_mirrored_labels() {
     let s = Scratch::new(&THREE[..1]);
     s.build();
-    let rows = read_rows(&s.out().join("data"), "clip_id,mirrored,action,text");
+    let rows = pyarrow_rows(&s.out().join("data"), "clip_id,mirrored,action,text");
     assert_eq!(
         rows,
         vec![
@@ -268,29 +268,6 @@ fn mirrored_rows_carry_mirrored_labels() {
             "bandai-namco-1/dataset-1_walk-left_normal_001:0-135:m|True|walk-right|walk right, normal style",
         ]
     );
-}
-
-/// Reads columns with pyarrow, an independent reader (installed by `.ci/run`).
-fn read_rows(table: &Path, columns: &str) -> Vec<String> {
-    let script = format!(
-        "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
-    );
-    let out = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .arg(table)
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "pyarrow failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(str::to_string)
-        .collect()
 }
 
 #[test]
@@ -359,18 +336,7 @@ fn config_errors_name_the_key_and_what_was_expected() {
 #[test]
 fn demo_build_segments_the_long_capture_and_prints_counts() {
     let out = tempfile::tempdir().unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(out.path())
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let run = build_demo(out.path());
     let printed = String::from_utf8(run.stdout).unwrap();
     assert!(
         printed.contains("motion types (originals):") && printed.contains("walk forward 1"),
@@ -385,7 +351,7 @@ fn demo_build_segments_the_long_capture_and_prints_counts() {
         report["clips"], 25,
         "10 clips, their mirrors, 5 synthetic pairs within splits"
     );
-    let rows = read_rows(
+    let rows = pyarrow_rows(
         &out.path().join("demo/data"),
         "clip_id,annotation_source,frame_range",
     );

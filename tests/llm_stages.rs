@@ -3,7 +3,6 @@
 mod common;
 
 use std::fs;
-use std::path::Path;
 use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -162,28 +161,6 @@ fn llm_section(server: &Server) -> String {
     )
 }
 
-fn rows(table: &Path, columns: &str) -> Vec<String> {
-    let script = format!(
-        "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
-    );
-    let out = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .arg(table)
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(str::to_string)
-        .collect()
-}
-
 fn stage<'a>(report: &'a BuildReport, name: &str) -> &'a motionforge::build::StageRun {
     report
         .stages
@@ -234,7 +211,7 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
     );
 
     let out = dir.path().join("out/llm");
-    let table = rows(&out.join("data"), "clip_id,parts,label_source,paraphrases");
+    let table = pyarrow_rows(&out.join("data"), "clip_id,parts,label_source,paraphrases");
     let walk = table
         .iter()
         .find(|r| r.contains("walk_normal_001:0-195|"))
@@ -248,7 +225,7 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
         walk_m.contains("[False, False, True, True, False, False]|llm:test-model"),
         "arms mirror onto arms: {walk_m}"
     );
-    let plans = rows(&out.join("plans.parquet"), "text,step_id,step,category");
+    let plans = pyarrow_rows(&out.join("plans.parquet"), "text,step_id,step,category");
     assert_eq!(plans.len(), 6, "{plans:?}");
     assert!(
         plans.contains(&"walk|2|do it|interaction".to_string()),
@@ -340,7 +317,7 @@ fn without_an_llm_the_embedded_labeller_labels_and_skips_are_reported() {
         !dir.path().join("out/llm/llm-cache.jsonl").exists(),
         "no cache file without an LLM"
     );
-    let table = rows(
+    let table = pyarrow_rows(
         &dir.path().join("out/llm/data"),
         "clip_id,parts,label_source",
     );

@@ -73,3 +73,44 @@ pub fn table_bytes(dataset: &Path) -> Vec<u8> {
         .flat_map(|p| std::fs::read(p).unwrap())
         .collect()
 }
+
+/// Columns of a Parquet file or folder of shards, read with pyarrow (an independent reader,
+/// installed by `.ci/run`): one `|`-joined line per row.
+pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
+    let script = format!(
+        "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
+    );
+    let out = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(table)
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "pyarrow failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+/// Builds the demo config into `output` with the binary; its dataset folder is `output/demo`.
+pub fn build_demo(output: &Path) -> std::process::Output {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(repo().join("fixtures/demo.toml"))
+        .arg("--output")
+        .arg(output)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
