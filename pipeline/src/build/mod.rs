@@ -611,8 +611,8 @@ fn llm_vetoes(
         return Ok((BTreeSet::new(), report));
     }
     let (pairs, _) =
-        crate::stages::compose::sample(clips, &config.synthetic, config.dataset.seed, |_| {
-            "all".to_string()
+        crate::stages::compose::sample(clips, &config.synthetic, config.dataset.seed, |c| {
+            c.split.clone()
         });
     let texts: BTreeSet<(String, String)> = pairs
         .iter()

@@ -79,11 +79,13 @@ struct ShardPlan {
     clips: Vec<usize>,
 }
 
-/// Rough uncompressed size of a clip's row: the motion arrays dominate.
+/// Rough uncompressed size of a clip's row: the per-joint arrays dominate (positions 3, rotations
+/// 4, 6D rotations 6, velocities 3 floats per joint and frame; root, contacts and future root per
+/// frame), whether or not every feature column is switched on.
 fn row_bytes(clip: &Clip) -> u64 {
     let frames = clip.motion.num_frames() as u64;
     let joints = clip.motion.num_joints() as u64;
-    frames * joints * (3 + 4) * 4 + frames * 3 * 4 + 2048
+    frames * joints * (3 + 4 + 6 + 3) * 4 + frames * (3 + 9) * 4 + frames * 4 + 2048
 }
 
 /// Shards per split, in split order, each filled up to `target` bytes (at least one clip).
