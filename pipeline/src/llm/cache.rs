@@ -254,30 +254,7 @@ impl ResponseCache {
     /// Appends an entry and syncs it to disk before it becomes visible; it replaces any earlier
     /// entry for the key. On failure nothing changes, in memory or (as far as the OS allows) on disk.
     pub fn insert(&mut self, key: CacheKey, entry: CacheEntry) -> Result<(), CacheError> {
-        let mut line = serde_json::to_vec(&RecordOut {
-            key: &key.0,
-            entry: &entry,
-        })
-        .map_err(|e| CacheError::Encode {
-            path: self.path.clone(),
-            message: e.to_string(),
-        })?;
-        line.push(b'\n');
-        let written = self
-            .file
-            .write_all(&line)
-            .and_then(|()| self.file.sync_data());
-        if let Err(source) = written {
-            // Cut off whatever part of the line reached the file, so the next append starts clean.
-            let _ = self.file.set_len(self.len_bytes);
-            return Err(CacheError::Io {
-                path: self.path.clone(),
-                source,
-            });
-        }
-        self.len_bytes += line.len() as u64;
-        self.entries.insert(key.0, entry);
-        Ok(())
+        self.insert_many(vec![(key, entry)])
     }
 
     /// Appends many entries with one write and one sync (imports of thousands of answers would
