@@ -2,6 +2,7 @@
 //! clean labels and the text pairs of SINC's spatial training split. Word-level spelling rules are
 //! checked on hand-written cases, phrase-level rules on every real label, and exact outputs on a
 //! hand-checked sample of real labels and real pairs.
+mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -9,14 +10,7 @@ use motionforge::compose_text::*;
 use serde_json::Value;
 
 fn sinc_dir() -> PathBuf {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    assert!(
-        data.is_dir(),
-        "real data not found at {}: the text-composition tests need ../shared/data beside the \
-         repository and must not pass without it",
-        data.display()
-    );
-    let sinc = data.join("sinc");
+    let sinc = common::shared_data().join("sinc");
     assert!(sinc.is_dir(), "{} is missing", sinc.display());
     sinc
 }

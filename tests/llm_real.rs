@@ -15,18 +15,7 @@ fn a_real_server_labels_paraphrases_and_plans_and_a_rebuild_asks_nothing() {
     let url = std::env::var("MOTIONFORGE_LLM_URL")
         .expect("set MOTIONFORGE_LLM_URL, e.g. http://127.0.0.1:8081/v1");
     let model = std::env::var("MOTIONFORGE_LLM_MODEL").unwrap_or_else(|_| "gemma-3-270m".into());
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir_all(dir.path().join("captures")).unwrap();
-    for name in [
-        "dataset-1_walk_normal_001",
-        "dataset-1_kick_normal_001",
-        "dataset-1_bye_normal_001",
-    ] {
-        let src = shared_data()
-            .join("bandai-namco-1/data")
-            .join(format!("{name}.bvh"));
-        fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
-    }
+    let dir = bandai1_scratch(&WALK_KICK_BYE);
     let config_text = format!(
         r#"
 [dataset]

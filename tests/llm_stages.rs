@@ -118,18 +118,7 @@ impl Server {
 
 /// A scratch build of three real Bandai captures with the given extra config.
 fn scratch(extra: &str) -> (tempfile::TempDir, Config) {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir_all(dir.path().join("captures")).unwrap();
-    for name in [
-        "dataset-1_walk_normal_001",
-        "dataset-1_kick_normal_001",
-        "dataset-1_bye_normal_001",
-    ] {
-        let src = shared_data()
-            .join("bandai-namco-1/data")
-            .join(format!("{name}.bvh"));
-        fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
-    }
+    let dir = bandai1_scratch(&WALK_KICK_BYE);
     let text = format!(
         r#"
 [dataset]

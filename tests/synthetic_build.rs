@@ -19,14 +19,7 @@ const CAPTURES: [&str; 5] = [
 ];
 
 fn scratch(synthetic: &str, seed: u64) -> (tempfile::TempDir, Config) {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir_all(dir.path().join("captures")).unwrap();
-    for name in CAPTURES {
-        let src = shared_data()
-            .join("bandai-namco-1/data")
-            .join(format!("{name}.bvh"));
-        fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
-    }
+    let dir = bandai1_scratch(&CAPTURES);
     let text = format!(
         r#"
 [dataset]

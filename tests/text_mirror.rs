@@ -1,5 +1,6 @@
 //! Caption mirroring checked on real action texts (BABEL labels and the SINC GPT-3 label list):
 //! every property must hold on every text, and hand-checked real captions must come out exactly.
+mod common;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -7,14 +8,7 @@ use motionforge::text::*;
 use serde_json::Value;
 
 fn sinc_dir() -> PathBuf {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    assert!(
-        data.is_dir(),
-        "real data not found at {}: the caption-mirroring tests need ../shared/data beside the \
-         repository and must not pass without it",
-        data.display()
-    );
-    let sinc = data.join("sinc");
+    let sinc = common::shared_data().join("sinc");
     assert!(sinc.is_dir(), "{} is missing", sinc.display());
     sinc
 }

@@ -578,6 +578,14 @@ impl Config {
         self.output_dir().join(&self.dataset.name)
     }
 
+    /// The prompt templates: bundled, with any file in `prompts_dir` in its place.
+    pub fn prompts(&self) -> Result<crate::llm::prompt::Prompts, crate::llm::prompt::PromptError> {
+        match &self.prompts_dir {
+            Some(dir) => crate::llm::prompt::Prompts::with_overrides(&self.resolve(dir)),
+            None => crate::llm::prompt::Prompts::bundled(),
+        }
+    }
+
     /// The LLM response cache file.
     pub fn llm_cache_path(&self) -> PathBuf {
         match &self.llm_cache {

@@ -636,13 +636,6 @@ fn prompt_command(command: PromptCommand) -> Result<()> {
     Ok(())
 }
 
-fn config_prompts(config: &Config) -> Result<Prompts> {
-    Ok(match &config.prompts_dir {
-        Some(dir) => Prompts::with_overrides(&config.resolve(dir))?,
-        None => Prompts::bundled()?,
-    })
-}
-
 fn labels_command(command: LabelsCommand) -> Result<()> {
     match command {
         LabelsCommand::Import {
@@ -655,7 +648,7 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
             let llm = config.llm.as_ref().context(
                 "labels import needs an [llm] section naming the model whose answers these are (SINC: model = \"text-davinci-003\", kind = \"completion\", temperature = 0, max_tokens = 256)",
             )?;
-            let prompts = config_prompts(&config)?;
+            let prompts = config.prompts()?;
             let json = std::fs::read_to_string(&file)
                 .with_context(|| format!("cannot read {}", file.display()))?;
             let cache_path = config.llm_cache_path();
@@ -727,7 +720,7 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
                             .llm
                             .as_ref()
                             .context("--source cache needs an [llm] section in the config")?;
-                        let prompts = config_prompts(&config)?;
+                        let prompts = config.prompts()?;
                         let cache = ResponseCache::open(&config.llm_cache_path())?;
                         let variant = config.part_labels.variant;
                         motionforge::parts::eval::evaluate(&gold_set, |t| {

@@ -624,10 +624,7 @@ fn llm_vetoes(
         })
         .collect();
     let texts: Vec<(String, String)> = texts.into_iter().collect();
-    let prompts = match &config.prompts_dir {
-        Some(dir) => crate::llm::prompt::Prompts::with_overrides(&config.resolve(dir)),
-        None => crate::llm::prompt::Prompts::bundled(),
-    }?;
+    let prompts = config.prompts()?;
     let mut cache = match &config.llm {
         Some(_) => {
             let path = config.llm_cache_path();

@@ -12,7 +12,6 @@ use crate::clip::{Clip, SourceKind};
 use crate::config::Labeller;
 use crate::llm::cache::ResponseCache;
 use crate::llm::plans::PlanStep;
-use crate::llm::prompt::Prompts;
 use crate::parts::PartSet;
 use crate::stages::augment::{self, AugmentReport};
 use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
@@ -74,10 +73,7 @@ pub(super) fn run(
     offline: bool,
 ) -> Result<TextOutcome, BuildError> {
     let config = shared.config;
-    let prompts = match &config.prompts_dir {
-        Some(dir) => Prompts::with_overrides(&config.resolve(dir)),
-        None => Prompts::bundled(),
-    }?;
+    let prompts = config.prompts()?;
     let mut cache = open_cache(shared)?;
     let mut outcome = TextOutcome::default();
 

@@ -9,8 +9,6 @@ use minijinja::value::Serde;
 use minijinja::{Environment, UndefinedBehavior, Value};
 use serde::{Deserialize, Serialize};
 
-use crate::build::Fingerprint;
-
 /// The bundled templates and their data, compiled into the binary.
 const BUNDLED: [(&str, &str); 6] = [
     (
@@ -114,7 +112,6 @@ impl PartPromptVariant {
 pub struct Prompts {
     env: Environment<'static>,
     data: BTreeMap<String, toml::Table>,
-    digest: String,
 }
 
 impl Prompts {
@@ -151,9 +148,7 @@ impl Prompts {
         let mut env = Environment::new();
         env.set_undefined_behavior(UndefinedBehavior::Strict);
         let mut data = BTreeMap::new();
-        let mut fp = Fingerprint::new("prompts", 1);
         for (name, text) in &files {
-            fp = fp.text(name).text(text);
             if let Some(stem) = name.strip_suffix(".toml") {
                 let table: toml::Table = toml::from_str(text).map_err(|e| PromptError::Data {
                     file: name.clone(),
@@ -165,16 +160,7 @@ impl Prompts {
                     .map_err(|e| template_error(stem, &e))?;
             }
         }
-        Ok(Prompts {
-            env,
-            data,
-            digest: fp.finish(),
-        })
-    }
-
-    /// A digest of every template and data file: part of the fingerprint of stages that prompt.
-    pub fn digest(&self) -> &str {
-        &self.digest
+        Ok(Prompts { env, data })
     }
 
     /// Renders `template` with `vars` plus the template's data file. Missing variables are errors.
