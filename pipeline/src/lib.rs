@@ -9,6 +9,7 @@ pub mod io;
 pub mod llm;
 pub mod motion;
 pub mod parts;
+pub mod progress;
 pub mod quality;
 pub mod report;
 pub mod source;

@@ -260,7 +260,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
             if let Some(output) = output {
                 config.dataset.output = std::path::absolute(&output).unwrap_or(output);
             }
-            let report = build(&config, &BuildOptions { force, offline })?;
+            let report = build(
+                &config,
+                &BuildOptions {
+                    force,
+                    offline,
+                    ..BuildOptions::default()
+                },
+            )?;
             if json {
                 writeln!(
                     std::io::stdout(),
@@ -784,8 +791,8 @@ fn export_bvh(config: &Path, clip_id: &str, output: Option<PathBuf>, offline: bo
     let clips = motionforge::build::collect_clips(
         &config,
         &BuildOptions {
-            force: false,
             offline,
+            ..BuildOptions::default()
         },
     )?;
     let Some(clip) = clips.iter().find(|c| c.clip_id == clip_id) else {

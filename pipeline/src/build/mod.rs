@@ -169,6 +169,8 @@ pub struct BuildOptions {
     pub force: bool,
     /// Send no LLM request: answers come from the response cache only.
     pub offline: bool,
+    /// Where stage progress is reported.
+    pub progress: crate::progress::ProgressSink,
 }
 
 fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'a>, BuildError> {
