@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 
-use motionforge::build::{BuildOptions, BuildReport, build};
+use motionforge::build::{BuildOptions, BuildReport, Stage, build};
 use motionforge::config::Config;
 use motionforge::llm::cache::ResponseCache;
 use motionforge::llm::prompt::{PartPromptVariant, Prompts};
@@ -45,6 +45,54 @@ enum Command {
         #[arg(long)]
         offline: bool,
         /// Print the build report as JSON instead of a summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Run the named stages and every stage they depend on, nothing after them.
+    ///
+    /// Stages, in order: ingest, segment, label, paraphrase, plan, mirror, compose, write,
+    /// report; each depends on all before it. `run segment` reads and cuts every capture and
+    /// caches the result; a later `build` reuses it.
+    Run {
+        /// Stages to run (with their dependencies).
+        #[arg(required = true, value_parser = parse_stage)]
+        stages: Vec<Stage>,
+        /// Build configuration (TOML).
+        #[arg(long, short, default_value = "motionforge.toml")]
+        config: PathBuf,
+        /// Recompute the stages, ignoring cached outputs.
+        #[arg(long)]
+        force: bool,
+        /// Exit with code 3 when any input was rejected.
+        #[arg(long)]
+        strict: bool,
+        /// Send no LLM request: LLM stages use cached answers only.
+        #[arg(long)]
+        offline: bool,
+        /// Print the run's report as JSON instead of a summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Show what a build would run and why (which input, config key or stage version changed),
+    /// without running anything.
+    Plan {
+        /// Build configuration (TOML).
+        #[arg(long, short, default_value = "motionforge.toml")]
+        config: PathBuf,
+        /// Plan only up to this stage.
+        #[arg(long, value_parser = parse_stage)]
+        through: Option<Stage>,
+        /// Print the plan as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Show each stage's state: fresh or stale, when it last ran and what it did, and the rows of
+    /// the written dataset.
+    Status {
+        /// Build configuration (TOML).
+        #[arg(long, short, default_value = "motionforge.toml")]
+        config: PathBuf,
+        /// Print the status as JSON.
         #[arg(long)]
         json: bool,
     },
@@ -281,6 +329,74 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 return Ok(ExitCode::from(3));
             }
         }
+        Command::Run {
+            stages,
+            config,
+            force,
+            strict,
+            offline,
+            json,
+        } => {
+            let config = Config::load(&config)?;
+            let through = stages.iter().copied().max();
+            let report = build(
+                &config,
+                &BuildOptions {
+                    force,
+                    offline,
+                    through,
+                    ..BuildOptions::default()
+                },
+            )?;
+            if json {
+                writeln!(
+                    std::io::stdout(),
+                    "{}",
+                    serde_json::to_string_pretty(&report)?
+                )?;
+            } else {
+                print_report(&report)?;
+            }
+            if strict && !report.rejects.is_empty() {
+                return Ok(ExitCode::from(3));
+            }
+        }
+        Command::Plan {
+            config,
+            through,
+            json,
+        } => {
+            let config = Config::load(&config)?;
+            let plan = motionforge::build::plan(
+                &config,
+                &BuildOptions {
+                    through,
+                    ..BuildOptions::default()
+                },
+            )?;
+            if json {
+                writeln!(
+                    std::io::stdout(),
+                    "{}",
+                    serde_json::to_string_pretty(&plan)?
+                )?;
+            } else {
+                print_plan(&plan)?;
+            }
+        }
+        Command::Status { config, json } => {
+            let config = Config::load(&config)?;
+            let status = motionforge::build::status(&config)?;
+            if json {
+                writeln!(
+                    std::io::stdout(),
+                    "{}",
+                    serde_json::to_string_pretty(&status)?
+                )?;
+            } else {
+                print_status(&status)?;
+            }
+        }
         Command::MirrorText { file } => mirror_text(file.as_deref())?,
         Command::CalibrateMirror { profile, captures } => calibrate_mirror(&profile, &captures)?,
         Command::ExportBvh {
@@ -326,6 +442,121 @@ fn counts(map: &std::collections::BTreeMap<String, usize>) -> String {
         .map(|(k, n)| format!("{k} {n}"))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+fn parse_stage(s: &str) -> std::result::Result<Stage, String> {
+    s.parse()
+}
+
+fn reasons(map: &std::collections::BTreeMap<String, usize>) -> String {
+    map.iter()
+        .map(|(why, n)| format!("{why} ({n})"))
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "plan for {} ({}):",
+        plan.dataset,
+        plan.output.display()
+    )?;
+    for stage in &plan.stages {
+        if stage.fresh() {
+            writeln!(
+                out,
+                "{:>10}  up to date ({} items)",
+                stage.stage.name(),
+                stage.items
+            )?;
+        } else {
+            writeln!(
+                out,
+                "{:>10}  {} of {} to run: {}",
+                stage.stage.name(),
+                stage.to_run,
+                stage.items.max(stage.to_run),
+                reasons(&stage.reasons)
+            )?;
+            for example in &stage.examples {
+                writeln!(out, "{:>10}    {example}", "")?;
+            }
+        }
+    }
+    if plan.nothing_to_run() {
+        writeln!(out, "nothing to run: a build would reuse everything")?;
+    }
+    Ok(())
+}
+
+/// `YYYY-MM-DD HH:MM UTC` of Unix seconds (days to civil date as in Howard Hinnant's algorithm).
+fn utc(secs: u64) -> String {
+    let days = (secs / 86_400) as i64;
+    let rem = secs % 86_400;
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02} {:02}:{:02} UTC",
+        rem / 3_600,
+        (rem % 3_600) / 60
+    )
+}
+
+fn print_status(status: &motionforge::build::Status) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    let rows = if status.splits.is_empty() {
+        "not written yet".to_string()
+    } else {
+        status
+            .splits
+            .iter()
+            .map(|(split, n)| format!("{split} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    writeln!(
+        out,
+        "{} ({}): {rows}",
+        status.dataset,
+        status.output.display()
+    )?;
+    writeln!(
+        out,
+        "{:>10}  {:<6} {:<21} {:>6} {:>6} {:>6}",
+        "stage", "state", "last run", "items", "ran", "reused"
+    )?;
+    for s in &status.stages {
+        let last = s.last_run.map_or_else(|| "never".to_string(), utc);
+        writeln!(
+            out,
+            "{:>10}  {:<6} {:<21} {:>6} {:>6} {:>6}",
+            s.stage.name(),
+            if s.fresh { "fresh" } else { "stale" },
+            last,
+            s.items,
+            s.ran,
+            s.reused
+        )?;
+        if !s.fresh {
+            writeln!(
+                out,
+                "{:>10}    {} to run: {}",
+                "",
+                s.to_run,
+                reasons(&s.reasons)
+            )?;
+        }
+    }
+    Ok(())
 }
 
 fn print_report(report: &BuildReport) -> std::io::Result<()> {

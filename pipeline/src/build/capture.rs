@@ -16,6 +16,10 @@ use crate::stages::{ingest, mirror};
 #[derive(Default)]
 pub(super) struct Item {
     pub(super) ran: [bool; 3],
+    /// In probe mode: the first stage whose output is not cached (nothing after it is known).
+    pub(super) pending: Option<&'static str>,
+    /// The item's key in the ledger: the capture path as found.
+    pub(super) key: String,
     pub(super) fingerprints: Vec<(&'static str, String)>,
     /// The capture's original clips (labelled by the text stages before mirroring).
     pub(super) clips: Vec<Clip>,
@@ -54,7 +58,10 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
     let config = shared.config;
     let source = &config.sources[file.source];
     let spec = &shared.specs[file.source];
-    let mut item = Item::default();
+    let mut item = Item {
+        key: file.display.clone(),
+        ..Item::default()
+    };
     let bytes = match std::fs::read(&file.path) {
         Ok(b) => b,
         Err(e) => {
@@ -77,10 +84,15 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
     };
     let ingest_fp = ingest::fingerprint(&input);
-    let (ingested, ran): (ingest::IngestOutput, bool) =
+    let Some((ingested, ran)) =
         shared
             .workspace
-            .cached(ingest::NAME, &ingest_fp, || ingest::run(&input))?;
+            .item(ingest::NAME, &item.key, &ingest_fp, || ingest::run(&input))?
+    else {
+        item.pending = Some(ingest::NAME);
+        return Ok(item);
+    };
+    let ingest_fp = ingest_fp.fingerprint;
     item.ran[0] = ran;
     item.fingerprints.push((ingest::NAME, ingest_fp.clone()));
     item.rejects.extend(ingested.rejects);
@@ -160,12 +172,18 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         fps: config.dataset.fps,
     };
     let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &shared.types_digest);
-    let (segmented, ran): (SegmentOutput, bool) =
+    let Some((segmented, ran)): Option<(SegmentOutput, bool)> =
         shared
             .workspace
-            .cached(segment::NAME, &seg_fp, || segment::run(&seg_input))?;
+            .item(segment::NAME, &item.key, &seg_fp, || {
+                segment::run(&seg_input)
+            })?
+    else {
+        item.pending = Some(segment::NAME);
+        return Ok(item);
+    };
     item.ran[1] = ran;
-    item.fingerprints.push((segment::NAME, seg_fp.clone()));
+    item.fingerprints.push((segment::NAME, seg_fp.fingerprint));
 
     item.clips = segmented.clips.clone();
     item.segment = segmented;
@@ -187,12 +205,16 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
         message: e.to_string(),
     })?;
     let fp = mirror::fingerprint(&sha256_hex(&encoded), spec, &shared.types_digest);
-    let (mirrored, ran): (mirror::MirrorOutput, bool) =
-        shared.workspace.cached(mirror::NAME, &fp, || {
+    let Some((mirrored, ran)): Option<(mirror::MirrorOutput, bool)> =
+        shared.workspace.item(mirror::NAME, &item.key, &fp, || {
             mirror::run(&item.clips, spec, shared.types.taxonomy())
-        })?;
+        })?
+    else {
+        item.pending = Some(mirror::NAME);
+        return Ok(());
+    };
     item.ran[2] = ran;
-    item.fingerprints.push((mirror::NAME, fp));
+    item.fingerprints.push((mirror::NAME, fp.fingerprint));
     item.mirrored = mirrored.clips;
     item.rejects.extend(mirrored.rejects);
     Ok(())

@@ -3,6 +3,7 @@
 
 mod capture;
 mod output;
+mod plan;
 mod reject;
 mod text;
 pub mod workspace;
@@ -13,9 +14,11 @@ use std::path::PathBuf;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
 pub use reject::Reject;
 pub use workspace::{
-    Fingerprint, Workspace, WorkspaceError, sha256_hex, temp_path, write_atomic, write_atomic_with,
+    Fingerprint, Ledger, Miss, StageLedger, Stamp, Workspace, WorkspaceError, sha256_hex,
+    temp_path, write_atomic, write_atomic_with,
 };
 
 use capture::{Item, Shared};
@@ -47,9 +50,85 @@ pub const REJECTS_FILE: &str = "rejects.jsonl";
 pub const REPORT_FILE: &str = "build-report.json";
 /// Task plans, one row per step.
 pub const PLANS_FILE: &str = "plans.parquet";
+/// The report's statistics, inside the dataset folder.
+pub const REPORT_STATS: &str = "report/stats.json";
 
 /// Version of the table-writing stage.
 const WRITE_VERSION: u32 = 2;
+
+/// The stages of a build in dependency order: each needs every one before it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// Read and check capture files.
+    Ingest,
+    /// Cut captures into clips by their annotations.
+    Segment,
+    /// Body parts of every text (embedded labeller, LLM or imported answers).
+    Label,
+    /// Alternative captions (LLM).
+    Paraphrase,
+    /// Task plans of single actions (LLM).
+    Plan,
+    /// Left/right mirrored copies of every clip.
+    Mirror,
+    /// Synthetic simultaneous-action pairs and plausibility metrics.
+    Compose,
+    /// Parquet shards, manifest, card, normalisation statistics.
+    Write,
+    /// Statistics report (tables, figures, stats.json).
+    Report,
+}
+
+impl Stage {
+    /// Every stage, in order.
+    pub const ALL: [Stage; 9] = [
+        Stage::Ingest,
+        Stage::Segment,
+        Stage::Label,
+        Stage::Paraphrase,
+        Stage::Plan,
+        Stage::Mirror,
+        Stage::Compose,
+        Stage::Write,
+        Stage::Report,
+    ];
+
+    /// The stage's name in reports and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Ingest => ingest::NAME,
+            Stage::Segment => segment::NAME,
+            Stage::Label => label::NAME,
+            Stage::Paraphrase => "paraphrase",
+            Stage::Plan => "plan",
+            Stage::Mirror => mirror::NAME,
+            Stage::Compose => crate::stages::compose::NAME,
+            Stage::Write => "write",
+            Stage::Report => "report",
+        }
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Stage {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Stage, String> {
+        Stage::ALL
+            .into_iter()
+            .find(|stage| stage.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+                format!("unknown stage `{s}`; expected one of {}", names.join(", "))
+            })
+    }
+}
 
 /// Errors that stop a build (bad inputs do not: they become rejects).
 #[derive(Debug, thiserror::Error)]
@@ -171,12 +250,24 @@ pub struct BuildOptions {
     pub offline: bool,
     /// Where stage progress is reported.
     pub progress: crate::progress::ProgressSink,
+    /// Run only up to this stage (and everything it depends on); all stages when `None`.
+    pub through: Option<Stage>,
 }
 
-fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'a>, BuildError> {
+fn run_stages<'a>(
+    config: &'a Config,
+    options: &BuildOptions,
+    probe: bool,
+) -> Result<Staged<'a>, BuildError> {
     let output = config.dataset_dir();
-    let workspace = Workspace::new(&output);
-    if options.force {
+    let through = options.through.unwrap_or(Stage::Report);
+    let progress = &options.progress;
+    let workspace = if probe {
+        Workspace::probing(&output)
+    } else {
+        Workspace::new(&output)
+    };
+    if options.force && !probe {
         let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
     }
     let files = source::discover(config)?;
@@ -206,10 +297,18 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
         types_digest,
     };
 
+    progress.stage_started(ingest::NAME, files.len() as u64);
     let mut items: Vec<Item> = files
         .par_iter()
-        .map(|file| capture::segment_capture(&shared, file))
+        .map(|file| {
+            let item = capture::segment_capture(&shared, file);
+            progress.advanced(ingest::NAME, 1);
+            item
+        })
         .collect::<Result<_, _>>()?;
+    // In probe mode, a capture whose ingest or segment output is not cached stops there: what
+    // follows depends on outputs that do not exist yet.
+    let upstream_pending = items.iter().any(|i| i.pending.is_some());
     // Splits by capture: set before labelling so every later copy (mirror, pair) inherits it.
     let split_text = match &config.splits.file {
         Some(f) => {
@@ -234,18 +333,37 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
             clip.split = splits.split_of(&clip.capture.path, &stem);
         }
     }
-    let text = text::run(&shared, &mut items, options.offline)?;
-    if config.mirror.enabled {
+    let run_text = through >= Stage::Label && !upstream_pending;
+    let text = if run_text {
+        text::run(&shared, &mut items, options.offline || probe, through)?
+    } else {
+        text::TextOutcome {
+            pending: upstream_pending,
+            ..Default::default()
+        }
+    };
+    let run_mirror = config.mirror.enabled && through >= Stage::Mirror && !text.pending;
+    if run_mirror {
+        progress.stage_started(mirror::NAME, items.len() as u64);
         items
             .par_iter_mut()
-            .map(|item| capture::mirror_capture(&shared, item))
+            .map(|item| {
+                let done = capture::mirror_capture(&shared, item);
+                progress.advanced(mirror::NAME, 1);
+                done
+            })
             .collect::<Result<Vec<()>, _>>()?;
     }
+    let mirror_pending = items.iter().any(|i| i.pending == Some(mirror::NAME));
+    let first_pending = items_pending_stage(&items);
 
     let mut stages = Vec::new();
     let names = [ingest::NAME, segment::NAME, mirror::NAME];
     for (k, name) in names.iter().enumerate() {
-        if k == 2 && !config.mirror.enabled {
+        if k == 1 && through < Stage::Segment {
+            continue;
+        }
+        if k == 2 && !run_mirror {
             continue;
         }
         if k == 2 {
@@ -275,7 +393,7 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
         shared.workspace.prune(name, &live);
     }
 
-    if !config.mirror.enabled {
+    if !run_mirror {
         stages.extend(text.runs.iter().cloned());
     }
 
@@ -329,59 +447,31 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
     notes.sort();
 
     // Synthetic pairs from the labelled originals and mirrors, and plausibility for every clip.
-    let all: Vec<&Clip> = clips.iter().collect();
-    let encoded = postcard::to_stdvec(&all).map_err(|e| WorkspaceError::Encode {
-        what: "clips to compose".into(),
-        message: e.to_string(),
-    })?;
-    let vetoed = llm_vetoes(&shared, &all, options.offline)?;
-    let fp = Fingerprint::new(
-        crate::stages::compose::NAME,
-        crate::stages::compose::VERSION,
-    )
-    .text(&sha256_hex(&encoded))
-    .json(&config.synthetic)
-    .json(&config.dataset.seed)
-    .json(&vetoed.0)
-    .finish();
-    drop(encoded);
-    let (composed, ran): (crate::stages::compose::ComposeOutput, bool) =
-        shared
-            .workspace
-            .cached(crate::stages::compose::NAME, &fp, || {
-                crate::stages::compose::run(
-                    &all,
-                    &config.synthetic,
-                    config.dataset.seed,
-                    |c| c.split.clone(),
-                    |c| shared.profile_of(c),
-                    |a, b| {
-                        let key = (
-                            label::normalize_text(&a.text),
-                            label::normalize_text(&b.text),
-                        );
-                        vetoed.0.contains(&key).then_some("llm_incompatible")
-                    },
-                )
-            })?;
-    shared
-        .workspace
-        .prune(crate::stages::compose::NAME, &BTreeSet::from([fp]));
-    stages.push(StageRun {
-        stage: crate::stages::compose::NAME.into(),
-        items: composed.report.sampled,
-        ran: if ran { composed.report.sampled } else { 0 },
-        reused: if ran { 0 } else { composed.report.sampled },
-    });
-    for clip in &mut clips {
-        clip.plausibility = composed.real_metrics.get(&clip.clip_id).copied();
+    let mut compose_report = crate::stages::compose::ComposeReport::default();
+    let mut pair_check = crate::stages::augment::AugmentReport::default();
+    let mut blocked = if upstream_pending {
+        first_pending
+    } else if text.pending {
+        Some(Stage::Label)
+    } else if mirror_pending {
+        Some(Stage::Mirror)
+    } else {
+        None
+    };
+    if through >= Stage::Compose && blocked.is_none() {
+        match compose(&shared, &mut clips, options.offline || probe)? {
+            Some((report, check, run)) => {
+                progress.stage_started(&run.stage, run.items as u64);
+                compose_report = report;
+                pair_check = check;
+                stages.push(run);
+            }
+            None => blocked = Some(Stage::Compose),
+        }
     }
-    clips.extend(composed.clips);
-    clips.sort_by(|a, b| {
-        a.clip_id
-            .cmp(&b.clip_id)
-            .then(a.capture.path.cmp(&b.capture.path))
-    });
+    for run in &stages {
+        progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+    }
     Ok(Staged {
         output,
         files: files.len(),
@@ -392,10 +482,95 @@ fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'
         drops_by_reason,
         unmapped_labels,
         text,
-        compose: composed.report,
-        pair_check: vetoed.1,
+        compose: compose_report,
+        pair_check,
+        blocked,
         shared,
     })
+}
+
+/// The first stage a pending (probe-mode) capture stopped at.
+fn items_pending_stage(items: &[Item]) -> Option<Stage> {
+    items
+        .iter()
+        .filter_map(|i| i.pending)
+        .filter_map(|name| Stage::ALL.into_iter().find(|s| s.name() == name))
+        .min()
+}
+
+/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
+/// `None` in probe mode when its output is not cached.
+fn compose(
+    shared: &Shared<'_>,
+    clips: &mut Vec<Clip>,
+    offline: bool,
+) -> Result<
+    Option<(
+        crate::stages::compose::ComposeReport,
+        crate::stages::augment::AugmentReport,
+        StageRun,
+    )>,
+    BuildError,
+> {
+    let config = shared.config;
+    let all: Vec<&Clip> = clips.iter().collect();
+    let encoded = postcard::to_stdvec(&all).map_err(|e| WorkspaceError::Encode {
+        what: "clips to compose".into(),
+        message: e.to_string(),
+    })?;
+    let vetoed = llm_vetoes(shared, &all, offline)?;
+    let stamp = Fingerprint::new(
+        crate::stages::compose::NAME,
+        crate::stages::compose::VERSION,
+    )
+    .text("clips", &sha256_hex(&encoded))
+    .json("config synthetic", &config.synthetic)
+    .json("config dataset.seed", &config.dataset.seed)
+    .json("llm pair check", &vetoed.0)
+    .stamp();
+    drop(encoded);
+    let composed = shared
+        .workspace
+        .item(crate::stages::compose::NAME, "*", &stamp, || {
+            crate::stages::compose::run(
+                &all,
+                &config.synthetic,
+                config.dataset.seed,
+                |c| c.split.clone(),
+                |c| shared.profile_of(c),
+                |a, b| {
+                    let key = (
+                        label::normalize_text(&a.text),
+                        label::normalize_text(&b.text),
+                    );
+                    vetoed.0.contains(&key).then_some("llm_incompatible")
+                },
+            )
+        })?;
+    let Some((composed, ran)): Option<(crate::stages::compose::ComposeOutput, bool)> = composed
+    else {
+        return Ok(None);
+    };
+    shared.workspace.prune(
+        crate::stages::compose::NAME,
+        &BTreeSet::from([stamp.fingerprint]),
+    );
+    let run = StageRun {
+        stage: crate::stages::compose::NAME.into(),
+        items: composed.report.sampled,
+        ran: if ran { composed.report.sampled } else { 0 },
+        reused: if ran { 0 } else { composed.report.sampled },
+    };
+    for clip in clips.iter_mut() {
+        clip.plausibility = composed.real_metrics.get(&clip.clip_id).copied();
+    }
+    clips.extend(composed.clips);
+    clips.sort_by(|a, b| {
+        a.clip_id
+            .cmp(&b.clip_id)
+            .then(a.capture.path.cmp(&b.capture.path))
+    });
+    Ok(Some((composed.report, vetoed.1, run)))
 }
 
 /// What the stages produced, before anything is written.
@@ -412,12 +587,14 @@ struct Staged<'a> {
     text: text::TextOutcome,
     compose: crate::stages::compose::ComposeReport,
     pair_check: crate::stages::augment::AugmentReport,
+    /// In probe mode: the first stage whose output is not cached.
+    blocked: Option<Stage>,
 }
 
 /// Every clip a build would write (synthetic pairs included), from cached stage outputs where
 /// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
 pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip>, BuildError> {
-    Ok(run_stages(config, options)?.clips)
+    Ok(run_stages(config, options, false)?.clips)
 }
 
 /// Runs every stage of the build described by `config` and writes the dataset.
@@ -435,7 +612,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         text,
         compose,
         pair_check,
-    } = run_stages(config, options)?;
+        blocked: _,
+    } = run_stages(config, options, false)?;
     let workspace = &shared.workspace;
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
@@ -452,18 +630,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             profiles.entry(clip.profile.clone()).or_insert(bound);
         }
     }
-    // The table's input is exactly its rows (and the plans): their encoding is the fingerprint.
-    let encoded = postcard::to_stdvec(&clips).map_err(|e| WorkspaceError::Encode {
-        what: "clip table".into(),
-        message: e.to_string(),
-    })?;
-    let table_fingerprint = Fingerprint::new("write", WRITE_VERSION)
-        .text(&sha256_hex(&encoded))
-        .json(&config.features)
-        .json(&text.plans)
-        .json(&crate::io::schema::SCHEMA_VERSION)
-        .finish();
-    drop(encoded);
+    let table_stamp = table_stamp(config, &clips, &text.plans)?;
+    let table_fingerprint = table_stamp.fingerprint.clone();
     let table = Table {
         plans: &text.plans,
         clips: &clips,
@@ -503,7 +671,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .collect();
     sources.sort_by_key(|v| v.to_string());
     sources.dedup();
-    let config_fingerprint = Fingerprint::new("config", 1).json(config).finish();
+    let config_fingerprint = Fingerprint::new("config", 1)
+        .json("config", config)
+        .finish();
     let manifest = serde_json::json!({
         "schema_version": crate::io::schema::SCHEMA_VERSION,
         "dataset": config.dataset.name,
@@ -535,32 +705,53 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         shard_bytes: config.dataset.shard_bytes,
         features: config.features,
     };
-    let write_ran = write_outputs(
-        options.force,
-        &output,
-        workspace,
-        &table_fingerprint,
-        &table,
-        &companions,
-    )?;
-    stages.push(StageRun {
-        stage: "write".into(),
-        items: 1,
-        ran: usize::from(write_ran),
-        reused: usize::from(!write_ran),
-    });
-    // The report is derived from the shards: redo it when they changed or it is missing.
-    let report_ran = write_ran || !output.join("report/stats.json").is_file();
-    if report_ran {
-        crate::report::report_dataset(&output, None)
-            .map_err(|e| BuildError::Report(e.to_string()))?;
+    let through = options.through.unwrap_or(Stage::Report);
+    let mut stamps = workspace.seen();
+    if through >= Stage::Write {
+        options.progress.stage_started(Stage::Write.name(), 1);
+        let write_ran = write_outputs(
+            options.force,
+            &output,
+            workspace,
+            &table_fingerprint,
+            &table,
+            &companions,
+        )?;
+        let run = StageRun {
+            stage: Stage::Write.name().into(),
+            items: 1,
+            ran: usize::from(write_ran),
+            reused: usize::from(!write_ran),
+        };
+        options
+            .progress
+            .stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+        stages.push(run);
+        stamps.push(Miss {
+            stage: Stage::Write.name().into(),
+            key: "*".into(),
+            stamp: table_stamp,
+        });
+        if through >= Stage::Report {
+            // The report is derived from the shards: redo it when they changed or it is missing.
+            options.progress.stage_started(Stage::Report.name(), 1);
+            let report_ran = write_ran || !output.join(REPORT_STATS).is_file();
+            if report_ran {
+                crate::report::report_dataset(&output, None)
+                    .map_err(|e| BuildError::Report(e.to_string()))?;
+            }
+            let run = StageRun {
+                stage: Stage::Report.name().into(),
+                items: 1,
+                ran: usize::from(report_ran),
+                reused: usize::from(!report_ran),
+            };
+            options
+                .progress
+                .stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+            stages.push(run);
+        }
     }
-    stages.push(StageRun {
-        stage: "report".into(),
-        items: 1,
-        ran: usize::from(report_ran),
-        reused: usize::from(!report_ran),
-    });
 
     let mut notes_by_kind = BTreeMap::new();
     for n in &notes {
@@ -589,9 +780,67 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         pair_check,
         table_fingerprint,
     };
-    let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
-    write_atomic(&output.join(REPORT_FILE), &json)?;
+    // A partial run (`run <stage>`) leaves the last full build's report in place.
+    if through == Stage::Report {
+        let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
+        write_atomic(&output.join(REPORT_FILE), &json)?;
+    }
+    save_ledger(workspace, &report.stages, &stamps)?;
     Ok(report)
+}
+
+/// The write stage's stamp: the table's input is exactly its rows (and the plans), so their
+/// encoding is the fingerprint.
+fn table_stamp(
+    config: &Config,
+    clips: &[Clip],
+    plans: &BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
+) -> Result<Stamp, BuildError> {
+    let encoded = postcard::to_stdvec(clips).map_err(|e| WorkspaceError::Encode {
+        what: "clip table".into(),
+        message: e.to_string(),
+    })?;
+    Ok(Fingerprint::new(Stage::Write.name(), WRITE_VERSION)
+        .text("rows", &sha256_hex(&encoded))
+        .json("config features", &config.features)
+        .json("task plans", plans)
+        .json("schema version", &crate::io::schema::SCHEMA_VERSION)
+        .stamp())
+}
+
+/// Records what this run did in the workspace ledger: for every stage it ran, when, its counts
+/// and each item's stamp (so `plan` can later say what changed). Stages it did not reach keep
+/// their earlier record.
+fn save_ledger(
+    workspace: &Workspace,
+    runs: &[StageRun],
+    stamps: &[Miss],
+) -> Result<(), BuildError> {
+    let mut ledger = Ledger::load(workspace);
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    for run in runs {
+        let entries = stamps
+            .iter()
+            .filter(|m| m.stage == run.stage)
+            .map(|m| (m.key.clone(), m.stamp.clone()))
+            .collect();
+        ledger.stages.insert(
+            run.stage.clone(),
+            StageLedger {
+                last_run: now,
+                items: run.items,
+                ran: run.ran,
+                reused: run.reused,
+                entries,
+            },
+        );
+    }
+    let json = serde_json::to_vec_pretty(&ledger).unwrap_or_default();
+    write_atomic(&workspace.root().join(workspace::LEDGER_FILE), &json)?;
+    Ok(())
 }
 
 /// Text pairs the LLM says cannot be done at once, for the sampled pairs (when `llm_check` is on),
@@ -671,8 +920,8 @@ fn load_types(config: &Config) -> Result<(TypeMap, String), BuildError> {
         ),
     };
     let digest = Fingerprint::new("motion_types", 1)
-        .text(&text)
-        .json(cfg)
+        .text("taxonomy", &text)
+        .json("config motion_types", cfg)
         .finish();
     Ok((
         TypeMap::new(taxonomy.with_extra(cfg.extra.clone())?, cfg)?,

@@ -265,6 +265,28 @@ fn card(name: &str, splits: &BTreeMap<String, usize>, companions: &Companions) -
     y
 }
 
+/// Whether the written outputs are those of a table with `fingerprint`, untouched since; else why
+/// not.
+pub(super) fn written(
+    output: &Path,
+    workspace: &Workspace,
+    fingerprint: &str,
+) -> Result<(), String> {
+    let state: Option<State> = std::fs::read(workspace.root().join("state.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok());
+    let Some(state) = state else {
+        return Err("never written".to_string());
+    };
+    if !outputs_match(output, &state) {
+        return Err("output files changed or missing".to_string());
+    }
+    if state.table_fingerprint != fingerprint {
+        return Err("rows changed".to_string());
+    }
+    Ok(())
+}
+
 pub(super) fn write_outputs(
     force: bool,
     output: &Path,
@@ -300,10 +322,10 @@ pub(super) fn write_outputs(
             message: e.to_string(),
         })?;
         let fp = super::Fingerprint::new("shard", 1)
-            .text(&sha256_hex(&encoded))
-            .text(&skeletons_json)
-            .json(&crate::io::schema::SCHEMA_VERSION)
-            .json(&companions.features)
+            .text("rows", &sha256_hex(&encoded))
+            .text("skeletons", &skeletons_json)
+            .json("schema version", &crate::io::schema::SCHEMA_VERSION)
+            .json("config features", &companions.features)
             .finish();
         let path = output.join(&plan.file);
         let fresh = !force

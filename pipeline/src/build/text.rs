@@ -34,6 +34,8 @@ pub(super) struct TextOutcome {
     pub(super) plans: BTreeMap<String, Vec<PlanStep>>,
     /// Texts whose LLM request failed after its last retry, and plans still invalid after repair.
     pub(super) rejects: Vec<Reject>,
+    /// In probe mode: the label assignment is not cached (labels, and all after, would run).
+    pub(super) pending: bool,
 }
 
 fn text_reject(stage: &str, text: &str, reason: &str, message: String) -> Reject {
@@ -71,7 +73,9 @@ pub(super) fn run(
     shared: &Shared<'_>,
     items: &mut [Item],
     offline: bool,
+    through: super::Stage,
 ) -> Result<TextOutcome, BuildError> {
+    use super::Stage;
     let config = shared.config;
     let prompts = config.prompts()?;
     let mut cache = open_cache(shared)?;
@@ -100,12 +104,12 @@ pub(super) fn run(
                 .map(|(_, f)| f.as_str())
         })
         .collect();
-    let fp = Fingerprint::new(label::NAME, LABEL_VERSION)
-        .json(&labels)
-        .json(&segment_fps)
-        .finish();
+    let stamp = Fingerprint::new(label::NAME, LABEL_VERSION)
+        .json("part labels", &labels)
+        .json("segments", &segment_fps)
+        .stamp();
     let n_clips = clips.len();
-    let (assigned, ran): (ClipLabels, bool) = shared.workspace.cached(label::NAME, &fp, || {
+    let assigned = shared.workspace.item(label::NAME, "*", &stamp, || {
         let mut all: Vec<Clip> = items.iter().flat_map(|i| i.clips.iter().cloned()).collect();
         let mut report = report.clone();
         label::apply_labels(&mut all, &labels, |c| shared.profile_of(c), &mut report);
@@ -117,7 +121,13 @@ pub(super) fn run(
             report,
         }
     })?;
-    shared.workspace.prune(label::NAME, &BTreeSet::from([fp]));
+    let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
+        outcome.pending = true;
+        return Ok(outcome);
+    };
+    shared
+        .workspace
+        .prune(label::NAME, &BTreeSet::from([stamp.fingerprint]));
     for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
         if let Some((parts, source)) = assigned.by_clip.get(&clip.clip_id) {
             clip.parts = *parts;
@@ -151,7 +161,7 @@ pub(super) fn run(
     });
 
     // Paraphrases of every clip's caption.
-    if config.paraphrases.enabled {
+    if config.paraphrases.enabled && through >= Stage::Paraphrase {
         let texts: BTreeSet<String> = items
             .iter()
             .flat_map(|i| i.clips.iter().map(|c| normalize_text(&c.text)))
@@ -176,7 +186,7 @@ pub(super) fn run(
         outcome.paraphrase = report;
     }
     // Task plans of every single action.
-    if config.task_plans.enabled {
+    if config.task_plans.enabled && through >= Stage::Plan {
         let texts: BTreeSet<String> = items
             .iter()
             .flat_map(|i| {

@@ -4,8 +4,10 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use serde::Serialize;
+use std::collections::BTreeMap;
+
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::motion::skeleton::hex;
@@ -43,9 +45,22 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     hex(&Sha256::digest(bytes))
 }
 
-/// A content fingerprint: stage name and version, its config, and its inputs' digests.
+/// A content fingerprint: stage name and version, its config, and its inputs' digests. Each
+/// piece is named, so `plan` can say which one changed since the last run.
 #[derive(Debug, Clone)]
-pub struct Fingerprint(Sha256);
+pub struct Fingerprint {
+    hasher: Sha256,
+    parts: BTreeMap<String, String>,
+}
+
+/// A finished fingerprint with the digest of each named piece.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct Stamp {
+    /// The fingerprint (hex).
+    pub fingerprint: String,
+    /// Digest of each named piece (short hex), by name.
+    pub parts: BTreeMap<String, String>,
+}
 
 impl Fingerprint {
     /// Starts a fingerprint for a stage at a version.
@@ -54,25 +69,40 @@ impl Fingerprint {
         h.update(stage.as_bytes());
         h.update([0]);
         h.update(version.to_le_bytes());
-        Fingerprint(h)
+        Fingerprint {
+            hasher: h,
+            parts: BTreeMap::from([("stage version".to_string(), version.to_string())]),
+        }
     }
 
-    /// Adds a string (length-prefixed so concatenations cannot collide).
-    pub fn text(mut self, s: &str) -> Self {
-        self.0.update((s.len() as u64).to_le_bytes());
-        self.0.update(s.as_bytes());
+    /// Adds a string, named for reports (length-prefixed so concatenations cannot collide).
+    pub fn text(mut self, name: &str, s: &str) -> Self {
+        self.hasher.update((s.len() as u64).to_le_bytes());
+        self.hasher.update(s.as_bytes());
+        let digest = sha256_hex(s.as_bytes());
+        self.parts
+            .insert(name.to_string(), digest[..16.min(digest.len())].to_string());
         self
     }
 
-    /// Adds a serialisable value through its JSON form (configs, options).
-    pub fn json<T: Serialize>(self, value: &T) -> Self {
+    /// Adds a serialisable value through its JSON form (configs, options), named for reports.
+    pub fn json<T: Serialize>(self, name: &str, value: &T) -> Self {
         let s = serde_json::to_string(value).unwrap_or_default();
-        self.text(&s)
+        self.text(name, &s)
     }
 
     /// The hex digest.
     pub fn finish(self) -> String {
-        hex(&self.0.finalize())
+        hex(&self.hasher.finalize())
+    }
+
+    /// The hex digest with its named pieces.
+    pub fn stamp(self) -> Stamp {
+        let parts = self.parts.clone();
+        Stamp {
+            fingerprint: self.finish(),
+            parts,
+        }
     }
 }
 
@@ -122,10 +152,85 @@ pub fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
 }
 
-/// The per-item stage cache under `<output>/.motionforge/cache/<stage>/<fingerprint>`.
+/// The file recording, per stage and item, the fingerprint of the last run.
+pub const LEDGER_FILE: &str = "ledger.json";
+
+/// What the last runs of each stage saw: per item, its [`Stamp`]; per stage, when and how much.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Ledger {
+    /// By stage name.
+    pub stages: BTreeMap<String, StageLedger>,
+}
+
+/// One stage's record in the [`Ledger`].
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageLedger {
+    /// When the stage last ran or was checked fresh (seconds since the Unix epoch).
+    pub last_run: u64,
+    /// Items covered then.
+    pub items: usize,
+    /// Items computed then.
+    pub ran: usize,
+    /// Items reused then.
+    pub reused: usize,
+    /// The stamp of each item (capture path, or `*` for stages over the whole set).
+    pub entries: BTreeMap<String, Stamp>,
+}
+
+impl Ledger {
+    /// The ledger of a workspace; empty when missing or unreadable (nothing is known, so every
+    /// item counts as new).
+    pub fn load(workspace: &Workspace) -> Ledger {
+        fs::read(workspace.root().join(LEDGER_FILE))
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok())
+            .unwrap_or_default()
+    }
+
+    /// Why an item whose stamp is `now` is not in the cache, compared with the last run.
+    pub fn why(&self, stage: &str, key: &str, now: &Stamp) -> String {
+        let Some(before) = self.stages.get(stage).and_then(|s| s.entries.get(key)) else {
+            return "new".to_string();
+        };
+        let changed: Vec<&str> = now
+            .parts
+            .iter()
+            .filter(|(name, digest)| before.parts.get(*name) != Some(*digest))
+            .map(|(name, _)| name.as_str())
+            .chain(
+                before
+                    .parts
+                    .keys()
+                    .filter(|name| !now.parts.contains_key(*name))
+                    .map(String::as_str),
+            )
+            .collect();
+        if changed.is_empty() {
+            "cache entry missing (cleaned or pruned)".to_string()
+        } else {
+            format!("changed: {}", changed.join(", "))
+        }
+    }
+}
+
+/// A stage item the probe found missing from the cache.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Miss {
+    /// Stage name.
+    pub stage: String,
+    /// Item key.
+    pub key: String,
+    /// Its stamp now.
+    pub stamp: Stamp,
+}
+
+/// The per-item stage cache under `<output>/.motionforge/cache/<stage>/<fingerprint>`. In probe
+/// mode (for `plan`) nothing is computed or stored: misses are collected instead.
 #[derive(Debug, Clone)]
 pub struct Workspace {
     root: PathBuf,
+    probe: bool,
+    seen: std::sync::Arc<std::sync::Mutex<Vec<Miss>>>,
 }
 
 impl Workspace {
@@ -133,7 +238,59 @@ impl Workspace {
     pub fn new(output: &Path) -> Workspace {
         Workspace {
             root: output.join(".motionforge"),
+            probe: false,
+            seen: Default::default(),
         }
+    }
+
+    /// The same workspace in probe mode: [`Workspace::item`] computes nothing on a miss.
+    pub fn probing(output: &Path) -> Workspace {
+        Workspace {
+            probe: true,
+            ..Workspace::new(output)
+        }
+    }
+
+    /// True in probe mode.
+    pub fn is_probe(&self) -> bool {
+        self.probe
+    }
+
+    /// Every item stamp seen in this run (hits and misses), for the ledger.
+    pub fn seen(&self) -> Vec<Miss> {
+        self.seen.lock().map(|v| v.clone()).unwrap_or_default()
+    }
+
+    /// The cached output of `stage` for item `key`, or computes and stores it; the flag says
+    /// whether it ran. In probe mode a miss returns `None` and computes nothing.
+    pub fn item<T: Serialize + DeserializeOwned>(
+        &self,
+        stage: &str,
+        key: &str,
+        stamp: &Stamp,
+        compute: impl FnOnce() -> T,
+    ) -> Result<Option<(T, bool)>, WorkspaceError> {
+        if let Ok(mut seen) = self.seen.lock() {
+            seen.push(Miss {
+                stage: stage.to_string(),
+                key: key.to_string(),
+                stamp: stamp.clone(),
+            });
+        }
+        if let Some(v) = self.load(stage, &stamp.fingerprint) {
+            return Ok(Some((v, false)));
+        }
+        if self.probe {
+            return Ok(None);
+        }
+        let v = compute();
+        self.store(stage, &stamp.fingerprint, &v)?;
+        Ok(Some((v, true)))
+    }
+
+    /// True when `stage` has a cached output under `fingerprint`.
+    pub fn has(&self, stage: &str, fingerprint: &str) -> bool {
+        self.entry(stage, fingerprint).is_file()
     }
 
     /// The workspace folder.
@@ -186,6 +343,9 @@ impl Workspace {
 
     /// Removes cache entries of `stage` not in `keep` (old fingerprints).
     pub fn prune(&self, stage: &str, keep: &std::collections::BTreeSet<String>) {
+        if self.probe {
+            return;
+        }
         let dir = self.root.join("cache").join(stage);
         let Ok(entries) = fs::read_dir(&dir) else {
             return;

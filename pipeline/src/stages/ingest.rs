@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::build::{Fingerprint, Reject, sha256_hex};
+use crate::build::{Fingerprint, Reject, Stamp, sha256_hex};
 use crate::clip::{Capture, CaptureRef};
 use crate::motion::{ProfileSpec, read_bvh};
 use crate::source::CaptureFile;
@@ -37,14 +37,14 @@ pub struct IngestOutput {
 }
 
 /// The fingerprint of one capture's ingest: everything the output depends on.
-pub fn fingerprint(input: &CaptureInput<'_>) -> String {
+pub fn fingerprint(input: &CaptureInput<'_>) -> Stamp {
     Fingerprint::new(NAME, VERSION)
-        .text(input.source)
-        .text(&input.file.display)
-        .text(&sha256_hex(input.bytes))
-        .json(input.profile)
-        .json(&input.fps_override)
-        .finish()
+        .text("source name", input.source)
+        .text("file path", &input.file.display)
+        .text("file content", &sha256_hex(input.bytes))
+        .json("skeleton profile", input.profile)
+        .json("fps override", &input.fps_override)
+        .stamp()
 }
 
 /// A refusal of `file` by `stage`.

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::Taxonomy;
-use crate::build::{Fingerprint, Reject};
+use crate::build::{Fingerprint, Reject, Stamp};
 use crate::clip::Clip;
 use crate::llm::plans::mirror_paraphrases;
 use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};
@@ -22,12 +22,12 @@ pub fn fingerprint(
     segment_fingerprint: &str,
     profile: &ProfileSpec,
     types: &impl Serialize,
-) -> String {
+) -> Stamp {
     Fingerprint::new(NAME, VERSION)
-        .text(segment_fingerprint)
-        .json(profile)
-        .json(types)
-        .finish()
+        .text("labelled clips", segment_fingerprint)
+        .json("skeleton profile", profile)
+        .json("motion types", types)
+        .stamp()
 }
 
 /// The stage's output for one ingest item.

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::overlap::overlaps;
 use crate::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
 use crate::annotate::taxonomy::TypeMap;
-use crate::build::Fingerprint;
+use crate::build::{Fingerprint, Stamp};
 use crate::clip::{Capture, Clip, SourceKind};
 use crate::config::SegmentConfig;
 use crate::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
@@ -54,19 +54,15 @@ pub struct SegmentOutput {
 }
 
 /// Fingerprint of segmenting one capture.
-pub fn fingerprint(
-    ingest: &str,
-    input: &SegmentInput<'_>,
-    types_config: &impl Serialize,
-) -> String {
+pub fn fingerprint(ingest: &str, input: &SegmentInput<'_>, types_config: &impl Serialize) -> Stamp {
     Fingerprint::new(NAME, VERSION)
-        .text(ingest)
-        .text(input.kind)
-        .json(input.annotation)
-        .json(input.config)
-        .json(types_config)
-        .json(&input.fps)
-        .finish()
+        .text("ingest output", ingest)
+        .text("annotation format", input.kind)
+        .json("annotations", input.annotation)
+        .json("config sources.segment", input.config)
+        .json("motion types", types_config)
+        .json("config dataset.fps", &input.fps)
+        .stamp()
 }
 
 /// Lowercase, `-` and `_` as spaces, single spaces: how labels are compared with config lists.

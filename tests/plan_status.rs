@@ -1,0 +1,159 @@
+//! `plan`, `status` and `run <stage>`: what a build would run and why, checked against what the
+//! build then does.
+
+mod common;
+
+use std::path::Path;
+
+use motionforge::build::{BuildOptions, Plan, Stage, build, plan, status};
+use motionforge::config::Config;
+
+/// A copy of the bundled fixtures (so a test may edit a capture) and its config writing into
+/// the copy.
+fn scratch() -> (tempfile::TempDir, Config) {
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(
+        &common::repo().join("fixtures"),
+        &dir.path().join("fixtures"),
+    );
+    let mut config = Config::load(&dir.path().join("fixtures/demo.toml")).unwrap();
+    config.dataset.output = dir.path().join("out");
+    (dir, config)
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+fn stage(plan: &Plan, stage: Stage) -> &motionforge::build::StagePlan {
+    plan.stages.iter().find(|s| s.stage == stage).unwrap()
+}
+
+fn ran(report: &motionforge::build::BuildReport, name: &str) -> usize {
+    report
+        .stages
+        .iter()
+        .find(|s| s.stage == name)
+        .map_or(0, |s| s.ran)
+}
+
+#[test]
+fn plan_names_new_captures_then_nothing_after_a_build() {
+    let (_dir, config) = scratch();
+    let before = plan(&config, &BuildOptions::default()).unwrap();
+    let ingest = stage(&before, Stage::Ingest);
+    assert_eq!(ingest.to_run, 9, "{before:#?}");
+    assert_eq!(ingest.reasons.get("new"), Some(&9));
+    // Nothing past ingest can be known before it runs.
+    assert!(
+        stage(&before, Stage::Write)
+            .reasons
+            .contains_key("ingest re-runs first")
+    );
+    // Planning computed and wrote nothing.
+    assert!(!config.dataset_dir().join("data").exists());
+
+    build(&config, &BuildOptions::default()).unwrap();
+    let after = plan(&config, &BuildOptions::default()).unwrap();
+    assert!(after.nothing_to_run(), "{after:#?}");
+    let status = status(&config).unwrap();
+    assert!(
+        status
+            .stages
+            .iter()
+            .all(|s| s.fresh && s.last_run.is_some())
+    );
+    let rows: u64 = status.splits.iter().map(|(_, n)| n).sum();
+    assert_eq!(rows, 25);
+    assert_eq!(status.splits[0].0, "train");
+}
+
+#[test]
+fn plan_says_which_config_key_changed_and_the_build_agrees() {
+    let (_dir, mut config) = scratch();
+    build(&config, &BuildOptions::default()).unwrap();
+    config.dataset.seed += 1;
+    let p = plan(&config, &BuildOptions::default()).unwrap();
+    for fresh in [Stage::Ingest, Stage::Segment, Stage::Label, Stage::Mirror] {
+        assert!(stage(&p, fresh).fresh(), "{fresh} should be fresh: {p:#?}");
+    }
+    let compose = stage(&p, Stage::Compose);
+    assert_eq!(
+        compose.reasons.keys().collect::<Vec<_>>(),
+        ["changed: config dataset.seed"]
+    );
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(ran(&report, "mirror"), 0);
+    assert_eq!(ran(&report, "segment"), 0);
+    assert!(ran(&report, "compose") > 0);
+}
+
+#[test]
+fn plan_names_the_capture_whose_file_changed() {
+    let (dir, config) = scratch();
+    build(&config, &BuildOptions::default()).unwrap();
+    let file = dir
+        .path()
+        .join("fixtures/bandai-namco-1/data/dataset-1_kick_normal_001.bvh");
+    // Same motion, one more trailing newline: the bytes (and so the fingerprint) change.
+    let mut bytes = std::fs::read(&file).unwrap();
+    bytes.push(b'\n');
+    std::fs::write(&file, bytes).unwrap();
+    let p = plan(&config, &BuildOptions::default()).unwrap();
+    let ingest = stage(&p, Stage::Ingest);
+    assert_eq!(ingest.to_run, 1, "{p:#?}");
+    assert_eq!(
+        ingest.reasons.keys().collect::<Vec<_>>(),
+        ["changed: file content"]
+    );
+    assert!(ingest.examples[0].contains("dataset-1_kick_normal_001.bvh"));
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(ran(&report, "ingest"), 1);
+}
+
+#[test]
+fn run_segment_runs_its_dependencies_and_nothing_after() {
+    let (_dir, config) = scratch();
+    let report = build(
+        &config,
+        &BuildOptions {
+            through: Some(Stage::Segment),
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
+    let names: Vec<&str> = report.stages.iter().map(|s| s.stage.as_str()).collect();
+    assert_eq!(names, ["ingest", "segment"]);
+    assert!(!config.dataset_dir().join("data").exists());
+    assert!(!config.dataset_dir().join("build-report.json").exists());
+    let p = plan(&config, &BuildOptions::default()).unwrap();
+    assert!(stage(&p, Stage::Segment).fresh(), "{p:#?}");
+    assert!(!stage(&p, Stage::Label).fresh());
+    // The full build reuses the segments.
+    let full = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(ran(&full, "segment"), 0);
+    assert_eq!(full.clips, 25);
+}
+
+#[test]
+fn stage_names_parse_and_unknown_ones_are_refused() {
+    assert_eq!("mirror".parse::<Stage>(), Ok(Stage::Mirror));
+    let err = "mirrors".parse::<Stage>().unwrap_err();
+    assert!(err.contains("expected one of ingest, segment"), "{err}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["run", "segmnt", "--config", "fixtures/demo.toml"])
+        .current_dir(common::repo())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown stage `segmnt`"));
+}
