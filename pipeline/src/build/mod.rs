@@ -267,6 +267,9 @@ fn run_stages<'a>(
     } else {
         Workspace::new(&output)
     };
+    if !probe {
+        workspace::remove_stale_temps(&output);
+    }
     if options.force && !probe {
         let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
     }
@@ -671,8 +674,12 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .collect();
     sources.sort_by_key(|v| v.to_string());
     sources.dedup();
+    // Where the dataset is written is not part of what it is: the same config built into
+    // another folder gives the same bytes.
+    let mut content_config = config.clone();
+    content_config.dataset.output = PathBuf::new();
     let config_fingerprint = Fingerprint::new("config", 1)
-        .json("config", config)
+        .json("config", &content_config)
         .finish();
     let manifest = serde_json::json!({
         "schema_version": crate::io::schema::SCHEMA_VERSION,
@@ -735,10 +742,13 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         if through >= Stage::Report {
             // The report is derived from the shards: redo it when they changed or it is missing.
             options.progress.stage_started(Stage::Report.name(), 1);
-            let report_ran = write_ran || !output.join(REPORT_STATS).is_file();
+            let report_ran = !report_is_current(&output, workspace, &table_fingerprint);
             if report_ran {
+                let marker = workspace.root().join(REPORT_MARKER);
+                let _ = std::fs::remove_file(&marker);
                 crate::report::report_dataset(&output, None)
                     .map_err(|e| BuildError::Report(e.to_string()))?;
+                write_atomic(&marker, table_fingerprint.as_bytes())?;
             }
             let run = StageRun {
                 stage: Stage::Report.name().into(),
@@ -787,6 +797,17 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     }
     save_ledger(workspace, &report.stages, &stamps)?;
     Ok(report)
+}
+
+/// Inside the workspace: the table fingerprint the report in `report/` was made from.
+const REPORT_MARKER: &str = "report-of";
+
+/// True when `report/` is complete and made from the table with `fingerprint` (a crash between
+/// writing the shards and finishing the report leaves it stale, not current).
+fn report_is_current(output: &std::path::Path, workspace: &Workspace, fingerprint: &str) -> bool {
+    output.join(REPORT_STATS).is_file()
+        && std::fs::read_to_string(workspace.root().join(REPORT_MARKER))
+            .is_ok_and(|f| f == fingerprint)
 }
 
 /// The write stage's stamp: the table's input is exactly its rows (and the plans), so their

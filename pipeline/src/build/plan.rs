@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, BuildOptions, Ledger, REPORT_STATS, Stage, Workspace, output, run_stages,
+    BuildError, BuildOptions, Ledger, Stage, Workspace, output, report_is_current, run_stages,
     table_stamp,
 };
 use crate::config::Config;
@@ -171,8 +171,8 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
             plan.items = 1;
             if write_fresh.is_err() {
                 plan.stale("*", "write re-runs first".to_string());
-            } else if !staged.output.join(REPORT_STATS).is_file() {
-                plan.stale("*", "report missing".to_string());
+            } else if !report_is_current(&staged.output, workspace, &stamp.fingerprint) {
+                plan.stale("*", "report missing or unfinished".to_string());
             }
         }
     }

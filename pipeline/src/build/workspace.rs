@@ -143,6 +143,66 @@ pub fn write_atomic_with(
     Ok(())
 }
 
+/// Removes the temporary files an interrupted build left under `dir` (see [`temp_path`]); only
+/// one build holds a dataset folder at a time, so every one found is an orphan. Returns how many.
+pub fn remove_stale_temps(dir: &Path) -> usize {
+    let mut removed = 0;
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push(path);
+            } else if is_temp_name(&entry.file_name().to_string_lossy())
+                && fs::remove_file(&path).is_ok()
+            {
+                removed += 1;
+            }
+        }
+    }
+    removed
+}
+
+/// `.<name>.<pid>.tmp`, as [`temp_path`] makes them, possibly with an extension after it for
+/// writers that pick the format by extension (`.<name>.<pid>.tmp.png`).
+fn is_temp_name(name: &str) -> bool {
+    let Some(rest) = name.strip_prefix('.') else {
+        return false;
+    };
+    let stem = match rest.rsplit_once(".tmp") {
+        Some((stem, ext))
+            if ext.is_empty()
+                || ext.strip_prefix('.').is_some_and(|e| {
+                    !e.is_empty() && e.bytes().all(|b| b.is_ascii_alphanumeric())
+                }) =>
+        {
+            stem
+        }
+        _ => return false,
+    };
+    stem.rsplit_once('.').is_some_and(|(base, pid)| {
+        !base.is_empty() && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_temp_name;
+
+    #[test]
+    fn temp_names_are_recognised_and_outputs_are_not() {
+        assert!(is_temp_name(".train-00000-of-00001.parquet.1234.tmp"));
+        assert!(is_temp_name(".composition.png.18156.tmp.png"));
+        assert!(!is_temp_name("train-00000-of-00001.parquet"));
+        assert!(!is_temp_name(".hidden"));
+        assert!(!is_temp_name(".notes.tmp"));
+        assert!(!is_temp_name(".a.b.tmp"));
+    }
+}
+
 /// The temporary name used while writing `path`.
 pub fn temp_path(path: &Path) -> PathBuf {
     let name = path

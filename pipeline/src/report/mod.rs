@@ -176,15 +176,6 @@ pub fn write_report(
     let mut written = Vec::new();
     let rows = stats::sorted_rows(rows);
 
-    let json_path = out_dir.join("stats.json");
-    let mut json = serde_json::to_string_pretty(stats).map_err(|e| ReportError::Json {
-        path: json_path.clone(),
-        message: e.to_string(),
-    })?;
-    json.push('\n');
-    crate::build::write_atomic(&json_path, json.as_bytes())?;
-    written.push(json_path);
-
     let tex_path = out_dir.join("tables.tex");
     crate::build::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
     written.push(tex_path);
@@ -195,6 +186,16 @@ pub fn write_report(
     let md_path = out_dir.join("report.md");
     crate::build::write_atomic(&md_path, tables::markdown(stats).as_bytes())?;
     written.push(md_path);
+
+    // Last, so a report cut short by a crash has no `stats.json` and does not look finished.
+    let json_path = out_dir.join("stats.json");
+    let mut json = serde_json::to_string_pretty(stats).map_err(|e| ReportError::Json {
+        path: json_path.clone(),
+        message: e.to_string(),
+    })?;
+    json.push('\n');
+    crate::build::write_atomic(&json_path, json.as_bytes())?;
+    written.insert(0, json_path);
     Ok(written)
 }
 
