@@ -33,7 +33,7 @@ import glob, hashlib, json, os, sys
 import numpy as np, pyarrow.parquet as pq
 root = sys.argv[1]
 manifest = json.load(open(os.path.join(root, 'manifest.json')))
-assert manifest['schema_version'] == 6, manifest['schema_version']
+assert manifest['schema_version'] == 7, manifest['schema_version']
 total = 0
 captures = {}
 for split, entry in manifest['splits'].items():

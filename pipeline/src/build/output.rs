@@ -211,7 +211,8 @@ pub(super) fn card_body(
         } else {
             source.licence.as_str()
         };
-        let _ = writeln!(b, "- `{}` ({} captures): {licence}", source.name, n);
+        let captures = if n == 1 { "capture" } else { "captures" };
+        let _ = writeln!(b, "- `{}` ({n} {captures}): {licence}", source.name);
     }
     if licences.is_empty() {
         let _ = writeln!(
@@ -243,7 +244,12 @@ pub(super) fn card_body(
     b
 }
 
-fn card(name: &str, splits: &BTreeMap<String, usize>, companions: &Companions) -> String {
+fn card(
+    name: &str,
+    splits: &BTreeMap<String, usize>,
+    split_bytes: &BTreeMap<String, usize>,
+    companions: &Companions,
+) -> String {
     let mut y = String::from("---\n");
     y.push_str(&format!("pretty_name: {name}\nlicense: other\n"));
     if !companions.licences.is_empty() {
@@ -251,14 +257,20 @@ fn card(name: &str, splits: &BTreeMap<String, usize>, companions: &Companions) -
         y.push_str(&format!("  {}\n", companions.licences.join("; ")));
     }
     y.push_str("tags:\n- motion-capture\n- text-to-motion\n- motionforge\nconfigs:\n- config_name: default\n  data_files:\n");
-    for split in splits.keys() {
+    // Split order (train, val, test, then others), as loaders list them.
+    let order = crate::stages::split::split_order(splits.keys().cloned());
+    for split in &order {
         y.push_str(&format!(
             "  - split: {split}\n    path: {DATA_DIR}/{split}-*.parquet\n"
         ));
     }
     y.push_str("dataset_info:\n  splits:\n");
-    for (split, rows) in splits {
-        y.push_str(&format!("  - name: {split}\n    num_examples: {rows}\n"));
+    for split in &order {
+        let rows = splits.get(split).copied().unwrap_or(0);
+        let bytes = split_bytes.get(split).copied().unwrap_or(0);
+        y.push_str(&format!(
+            "  - name: {split}\n    num_bytes: {bytes}\n    num_examples: {rows}\n"
+        ));
     }
     y.push_str("---\n\n");
     y.push_str(&companions.card_body);
@@ -315,6 +327,7 @@ pub(super) fn write_outputs(
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
+    let mut split_bytes: BTreeMap<String, usize> = BTreeMap::new();
     for plan in &plans_for_shards {
         let rows: Vec<Clip> = plan.clips.iter().map(|&i| clips[i].clone()).collect();
         let encoded = postcard::to_stdvec(&rows).map_err(|e| super::WorkspaceError::Encode {
@@ -369,6 +382,7 @@ pub(super) fn write_outputs(
                 "sha256": sha256_hex(&bytes),
             }));
         *split_rows.entry(plan.split.clone()).or_insert(0) += rows.len();
+        *split_bytes.entry(plan.split.clone()).or_insert(0) += bytes.len();
         shard_fingerprints.insert(plan.file.clone(), fp);
     }
     // Shards of an earlier layout (other split names or counts) would look like part of the set.
@@ -442,7 +456,7 @@ pub(super) fn write_outputs(
         .to_string();
     write_atomic(
         &output.join(CARD_FILE),
-        card(&name, &split_rows, companions).as_bytes(),
+        card(&name, &split_rows, &split_bytes, companions).as_bytes(),
     )?;
     let mut names: Vec<String> = [
         SKELETONS_FILE,

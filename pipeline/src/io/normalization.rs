@@ -168,6 +168,17 @@ pub fn write_normalization(
         Arc::new(Float32Array::from(col_mean)),
         Arc::new(Float32Array::from(col_std)),
     ];
+    // Folders of profiles no longer in the split would pass for current statistics.
+    let current: std::collections::BTreeSet<&str> =
+        stats.keys().map(|(profile, _)| profile.as_str()).collect();
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) && !current.contains(name.as_str()) {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+    }
     let path = dir.join("normalization.parquet");
     let table = |e: TableError| BuildError::Table {
         path: path.clone(),

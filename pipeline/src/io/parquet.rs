@@ -8,7 +8,7 @@ use std::fs::File;
 use std::sync::Arc;
 
 use arrow_array::builder::{
-    BooleanBuilder, Float32Builder, ListBuilder, MapBuilder, MapFieldNames, StringBuilder,
+    BooleanBuilder, Float32Builder, ListBuilder, StringBuilder, StructBuilder,
 };
 use arrow_array::{
     ArrayRef, BooleanArray, Float32Array, Float64Array, Int32Array, Int64Array, ListArray,
@@ -284,21 +284,29 @@ pub fn clips_to_batch(
         ],
         None,
     )?;
-    let mut attributes = MapBuilder::new(
-        Some(MapFieldNames {
-            entry: "entries".into(),
-            key: "key".into(),
-            value: "value".into(),
-        }),
-        StringBuilder::new(),
-        StringBuilder::new(),
+    let entry = StructBuilder::new(
+        crate::io::schema::attribute_fields(),
+        vec![
+            Box::new(StringBuilder::new()) as Box<dyn arrow_array::builder::ArrayBuilder>,
+            Box::new(StringBuilder::new()),
+        ],
     );
+    let mut attributes = ListBuilder::new(entry).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Struct(crate::io::schema::attribute_fields()),
+        false,
+    )));
     for clip in clips {
+        let entries = attributes.values();
         for (k, v) in &clip.attributes {
-            attributes.keys().append_value(k);
-            attributes.values().append_value(v);
+            for (i, text) in [k, v].into_iter().enumerate() {
+                if let Some(b) = entries.field_builder::<StringBuilder>(i) {
+                    b.append_value(text);
+                }
+            }
+            entries.append(true);
         }
-        attributes.append(true)?;
+        attributes.append(true);
     }
     let columns: Vec<ArrayRef> = vec![
         strings(&|c| &c.clip_id),

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use arrow_schema::{DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 6;
+pub const SCHEMA_VERSION: u32 = 7;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
@@ -32,23 +32,27 @@ fn goal(name: &str) -> Field {
     )
 }
 
+/// The fields of one `attributes` entry.
+pub fn attribute_fields() -> Fields {
+    Fields::from(vec![
+        Field::new("key", DataType::Utf8, false),
+        Field::new("value", DataType::Utf8, false),
+    ])
+}
+
 /// The Arrow schema of a clip table.
 pub fn clip_schema() -> Schema {
     let frame_range = Fields::from(vec![
         Field::new("start", DataType::Int64, false),
         Field::new("end", DataType::Int64, false),
     ]);
-    let attributes = DataType::Map(
-        Arc::new(Field::new(
-            "entries",
-            DataType::Struct(Fields::from(vec![
-                Field::new("key", DataType::Utf8, false),
-                Field::new("value", DataType::Utf8, true),
-            ])),
-            false,
-        )),
+    // A list of key/value structs rather than an Arrow map: the same bytes on disk, and readers
+    // without map support (Hugging Face `datasets`) open it.
+    let attributes = DataType::List(Arc::new(Field::new(
+        "item",
+        DataType::Struct(attribute_fields()),
         false,
-    );
+    )));
     Schema::new(vec![
         Field::new("clip_id", DataType::Utf8, false),
         Field::new("source_kind", DataType::Utf8, false),
