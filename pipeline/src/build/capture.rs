@@ -2,6 +2,7 @@
 
 use std::collections::BTreeMap;
 
+use super::motions::{MotionRef, MotionSource, hollow};
 use super::{BuildError, Reject, Workspace, WorkspaceError, sha256_hex};
 use crate::annotate::filename::filename_annotation;
 use crate::annotate::taxonomy::TypeMap;
@@ -21,10 +22,15 @@ pub(super) struct Item {
     /// The item's key in the ledger: the capture path as found.
     pub(super) key: String,
     pub(super) fingerprints: Vec<(&'static str, String)>,
-    /// The capture's original clips (labelled by the text stages before mirroring).
+    /// The capture's original clips (labelled by the text stages before mirroring), without
+    /// their frames.
     pub(super) clips: Vec<Clip>,
-    /// Mirrored copies.
+    /// Where the frames of `clips` are.
+    pub(super) refs: Vec<MotionRef>,
+    /// Mirrored copies, without their frames.
     pub(super) mirrored: Vec<Clip>,
+    /// Where the frames of `mirrored` are.
+    pub(super) mirrored_refs: Vec<MotionRef>,
     pub(super) rejects: Vec<Reject>,
     /// Segmentation counts and notes (its clips moved to `clips`).
     pub(super) segment: SegmentOutput,
@@ -183,39 +189,68 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         return Ok(item);
     };
     item.ran[1] = ran;
+    let mut segmented = segmented;
+    item.clips = std::mem::take(&mut segmented.clips);
+    item.refs = item
+        .clips
+        .iter_mut()
+        .enumerate()
+        .map(|(i, clip)| hollow(clip, segment::NAME, &seg_fp.fingerprint, i))
+        .collect();
     item.fingerprints.push((segment::NAME, seg_fp.fingerprint));
-
-    item.clips = segmented.clips.clone();
     item.segment = segmented;
-    item.segment.clips.clear();
     Ok(item)
 }
 
 /// Mirrors a capture's labelled clips, reusing the cached copies when the clips are unchanged.
-pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(), BuildError> {
+pub(super) fn mirror_capture(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    item: &mut Item,
+) -> Result<(), BuildError> {
     let Some(first) = item.clips.first() else {
         return Ok(());
     };
     let Some(spec) = shared.specs.iter().find(|s| s.name == first.profile) else {
         return Ok(());
     };
-    // The stage's input is exactly the clips, labels included: their encoding is the fingerprint.
-    let encoded = postcard::to_stdvec(&item.clips).map_err(|e| WorkspaceError::Encode {
-        what: "clips to mirror".into(),
-        message: e.to_string(),
-    })?;
+    // The stage's input is exactly the clips, labels included, and their frames (named by where
+    // they are): that encoding is the fingerprint.
+    let encoded =
+        postcard::to_stdvec(&(&item.clips, &item.refs)).map_err(|e| WorkspaceError::Encode {
+            what: "clips to mirror".into(),
+            message: e.to_string(),
+        })?;
     let fp = mirror::fingerprint(&sha256_hex(&encoded), spec, &shared.types_digest);
     let Some((mirrored, ran)): Option<(mirror::MirrorOutput, bool)> =
-        shared.workspace.item(mirror::NAME, &item.key, &fp, || {
-            mirror::run(&item.clips, spec, shared.types.taxonomy())
-        })?
+        shared
+            .workspace
+            .try_item(mirror::NAME, &item.key, &fp, || {
+                let full: Vec<Clip> = item
+                    .clips
+                    .iter()
+                    .zip(&item.refs)
+                    .map(|(clip, at)| {
+                        let mut c = clip.clone();
+                        c.motion = motions.motion(at)?;
+                        Ok(c)
+                    })
+                    .collect::<Result<_, BuildError>>()?;
+                Ok::<_, BuildError>(mirror::run(&full, spec, shared.types.taxonomy()))
+            })?
     else {
         item.pending = Some(mirror::NAME);
         return Ok(());
     };
     item.ran[2] = ran;
-    item.fingerprints.push((mirror::NAME, fp.fingerprint));
     item.mirrored = mirrored.clips;
+    item.mirrored_refs = item
+        .mirrored
+        .iter_mut()
+        .enumerate()
+        .map(|(i, clip)| hollow(clip, mirror::NAME, &fp.fingerprint, i))
+        .collect();
+    item.fingerprints.push((mirror::NAME, fp.fingerprint));
     item.rejects.extend(mirrored.rejects);
     Ok(())
 }

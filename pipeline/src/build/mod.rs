@@ -2,6 +2,7 @@
 //! unchanged, writes outputs atomically and records what it rejected and why.
 
 mod capture;
+mod motions;
 mod output;
 mod plan;
 mod reject;
@@ -22,6 +23,7 @@ pub use workspace::{
 };
 
 use capture::{Item, Shared};
+use motions::{MotionIndex, MotionSource};
 use output::{Table, skeleton_json, write_outputs};
 
 use crate::annotate::span::Note;
@@ -164,6 +166,9 @@ pub enum BuildError {
     /// The motion-type taxonomy or mapping is invalid.
     #[error(transparent)]
     Taxonomy(#[from] TaxonomyError),
+    /// A held clip's motion cannot be found (internal bookkeeping; `--force` rebuilds it).
+    #[error("{0}")]
+    Motion(String),
     /// The table cannot be written.
     #[error("{path}: {source}")]
     Table {
@@ -299,6 +304,7 @@ fn run_stages<'a>(
         types,
         types_digest,
     };
+    let motions = MotionSource::new(&shared.workspace);
 
     progress.stage_started(ingest::NAME, files.len() as u64);
     let mut items: Vec<Item> = files
@@ -338,7 +344,13 @@ fn run_stages<'a>(
     }
     let run_text = through >= Stage::Label && !upstream_pending;
     let text = if run_text {
-        text::run(&shared, &mut items, options.offline || probe, through)?
+        text::run(
+            &shared,
+            &motions,
+            &mut items,
+            options.offline || probe,
+            through,
+        )?
     } else {
         text::TextOutcome {
             pending: upstream_pending,
@@ -351,7 +363,7 @@ fn run_stages<'a>(
         items
             .par_iter_mut()
             .map(|item| {
-                let done = capture::mirror_capture(&shared, item);
+                let done = capture::mirror_capture(&shared, &motions, item);
                 progress.advanced(mirror::NAME, 1);
                 done
             })
@@ -401,11 +413,20 @@ fn run_stages<'a>(
     }
 
     let mut clips: Vec<Clip> = Vec::new();
+    let mut index = MotionIndex::new();
     let mut rejects: Vec<Reject> = Vec::new();
     let mut drops_by_reason = BTreeMap::new();
     let mut unmapped_labels = BTreeMap::new();
     let mut notes: Vec<Note> = Vec::new();
     for item in items {
+        for (clip, at) in item
+            .clips
+            .iter()
+            .zip(item.refs)
+            .chain(item.mirrored.iter().zip(item.mirrored_refs))
+        {
+            index.insert(motions::key(clip), at);
+        }
         clips.extend(item.clips);
         clips.extend(item.mirrored);
         rejects.extend(item.rejects);
@@ -462,7 +483,13 @@ fn run_stages<'a>(
         None
     };
     if through >= Stage::Compose && blocked.is_none() {
-        match compose(&shared, &mut clips, options.offline || probe)? {
+        match compose(
+            &shared,
+            &motions,
+            &mut clips,
+            &mut index,
+            options.offline || probe,
+        )? {
             Some((report, check, run)) => {
                 progress.stage_started(&run.stage, run.items as u64);
                 compose_report = report;
@@ -488,6 +515,7 @@ fn run_stages<'a>(
         compose: compose_report,
         pair_check,
         blocked,
+        index,
         shared,
     })
 }
@@ -505,7 +533,9 @@ fn items_pending_stage(items: &[Item]) -> Option<Stage> {
 /// `None` in probe mode when its output is not cached.
 fn compose(
     shared: &Shared<'_>,
+    motions: &MotionSource,
     clips: &mut Vec<Clip>,
+    index: &mut MotionIndex,
     offline: bool,
 ) -> Result<
     Option<(
@@ -517,7 +547,8 @@ fn compose(
 > {
     let config = shared.config;
     let all: Vec<&Clip> = clips.iter().collect();
-    let encoded = postcard::to_stdvec(&all).map_err(|e| WorkspaceError::Encode {
+    // The clips without frames, and where their frames are: together, the stage's input.
+    let encoded = postcard::to_stdvec(&(&all, &*index)).map_err(|e| WorkspaceError::Encode {
         what: "clips to compose".into(),
         message: e.to_string(),
     })?;
@@ -534,13 +565,15 @@ fn compose(
     drop(encoded);
     let composed = shared
         .workspace
-        .item(crate::stages::compose::NAME, "*", &stamp, || {
-            crate::stages::compose::run(
+        .try_item(crate::stages::compose::NAME, "*", &stamp, || {
+            let mut spill = motions::SyntheticSpill::new(&shared.workspace);
+            let out = crate::stages::compose::run(
                 &all,
                 &config.synthetic,
                 config.dataset.seed,
                 |c| c.split.clone(),
                 |c| shared.profile_of(c),
+                |c| motions.hydrate(c, index).map(|full| full.motion),
                 |a, b| {
                     let key = (
                         label::normalize_text(&a.text),
@@ -548,15 +581,27 @@ fn compose(
                     );
                     vetoed.0.contains(&key).then_some("llm_incompatible")
                 },
-            )
+                |clip| spill.push(clip),
+            )?;
+            Ok::<_, BuildError>((out, spill.finish()?))
         })?;
-    let Some((composed, ran)): Option<(crate::stages::compose::ComposeOutput, bool)> = composed
+    let Some(((composed, refs), ran)): Option<(
+        (
+            crate::stages::compose::ComposeOutput,
+            Vec<motions::MotionRef>,
+        ),
+        bool,
+    )> = composed
     else {
         return Ok(None);
     };
     shared.workspace.prune(
         crate::stages::compose::NAME,
         &BTreeSet::from([stamp.fingerprint]),
+    );
+    shared.workspace.prune(
+        motions::SYNTHETIC_CHUNKS,
+        &refs.iter().map(|r| r.fingerprint.clone()).collect(),
     );
     let run = StageRun {
         stage: crate::stages::compose::NAME.into(),
@@ -566,6 +611,9 @@ fn compose(
     };
     for clip in clips.iter_mut() {
         clip.plausibility = composed.real_metrics.get(&clip.clip_id).copied();
+    }
+    for (clip, at) in composed.clips.iter().zip(refs) {
+        index.insert(motions::key(clip), at);
     }
     clips.extend(composed.clips);
     clips.sort_by(|a, b| {
@@ -592,12 +640,36 @@ struct Staged<'a> {
     pair_check: crate::stages::augment::AugmentReport,
     /// In probe mode: the first stage whose output is not cached.
     blocked: Option<Stage>,
+    /// Where the frames of `clips` are (the clips are held without them).
+    index: MotionIndex,
 }
 
 /// Every clip a build would write (synthetic pairs included), from cached stage outputs where
 /// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
 pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip>, BuildError> {
-    Ok(run_stages(config, options, false)?.clips)
+    let staged = run_stages(config, options, false)?;
+    let motions = MotionSource::new(&staged.shared.workspace);
+    staged
+        .clips
+        .iter()
+        .map(|c| motions.hydrate(c, &staged.index))
+        .collect()
+}
+
+/// The clip `clip_id` as a build would write it, frames included (see [`collect_clips`]).
+pub fn find_clip(
+    config: &Config,
+    options: &BuildOptions,
+    clip_id: &str,
+) -> Result<Option<Clip>, BuildError> {
+    let staged = run_stages(config, options, false)?;
+    let motions = MotionSource::new(&staged.shared.workspace);
+    staged
+        .clips
+        .iter()
+        .find(|c| c.clip_id == clip_id)
+        .map(|c| motions.hydrate(c, &staged.index))
+        .transpose()
 }
 
 /// Runs every stage of the build described by `config` and writes the dataset.
@@ -616,7 +688,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         compose,
         pair_check,
         blocked: _,
+        index,
     } = run_stages(config, options, false)?;
+    let motions = MotionSource::new(&shared.workspace);
     let workspace = &shared.workspace;
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
@@ -633,7 +707,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             profiles.entry(clip.profile.clone()).or_insert(bound);
         }
     }
-    let table_stamp = table_stamp(config, &clips, &text.plans)?;
+    let table_stamp = table_stamp(config, &clips, &index, &text.plans)?;
     let table_fingerprint = table_stamp.fingerprint.clone();
     let table = Table {
         plans: &text.plans,
@@ -641,6 +715,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         profiles: &profiles,
         skeletons: &skeletons,
         rejects: &rejects,
+        index: &index,
+        motions: &motions,
     };
     let mut actions = BTreeMap::new();
     let mut motion_types = BTreeMap::new();
@@ -815,9 +891,11 @@ fn report_is_current(output: &std::path::Path, workspace: &Workspace, fingerprin
 fn table_stamp(
     config: &Config,
     clips: &[Clip],
+    index: &MotionIndex,
     plans: &BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
 ) -> Result<Stamp, BuildError> {
-    let encoded = postcard::to_stdvec(clips).map_err(|e| WorkspaceError::Encode {
+    // The rows without frames, and where their frames are (stage outputs named by content).
+    let encoded = postcard::to_stdvec(&(clips, index)).map_err(|e| WorkspaceError::Encode {
         what: "clip table".into(),
         message: e.to_string(),
     })?;

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::motions::{MotionIndex, MotionSource, key};
 use super::{
     BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE,
     Reject, SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
@@ -70,6 +71,10 @@ pub(super) struct Table<'a> {
     pub(super) profiles: &'a BTreeMap<String, Profile>,
     pub(super) skeletons: &'a BTreeMap<String, serde_json::Value>,
     pub(super) rejects: &'a [Reject],
+    /// Where the frames of `clips` are.
+    pub(super) index: &'a MotionIndex,
+    /// Reads them back.
+    pub(super) motions: &'a MotionSource,
 }
 
 /// One planned shard: its file and the clips (indices into the sorted clip list) it holds.
@@ -82,21 +87,21 @@ struct ShardPlan {
 /// Rough uncompressed size of a clip's row: the per-joint arrays dominate (positions 3, rotations
 /// 4, 6D rotations 6, velocities 3 floats per joint and frame; root, contacts and future root per
 /// frame), whether or not every feature column is switched on.
-fn row_bytes(clip: &Clip) -> u64 {
-    let frames = clip.motion.num_frames() as u64;
+fn row_bytes(clip: &Clip, index: &MotionIndex) -> u64 {
+    let frames = index.get(&key(clip)).map_or(0, |at| u64::from(at.frames));
     let joints = clip.motion.num_joints() as u64;
     frames * joints * (3 + 4 + 6 + 3) * 4 + frames * (3 + 9) * 4 + frames * 4 + 2048
 }
 
 /// Shards per split, in split order, each filled up to `target` bytes (at least one clip).
-fn plan_shards(clips: &[Clip], target: u64) -> Vec<ShardPlan> {
+fn plan_shards(clips: &[Clip], index: &MotionIndex, target: u64) -> Vec<ShardPlan> {
     let splits = crate::stages::split::split_order(clips.iter().map(|c| c.split.clone()));
     let mut plans = Vec::new();
     for split in splits {
         let mut groups: Vec<Vec<usize>> = vec![Vec::new()];
         let mut size = 0u64;
         for (i, c) in clips.iter().enumerate().filter(|(_, c)| c.split == split) {
-            let b = row_bytes(c);
+            let b = row_bytes(c, index);
             if size + b > target && groups.last().is_some_and(|g| !g.is_empty()) {
                 groups.push(Vec::new());
                 size = 0;
@@ -313,6 +318,8 @@ pub(super) fn write_outputs(
         profiles,
         skeletons,
         rejects,
+        index,
+        motions,
     } = *table;
     let state_path = workspace.root().join("state.json");
     let state: State = std::fs::read(&state_path)
@@ -323,17 +330,29 @@ pub(super) fn write_outputs(
         return Ok(false);
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
-    let plans_for_shards = plan_shards(clips, companions.shard_bytes);
+    let plans_for_shards = plan_shards(clips, index, companions.shard_bytes);
+    // Normalisation statistics over the training split (the first split when there is no
+    // `train`), gathered shard by shard as the rows pass.
+    let stats_split = if plans_for_shards.iter().any(|p| p.split == "train") {
+        Some("train".to_string())
+    } else {
+        plans_for_shards.first().map(|p| p.split.clone())
+    };
+    let mut normalization = crate::io::normalization::NormalizationStats::default();
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
     let mut split_bytes: BTreeMap<String, usize> = BTreeMap::new();
     for plan in &plans_for_shards {
-        let rows: Vec<Clip> = plan.clips.iter().map(|&i| clips[i].clone()).collect();
-        let encoded = postcard::to_stdvec(&rows).map_err(|e| super::WorkspaceError::Encode {
-            what: plan.file.clone(),
-            message: e.to_string(),
-        })?;
+        let held: Vec<&Clip> = plan.clips.iter().map(|&i| &clips[i]).collect();
+        let refs: Vec<Option<&super::motions::MotionRef>> =
+            held.iter().map(|c| index.get(&key(c))).collect();
+        // Rows without frames, and where the frames are: the shard's content.
+        let encoded =
+            postcard::to_stdvec(&(&held, &refs)).map_err(|e| super::WorkspaceError::Encode {
+                what: plan.file.clone(),
+                message: e.to_string(),
+            })?;
         let fp = super::Fingerprint::new("shard", 1)
             .text("rows", &sha256_hex(&encoded))
             .text("skeletons", &skeletons_json)
@@ -347,6 +366,20 @@ pub(super) fn write_outputs(
                 .outputs
                 .get(&plan.file)
                 .is_some_and(|sha| std::fs::read(&path).is_ok_and(|b| &sha256_hex(&b) == sha));
+        let for_stats = stats_split.as_deref() == Some(plan.split.as_str());
+        // One shard's rows with their frames at a time.
+        let rows: Vec<Clip> = if !fresh || for_stats {
+            held.iter()
+                .map(|c| motions.hydrate(c, index))
+                .collect::<Result<_, _>>()?
+        } else {
+            Vec::new()
+        };
+        if for_stats {
+            for row in &rows {
+                normalization.add(row, profiles, &companions.features);
+            }
+        }
         if !fresh {
             let mut table_error = None;
             write_atomic_with(&path, |file| {
@@ -377,11 +410,11 @@ pub(super) fn write_outputs(
             .or_default()
             .push(serde_json::json!({
                 "file": plan.file,
-                "rows": rows.len(),
+                "rows": held.len(),
                 "bytes": bytes.len(),
                 "sha256": sha256_hex(&bytes),
             }));
-        *split_rows.entry(plan.split.clone()).or_insert(0) += rows.len();
+        *split_rows.entry(plan.split.clone()).or_insert(0) += held.len();
         *split_bytes.entry(plan.split.clone()).or_insert(0) += bytes.len();
         shard_fingerprints.insert(plan.file.clone(), fp);
     }
@@ -397,21 +430,8 @@ pub(super) fn write_outputs(
         }
     }
     check_splits(output, &plans_for_shards)?;
-    // Normalisation statistics over the training split (the first split when there is no
-    // `train`), written whenever the shards are.
-    let stats_split = if split_rows.contains_key("train") {
-        Some("train".to_string())
-    } else {
-        plans_for_shards.first().map(|p| p.split.clone())
-    };
-    if let Some(split) = stats_split {
-        crate::io::normalization::write_normalization(
-            &output.join(NORMALIZATION_DIR),
-            clips,
-            &split,
-            profiles,
-            &companions.features,
-        )?;
+    if stats_split.is_some() {
+        normalization.write(&output.join(NORMALIZATION_DIR))?;
     }
     write_atomic(&output.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
     let mut lines = String::new();

@@ -155,7 +155,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         }
     }
     if blocked.is_none() && through >= Stage::Write {
-        let stamp = table_stamp(config, &staged.clips, &text.plans)?;
+        let stamp = table_stamp(config, &staged.clips, &staged.index, &text.plans)?;
         let write_fresh = output::written(&staged.output, workspace, &stamp.fingerprint);
         if let Some(plan) = plans.get_mut(&Stage::Write) {
             plan.items = 1;

@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::{Deserialize, Serialize};
 
 use super::capture::{Item, Shared};
+use super::motions::MotionSource;
 use super::{BuildError, Fingerprint, Reject, StageRun};
 use crate::clip::{Clip, SourceKind};
 use crate::config::Labeller;
@@ -71,6 +72,7 @@ fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> 
 /// Runs the text stages and puts their results on the items' clips.
 pub(super) fn run(
     shared: &Shared<'_>,
+    motions: &MotionSource,
     items: &mut [Item],
     offline: bool,
     through: super::Stage,
@@ -109,17 +111,40 @@ pub(super) fn run(
         .json("segments", &segment_fps)
         .stamp();
     let n_clips = clips.len();
-    let assigned = shared.workspace.item(label::NAME, "*", &stamp, || {
-        let mut all: Vec<Clip> = items.iter().flat_map(|i| i.clips.iter().cloned()).collect();
+    let assigned = shared.workspace.try_item(label::NAME, "*", &stamp, || {
+        // One capture's frames at a time: the velocity evidence needs the motions.
         let mut report = report.clone();
-        label::apply_labels(&mut all, &labels, |c| shared.profile_of(c), &mut report);
-        ClipLabels {
-            by_clip: all
-                .into_iter()
-                .map(|c| (c.clip_id, (c.parts, c.label_source)))
-                .collect(),
-            report,
+        let mut by_clip = BTreeMap::new();
+        let mut agreement = (0.0, 0usize);
+        for item in items.iter() {
+            let mut full: Vec<Clip> = item
+                .clips
+                .iter()
+                .zip(&item.refs)
+                .map(|(clip, at)| {
+                    let mut c = clip.clone();
+                    c.motion = motions.motion(at)?;
+                    Ok(c)
+                })
+                .collect::<Result<_, BuildError>>()?;
+            let mut part = LabelReport::default();
+            label::apply_labels(&mut full, &labels, |c| shared.profile_of(c), &mut part);
+            for (source, n) in part.sources {
+                *report.sources.entry(source).or_insert(0) += n;
+            }
+            if let Some((mean, n)) = part.velocity_agreement {
+                agreement.0 += mean * n as f64;
+                agreement.1 += n;
+            }
+            by_clip.extend(
+                full.into_iter()
+                    .map(|c| (c.clip_id, (c.parts, c.label_source))),
+            );
         }
+        if agreement.1 > 0 {
+            report.velocity_agreement = Some((agreement.0 / agreement.1 as f64, agreement.1));
+        }
+        Ok::<_, BuildError>(ClipLabels { by_clip, report })
     })?;
     let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
         outcome.pending = true;

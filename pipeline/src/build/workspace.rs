@@ -330,6 +330,17 @@ impl Workspace {
         stamp: &Stamp,
         compute: impl FnOnce() -> T,
     ) -> Result<Option<(T, bool)>, WorkspaceError> {
+        self.try_item(stage, key, stamp, || Ok::<T, WorkspaceError>(compute()))
+    }
+
+    /// Like [`Workspace::item`], for a computation that can fail.
+    pub fn try_item<T: Serialize + DeserializeOwned, E: From<WorkspaceError>>(
+        &self,
+        stage: &str,
+        key: &str,
+        stamp: &Stamp,
+        compute: impl FnOnce() -> Result<T, E>,
+    ) -> Result<Option<(T, bool)>, E> {
         if let Ok(mut seen) = self.seen.lock() {
             seen.push(Miss {
                 stage: stage.to_string(),
@@ -343,7 +354,7 @@ impl Workspace {
         if self.probe {
             return Ok(None);
         }
-        let v = compute();
+        let v = compute()?;
         self.store(stage, &stamp.fingerprint, &v)?;
         Ok(Some((v, true)))
     }
@@ -384,6 +395,20 @@ impl Workspace {
             message: e.to_string(),
         })?;
         write_atomic(&self.entry(stage, fingerprint), &bytes)
+    }
+
+    /// Stores already-encoded bytes under `fingerprint`, unless an entry is there.
+    pub fn store_bytes(
+        &self,
+        stage: &str,
+        fingerprint: &str,
+        bytes: &[u8],
+    ) -> Result<(), WorkspaceError> {
+        let path = self.entry(stage, fingerprint);
+        if path.is_file() {
+            return Ok(());
+        }
+        write_atomic(&path, bytes)
     }
 
     /// Returns the cached output or computes and stores it; the flag says whether it ran.

@@ -91,10 +91,30 @@ pub fn write_normalization(
     profiles: &BTreeMap<String, Profile>,
     config: &FeatureConfig,
 ) -> Result<Vec<PathBuf>, BuildError> {
-    let mut stats: BTreeMap<(String, &'static str), Moments> = BTreeMap::new();
+    let mut stats = NormalizationStats::default();
     for clip in clips.iter().filter(|c| c.split == split) {
+        stats.add(clip, profiles, config);
+    }
+    stats.write(dir)
+}
+
+/// Per-feature moments gathered one clip at a time, so the clips need not be in memory together.
+#[derive(Default)]
+pub struct NormalizationStats {
+    stats: BTreeMap<(String, &'static str), Moments>,
+}
+
+impl NormalizationStats {
+    /// Adds every frame of `clip` (skipped when its profile is not in `profiles`).
+    pub fn add(
+        &mut self,
+        clip: &Clip,
+        profiles: &BTreeMap<String, Profile>,
+        config: &FeatureConfig,
+    ) {
+        let stats = &mut self.stats;
         let Some(profile) = profiles.get(&clip.profile) else {
-            continue;
+            return;
         };
         let n = clip.motion.num_joints();
         let m = dataset_motion(clip, profile);
@@ -126,86 +146,99 @@ pub fn write_normalization(
             }
         }
     }
-    let mut written = Vec::new();
-    let (mut col_profile, mut col_feature, mut col_joint, mut col_dim, mut col_mean, mut col_std) = (
-        Vec::new(),
-        Vec::new(),
-        Vec::new(),
-        Vec::new(),
-        Vec::new(),
-        Vec::new(),
-    );
-    for ((profile, feature), moments) in &stats {
-        let (mean, std) = moments.finish();
-        let shape = [mean.len() / moments.dims, moments.dims];
-        for (suffix, values) in [("mean", &mean), ("std", &std)] {
-            let path = dir.join(profile).join(format!("{feature}_{suffix}.npy"));
-            write_atomic(&path, &npy_f32(values, &shape))?;
-            written.push(path);
-        }
-        for k in 0..mean.len() {
-            col_profile.push(profile.clone());
-            col_feature.push(feature.to_string());
-            col_joint.push((k / moments.dims) as i32);
-            col_dim.push((k % moments.dims) as i32);
-            col_mean.push(mean[k]);
-            col_std.push(std[k]);
-        }
-    }
-    let schema = Arc::new(Schema::new(vec![
-        Field::new("profile", DataType::Utf8, false),
-        Field::new("feature", DataType::Utf8, false),
-        Field::new("joint", DataType::Int32, false),
-        Field::new("dim", DataType::Int32, false),
-        Field::new("mean", DataType::Float32, false),
-        Field::new("std", DataType::Float32, false),
-    ]));
-    let columns: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(col_profile)),
-        Arc::new(StringArray::from(col_feature)),
-        Arc::new(Int32Array::from(col_joint)),
-        Arc::new(Int32Array::from(col_dim)),
-        Arc::new(Float32Array::from(col_mean)),
-        Arc::new(Float32Array::from(col_std)),
-    ];
-    // Folders of profiles no longer in the split would pass for current statistics.
-    let current: std::collections::BTreeSet<&str> =
-        stats.keys().map(|(profile, _)| profile.as_str()).collect();
-    if let Ok(entries) = std::fs::read_dir(dir) {
-        for entry in entries.flatten() {
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if entry.file_type().is_ok_and(|t| t.is_dir()) && !current.contains(name.as_str()) {
-                let _ = std::fs::remove_dir_all(entry.path());
+
+    /// Writes the statistics gathered (see [`write_normalization`]).
+    pub fn write(self, dir: &Path) -> Result<Vec<PathBuf>, BuildError> {
+        let stats = self.stats;
+        let mut written = Vec::new();
+        let (
+            mut col_profile,
+            mut col_feature,
+            mut col_joint,
+            mut col_dim,
+            mut col_mean,
+            mut col_std,
+        ) = (
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+        );
+        for ((profile, feature), moments) in &stats {
+            let (mean, std) = moments.finish();
+            let shape = [mean.len() / moments.dims, moments.dims];
+            for (suffix, values) in [("mean", &mean), ("std", &std)] {
+                let path = dir.join(profile).join(format!("{feature}_{suffix}.npy"));
+                write_atomic(&path, &npy_f32(values, &shape))?;
+                written.push(path);
+            }
+            for k in 0..mean.len() {
+                col_profile.push(profile.clone());
+                col_feature.push(feature.to_string());
+                col_joint.push((k / moments.dims) as i32);
+                col_dim.push((k % moments.dims) as i32);
+                col_mean.push(mean[k]);
+                col_std.push(std[k]);
             }
         }
-    }
-    let path = dir.join("normalization.parquet");
-    let table = |e: TableError| BuildError::Table {
-        path: path.clone(),
-        source: e,
-    };
-    let batch = RecordBatch::try_new(Arc::clone(&schema), columns).map_err(|e| table(e.into()))?;
-    let mut failure = None;
-    write_atomic_with(&path, |file| {
-        let handle = file.try_clone()?;
-        let run = || -> Result<(), TableError> {
-            let mut w = ArrowWriter::try_new(handle, Arc::clone(&schema), None)?;
-            w.write(&batch)?;
-            w.close()?;
-            Ok(())
-        };
-        run().map_err(|e| {
-            failure = Some(e);
-            std::io::Error::other("normalization table encoding failed")
-        })
-    })
-    .map_err(|e| match failure.take() {
-        Some(source) => BuildError::Table {
+        let schema = Arc::new(Schema::new(vec![
+            Field::new("profile", DataType::Utf8, false),
+            Field::new("feature", DataType::Utf8, false),
+            Field::new("joint", DataType::Int32, false),
+            Field::new("dim", DataType::Int32, false),
+            Field::new("mean", DataType::Float32, false),
+            Field::new("std", DataType::Float32, false),
+        ]));
+        let columns: Vec<ArrayRef> = vec![
+            Arc::new(StringArray::from(col_profile)),
+            Arc::new(StringArray::from(col_feature)),
+            Arc::new(Int32Array::from(col_joint)),
+            Arc::new(Int32Array::from(col_dim)),
+            Arc::new(Float32Array::from(col_mean)),
+            Arc::new(Float32Array::from(col_std)),
+        ];
+        // Folders of profiles no longer in the split would pass for current statistics.
+        let current: std::collections::BTreeSet<&str> =
+            stats.keys().map(|(profile, _)| profile.as_str()).collect();
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for entry in entries.flatten() {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                if entry.file_type().is_ok_and(|t| t.is_dir()) && !current.contains(name.as_str()) {
+                    let _ = std::fs::remove_dir_all(entry.path());
+                }
+            }
+        }
+        let path = dir.join("normalization.parquet");
+        let table = |e: TableError| BuildError::Table {
             path: path.clone(),
-            source,
-        },
-        None => BuildError::Workspace(e),
-    })?;
-    written.push(path);
-    Ok(written)
+            source: e,
+        };
+        let batch =
+            RecordBatch::try_new(Arc::clone(&schema), columns).map_err(|e| table(e.into()))?;
+        let mut failure = None;
+        write_atomic_with(&path, |file| {
+            let handle = file.try_clone()?;
+            let run = || -> Result<(), TableError> {
+                let mut w = ArrowWriter::try_new(handle, Arc::clone(&schema), None)?;
+                w.write(&batch)?;
+                w.close()?;
+                Ok(())
+            };
+            run().map_err(|e| {
+                failure = Some(e);
+                std::io::Error::other("normalization table encoding failed")
+            })
+        })
+        .map_err(|e| match failure.take() {
+            Some(source) => BuildError::Table {
+                path: path.clone(),
+                source,
+            },
+            None => BuildError::Workspace(e),
+        })?;
+        written.push(path);
+        Ok(written)
+    }
 }

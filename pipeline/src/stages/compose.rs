@@ -11,14 +11,14 @@ use crate::clip::{Clip, SourceKind};
 use crate::compose_text::compose_variants;
 use crate::motion::canonical::dataset_positions;
 use crate::motion::compose::{Trim, compose};
-use crate::motion::{BodyPart, Profile};
+use crate::motion::{BodyPart, Motion, Profile};
 use crate::parts::PartSet;
 use crate::quality::{Plausibility, Thresholds, plausibility};
 
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// Synthetic-pair settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -221,15 +221,20 @@ pub fn sample<'c>(
 
 /// Runs the stage: plausibility metrics for every clip, then the sampled pairs composed, checked
 /// and kept or dropped by reason. `veto` may refuse a pair before composition (the LLM check),
-/// naming the reason; `profile_of` binds a clip's skeleton profile.
-pub fn run(
+/// naming the reason; `profile_of` binds a clip's skeleton profile; `motion_of` gives a clip's
+/// frames (the clips may be held without them, one motion is read at a time); `keep` sees each
+/// composed clip before it joins the output (the build moves its frames to disk there).
+#[allow(clippy::too_many_arguments)]
+pub fn run<E>(
     clips: &[&Clip],
     config: &SyntheticConfig,
     seed: u64,
     split_of: impl Fn(&Clip) -> String,
     profile_of: impl Fn(&Clip) -> Option<Profile>,
+    motion_of: impl Fn(&Clip) -> Result<Motion, E>,
     veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
-) -> ComposeOutput {
+    mut keep: impl FnMut(&mut Clip) -> Result<(), E>,
+) -> Result<ComposeOutput, E> {
     let mut out = ComposeOutput::default();
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     let mut bound = |c: &Clip| -> Option<Profile> {
@@ -243,10 +248,11 @@ pub fn run(
     };
     for c in clips {
         if let Some(p) = bound(c) {
-            let positions = dataset_positions(&c.motion, &p);
+            let motion = motion_of(c)?;
+            let positions = dataset_positions(&motion, &p);
             out.real_metrics.insert(
                 c.clip_id.clone(),
-                plausibility(&positions, c.motion.num_joints(), c.motion.fps, &p),
+                plausibility(&positions, motion.num_joints(), motion.fps, &p),
             );
         }
     }
@@ -259,14 +265,15 @@ pub fn run(
         }
         let Some(profile) = bound(a) else { continue };
         let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
+        let (motion_a, motion_b) = (motion_of(a)?, motion_of(b)?);
         let trim = if config.random_offset {
-            let spare = a.motion.num_frames().abs_diff(b.motion.num_frames());
+            let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
             Trim::At(rng.below(spare + 1))
         } else {
             Trim::Start
         };
         let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
-        let composite = compose(&a.motion, mask(pa), &b.motion, mask(pb), &profile, trim);
+        let composite = compose(&motion_a, mask(pa), &motion_b, mask(pb), &profile, trim);
         let positions = dataset_positions(&composite.motion, &profile);
         let metrics = plausibility(
             &positions,
@@ -288,7 +295,7 @@ pub fn run(
         let legs_from_a =
             composite.parts_from_first & crate::motion::compose::part_bit(BodyPart::Global) != 0;
         let base = if legs_from_a { a } else { b };
-        out.clips.push(Clip {
+        let mut clip = Clip {
             clip_id: format!("synthetic/{}+{}", a.clip_id, b.clip_id),
             kind: SourceKind::Synthetic,
             capture: base.capture.clone(),
@@ -321,8 +328,10 @@ pub fn run(
             ],
             plausibility: Some(metrics),
             motion: composite.motion,
-        });
+        };
+        keep(&mut clip)?;
+        out.clips.push(clip);
         out.report.composed += 1;
     }
-    out
+    Ok(out)
 }
