@@ -67,12 +67,21 @@ async fn post_build(
 /// Polls `GET /builds/{id}` every 100 ms until the build is final; on every poll, checks through
 /// `GET /builds` that no two builds run at once.
 async fn wait_final(client: &reqwest::Client, base: &str, id: i64) -> Value {
+    watch_build(client, base, id).await.0
+}
+
+/// [`wait_final`], also returning the answers seen while the build was running.
+async fn watch_build(client: &reqwest::Client, base: &str, id: i64) -> (Value, Vec<Value>) {
     let start = Instant::now();
+    let mut running = Vec::new();
     loop {
         let (status, build) = get(client, &format!("{base}/builds/{id}")).await;
         assert_eq!(status, 200, "{build}");
         if ["succeeded", "failed", "interrupted"].contains(&build["state"].as_str().unwrap()) {
-            return build;
+            return (build, running);
+        }
+        if build["state"] == "running" {
+            running.push(build.clone());
         }
         let (_, all) = get(client, &format!("{base}/builds")).await;
         let running = all["builds"]
@@ -157,7 +166,20 @@ async fn builds_over_http_with_auth_queue_stats_and_history_across_restarts() {
     let (_, now2) = get(&client, &format!("{base}/builds/{id2}")).await;
     assert_eq!(now2["state"], "queued", "{now2}");
 
-    let b1 = wait_final(&client, &base, id1).await;
+    let (b1, seen_running) = watch_build(&client, &base, id1).await;
+    // While it runs, the answer carries the live log (the build takes over a second here).
+    let live = seen_running.first().expect("build 1 seen running");
+    assert!(
+        live["started_at"].is_string() && live["finished_at"].is_null(),
+        "{live}"
+    );
+    assert!(
+        live["log"][0]
+            .as_str()
+            .unwrap()
+            .starts_with(&format!("build {id1} of `demo` started")),
+        "{live}"
+    );
     let b2 = wait_final(&client, &base, id2).await;
     assert_eq!(b1["state"], "succeeded", "{b1}");
     assert_eq!(b2["state"], "succeeded", "{b2}");
@@ -312,6 +334,37 @@ async fn a_build_left_running_is_interrupted_and_resumed_on_start() {
     let (service, base) = start(state.path(), vec![demo_config(out.path())]).await;
     let (_, builds) = get(&client, &format!("{base}/builds")).await;
     assert_eq!(builds["builds"].as_array().unwrap().len(), 3, "{builds}");
+    service.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_build_records_its_error_and_the_queue_goes_on() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let mut config = demo_config(out.path());
+    config.sources[0].profile = "no-such-skeleton".into();
+    let (service, base) = start(state.path(), vec![config]).await;
+    let client = reqwest::Client::new();
+    let (_, a) = post_build(&client, &base, Some(TOKEN), "").await;
+    let (_, b) = post_build(&client, &base, Some(TOKEN), r#"{"force": true}"#).await;
+    let a = wait_final(&client, &base, a["id"].as_i64().unwrap()).await;
+    let b = wait_final(&client, &base, b["id"].as_i64().unwrap()).await;
+    for build in [&a, &b] {
+        assert_eq!(build["state"], "failed", "{build}");
+        let error = build["error"].as_str().unwrap();
+        assert!(error.contains("no-such-skeleton"), "{error}");
+        assert!(build["counts"].is_null(), "{build}");
+        let log = build["log"].as_array().unwrap();
+        assert!(
+            log.last()
+                .unwrap()
+                .as_str()
+                .unwrap()
+                .starts_with("failed: "),
+            "{build}"
+        );
+    }
+    assert_eq!(b["force"], true);
     service.stop().await.unwrap();
 }
 

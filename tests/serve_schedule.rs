@@ -151,6 +151,13 @@ fn a_bad_schedule_is_refused_naming_the_key_value_and_form() {
     .unwrap();
     let configs = load_configs(std::slice::from_ref(&good)).unwrap();
     assert_eq!(configs[0].dataset.schedule.as_deref(), Some("0 3 * * *"));
+    // When to build is not what to build: the config fingerprint must not see it.
+    let mut without = configs[0].clone();
+    without.dataset.schedule = None;
+    assert_eq!(
+        serde_json::to_string(&configs[0]).unwrap(),
+        serde_json::to_string(&without).unwrap()
+    );
     let twice = load_configs(&[good.clone(), good]).unwrap_err().to_string();
     assert!(twice.contains("both build dataset `demo`"), "{twice}");
 }

@@ -233,6 +233,7 @@ fn datasets(configs: Vec<Config>) -> Result<BTreeMap<String, Dataset>, ServeErro
     }
     let mut out: BTreeMap<String, Dataset> = BTreeMap::new();
     for config in configs {
+        // A loaded config keeps its folder, not its file name; `load_configs` names the file.
         let config_path = config.base_dir.clone();
         let schedule = match &config.dataset.schedule {
             Some(text) => {

@@ -92,12 +92,19 @@ impl Clock for ManualClock {
 
 /// Parses a schedule; the error says what is wrong with it.
 pub fn parse_schedule(text: &str) -> Result<Cron, String> {
-    CronParser::builder()
+    let cron = CronParser::builder()
         .seconds(Seconds::Disallowed)
         .year(Year::Disallowed)
         .build()
         .parse(text)
-        .map_err(|e| e.to_string())
+        .map_err(|e| e.to_string())?;
+    // Without a year field a pattern that matches once matches within any eight years (29
+    // February), so one search from a fixed date tells whether it ever comes.
+    let reference = DateTime::<Utc>::from_timestamp(946_684_800, 0).unwrap_or_default();
+    if next_after(&cron, reference).is_none() {
+        return Err("it names no date that exists".into());
+    }
+    Ok(cron)
 }
 
 /// The first time after `after` (exclusive) that `cron` names, if any.
@@ -219,6 +226,11 @@ mod tests {
         assert!(parse_schedule("every night").is_err());
         assert!(parse_schedule("61 3 * * *").is_err());
         assert!(parse_schedule("").is_err());
+        assert!(
+            parse_schedule("0 0 31 2 *").is_err(),
+            "31 February never comes"
+        );
+        assert!(parse_schedule("0 0 29 2 *").is_ok());
     }
 
     #[test]
