@@ -369,6 +369,54 @@ async fn a_failed_build_records_its_error_and_the_queue_goes_on() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_two_datasets_a_build_must_name_one() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let mut other = demo_config(out.path());
+    other.dataset.name = "demo-copy".into();
+    let (service, base) = start(state.path(), vec![demo_config(out.path()), other]).await;
+    let client = reqwest::Client::new();
+    let (status, body) = post_build(&client, &base, Some(TOKEN), r#"{"force": true}"#).await;
+    assert_eq!(status, 400, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("`dataset` is required"),
+        "{body}"
+    );
+    let (_, datasets) = get(&client, &format!("{base}/datasets")).await;
+    let names: Vec<&str> = datasets["datasets"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, vec!["demo", "demo-copy"]);
+    let (_, builds) = get(&client, &format!("{base}/builds")).await;
+    assert_eq!(
+        builds["builds"],
+        serde_json::json!([]),
+        "nothing was queued"
+    );
+    service.stop().await.unwrap();
+
+    let err = Service::start(
+        ServiceSetup {
+            datasets: vec![demo_config(out.path()), demo_config(out.path())],
+            state_dir: state.path().to_path_buf(),
+            token: Token::new(TOKEN).unwrap(),
+            clock: Arc::new(SystemClock),
+        },
+        tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap(),
+    )
+    .await
+    .err()
+    .expect("two configs of one dataset are refused");
+    assert!(err.to_string().contains("`demo`"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn openapi_describes_exactly_the_routes_served() {
     let text = std::fs::read_to_string(repo().join("docs/openapi.json")).unwrap();
     let doc: Value = serde_json::from_str(&text).unwrap();

@@ -2,7 +2,9 @@
 //!
 //! Times are unix milliseconds (UTC). The connection holds SQLite's lock for its whole life
 //! (`locking_mode = EXCLUSIVE`), so a second service on the same state folder fails to start
-//! instead of running builds of the same datasets at the same time.
+//! instead of running builds of the same datasets at the same time. Every call is one short
+//! statement or transaction on a small table, so async handlers make them directly rather than
+//! through a blocking pool.
 
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
