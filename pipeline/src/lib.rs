@@ -12,6 +12,7 @@ pub mod parts;
 pub mod progress;
 pub mod quality;
 pub mod report;
+pub mod serve;
 pub mod source;
 pub mod stages;
 pub mod text;

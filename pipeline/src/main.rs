@@ -144,6 +144,24 @@ enum Command {
     },
     /// Print the clip table schema (columns, types, version) as JSON.
     Schema,
+    /// Serve an HTTP API that builds the datasets on request and on their `dataset.schedule`,
+    /// one build at a time per dataset, with the run history kept across restarts
+    /// (docs/service.md). Calls that change state need `Authorization: Bearer <token>`.
+    Serve {
+        /// A dataset's build configuration; repeat to serve several datasets.
+        #[arg(long, short, default_value = "motionforge.toml")]
+        config: Vec<PathBuf>,
+        /// Address to listen on.
+        #[arg(long, default_value = motionforge::serve::DEFAULT_BIND)]
+        bind: String,
+        /// Folder of the run history database.
+        #[arg(long, default_value = motionforge::serve::DEFAULT_STATE_DIR)]
+        state: PathBuf,
+        /// Environment variable holding the bearer token (required: the service will not start
+        /// without it).
+        #[arg(long, default_value = motionforge::serve::DEFAULT_TOKEN_ENV)]
+        token_env: String,
+    },
     /// Work with prompt templates.
     Prompt {
         #[command(subcommand)]
@@ -416,6 +434,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Prompt { command } => prompt_command(command)?,
         Command::Labels { command } => labels_command(command)?,
+        Command::Serve {
+            config,
+            bind,
+            state,
+            token_env,
+        } => motionforge::serve::run(&motionforge::serve::ServeCommand {
+            configs: config,
+            bind,
+            state_dir: state,
+            token_env,
+        })?,
         Command::Schema => writeln!(
             std::io::stdout(),
             "{}",

@@ -1,0 +1,533 @@
+//! `motionforge serve` over real HTTP on loopback: auth, builds of the demo to completion, the
+//! per-dataset queue, statistics, history across restarts, recovery of an interrupted build, the
+//! OpenAPI description, and the command's clean stop.
+mod common;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use motionforge::config::Config;
+use motionforge::serve::history::{History, Trigger};
+use motionforge::serve::schedule::SystemClock;
+use motionforge::serve::{Service, ServiceSetup, Token};
+use serde_json::Value;
+
+use common::repo;
+
+const TOKEN: &str = "s3cret-test-token";
+/// Generous: a debug-mode demo build on two busy cores.
+const BUILD_TIMEOUT: Duration = Duration::from_secs(600);
+
+fn demo_config(output: &Path) -> Config {
+    let mut config = Config::load(&repo().join("fixtures/demo.toml")).unwrap();
+    config.dataset.output = output.to_path_buf();
+    config
+}
+
+async fn start(state: &Path, configs: Vec<Config>) -> (Service, String) {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let service = Service::start(
+        ServiceSetup {
+            datasets: configs,
+            state_dir: state.to_path_buf(),
+            token: Token::new(TOKEN).unwrap(),
+            clock: Arc::new(SystemClock),
+        },
+        listener,
+    )
+    .await
+    .unwrap();
+    let base = format!("http://{}", service.local_addr());
+    (service, base)
+}
+
+async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
+    let response = client.get(url).send().await.unwrap();
+    let status = response.status().as_u16();
+    (status, response.json().await.unwrap())
+}
+
+async fn post_build(
+    client: &reqwest::Client,
+    base: &str,
+    token: Option<&str>,
+    body: &str,
+) -> (u16, Value) {
+    let mut request = client.post(format!("{base}/builds")).body(body.to_string());
+    if let Some(token) = token {
+        request = request.header("Authorization", format!("Bearer {token}"));
+    }
+    let response = request.send().await.unwrap();
+    let status = response.status().as_u16();
+    (status, response.json().await.unwrap())
+}
+
+/// Polls `GET /builds/{id}` every 100 ms until the build is final; on every poll, checks through
+/// `GET /builds` that no two builds run at once.
+async fn wait_final(client: &reqwest::Client, base: &str, id: i64) -> Value {
+    watch_build(client, base, id).await.0
+}
+
+/// [`wait_final`], also returning the answers seen while the build was running.
+async fn watch_build(client: &reqwest::Client, base: &str, id: i64) -> (Value, Vec<Value>) {
+    let start = Instant::now();
+    let mut running = Vec::new();
+    loop {
+        let (status, build) = get(client, &format!("{base}/builds/{id}")).await;
+        assert_eq!(status, 200, "{build}");
+        if ["succeeded", "failed", "interrupted"].contains(&build["state"].as_str().unwrap()) {
+            return (build, running);
+        }
+        if build["state"] == "running" {
+            running.push(build.clone());
+        }
+        let (_, all) = get(client, &format!("{base}/builds")).await;
+        let running = all["builds"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|b| b["state"] == "running")
+            .count();
+        assert!(
+            running <= 1,
+            "two builds of one dataset running at once: {all}"
+        );
+        assert!(
+            start.elapsed() < BUILD_TIMEOUT,
+            "build {id} not finished after {BUILD_TIMEOUT:?}: {build}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn builds_over_http_with_auth_queue_stats_and_history_across_restarts() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let (service, base) = start(state.path(), vec![demo_config(out.path())]).await;
+    let client = reqwest::Client::new();
+
+    let (status, health) = get(&client, &format!("{base}/health")).await;
+    assert_eq!((status, &health["status"]), (200, &Value::from("ok")));
+    assert_eq!(health["datasets"], serde_json::json!(["demo"]));
+
+    // State-changing calls need the token; nothing is queued without it.
+    let (status, body) = post_build(&client, &base, None, r#"{"dataset":"demo"}"#).await;
+    assert_eq!(status, 401, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("missing bearer token")
+    );
+    let (status, body) = post_build(&client, &base, Some("wrong"), r#"{"dataset":"demo"}"#).await;
+    assert_eq!(status, 401, "{body}");
+    assert_eq!(body["error"], "wrong bearer token");
+    let basic = client
+        .post(format!("{base}/builds"))
+        .header("Authorization", format!("Basic {TOKEN}"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(basic.status().as_u16(), 401);
+    assert!(basic.headers().contains_key("www-authenticate"));
+    let (_, builds) = get(&client, &format!("{base}/builds")).await;
+    assert_eq!(builds["builds"], serde_json::json!([]));
+
+    // Not built yet: no statistics.
+    let (status, body) = get(&client, &format!("{base}/datasets/demo/stats")).await;
+    assert_eq!(status, 404, "{body}");
+
+    // Two builds back to back: the second waits for the first.
+    let first = client
+        .post(format!("{base}/builds"))
+        .bearer_auth(TOKEN)
+        .json(&serde_json::json!({"dataset": "demo", "force": false}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(first.status().as_u16(), 202);
+    let first_location = first.headers()["location"].to_str().unwrap().to_string();
+    let first: Value = first.json().await.unwrap();
+    let id1 = first["id"].as_i64().unwrap();
+    assert_eq!(first_location, format!("/builds/{id1}"));
+    assert_eq!(first["trigger"], "api");
+    // One dataset served: the body may be left out.
+    let (status, second) = post_build(&client, &base, Some(TOKEN), "").await;
+    assert_eq!(status, 202, "{second}");
+    let id2 = second["id"].as_i64().unwrap();
+    assert!(id2 > id1);
+    assert_eq!(
+        second["state"], "queued",
+        "the second build must wait: {second}"
+    );
+    let (_, now2) = get(&client, &format!("{base}/builds/{id2}")).await;
+    assert_eq!(now2["state"], "queued", "{now2}");
+
+    let (b1, seen_running) = watch_build(&client, &base, id1).await;
+    // While it runs, the answer carries the live log (the build takes over a second here).
+    let live = seen_running.first().expect("build 1 seen running");
+    assert!(
+        live["started_at"].is_string() && live["finished_at"].is_null(),
+        "{live}"
+    );
+    assert!(
+        live["log"][0]
+            .as_str()
+            .unwrap()
+            .starts_with(&format!("build {id1} of `demo` started")),
+        "{live}"
+    );
+    let b2 = wait_final(&client, &base, id2).await;
+    assert_eq!(b1["state"], "succeeded", "{b1}");
+    assert_eq!(b2["state"], "succeeded", "{b2}");
+    assert_eq!(b1["counts"]["clips"], 25, "{b1}");
+    assert_eq!(b1["counts"]["captures"], 9, "{b1}");
+    assert_eq!(b1["counts"]["mirrored"], 10, "{b1}");
+    assert_eq!(b1["counts"]["nothing_ran"], false, "{b1}");
+    let stages = b1["stages"].as_array().unwrap();
+    let names: Vec<&str> = stages
+        .iter()
+        .map(|s| s["stage"].as_str().unwrap())
+        .collect();
+    for stage in ["ingest", "segment", "mirror", "write", "report"] {
+        assert!(names.contains(&stage), "stage {stage} missing: {names:?}");
+    }
+    assert!(stages.iter().all(|s| s["finished"] == true), "{b1}");
+    let ingest = stages.iter().find(|s| s["stage"] == "ingest").unwrap();
+    assert_eq!(
+        (ingest["total"].as_u64(), ingest["ran"].as_u64()),
+        (Some(9), Some(9))
+    );
+    let log: Vec<&str> = b1["log"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l.as_str().unwrap())
+        .collect();
+    assert!(log[0].contains("started"), "{log:?}");
+    assert!(log.last().unwrap().contains("succeeded"), "{log:?}");
+    // Nothing changed between them: the second reused everything, and ran after the first.
+    assert_eq!(b2["counts"]["nothing_ran"], true, "{b2}");
+    assert_eq!(b2["counts"]["clips"], 25);
+    assert!(
+        b2["started_at"].as_str().unwrap() >= b1["finished_at"].as_str().unwrap(),
+        "second started before the first finished: {b1} {b2}"
+    );
+    println!(
+        "demo build {} s, rebuild with nothing changed {} s (debug)",
+        b1["seconds"], b2["seconds"]
+    );
+
+    // Datasets and statistics.
+    let (status, datasets) = get(&client, &format!("{base}/datasets")).await;
+    assert_eq!(status, 200);
+    let demo = &datasets["datasets"][0];
+    assert_eq!(demo["name"], "demo");
+    assert_eq!(demo["stats_available"], true);
+    assert_eq!(demo["last_build"]["id"], id2);
+    assert_eq!(demo["queued"], serde_json::json!([]));
+    let (status, stats) = get(&client, &format!("{base}/datasets/demo/stats")).await;
+    assert_eq!(status, 200);
+    let on_disk: Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("demo/report/stats.json")).unwrap())
+            .unwrap();
+    assert_eq!(stats, on_disk);
+
+    // Errors answer JSON with the right status.
+    let (status, body) = get(&client, &format!("{base}/datasets/nope/stats")).await;
+    assert_eq!(status, 404);
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("no dataset `nope`")
+    );
+    for path in ["/builds/9999", "/builds/abc", "/nowhere"] {
+        let (status, body) = get(&client, &format!("{base}{path}")).await;
+        assert_eq!(status, 404, "{path}: {body}");
+        assert!(body["error"].is_string(), "{path}: {body}");
+    }
+    let (status, body) = post_build(&client, &base, Some(TOKEN), r#"{"dataset":"nope"}"#).await;
+    assert_eq!(status, 404, "{body}");
+    let (status, body) = post_build(
+        &client,
+        &base,
+        Some(TOKEN),
+        r#"{"dataset":"demo","fast":1}"#,
+    )
+    .await;
+    assert_eq!(status, 400, "{body}");
+    let (status, body) = get(&client, &format!("{base}/builds?state=done")).await;
+    assert_eq!(status, 400, "{body}");
+    let (_, page) = get(&client, &format!("{base}/builds?limit=1")).await;
+    assert_eq!(page["builds"].as_array().unwrap().len(), 1);
+
+    // A new service on the same state folder finds the history.
+    service.stop().await.unwrap();
+    let (service, base) = start(state.path(), vec![demo_config(out.path())]).await;
+    let (_, builds) = get(&client, &format!("{base}/builds")).await;
+    let listed: Vec<(i64, &str)> = builds["builds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| (b["id"].as_i64().unwrap(), b["state"].as_str().unwrap()))
+        .collect();
+    assert_eq!(listed, vec![(id2, "succeeded"), (id1, "succeeded")]);
+    let (_, again) = get(&client, &format!("{base}/builds/{id1}")).await;
+    assert_eq!(again["counts"], b1["counts"]);
+    assert_eq!(again["stages"], b1["stages"]);
+    assert_eq!(again["log"], b1["log"]);
+    service.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_build_left_running_is_interrupted_and_resumed_on_start() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    // What a crash leaves: one build running, one queued behind it.
+    let (crashed, waiting) = {
+        let history = History::open(state.path()).unwrap();
+        let crashed = history
+            .enqueue("demo", Trigger::Api, true, false, None, 1_000)
+            .unwrap();
+        assert!(history.start(crashed, 2_000).unwrap());
+        let waiting = history
+            .enqueue("demo", Trigger::Schedule, false, false, None, 3_000)
+            .unwrap();
+        (crashed, waiting)
+    };
+
+    let (service, base) = start(state.path(), vec![demo_config(out.path())]).await;
+    let client = reqwest::Client::new();
+    let (_, old) = get(&client, &format!("{base}/builds/{crashed}")).await;
+    assert_eq!(old["state"], "interrupted", "{old}");
+    assert!(old["error"].as_str().unwrap().contains("stopped"), "{old}");
+    let resume = old["resumed_by"]
+        .as_i64()
+        .expect("a resume build is queued");
+    assert!(
+        resume > waiting,
+        "the resume build is queued after the waiting one"
+    );
+
+    let (_, new) = get(&client, &format!("{base}/builds/{resume}")).await;
+    assert_eq!(new["trigger"], "resume");
+    assert_eq!(new["resumes"], crashed);
+    assert_eq!(
+        new["force"], false,
+        "a resume reuses what the forced build finished"
+    );
+
+    let w = wait_final(&client, &base, waiting).await;
+    let r = wait_final(&client, &base, resume).await;
+    assert_eq!(w["state"], "succeeded", "{w}");
+    assert_eq!(w["counts"]["clips"], 25, "{w}");
+    assert_eq!(r["state"], "succeeded", "{r}");
+    assert_eq!(r["counts"]["nothing_ran"], true, "{r}");
+    assert!(r["started_at"].as_str().unwrap() >= w["finished_at"].as_str().unwrap());
+    service.stop().await.unwrap();
+
+    // Resumed once only: another start adds nothing.
+    let (service, base) = start(state.path(), vec![demo_config(out.path())]).await;
+    let (_, builds) = get(&client, &format!("{base}/builds")).await;
+    assert_eq!(builds["builds"].as_array().unwrap().len(), 3, "{builds}");
+    service.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_build_records_its_error_and_the_queue_goes_on() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let mut config = demo_config(out.path());
+    config.sources[0].profile = "no-such-skeleton".into();
+    let (service, base) = start(state.path(), vec![config]).await;
+    let client = reqwest::Client::new();
+    let (_, a) = post_build(&client, &base, Some(TOKEN), "").await;
+    let (_, b) = post_build(&client, &base, Some(TOKEN), r#"{"force": true}"#).await;
+    let a = wait_final(&client, &base, a["id"].as_i64().unwrap()).await;
+    let b = wait_final(&client, &base, b["id"].as_i64().unwrap()).await;
+    for build in [&a, &b] {
+        assert_eq!(build["state"], "failed", "{build}");
+        let error = build["error"].as_str().unwrap();
+        assert!(error.contains("no-such-skeleton"), "{error}");
+        assert!(build["counts"].is_null(), "{build}");
+        let log = build["log"].as_array().unwrap();
+        assert!(
+            log.last()
+                .unwrap()
+                .as_str()
+                .unwrap()
+                .starts_with("failed: "),
+            "{build}"
+        );
+    }
+    assert_eq!(b["force"], true);
+    service.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_two_datasets_a_build_must_name_one() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let mut other = demo_config(out.path());
+    other.dataset.name = "demo-copy".into();
+    let (service, base) = start(state.path(), vec![demo_config(out.path()), other]).await;
+    let client = reqwest::Client::new();
+    let (status, body) = post_build(&client, &base, Some(TOKEN), r#"{"force": true}"#).await;
+    assert_eq!(status, 400, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("`dataset` is required"),
+        "{body}"
+    );
+    let (_, datasets) = get(&client, &format!("{base}/datasets")).await;
+    let names: Vec<&str> = datasets["datasets"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, vec!["demo", "demo-copy"]);
+    let (_, builds) = get(&client, &format!("{base}/builds")).await;
+    assert_eq!(
+        builds["builds"],
+        serde_json::json!([]),
+        "nothing was queued"
+    );
+    service.stop().await.unwrap();
+
+    let err = Service::start(
+        ServiceSetup {
+            datasets: vec![demo_config(out.path()), demo_config(out.path())],
+            state_dir: state.path().to_path_buf(),
+            token: Token::new(TOKEN).unwrap(),
+            clock: Arc::new(SystemClock),
+        },
+        tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap(),
+    )
+    .await
+    .err()
+    .expect("two configs of one dataset are refused");
+    assert!(err.to_string().contains("`demo`"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn openapi_describes_exactly_the_routes_served() {
+    let text = std::fs::read_to_string(repo().join("docs/openapi.json")).unwrap();
+    let doc: Value = serde_json::from_str(&text).unwrap();
+    assert!(
+        doc["openapi"].as_str().unwrap().starts_with("3.1"),
+        "{}",
+        doc["openapi"]
+    );
+    let mut described = BTreeSet::new();
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        for method in item.as_object().unwrap().keys() {
+            if ["get", "post", "put", "patch", "delete", "head", "options"]
+                .contains(&method.as_str())
+            {
+                described.insert((method.to_uppercase(), path.clone()));
+            }
+        }
+    }
+    let served: BTreeSet<(String, String)> = motionforge::serve::api::routes()
+        .into_iter()
+        .map(|(m, p)| (m.to_string(), p.to_string()))
+        .collect();
+    assert_eq!(described, served, "docs/openapi.json and the router differ");
+
+    // And each described operation reaches a handler (not the no-route fallback).
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let (service, base) = start(state.path(), vec![demo_config(out.path())]).await;
+    let client = reqwest::Client::new();
+    for (method, path) in &described {
+        let url = format!(
+            "{base}{}",
+            path.replace("{id}", "1").replace("{name}", "demo")
+        );
+        let method = reqwest::Method::from_bytes(method.as_bytes()).unwrap();
+        let response = client.request(method.clone(), &url).send().await.unwrap();
+        let status = response.status().as_u16();
+        let body: Value = response.json().await.unwrap();
+        assert_ne!(status, 405, "{method} {path}: {body}");
+        let error = body["error"].as_str().unwrap_or("");
+        assert!(!error.starts_with("no route"), "{method} {path}: {body}");
+    }
+    service.stop().await.unwrap();
+}
+
+#[test]
+fn the_command_refuses_to_start_without_a_token_and_stops_cleanly_on_sigterm() {
+    use std::io::{BufRead, BufReader};
+    use std::process::{Command, Stdio};
+
+    let state = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args([
+            "serve",
+            "--bind",
+            "127.0.0.1:0",
+            "--token-env",
+            "MOTIONFORGE_TEST_UNSET_TOKEN",
+        ])
+        .arg("--config")
+        .arg(repo().join("fixtures/demo.toml"))
+        .arg("--state")
+        .arg(state.path())
+        .env_remove("MOTIONFORGE_TEST_UNSET_TOKEN")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("MOTIONFORGE_TEST_UNSET_TOKEN"), "{stderr}");
+
+    let mut child = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["serve", "--bind", "127.0.0.1:0"])
+        .arg("--config")
+        .arg(repo().join("fixtures/demo.toml"))
+        .arg("--state")
+        .arg(state.path())
+        .env("MOTIONFORGE_TOKEN", TOKEN)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let serving = lines
+        .by_ref()
+        .map(Result::unwrap)
+        .find(|l| l.contains("serving"))
+        .expect("the service says where it serves");
+    let addr = serving.rsplit("http://").next().unwrap().trim().to_string();
+    assert_eq!(health_status(&addr), 200);
+    let killed = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let rest: Vec<String> = lines.map(Result::unwrap).collect();
+    let status = child.wait().unwrap();
+    assert!(status.success(), "exit {status:?}: {rest:?}");
+    assert!(rest.iter().any(|l| l.contains("stopping")), "{rest:?}");
+    assert!(state.path().join("history.sqlite3").is_file());
+}
+
+/// `GET /health` status, from a test without a runtime.
+fn health_status(addr: &str) -> u16 {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(async {
+            reqwest::get(format!("http://{addr}/health"))
+                .await
+                .unwrap()
+                .status()
+                .as_u16()
+        })
+}
