@@ -14,4 +14,5 @@ pub mod quality;
 pub mod report;
 pub mod source;
 pub mod stages;
+pub mod terminal;
 pub mod text;

@@ -2,6 +2,8 @@
 //! unchanged, writes outputs atomically and records what it rejected and why.
 
 mod capture;
+pub mod clean;
+pub mod lock;
 mod output;
 mod reject;
 mod text;
@@ -171,6 +173,9 @@ pub struct BuildOptions {
     pub offline: bool,
     /// Where stage progress is reported.
     pub progress: crate::progress::ProgressSink,
+    /// How long to wait for another build of the same dataset folder to finish (`None`: refuse
+    /// at once).
+    pub lock_wait: Option<std::time::Duration>,
 }
 
 fn run_stages<'a>(config: &'a Config, options: &BuildOptions) -> Result<Staged<'a>, BuildError> {
@@ -422,6 +427,9 @@ pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip
 
 /// Runs every stage of the build described by `config` and writes the dataset.
 pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, BuildError> {
+    // One build per dataset folder at a time; released when this function returns.
+    let _lock = lock::WorkspaceLock::acquire(&config.dataset_dir(), options.lock_wait)
+        .map_err(WorkspaceError::from)?;
     let Staged {
         shared,
         output,

@@ -14,7 +14,7 @@ use crate::motion::skeleton::hex;
 #[derive(Debug, thiserror::Error)]
 pub enum WorkspaceError {
     /// An I/O error on a file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {source}{}", io_hint(source))]
     Io {
         /// The file.
         path: PathBuf,
@@ -29,6 +29,30 @@ pub enum WorkspaceError {
         /// The encoder's message.
         message: String,
     },
+    /// Another process is building the same dataset folder, or its lock cannot be taken.
+    #[error(transparent)]
+    Lock(#[from] super::lock::LockError),
+}
+
+/// What to do about the I/O errors a person can fix, for error messages.
+pub fn io_hint(error: &std::io::Error) -> &'static str {
+    use std::io::ErrorKind;
+    match error.kind() {
+        ErrorKind::StorageFull | ErrorKind::QuotaExceeded => {
+            "; the disk is full: free some space, or build into another folder with --output"
+        }
+        ErrorKind::FileTooLarge => {
+            "; the file size limit was reached (`ulimit -f`, or the file system's limit)"
+        }
+        ErrorKind::PermissionDenied => {
+            "; no permission to write there: fix the folder's permissions, or build into another folder with --output"
+        }
+        ErrorKind::ReadOnlyFilesystem => {
+            "; the file system is read-only: build into another folder with --output"
+        }
+        ErrorKind::NotADirectory => "; a file stands where this path needs a folder",
+        _ => "",
+    }
 }
 
 pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WorkspaceError + '_ {
