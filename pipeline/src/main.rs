@@ -72,6 +72,7 @@ enum Command {
     ///
     /// Work whose inputs, config and stage version are unchanged is reused from the output
     /// folder's cache; bad inputs are listed in `rejects.jsonl` and the build goes on.
+    #[command(after_help = EXIT_CODES)]
     Build {
         /// Build configuration (TOML); relative paths inside resolve against its folder.
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -106,6 +107,7 @@ enum Command {
     ///
     /// Only what a build writes is removed, and only inside `<output>/<name>`; the LLM response
     /// cache and files you put there are kept. Takes the dataset folder's lock, like a build.
+    #[command(after_help = EXIT_CODES)]
     Clean {
         /// Build configuration naming the dataset folder.
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -204,6 +206,7 @@ enum Command {
 #[derive(Subcommand)]
 enum ConfigCommand {
     /// Check every value of the config and every file it names; print all problems at once.
+    #[command(after_help = EXIT_CODES)]
     Check {
         /// Build configuration (TOML).
         #[arg(long, short, default_value = DEFAULT_CONFIG)]

@@ -223,8 +223,8 @@ impl Progress for LogProgress {
     }
 }
 
-/// Stage progress as bars on a terminal (counts, rate and ETA; a spinner when the total is
-/// unknown), with the same log lines as [`LogProgress`] printed above them.
+/// Stage progress as bars on a terminal (counts, elapsed time and ETA; a spinner when the total
+/// is unknown), with the same log lines as [`LogProgress`] printed above them.
 pub struct BarProgress {
     multi: MultiProgress,
     bars: Mutex<HashMap<String, ProgressBar>>,
@@ -278,7 +278,7 @@ fn bar_style(total: u64) -> ProgressStyle {
     let template = if total == 0 {
         "{prefix:>10} {spinner} {pos} done, {elapsed}"
     } else {
-        "{prefix:>10} [{bar:30}] {pos}/{len} ({per_sec}, {elapsed}, ETA {eta})"
+        "{prefix:>10} [{bar:30}] {pos}/{len} ({elapsed}, ETA {eta})"
     };
     ProgressStyle::with_template(template)
         .unwrap_or_else(|_| ProgressStyle::default_bar())
