@@ -25,22 +25,40 @@ fn is_root() -> bool {
 
 /// The binary, run so that file permissions apply to it. Root ignores permission bits, so as
 /// root (this machine and CI run as root) it runs as `nobody` through `setpriv`; otherwise as
-/// the current user.
-fn unprivileged(args: &[&std::ffi::OsStr], cwd: &Path) -> Output {
+/// the current user. As `nobody` it runs a copy of the binary, placed in `dir` beside the inputs,
+/// so that the checkout's own permissions do not matter.
+fn unprivileged(dir: &Path, args: &[&std::ffi::OsStr]) -> Output {
     let mut cmd = if is_root() {
+        let bin = dir.join("motionforge");
+        std::fs::copy(BIN, &bin).unwrap();
+        std::fs::set_permissions(&bin, std::fs::Permissions::from_mode(0o755)).unwrap();
         let mut c = Command::new("setpriv");
-        c.args([
-            "--reuid=65534",
-            "--regid=65534",
-            "--clear-groups",
-            "--",
-            BIN,
-        ]);
+        c.args(["--reuid=65534", "--regid=65534", "--clear-groups", "--"])
+            .arg(bin);
         c
     } else {
         Command::new(BIN)
     };
-    cmd.args(args).current_dir(cwd).output().unwrap()
+    cmd.args(args).current_dir(dir).output().unwrap()
+}
+
+/// A copy of `fixtures/` in `dir` that everyone can read; returns the demo config in it.
+fn readable_fixtures(dir: &Path) -> PathBuf {
+    fn copy(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        std::fs::set_permissions(to, std::fs::Permissions::from_mode(0o755)).unwrap();
+        for entry in std::fs::read_dir(from).unwrap().flatten() {
+            let target = to.join(entry.file_name());
+            if entry.file_type().unwrap().is_dir() {
+                copy(&entry.path(), &target);
+            } else {
+                std::fs::copy(entry.path(), &target).unwrap();
+                std::fs::set_permissions(&target, std::fs::Permissions::from_mode(0o644)).unwrap();
+            }
+        }
+    }
+    copy(&repo().join("fixtures"), &dir.join("fixtures"));
+    dir.join("fixtures/demo.toml")
 }
 
 /// The binary under a file size limit: every write past about 64 KiB fails with EFBIG, as on a
@@ -164,8 +182,8 @@ fn an_unwritable_output_folder_fails_naming_the_folder() {
     let output = dir.path().join("out");
     std::fs::create_dir(&output).unwrap();
     std::fs::set_permissions(&output, std::fs::Permissions::from_mode(0o555)).unwrap();
-    let config = repo().join("fixtures/demo.toml");
-    let run = unprivileged(&build_args(&config, &output), dir.path());
+    let config = readable_fixtures(dir.path());
+    let run = unprivileged(dir.path(), &build_args(&config, &output));
     assert_eq!(run.status.code(), Some(1), "{}", text(&run.stderr));
     let err = text(&run.stderr);
     assert!(
@@ -193,8 +211,8 @@ fn a_dataset_folder_whose_outputs_cannot_be_written_fails_at_the_write_and_leave
     ] {
         std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
     }
-    let config = repo().join("fixtures/demo.toml");
-    let run = unprivileged(&build_args(&config, &output), dir.path());
+    let config = readable_fixtures(dir.path());
+    let run = unprivileged(dir.path(), &build_args(&config, &output));
     assert_eq!(run.status.code(), Some(1), "{}", text(&run.stderr));
     let err = text(&run.stderr);
     assert!(
