@@ -15,4 +15,5 @@ pub mod report;
 pub mod serve;
 pub mod source;
 pub mod stages;
+pub mod terminal;
 pub mod text;

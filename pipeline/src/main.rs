@@ -1,25 +1,69 @@
 //! The `motionforge` command: argument parsing and human output over the library.
 
-use std::io::{BufRead, Write};
+use std::io::{BufRead, IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 
 use motionforge::build::{BuildOptions, BuildReport, Stage, build};
-use motionforge::config::Config;
+use motionforge::config::{Config, DEFAULT_CONFIG};
 use motionforge::llm::cache::ResponseCache;
 use motionforge::llm::prompt::{PartPromptVariant, Prompts};
 use motionforge::motion::{MirrorPlan, OffsetPolicy, ProfileSpec, calibrate, read_bvh};
+use motionforge::progress::ProgressSink;
+use motionforge::terminal::{BarProgress, LogOptions, LogProgress};
+
+/// Exit codes, shown after `--help` and documented in docs/user-guide.md.
+const EXIT_CODES: &str = "\
+Exit codes:
+  0  success (including a build with rejected inputs, unless --strict)
+  1  failure: a file that cannot be read or written (disk full, no permission), another
+     build holding the dataset folder (see --wait), an LLM stage that cannot run
+  2  usage or config error: bad arguments, a config that is missing, does not parse or
+     fails its checks, or names files that do not exist (`motionforge config check`)
+  3  build --strict finished, but some inputs were rejected (see rejects.jsonl)
+
+Logging: progress and log lines go to standard error (bars on a terminal, plain lines
+otherwise, JSON lines with --json); results go to standard output.";
 
 /// Build text-to-motion training sets from mocap captures: segment, mirror, label, compose,
 /// and write sharded Parquet with statistics for papers.
 #[derive(Parser)]
-#[command(name = "motionforge", version, about, long_about = None, propagate_version = true)]
+#[command(
+    name = "motionforge",
+    version,
+    about,
+    long_about = None,
+    propagate_version = true,
+    after_help = EXIT_CODES
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Print only warnings and errors (no progress, no build summary).
+    #[arg(long, short, global = true, conflicts_with = "verbose")]
+    quiet: bool,
+    /// Log more: -v adds debug lines (stage starts, timings, fields), -vv trace lines, -vvv
+    /// dependencies' lines too.
+    #[arg(long, short, global = true, action = clap::ArgAction::Count)]
+    verbose: u8,
+    /// Machine-readable output: log lines as JSON objects on standard error, and results (the
+    /// build report, label scores, config check) as JSON on standard output.
+    #[arg(long, global = true)]
+    json: bool,
+}
+
+/// `--wait` values: `30s`, `5m`, `1h 30m`, or bare seconds.
+fn parse_wait(text: &str) -> Result<Duration, String> {
+    if let Ok(seconds) = text.trim().parse::<u64>() {
+        return Ok(Duration::from_secs(seconds));
+    }
+    humantime::parse_duration(text.trim())
+        .map_err(|e| format!("{e}; expected a duration such as 30s, 5m or 1h"))
 }
 
 #[derive(Subcommand)]
@@ -28,9 +72,10 @@ enum Command {
     ///
     /// Work whose inputs, config and stage version are unchanged is reused from the output
     /// folder's cache; bad inputs are listed in `rejects.jsonl` and the build goes on.
+    #[command(after_help = EXIT_CODES)]
     Build {
         /// Build configuration (TOML); relative paths inside resolve against its folder.
-        #[arg(long, short, default_value = "motionforge.toml")]
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
         config: PathBuf,
         /// Write the dataset here instead of the config's `dataset.output`.
         #[arg(long, short)]
@@ -44,9 +89,39 @@ enum Command {
         /// Send no LLM request: LLM stages use cached answers only.
         #[arg(long)]
         offline: bool,
-        /// Print the build report as JSON instead of a summary.
+        /// When another build holds the dataset folder, wait this long for it (30s, 5m, 1h)
+        /// instead of failing at once.
+        #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
+        wait: Option<Duration>,
+    },
+    /// Check a build configuration without building: every value, and every file it names.
+    ///
+    /// Prints every problem at once, as `file:line: key: value: expected ...` (exit code 2), or
+    /// one line with what the build would read.
+    Config {
+        #[command(subcommand)]
+        command: ConfigCommand,
+    },
+    /// Remove a built dataset's outputs (shards, card, manifest, report, stage cache), or with
+    /// --cache-only only its stage cache.
+    ///
+    /// Only what a build writes is removed, and only inside `<output>/<name>`; the LLM response
+    /// cache and files you put there are kept. Takes the dataset folder's lock, like a build.
+    #[command(after_help = EXIT_CODES)]
+    Clean {
+        /// Build configuration naming the dataset folder.
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
+        config: PathBuf,
+        /// The output folder the dataset was built into with `build --output`.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
+        /// Remove only the stage cache (`.motionforge/cache`); the next build recomputes every
+        /// stage but rewrites no output that would be identical.
         #[arg(long)]
-        json: bool,
+        cache_only: bool,
+        /// When a build holds the dataset folder, wait this long for it (30s, 5m, 1h).
+        #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
+        wait: Option<Duration>,
     },
     /// Run the named stages and every stage they depend on, nothing after them.
     ///
@@ -58,8 +133,11 @@ enum Command {
         #[arg(required = true, value_parser = parse_stage)]
         stages: Vec<Stage>,
         /// Build configuration (TOML).
-        #[arg(long, short, default_value = "motionforge.toml")]
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
         config: PathBuf,
+        /// Write the dataset here instead of the config's `dataset.output`.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
         /// Recompute the stages, ignoring cached outputs.
         #[arg(long)]
         force: bool,
@@ -69,32 +147,32 @@ enum Command {
         /// Send no LLM request: LLM stages use cached answers only.
         #[arg(long)]
         offline: bool,
-        /// Print the run's report as JSON instead of a summary.
-        #[arg(long)]
-        json: bool,
+        /// When another build holds the dataset folder, wait this long for it (30s, 5m, 1h).
+        #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
+        wait: Option<Duration>,
     },
     /// Show what a build would run and why (which input, config key or stage version changed),
     /// without running anything.
     Plan {
         /// Build configuration (TOML).
-        #[arg(long, short, default_value = "motionforge.toml")]
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
         config: PathBuf,
+        /// The dataset folder's parent, instead of the config's `dataset.output`.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
         /// Plan only up to this stage.
         #[arg(long, value_parser = parse_stage)]
         through: Option<Stage>,
-        /// Print the plan as JSON.
-        #[arg(long)]
-        json: bool,
     },
     /// Show each stage's state: fresh or stale, when it last ran and what it did, and the rows of
     /// the written dataset.
     Status {
         /// Build configuration (TOML).
-        #[arg(long, short, default_value = "motionforge.toml")]
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
         config: PathBuf,
-        /// Print the status as JSON.
-        #[arg(long)]
-        json: bool,
+        /// The dataset folder's parent, instead of the config's `dataset.output`.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
     },
     /// Mirror caption lines: swap left/right and clockwise/counterclockwise, whole words only.
     ///
@@ -121,7 +199,7 @@ enum Command {
     /// precision, for inspection in Blender.
     ExportBvh {
         /// Build configuration; stages reuse their cached outputs.
-        #[arg(long, short, default_value = "motionforge.toml")]
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
         config: PathBuf,
         /// The clip id, as in the table's `clip_id` column.
         #[arg(long)]
@@ -132,6 +210,10 @@ enum Command {
         /// Send no LLM request while re-running stages.
         #[arg(long)]
         offline: bool,
+        /// When a build holds the dataset folder (whose stage cache this reads and refreshes),
+        /// wait this long for it (30s, 5m, 1h).
+        #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
+        wait: Option<Duration>,
     },
     /// Write the statistics report of a built dataset: tables (LaTeX, Markdown), figures (SVG,
     /// PNG) and stats.json, from its shards and manifest alone.
@@ -191,6 +273,20 @@ enum Command {
 }
 
 #[derive(Subcommand)]
+enum ConfigCommand {
+    /// Check every value of the config and every file it names; print all problems at once.
+    #[command(after_help = EXIT_CODES)]
+    Check {
+        /// Build configuration (TOML).
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
+        config: PathBuf,
+        /// Check the dataset folder under this output folder, as `build --output` would.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand)]
 enum PromptCommand {
     /// Print the exact prompt a stage sends for a text (for a paper's appendix, or debugging).
     Render {
@@ -226,7 +322,7 @@ enum LabelsCommand {
         /// The answers file (e.g. ../shared/data/sinc/gpt3-labels-list.json).
         file: PathBuf,
         /// Build configuration with an [llm] section; its llm_cache is written.
-        #[arg(long, short, default_value = "motionforge.toml")]
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
         config: PathBuf,
         /// Position of the answer to import in each list (SINC's Listing 1 prompt is the third).
         #[arg(long, default_value_t = 2)]
@@ -247,17 +343,17 @@ enum LabelsCommand {
         #[arg(long = "source", default_value = "embedded")]
         sources: Vec<String>,
         /// Build configuration, for `--source cache`.
-        #[arg(long, short)]
-        config: Option<PathBuf>,
-        /// Print JSON instead of a table.
-        #[arg(long)]
-        json: bool,
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
+        config: PathBuf,
     },
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match run(cli) {
+    let ui = Ui::new(&cli);
+    let result = run(cli, &ui);
+    ui.clear_bars();
+    match result {
         Ok(code) => code,
         Err(err) => {
             // A closed pipe (`motionforge mirror-text | head`) is not an error worth reporting.
@@ -267,8 +363,61 @@ fn main() -> ExitCode {
             }) {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("error: {}", error_message(&err));
-            ExitCode::from(exit_code(&err))
+            let code = exit_code(&err);
+            let message = error_message(&err);
+            if ui.log.json {
+                tracing::error!(exit_code = code, "{message}");
+            } else {
+                eprintln!("error: {message}");
+            }
+            ExitCode::from(code)
+        }
+    }
+}
+
+/// How this run reports to whoever started it: log level and form, and progress bars.
+struct Ui {
+    log: LogOptions,
+    bars: Option<Arc<BarProgress>>,
+}
+
+impl Ui {
+    /// Sets up logging to standard error; bars only when it is a terminal and lines are not
+    /// asked for.
+    fn new(cli: &Cli) -> Ui {
+        let log = LogOptions {
+            quiet: cli.quiet,
+            verbose: cli.verbose,
+            json: cli.json,
+        };
+        let bars = log
+            .bars(std::io::stderr().is_terminal())
+            .then(|| Arc::new(BarProgress::new()));
+        let subscriber = match &bars {
+            Some(b) => motionforge::terminal::subscriber(&log, b.log_writer()),
+            None => motionforge::terminal::subscriber(&log, std::io::stderr),
+        };
+        // Only fails if a subscriber is already set, and none is: nothing to report.
+        let _ = tracing::subscriber::set_global_default(subscriber);
+        Ui { log, bars }
+    }
+
+    /// Where a build reports its stages.
+    fn progress(&self) -> ProgressSink {
+        match &self.bars {
+            Some(bars) => ProgressSink::new(bars.clone()),
+            None => ProgressSink::new(Arc::new(LogProgress::new())),
+        }
+    }
+
+    /// Whether status lines (the build summary, "wrote ..." lines) are printed.
+    fn status(&self) -> bool {
+        !self.log.quiet
+    }
+
+    fn clear_bars(&self) {
+        if let Some(bars) = &self.bars {
+            bars.clear();
         }
     }
 }
@@ -300,6 +449,10 @@ fn exit_code(err: &anyhow::Error) -> u8 {
             || e.downcast_ref::<motionforge::llm::prompt::PromptError>()
                 .is_some()
             || matches!(
+                e.downcast_ref::<motionforge::build::clean::CleanError>(),
+                Some(motionforge::build::clean::CleanError::NotADataset { .. })
+            )
+            || matches!(
                 e.downcast_ref::<BuildError>(),
                 Some(
                     BuildError::Source(_)
@@ -312,35 +465,63 @@ fn exit_code(err: &anyhow::Error) -> u8 {
     if usage { 2 } else { 1 }
 }
 
-fn run(cli: Cli) -> Result<ExitCode> {
+fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
     match cli.command {
         Command::Build {
-            config,
+            config: path,
             output,
             force,
             strict,
             offline,
-            json,
+            wait,
         } => {
-            let mut config = Config::load(&config)?;
-            if let Some(output) = output {
-                config.dataset.output = std::path::absolute(&output).unwrap_or(output);
-            }
+            let config = load_checked(&path, output)?;
+            let dataset_dir = config.dataset_dir();
+            tracing::info!(
+                dataset = %config.dataset.name,
+                folder = %dataset_dir.display(),
+                "building {} into {}",
+                config.dataset.name,
+                dataset_dir.display()
+            );
+            let started = std::time::Instant::now();
             let report = build(
                 &config,
                 &BuildOptions {
                     force,
                     offline,
-                    ..BuildOptions::default()
+                    progress: ui.progress(),
+                    lock_wait: wait,
+                    through: None,
                 },
             )?;
-            if json {
+            ui.clear_bars();
+            let seconds = started.elapsed().as_secs_f64();
+            tracing::info!(
+                clips = report.clips,
+                captures = report.captures,
+                rejects = report.rejects.len(),
+                seconds,
+                "built {} clips from {} captures in {seconds:.1} s",
+                report.clips,
+                report.captures
+            );
+            if !report.rejects.is_empty() {
+                tracing::warn!(
+                    rejects = report.rejects.len(),
+                    "{} inputs rejected ({}), listed in {}",
+                    report.rejects.len(),
+                    counts(&report.rejects_by_reason),
+                    dataset_dir.join(motionforge::build::REJECTS_FILE).display()
+                );
+            }
+            if ui.log.json {
                 writeln!(
                     std::io::stdout(),
                     "{}",
                     serde_json::to_string_pretty(&report)?
                 )?;
-            } else {
+            } else if ui.status() {
                 print_report(&report)?;
             }
             if strict && !report.rejects.is_empty() {
@@ -350,12 +531,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Run {
             stages,
             config,
+            output,
             force,
             strict,
             offline,
-            json,
+            wait,
         } => {
-            let config = Config::load(&config)?;
+            let config = load_checked(&config, output)?;
             let through = stages.iter().copied().max();
             let report = build(
                 &config,
@@ -363,16 +545,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     force,
                     offline,
                     through,
-                    ..BuildOptions::default()
+                    progress: ui.progress(),
+                    lock_wait: wait,
                 },
             )?;
-            if json {
+            ui.clear_bars();
+            if ui.log.json {
                 writeln!(
                     std::io::stdout(),
                     "{}",
                     serde_json::to_string_pretty(&report)?
                 )?;
-            } else {
+            } else if ui.status() {
                 print_report(&report)?;
             }
             if strict && !report.rejects.is_empty() {
@@ -381,10 +565,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Plan {
             config,
+            output,
             through,
-            json,
         } => {
-            let config = Config::load(&config)?;
+            let config = load_checked(&config, output)?;
             let plan = motionforge::build::plan(
                 &config,
                 &BuildOptions {
@@ -392,7 +576,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     ..BuildOptions::default()
                 },
             )?;
-            if json {
+            if ui.log.json {
                 writeln!(
                     std::io::stdout(),
                     "{}",
@@ -402,10 +586,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 print_plan(&plan)?;
             }
         }
-        Command::Status { config, json } => {
-            let config = Config::load(&config)?;
+        Command::Status { config, output } => {
+            let config = load_checked(&config, output)?;
             let status = motionforge::build::status(&config)?;
-            if json {
+            if ui.log.json {
                 writeln!(
                     std::io::stdout(),
                     "{}",
@@ -415,6 +599,47 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 print_status(&status)?;
             }
         }
+        Command::Config {
+            command: ConfigCommand::Check { config, output },
+        } => config_check(&config, output, ui)?,
+        Command::Clean {
+            config,
+            output,
+            cache_only,
+            wait,
+        } => {
+            let mut config = Config::load(&config)?;
+            if let Some(output) = output {
+                config.dataset.output = std::path::absolute(&output).unwrap_or(output);
+            }
+            let dir = config.dataset_dir();
+            let report = motionforge::build::clean::clean(&dir, cache_only, wait)?;
+            let mut out = std::io::stdout().lock();
+            if ui.log.json {
+                let value = serde_json::json!({
+                    "dataset_dir": dir,
+                    "removed": report.removed,
+                    "bytes": report.bytes,
+                    "kept": report.kept,
+                });
+                writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+            } else if ui.status() {
+                if report.removed.is_empty() {
+                    writeln!(out, "nothing to clean in {}", dir.display())?;
+                } else {
+                    writeln!(
+                        out,
+                        "removed {} ({:.1} MB) from {}",
+                        report.removed.join(", "),
+                        report.bytes as f64 / 1e6,
+                        dir.display()
+                    )?;
+                }
+                if !report.kept.is_empty() {
+                    writeln!(out, "kept: {}", report.kept.join(", "))?;
+                }
+            }
+        }
         Command::MirrorText { file } => mirror_text(file.as_deref())?,
         Command::CalibrateMirror { profile, captures } => calibrate_mirror(&profile, &captures)?,
         Command::ExportBvh {
@@ -422,18 +647,20 @@ fn run(cli: Cli) -> Result<ExitCode> {
             clip,
             output,
             offline,
-        } => export_bvh(&config, &clip, output, offline)?,
+            wait,
+        } => export_bvh(&config, &clip, output, offline, wait, ui)?,
         Command::Report { dataset, output } => {
             let files = motionforge::report::report_dataset(&dataset, output.as_deref())?;
-            writeln!(
-                std::io::stdout(),
-                "wrote {} report files to {}",
-                files.len(),
-                output.unwrap_or_else(|| dataset.join("report")).display()
-            )?;
+            if ui.status() {
+                writeln!(
+                    std::io::stdout(),
+                    "wrote {} report files to {}",
+                    files.len(),
+                    output.unwrap_or_else(|| dataset.join("report")).display()
+                )?;
+            }
         }
         Command::Prompt { command } => prompt_command(command)?,
-        Command::Labels { command } => labels_command(command)?,
         Command::Serve {
             config,
             bind,
@@ -445,6 +672,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             state_dir: state,
             token_env,
         })?,
+        Command::Labels { command } => labels_command(command, ui.log.json)?,
         Command::Schema => writeln!(
             std::io::stdout(),
             "{}",
@@ -461,6 +689,90 @@ fn run(cli: Cli) -> Result<ExitCode> {
         },
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Loads a config for a build: its values and every file it names, all problems at once.
+fn load_checked(path: &Path, output: Option<PathBuf>) -> Result<Config> {
+    let (config, summary) = Config::load_checked(path, output)?;
+    for warning in &summary.warnings {
+        tracing::warn!("{warning}");
+    }
+    Ok(config)
+}
+
+fn config_check(path: &Path, output: Option<PathBuf>, ui: &Ui) -> Result<()> {
+    let (config, summary) = match Config::load_checked(path, output) {
+        Ok(ok) => ok,
+        Err(err) => {
+            if ui.log.json {
+                let problems: Vec<serde_json::Value> = match &err {
+                    motionforge::config::ConfigError::Invalid { problems, .. } => problems
+                        .iter()
+                        .map(|p| {
+                            serde_json::json!({
+                                "key": p.key, "value": p.value, "expected": p.expected, "line": p.line,
+                            })
+                        })
+                        .collect(),
+                    other => vec![serde_json::json!({ "message": other.to_string() })],
+                };
+                let value =
+                    serde_json::json!({ "ok": false, "config": path, "problems": problems });
+                writeln!(
+                    std::io::stdout(),
+                    "{}",
+                    serde_json::to_string_pretty(&value)?
+                )?;
+            }
+            return Err(err.into());
+        }
+    };
+    for warning in &summary.warnings {
+        tracing::warn!("{warning}");
+    }
+    let captures: usize = summary.captures.iter().sum();
+    let mut out = std::io::stdout().lock();
+    if ui.log.json {
+        let sources: Vec<serde_json::Value> = config
+            .sources
+            .iter()
+            .zip(&summary.captures)
+            .map(|(s, n)| serde_json::json!({ "name": s.name, "captures": n }))
+            .collect();
+        let value = serde_json::json!({
+            "ok": true,
+            "config": path,
+            "dataset": config.dataset.name,
+            "dataset_dir": config.dataset_dir(),
+            "sources": sources,
+            "warnings": summary.warnings,
+        });
+        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+    } else if ui.status() {
+        let splits: Vec<String> = config
+            .splits
+            .ratios
+            .iter()
+            .map(|(k, v)| format!("{k} {v}"))
+            .collect();
+        writeln!(
+            out,
+            "config {}: OK: dataset `{}` into {}, {} sources with {captures} captures, {} fps, seed {}, splits {}, LLM {}",
+            path.display(),
+            config.dataset.name,
+            config.dataset_dir().display(),
+            config.sources.len(),
+            config.dataset.fps,
+            config.dataset.seed,
+            splits.join(" / "),
+            config
+                .llm
+                .as_ref()
+                .map(|l| format!("{} at {}", l.model, l.base_url))
+                .unwrap_or_else(|| "none".into())
+        )?;
+    }
+    Ok(())
 }
 
 fn counts(map: &std::collections::BTreeMap<String, usize>) -> String {
@@ -903,7 +1215,7 @@ fn prompt_command(command: PromptCommand) -> Result<()> {
     Ok(())
 }
 
-fn labels_command(command: LabelsCommand) -> Result<()> {
+fn labels_command(command: LabelsCommand, json: bool) -> Result<()> {
     match command {
         LabelsCommand::Import {
             file,
@@ -966,7 +1278,6 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
             gold,
             sources,
             config,
-            json,
         } => {
             let gold_text = std::fs::read_to_string(&gold)
                 .with_context(|| format!("cannot read {}", gold.display()))?;
@@ -981,8 +1292,7 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
                         Some(motionforge::parts::lexicon::label_text(t).parts)
                     }),
                     "cache" => {
-                        let path = config.as_ref().context("--source cache needs --config")?;
-                        let config = Config::load(path)?;
+                        let config = Config::load(&config)?;
                         let llm = config
                             .llm
                             .as_ref()
@@ -1046,8 +1356,17 @@ fn labels_command(command: LabelsCommand) -> Result<()> {
     Ok(())
 }
 
-fn export_bvh(config: &Path, clip_id: &str, output: Option<PathBuf>, offline: bool) -> Result<()> {
-    let config = Config::load(config)?;
+fn export_bvh(
+    path: &Path,
+    clip_id: &str,
+    output: Option<PathBuf>,
+    offline: bool,
+    wait: Option<Duration>,
+    ui: &Ui,
+) -> Result<()> {
+    let config = load_checked(path, None)?;
+    // The stages read and refresh the dataset's stage cache, which a running build is writing.
+    let _lock = motionforge::build::lock::WorkspaceLock::acquire(&config.dataset_dir(), wait)?;
     let clips = motionforge::build::collect_clips(
         &config,
         &BuildOptions {
@@ -1077,14 +1396,16 @@ fn export_bvh(config: &Path, clip_id: &str, output: Option<PathBuf>, offline: bo
     let path = output
         .unwrap_or_else(|| PathBuf::from(format!("{}.bvh", clip_id.replace(['/', ':', '+'], "_"))));
     motionforge::build::write_atomic(&path, text.as_bytes())?;
-    writeln!(
-        std::io::stdout(),
-        "wrote {} ({} frames at {} fps, skeleton {})",
-        path.display(),
-        clip.motion.num_frames(),
-        clip.motion.fps,
-        clip.profile
-    )?;
+    if ui.status() {
+        writeln!(
+            std::io::stdout(),
+            "wrote {} ({} frames at {} fps, skeleton {})",
+            path.display(),
+            clip.motion.num_frames(),
+            clip.motion.fps,
+            clip.profile
+        )?;
+    }
     Ok(())
 }
 

@@ -2,6 +2,8 @@
 //! unchanged, writes outputs atomically and records what it rejected and why.
 
 mod capture;
+pub mod clean;
+pub mod lock;
 mod motions;
 mod output;
 mod plan;
@@ -257,6 +259,9 @@ pub struct BuildOptions {
     pub progress: crate::progress::ProgressSink,
     /// Run only up to this stage (and everything it depends on); all stages when `None`.
     pub through: Option<Stage>,
+    /// How long to wait for another build of the same dataset folder to finish (`None`: refuse
+    /// at once).
+    pub lock_wait: Option<std::time::Duration>,
 }
 
 fn run_stages<'a>(
@@ -272,9 +277,6 @@ fn run_stages<'a>(
     } else {
         Workspace::new(&output)
     };
-    if !probe {
-        workspace::remove_stale_temps(&output);
-    }
     if options.force && !probe {
         let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
     }
@@ -674,6 +676,9 @@ pub fn find_clip(
 
 /// Runs every stage of the build described by `config` and writes the dataset.
 pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, BuildError> {
+    // One build per dataset folder at a time; released when this function returns.
+    let _lock = lock::WorkspaceLock::acquire(&config.dataset_dir(), options.lock_wait)
+        .map_err(WorkspaceError::from)?;
     let Staged {
         shared,
         output,
@@ -902,6 +907,7 @@ fn table_stamp(
     Ok(Fingerprint::new(Stage::Write.name(), WRITE_VERSION)
         .text("rows", &sha256_hex(&encoded))
         .json("config features", &config.features)
+        .json("config dataset.shard_bytes", &config.dataset.shard_bytes)
         .json("task plans", plans)
         .json("schema version", &crate::io::schema::SCHEMA_VERSION)
         .stamp())

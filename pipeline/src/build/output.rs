@@ -339,6 +339,23 @@ pub(super) fn write_outputs(
         plans_for_shards.first().map(|p| p.split.clone())
     };
     let mut normalization = crate::io::normalization::NormalizationStats::default();
+    // From here until the new manifest is written the folder is not a finished dataset: the old
+    // manifest goes first, so a failure part-way leaves no manifest vouching for mixed shards.
+    let manifest_path = output.join(MANIFEST_FILE);
+    if manifest_path.exists() {
+        std::fs::remove_file(&manifest_path).map_err(workspace::io_err(&manifest_path))?;
+    }
+    // Shards of an earlier layout (other split names or counts) would look like part of the set.
+    let planned: std::collections::BTreeSet<&str> =
+        plans_for_shards.iter().map(|p| p.file.as_str()).collect();
+    if let Ok(entries) = std::fs::read_dir(output.join(DATA_DIR)) {
+        for entry in entries.flatten() {
+            let name = format!("{DATA_DIR}/{}", entry.file_name().to_string_lossy());
+            if name.ends_with(".parquet") && !planned.contains(name.as_str()) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
@@ -417,17 +434,6 @@ pub(super) fn write_outputs(
         *split_rows.entry(plan.split.clone()).or_insert(0) += held.len();
         *split_bytes.entry(plan.split.clone()).or_insert(0) += bytes.len();
         shard_fingerprints.insert(plan.file.clone(), fp);
-    }
-    // Shards of an earlier layout (other split names or counts) would look like part of the set.
-    let planned: std::collections::BTreeSet<&str> =
-        plans_for_shards.iter().map(|p| p.file.as_str()).collect();
-    if let Ok(entries) = std::fs::read_dir(output.join(DATA_DIR)) {
-        for entry in entries.flatten() {
-            let name = format!("{DATA_DIR}/{}", entry.file_name().to_string_lossy());
-            if name.ends_with(".parquet") && !planned.contains(name.as_str()) {
-                let _ = std::fs::remove_file(entry.path());
-            }
-        }
     }
     check_splits(output, &plans_for_shards)?;
     if stats_split.is_some() {

@@ -16,7 +16,7 @@ use crate::motion::skeleton::hex;
 #[derive(Debug, thiserror::Error)]
 pub enum WorkspaceError {
     /// An I/O error on a file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {source}{}", io_hint(source))]
     Io {
         /// The file.
         path: PathBuf,
@@ -31,6 +31,30 @@ pub enum WorkspaceError {
         /// The encoder's message.
         message: String,
     },
+    /// Another process is building the same dataset folder, or its lock cannot be taken.
+    #[error(transparent)]
+    Lock(#[from] super::lock::LockError),
+}
+
+/// What to do about the I/O errors a person can fix, for error messages.
+pub fn io_hint(error: &std::io::Error) -> &'static str {
+    use std::io::ErrorKind;
+    match error.kind() {
+        ErrorKind::StorageFull | ErrorKind::QuotaExceeded => {
+            "; the disk is full: free some space, or build into another folder with --output"
+        }
+        ErrorKind::FileTooLarge => {
+            "; the file size limit was reached (`ulimit -f`, or the file system's limit)"
+        }
+        ErrorKind::PermissionDenied => {
+            "; no permission to write there: fix the folder's permissions, or build into another folder with --output"
+        }
+        ErrorKind::ReadOnlyFilesystem => {
+            "; the file system is read-only: build into another folder with --output"
+        }
+        ErrorKind::NotADirectory => "; a file stands where this path needs a folder",
+        _ => "",
+    }
 }
 
 pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WorkspaceError + '_ {
@@ -141,66 +165,6 @@ pub fn write_atomic_with(
         let _ = d.sync_all();
     }
     Ok(())
-}
-
-/// Removes the temporary files an interrupted build left under `dir` (see [`temp_path`]); only
-/// one build holds a dataset folder at a time, so every one found is an orphan. Returns how many.
-pub fn remove_stale_temps(dir: &Path) -> usize {
-    let mut removed = 0;
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let Ok(entries) = fs::read_dir(&dir) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            if entry.file_type().is_ok_and(|t| t.is_dir()) {
-                stack.push(path);
-            } else if is_temp_name(&entry.file_name().to_string_lossy())
-                && fs::remove_file(&path).is_ok()
-            {
-                removed += 1;
-            }
-        }
-    }
-    removed
-}
-
-/// `.<name>.<pid>.tmp`, as [`temp_path`] makes them, possibly with an extension after it for
-/// writers that pick the format by extension (`.<name>.<pid>.tmp.png`).
-fn is_temp_name(name: &str) -> bool {
-    let Some(rest) = name.strip_prefix('.') else {
-        return false;
-    };
-    let stem = match rest.rsplit_once(".tmp") {
-        Some((stem, ext))
-            if ext.is_empty()
-                || ext.strip_prefix('.').is_some_and(|e| {
-                    !e.is_empty() && e.bytes().all(|b| b.is_ascii_alphanumeric())
-                }) =>
-        {
-            stem
-        }
-        _ => return false,
-    };
-    stem.rsplit_once('.').is_some_and(|(base, pid)| {
-        !base.is_empty() && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit())
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::is_temp_name;
-
-    #[test]
-    fn temp_names_are_recognised_and_outputs_are_not() {
-        assert!(is_temp_name(".train-00000-of-00001.parquet.1234.tmp"));
-        assert!(is_temp_name(".composition.png.18156.tmp.png"));
-        assert!(!is_temp_name("train-00000-of-00001.parquet"));
-        assert!(!is_temp_name(".hidden"));
-        assert!(!is_temp_name(".notes.tmp"));
-        assert!(!is_temp_name(".a.b.tmp"));
-    }
 }
 
 /// The temporary name used while writing `path`.

@@ -35,7 +35,7 @@ pub enum TableError {
     #[error("building the clip table: {0}")]
     Arrow(#[from] ArrowError),
     /// Parquet encoding or I/O failed.
-    #[error("writing Parquet: {0}")]
+    #[error("writing Parquet: {0}{hint}", hint = parquet_hint(.0))]
     Parquet(#[from] ParquetError),
     /// A clip's skeleton profile was not supplied.
     #[error("clip `{clip}` uses skeleton profile `{profile}`, which the writer was not given")]
@@ -45,6 +45,17 @@ pub enum TableError {
         /// The profile.
         profile: String,
     },
+}
+
+/// What to do about an I/O error under a Parquet error (a full disk, no permission), if anything.
+fn parquet_hint(error: &ParquetError) -> &'static str {
+    match error {
+        ParquetError::External(e) => e
+            .downcast_ref::<std::io::Error>()
+            .map(crate::build::workspace::io_hint)
+            .unwrap_or(""),
+        _ => "",
+    }
 }
 
 /// A clip's motion in the dataset frame, as the table stores it.

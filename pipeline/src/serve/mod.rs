@@ -238,12 +238,7 @@ fn datasets(configs: Vec<Config>) -> Result<BTreeMap<String, Dataset>, ServeErro
         let schedule = match &config.dataset.schedule {
             Some(text) => {
                 let cron = schedule::parse_schedule(text).map_err(|why| {
-                    ServeError::Config(ConfigError::Invalid {
-                        path: config_path.clone(),
-                        key: "dataset.schedule".into(),
-                        value: format!("{text:?}"),
-                        expected: format!("{} ({why})", schedule::SCHEDULE_FORM),
-                    })
+                    ServeError::Config(schedule_problem(&config_path, text, &why))
                 })?;
                 Some((text.clone(), cron))
             }
@@ -262,6 +257,19 @@ fn datasets(configs: Vec<Config>) -> Result<BTreeMap<String, Dataset>, ServeErro
     Ok(out)
 }
 
+/// The config error for an unusable `dataset.schedule`.
+fn schedule_problem(path: &std::path::Path, text: &str, why: &str) -> ConfigError {
+    ConfigError::Invalid {
+        path: path.to_path_buf(),
+        problems: vec![crate::config::Problem {
+            key: "dataset.schedule".into(),
+            value: format!("{text:?}"),
+            expected: format!("{} ({why})", schedule::SCHEDULE_FORM),
+            line: None,
+        }],
+    }
+}
+
 /// Loads config files for a service. A schedule error names the file.
 pub fn load_configs(paths: &[PathBuf]) -> Result<Vec<Config>, ServeError> {
     let mut configs = Vec::new();
@@ -278,12 +286,7 @@ pub fn load_configs(paths: &[PathBuf]) -> Result<Vec<Config>, ServeError> {
         if let Some(text) = &config.dataset.schedule
             && let Err(why) = schedule::parse_schedule(text)
         {
-            return Err(ServeError::Config(ConfigError::Invalid {
-                path: path.clone(),
-                key: "dataset.schedule".into(),
-                value: format!("{text:?}"),
-                expected: format!("{} ({why})", schedule::SCHEDULE_FORM),
-            }));
+            return Err(ServeError::Config(schedule_problem(path, text, &why)));
         }
         configs.push(config);
     }

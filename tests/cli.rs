@@ -1,0 +1,647 @@
+//! The command line: global flags (`-q`, `-v`, `--json`), stage progress (log lines and bars),
+//! `config check`, `clean`, and the documented exit codes.
+
+mod common;
+
+use std::io;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use common::repo;
+use indicatif::{ProgressDrawTarget, TermLike};
+use motionforge::config::Config;
+use motionforge::progress::Progress;
+use motionforge::terminal::{BarProgress, LogOptions, LogProgress, MemoryWriter, subscriber};
+
+const BIN: &str = env!("CARGO_BIN_EXE_motionforge");
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn run(args: &[&str], cwd: &Path) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+fn demo() -> String {
+    repo().join("fixtures/demo.toml").display().to_string()
+}
+
+fn lines(s: &str) -> Vec<&str> {
+    s.lines().filter(|l| !l.trim().is_empty()).collect()
+}
+
+// ---- flags -----------------------------------------------------------------------------------
+
+#[test]
+fn help_documents_the_exit_codes() {
+    let out = run(&["--help"], &repo());
+    assert!(out.status.success());
+    let help = text(&out.stdout);
+    for needle in [
+        "Exit codes:",
+        "0  success",
+        "1  failure",
+        "2  usage or config error",
+        "3  build --strict",
+        "--quiet",
+        "--verbose",
+        "--json",
+    ] {
+        assert!(
+            help.contains(needle),
+            "`{needle}` missing from --help:\n{help}"
+        );
+    }
+}
+
+#[test]
+fn quiet_prints_nothing_json_prints_the_report_and_json_lines_and_default_prints_both_kinds() {
+    let out = tempfile::tempdir().unwrap();
+    let o = out.path().display().to_string();
+    let quiet = run(
+        &["-q", "build", "--config", &demo(), "--output", &o],
+        &repo(),
+    );
+    assert!(quiet.status.success(), "{}", text(&quiet.stderr));
+    assert_eq!(text(&quiet.stdout), "", "-q prints no summary");
+    assert_eq!(
+        text(&quiet.stderr),
+        "",
+        "-q prints no progress or info lines"
+    );
+    assert!(out.path().join("demo/manifest.json").is_file());
+
+    // `--json` is global: after the subcommand, as it always was for `build`, or before it.
+    for args in [
+        vec!["build", "--json", "--config", &demo(), "--output", &o],
+        vec!["--json", "build", "--config", &demo(), "--output", &o],
+    ] {
+        let json = run(&args, &repo());
+        assert!(json.status.success(), "{}", text(&json.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+        assert_eq!(report["clips"], 25);
+        let logged: Vec<serde_json::Value> = lines(&text(&json.stderr))
+            .iter()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+            .collect();
+        assert!(
+            logged.iter().any(|v| v["level"] == "INFO"
+                && v["message"]
+                    .as_str()
+                    .is_some_and(|m| m.starts_with("building demo into"))
+                && v["dataset"] == "demo"),
+            "{logged:?}"
+        );
+        assert!(logged.iter().all(|v| v["timestamp"].is_string()));
+    }
+
+    let plain = run(&["build", "--config", &demo(), "--output", &o], &repo());
+    assert!(plain.status.success());
+    assert!(text(&plain.stdout).contains("nothing changed since the last build"));
+    let err = text(&plain.stderr);
+    assert!(
+        err.lines()
+            .next()
+            .is_some_and(|l| l.starts_with("building demo into")),
+        "{err}"
+    );
+    assert!(
+        err.lines().all(|l| !l.starts_with('{')),
+        "plain, not JSON: {err}"
+    );
+}
+
+#[test]
+fn quiet_and_verbose_together_are_a_usage_error() {
+    let out = run(&["-q", "-v", "schema"], &repo());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("cannot be used with"));
+}
+
+#[test]
+fn errors_are_json_lines_with_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--json", "build"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let line: serde_json::Value = serde_json::from_str(text(&out.stderr).trim()).unwrap();
+    assert_eq!(line["level"], "ERROR");
+    assert_eq!(line["exit_code"], 2);
+    assert!(
+        line["message"]
+            .as_str()
+            .unwrap()
+            .contains("no motionforge.toml")
+    );
+}
+
+// ---- progress --------------------------------------------------------------------------------
+
+fn stage_run(progress: &dyn Progress) {
+    progress.stage_started("ingest", 10);
+    for _ in 0..10 {
+        progress.advanced("ingest", 1);
+    }
+    progress.stage_finished("ingest", 7, 3);
+    progress.stage_started("compose", 0);
+    progress.stage_finished("compose", 0, 5);
+}
+
+fn logged(options: LogOptions, f: impl FnOnce()) -> String {
+    let memory = MemoryWriter::default();
+    tracing::subscriber::with_default(subscriber(&options, memory.clone()), f);
+    memory.text()
+}
+
+#[test]
+fn log_progress_prints_one_line_per_finished_stage() {
+    let out = logged(LogOptions::default(), || stage_run(&LogProgress::new()));
+    let l = lines(&out);
+    assert_eq!(l.len(), 2, "{out}");
+    assert!(l[0].starts_with("ingest: ran 7, reused 3 in "), "{out}");
+    assert!(l[0].ends_with(" s"), "{out}");
+    assert!(l[1].starts_with("compose: up to date, 5 reused"), "{out}");
+}
+
+#[test]
+fn verbose_progress_adds_starts_tenths_and_fields() {
+    let out = logged(
+        LogOptions {
+            verbose: 1,
+            ..LogOptions::default()
+        },
+        || stage_run(&LogProgress::new()),
+    );
+    assert!(
+        out.contains("debug: ingest: started, 10 items (stage=\"ingest\", total=10)"),
+        "{out}"
+    );
+    // Tenths 1..9 (the tenth tenth is the finish line).
+    assert_eq!(out.matches("debug: ingest: ").count(), 1 + 9, "{out}");
+    assert!(out.contains("ingest: ran 7, reused 3 in"), "{out}");
+}
+
+#[test]
+fn json_progress_lines_carry_the_stage_counts() {
+    let out = logged(
+        LogOptions {
+            json: true,
+            ..LogOptions::default()
+        },
+        || stage_run(&LogProgress::new()),
+    );
+    let events: Vec<serde_json::Value> = lines(&out)
+        .iter()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(events.len(), 2, "{out}");
+    assert_eq!(events[0]["stage"], "ingest");
+    assert_eq!(events[0]["ran"], 7);
+    assert_eq!(events[0]["reused"], 3);
+    assert_eq!(events[0]["level"], "INFO");
+    assert_eq!(events[0]["target"], "motionforge::progress");
+    assert!(events[0]["seconds"].is_f64());
+}
+
+#[test]
+fn quiet_progress_shows_warnings_only() {
+    let out = logged(
+        LogOptions {
+            quiet: true,
+            ..LogOptions::default()
+        },
+        || {
+            stage_run(&LogProgress::new());
+            tracing::warn!("disk nearly full");
+        },
+    );
+    assert_eq!(out, "warning: disk nearly full\n");
+}
+
+#[test]
+fn bars_are_only_for_a_terminal_without_json_or_quiet() {
+    let plain = LogOptions::default();
+    assert!(plain.bars(true));
+    assert!(!plain.bars(false));
+    assert!(
+        !LogOptions {
+            json: true,
+            ..plain
+        }
+        .bars(true)
+    );
+    assert!(
+        !LogOptions {
+            quiet: true,
+            ..plain
+        }
+        .bars(true)
+    );
+}
+
+/// A terminal in memory: what indicatif draws, line by line.
+#[derive(Debug, Clone, Default)]
+struct Screen(Arc<Mutex<Vec<String>>>);
+
+impl Screen {
+    fn text(&self) -> String {
+        self.0.lock().unwrap().join("\n")
+    }
+}
+
+impl TermLike for Screen {
+    fn width(&self) -> u16 {
+        120
+    }
+    fn move_cursor_up(&self, _: usize) -> io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_down(&self, _: usize) -> io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_right(&self, _: usize) -> io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_left(&self, _: usize) -> io::Result<()> {
+        Ok(())
+    }
+    fn write_line(&self, s: &str) -> io::Result<()> {
+        self.0.lock().unwrap().push(s.to_string());
+        Ok(())
+    }
+    fn write_str(&self, s: &str) -> io::Result<()> {
+        self.0.lock().unwrap().push(s.to_string());
+        Ok(())
+    }
+    fn clear_line(&self) -> io::Result<()> {
+        Ok(())
+    }
+    fn flush(&self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+#[test]
+fn bars_count_items_with_an_eta_and_disappear_when_the_stage_ends() {
+    let screen = Screen::default();
+    let bars =
+        BarProgress::with_draw_target(ProgressDrawTarget::term_like(Box::new(screen.clone())));
+    bars.stage_started("ingest", 9);
+    bars.advanced("ingest", 3);
+    assert_eq!(bars.position("ingest"), Some((3, Some(9))));
+    // The steady tick redraws within a quarter of a second.
+    std::thread::sleep(Duration::from_millis(600));
+    let drawn = screen.text();
+    assert!(
+        drawn.contains("ingest [") && drawn.contains("3/9") && drawn.contains("ETA"),
+        "{drawn}"
+    );
+    bars.stage_started("compose", 0);
+    std::thread::sleep(Duration::from_millis(600));
+    assert!(screen.text().contains("compose"), "{}", screen.text());
+    bars.stage_finished("ingest", 9, 0);
+    bars.stage_finished("compose", 0, 1);
+    assert_eq!(bars.position("ingest"), None);
+    assert_eq!(bars.position("compose"), None);
+}
+
+// ---- config check ----------------------------------------------------------------------------
+
+#[test]
+fn config_check_accepts_the_demo_with_a_one_line_summary() {
+    let out = run(&["config", "check", "--config", &demo()], &repo());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert_eq!(lines(&stdout).len(), 1, "{stdout}");
+    assert!(
+        stdout.contains(": OK: dataset `demo`")
+            && stdout.contains("2 sources with 9 captures")
+            && stdout.contains("30 fps")
+            && stdout.contains("seed 42"),
+        "{stdout}"
+    );
+}
+
+const BAD: &str = r#"[dataset]
+name = "x"
+output = "out"
+fps = 0
+
+[splits]
+ratios = { train = 0.8, val = 0.3 }
+
+[[sources]]
+name = "s"
+captures = ["missing/*.bvh"]
+profile = "nosuch"
+[sources.labels]
+kind = "filename"
+pattern = "{a}"
+action = "{a}"
+text = "{a}"
+"#;
+
+#[test]
+fn config_check_lists_every_problem_with_file_line_key_value_and_expectation() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.toml"), BAD).unwrap();
+    let out = run(&["config", "check", "-c", "bad.toml"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    for needle in [
+        "config bad.toml has 4 problems:",
+        "bad.toml:4: dataset.fps: 0: expected a frame rate above 0",
+        "bad.toml:7: splits.ratios: { train = 0.8, val = 0.3 }: expected shares that sum to 1 (they sum to 1.1)",
+        "bad.toml:11: sources[0].captures[0]: \"missing/*.bvh\": expected a pattern that matches capture files",
+        "folder missing does not exist",
+        "bad.toml:12: sources[0].profile: \"nosuch\": expected a bundled profile",
+    ] {
+        assert!(err.contains(needle), "`{needle}` missing:\n{err}");
+    }
+
+    let json = run(&["config", "check", "-c", "bad.toml", "--json"], dir.path());
+    assert_eq!(json.status.code(), Some(2));
+    let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(v["ok"], false);
+    let problems = v["problems"].as_array().unwrap();
+    assert_eq!(problems.len(), 4);
+    assert_eq!(problems[0]["key"], "dataset.fps");
+    assert_eq!(problems[0]["line"], 4);
+}
+
+#[test]
+fn a_build_with_missing_inputs_lists_them_all_before_doing_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("motionforge.toml"),
+        BAD.replace("fps = 0", "fps = 30")
+            .replace("val = 0.3", "val = 0.2"),
+    )
+    .unwrap();
+    let out = run(&["build"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("has 2 problems")
+            && err.contains("sources[0].captures[0]")
+            && err.contains("sources[0].profile"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out").exists(), "nothing was written");
+}
+
+#[test]
+fn a_missing_default_config_says_so_and_suggests_config() {
+    let dir = tempfile::tempdir().unwrap();
+    for args in [
+        vec!["build"],
+        vec!["config", "check"],
+        vec!["clean"],
+        vec!["export-bvh", "--clip", "x"],
+    ] {
+        let out = run(&args, dir.path());
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = text(&out.stderr);
+        assert!(
+            err.contains("no motionforge.toml in the working folder") && err.contains("--config"),
+            "{args:?}: {err}"
+        );
+    }
+    let out = run(&["build", "--config", "elsewhere.toml"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("config elsewhere.toml not found"));
+}
+
+#[test]
+fn type_errors_name_the_line_and_key() {
+    let err = Config::parse(
+        "[dataset]\nname = \"x\"\noutput = \"o\"\nfps = \"thirty\"\n",
+        Path::new("c.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert_eq!(
+        err,
+        "config c.toml:4: dataset.fps: invalid type: string \"thirty\", expected f64"
+    );
+    let err = Config::parse(
+        "[dataset]\nname = \"x\"\noutput = \"o\"\n[[sources]]\nname = \"s\"\ncaptures = [\"*.bvh\"]\nprofile = \"cmu\"\n[sources.labels]\nkind = \"filename\"\npattern = \"{a}\"\naction = \"{a}\"\ntext = \"{a}\"\n[sources.segment]\nmax_simultaneous = -2\n",
+        Path::new("c.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.starts_with("config c.toml:14: sources[0].segment.max_simultaneous: invalid value"),
+        "{err}"
+    );
+}
+
+/// A config that loads, with every table written out.
+const FULL: &str = r#"llm_cache = "cache.jsonl"
+[dataset]
+name = "x"
+output = "out"
+[mirror]
+[motion_types]
+[features]
+[splits]
+[synthetic]
+[synthetic.thresholds]
+max_foot_skate = 0.4
+max_ground_penetration = 0.03
+min_self_distance = 0.03
+max_lean = 25
+[part_labels]
+[task_plans]
+[paraphrases]
+[llm]
+base_url = "http://127.0.0.1:9/v1"
+model = "m"
+[[sources]]
+name = "s"
+captures = ["*.bvh"]
+profile = "cmu"
+[sources.labels]
+kind = "filename"
+pattern = "{a}"
+action = "{a}"
+text = "{a}"
+[sources.segment]
+"#;
+
+#[test]
+fn unknown_keys_are_rejected_in_every_table() {
+    Config::parse(FULL, Path::new("c.toml")).unwrap();
+    let headers: Vec<(usize, &str)> = FULL
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.starts_with('['))
+        .collect();
+    assert_eq!(headers.len(), 14);
+    for (at, header) in headers.into_iter().chain([(0, "top level")]) {
+        let mut text: Vec<&str> = FULL.lines().collect();
+        let at = if header == "top level" { 0 } else { at + 1 };
+        text.insert(at, "bogus_key = 1");
+        let err = Config::parse(&text.join("\n"), Path::new("c.toml"))
+            .expect_err(header)
+            .to_string();
+        assert!(
+            err.contains(&format!("c.toml:{}:", at + 1))
+                && err.contains("unknown field `bogus_key`"),
+            "{header}: {err}"
+        );
+    }
+}
+
+#[test]
+fn value_checks_report_every_problem_at_once() {
+    let text = FULL
+        .replace("name = \"x\"", "name = \"..\"")
+        .replace("[features]", "[features]\ncontact_speed = 0")
+        .replace(
+            "[splits]",
+            "[splits]\nratios = { train = 1.5, \"a/b\" = -0.5 }",
+        )
+        .replace("max_lean = 25", "max_lean = 200")
+        .replace(
+            "base_url = \"http://127.0.0.1:9/v1\"",
+            "base_url = \"ftp://x\"",
+        )
+        .replace(
+            "[sources.segment]",
+            "[sources.segment]\nmin_seconds = 3\nmax_seconds = 2",
+        );
+    let err = Config::parse(&text, Path::new("c.toml")).unwrap_err();
+    let motionforge::config::ConfigError::Invalid { problems, .. } = &err else {
+        panic!("{err}");
+    };
+    let keys: Vec<&str> = problems.iter().map(|p| p.key.as_str()).collect();
+    assert_eq!(
+        keys,
+        [
+            "dataset.name",
+            "features.contact_speed",
+            "splits.ratios.\"a/b\"",
+            "splits.ratios.\"a/b\"",
+            "splits.ratios.train",
+            "synthetic.thresholds.max_lean",
+            "llm.base_url",
+            "sources[0].segment.max_seconds",
+        ],
+        "{err}"
+    );
+    assert!(
+        problems.iter().all(|p| p.line.is_some()),
+        "every problem has its line: {err}"
+    );
+}
+
+// ---- clean -----------------------------------------------------------------------------------
+
+fn built_demo() -> (tempfile::TempDir, PathBuf) {
+    let out = tempfile::tempdir().unwrap();
+    common::build_demo(out.path());
+    let dataset = out.path().join("demo");
+    (out, dataset)
+}
+
+fn clean(out: &Path, extra: &[&str]) -> Output {
+    let (o, d) = (out.display().to_string(), demo());
+    let mut args = vec!["clean", "--config", &d, "--output", &o];
+    args.extend_from_slice(extra);
+    run(&args, &repo())
+}
+
+#[test]
+fn clean_cache_only_removes_the_stage_cache_and_nothing_else() {
+    let (out, dataset) = built_demo();
+    let run_ = clean(out.path(), &["--cache-only"]);
+    assert!(run_.status.success(), "{}", text(&run_.stderr));
+    assert!(!dataset.join(".motionforge/cache").exists());
+    assert!(dataset.join("manifest.json").is_file());
+    assert_eq!(common::shards(&dataset).len(), 3);
+    assert!(text(&run_.stdout).contains("removed .motionforge/cache"));
+    // The stages recompute; the outputs they would write are the same, so none is rewritten.
+    let rebuilt = common::build_demo(out.path());
+    let summary = text(&rebuilt.stdout);
+    assert!(
+        summary.contains("ingest  ran 9 of 9") && summary.contains("write  up to date"),
+        "{summary}"
+    );
+}
+
+#[test]
+fn clean_removes_the_outputs_but_keeps_the_llm_cache_and_foreign_files() {
+    let (out, dataset) = built_demo();
+    std::fs::write(dataset.join("llm-cache.jsonl"), "{}\n").unwrap();
+    std::fs::write(dataset.join("notes.txt"), "mine").unwrap();
+    std::fs::write(out.path().join("beside.txt"), "not in the dataset").unwrap();
+    std::fs::write(dataset.join(".manifest.json.4242.tmp"), "left over").unwrap();
+    let run_ = clean(out.path(), &[]);
+    assert!(run_.status.success(), "{}", text(&run_.stderr));
+    for gone in [
+        "data",
+        "normalization",
+        "report",
+        "manifest.json",
+        "README.md",
+        "skeletons.json",
+        "rejects.jsonl",
+        "build-report.json",
+        "plans.parquet",
+        ".motionforge/cache",
+        ".motionforge/state.json",
+        ".manifest.json.4242.tmp",
+    ] {
+        assert!(!dataset.join(gone).exists(), "{gone} must be removed");
+    }
+    for kept in ["llm-cache.jsonl", "notes.txt"] {
+        assert!(dataset.join(kept).is_file(), "{kept} must be kept");
+    }
+    assert!(out.path().join("beside.txt").is_file());
+    let stdout = text(&run_.stdout);
+    assert!(
+        stdout.contains("kept: llm-cache.jsonl, notes.txt"),
+        "{stdout}"
+    );
+    let again = clean(out.path(), &[]);
+    assert!(
+        text(&again.stdout).contains("nothing to clean"),
+        "{}",
+        text(&again.stdout)
+    );
+    let rebuilt = common::build_demo(out.path());
+    assert!(text(&rebuilt.stdout).contains("write  ran 1 of 1"));
+}
+
+#[test]
+fn clean_refuses_a_folder_that_is_not_a_dataset() {
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path().join("demo");
+    std::fs::create_dir_all(dir.join("data")).unwrap();
+    std::fs::write(dir.join("README.md"), "someone's project").unwrap();
+    let run_ = clean(out.path(), &[]);
+    assert_eq!(run_.status.code(), Some(2));
+    assert!(
+        text(&run_.stderr).contains("does not look like a motionforge dataset folder"),
+        "{}",
+        text(&run_.stderr)
+    );
+    assert!(dir.join("README.md").is_file() && dir.join("data").is_dir());
+}
+
+#[test]
+fn clean_does_not_run_while_a_build_holds_the_dataset() {
+    let (out, dataset) = built_demo();
+    let _held = motionforge::build::lock::WorkspaceLock::acquire(&dataset, None).unwrap();
+    let run_ = clean(out.path(), &[]);
+    assert_eq!(run_.status.code(), Some(1));
+    assert!(text(&run_.stderr).contains("is being built by pid"));
+    assert!(dataset.join("manifest.json").is_file());
+}
