@@ -485,6 +485,7 @@ fn run_stages<'a>(
         None
     };
     if through >= Stage::Compose && blocked.is_none() {
+        progress.stage_started(crate::stages::compose::NAME, clips.len() as u64);
         match compose(
             &shared,
             &motions,
@@ -493,7 +494,6 @@ fn run_stages<'a>(
             options.offline || probe,
         )? {
             Some((report, check, run)) => {
-                progress.stage_started(&run.stage, run.items as u64);
                 compose_report = report;
                 pair_check = check;
                 stages.push(run);
