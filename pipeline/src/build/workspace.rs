@@ -375,21 +375,6 @@ impl Workspace {
         write_atomic(&path, bytes)
     }
 
-    /// Returns the cached output or computes and stores it; the flag says whether it ran.
-    pub fn cached<T: Serialize + DeserializeOwned>(
-        &self,
-        stage: &str,
-        fingerprint: &str,
-        compute: impl FnOnce() -> T,
-    ) -> Result<(T, bool), WorkspaceError> {
-        if let Some(v) = self.load(stage, fingerprint) {
-            return Ok((v, false));
-        }
-        let v = compute();
-        self.store(stage, fingerprint, &v)?;
-        Ok((v, true))
-    }
-
     /// Removes cache entries of `stage` not in `keep` (old fingerprints).
     pub fn prune(&self, stage: &str, keep: &std::collections::BTreeSet<String>) {
         if self.probe {
