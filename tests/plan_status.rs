@@ -157,3 +157,41 @@ fn stage_names_parse_and_unknown_ones_are_refused() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("unknown stage `segmnt`"));
 }
+
+#[test]
+fn the_commands_print_plan_and_status() {
+    let out = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_motionforge");
+    let config = common::repo().join("fixtures/demo.toml");
+    let run = |args: &[&str]| {
+        std::process::Command::new(bin)
+            .args(args)
+            .arg("--config")
+            .arg(&config)
+            .arg("--output")
+            .arg(out.path())
+            .output()
+            .unwrap()
+    };
+    let segment = run(&["run", "segment"]);
+    assert!(
+        segment.status.success(),
+        "{}",
+        String::from_utf8_lossy(&segment.stderr)
+    );
+    let plan = run(&["--json", "plan"]);
+    assert!(plan.status.success());
+    let plan: serde_json::Value = serde_json::from_slice(&plan.stdout).unwrap();
+    let stages = plan["stages"].as_array().unwrap();
+    assert_eq!(stages[1]["stage"], "segment");
+    assert_eq!(stages[1]["to_run"], 0);
+    assert_eq!(stages[2]["stage"], "label");
+    assert_eq!(stages[2]["reasons"]["new"], 1, "{plan}");
+    let build = run(&["build"]);
+    assert!(build.status.success());
+    let status = run(&["status"]);
+    let text = String::from_utf8_lossy(&status.stdout);
+    assert!(status.status.success());
+    assert!(text.contains("train 17, val 2, test 6"), "{text}");
+    assert_eq!(text.matches(" fresh ").count(), 9, "{text}");
+}

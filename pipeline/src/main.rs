@@ -66,6 +66,30 @@ fn parse_wait(text: &str) -> Result<Duration, String> {
         .map_err(|e| format!("{e}; expected a duration such as 30s, 5m or 1h"))
 }
 
+/// What `build` and `run` share.
+#[derive(clap::Args)]
+struct BuildArgs {
+    /// Build configuration (TOML); relative paths inside resolve against its folder.
+    #[arg(long, short, default_value = DEFAULT_CONFIG)]
+    config: PathBuf,
+    /// Write the dataset here instead of the config's `dataset.output`.
+    #[arg(long, short)]
+    output: Option<PathBuf>,
+    /// Recompute, ignoring cached stage outputs.
+    #[arg(long)]
+    force: bool,
+    /// Exit with code 3 when any input was rejected.
+    #[arg(long)]
+    strict: bool,
+    /// Send no LLM request: LLM stages use cached answers only.
+    #[arg(long)]
+    offline: bool,
+    /// When another build holds the dataset folder, wait this long for it (30s, 5m, 1h)
+    /// instead of failing at once.
+    #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
+    wait: Option<Duration>,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Run every stage of a build: read captures, label, resample, mirror, write the clip table.
@@ -74,25 +98,8 @@ enum Command {
     /// folder's cache; bad inputs are listed in `rejects.jsonl` and the build goes on.
     #[command(after_help = EXIT_CODES)]
     Build {
-        /// Build configuration (TOML); relative paths inside resolve against its folder.
-        #[arg(long, short, default_value = DEFAULT_CONFIG)]
-        config: PathBuf,
-        /// Write the dataset here instead of the config's `dataset.output`.
-        #[arg(long, short)]
-        output: Option<PathBuf>,
-        /// Recompute everything, ignoring cached stage outputs.
-        #[arg(long)]
-        force: bool,
-        /// Exit with code 3 when any input was rejected.
-        #[arg(long)]
-        strict: bool,
-        /// Send no LLM request: LLM stages use cached answers only.
-        #[arg(long)]
-        offline: bool,
-        /// When another build holds the dataset folder, wait this long for it (30s, 5m, 1h)
-        /// instead of failing at once.
-        #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
-        wait: Option<Duration>,
+        #[command(flatten)]
+        args: BuildArgs,
     },
     /// Check a build configuration without building: every value, and every file it names.
     ///
@@ -132,24 +139,8 @@ enum Command {
         /// Stages to run (with their dependencies).
         #[arg(required = true, value_parser = parse_stage)]
         stages: Vec<Stage>,
-        /// Build configuration (TOML).
-        #[arg(long, short, default_value = DEFAULT_CONFIG)]
-        config: PathBuf,
-        /// Write the dataset here instead of the config's `dataset.output`.
-        #[arg(long, short)]
-        output: Option<PathBuf>,
-        /// Recompute the stages, ignoring cached outputs.
-        #[arg(long)]
-        force: bool,
-        /// Exit with code 3 when any input was rejected.
-        #[arg(long)]
-        strict: bool,
-        /// Send no LLM request: LLM stages use cached answers only.
-        #[arg(long)]
-        offline: bool,
-        /// When another build holds the dataset folder, wait this long for it (30s, 5m, 1h).
-        #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
-        wait: Option<Duration>,
+        #[command(flatten)]
+        args: BuildArgs,
     },
     /// Show what a build would run and why (which input, config key or stage version changed),
     /// without running anything.
@@ -467,101 +458,9 @@ fn exit_code(err: &anyhow::Error) -> u8 {
 
 fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
     match cli.command {
-        Command::Build {
-            config: path,
-            output,
-            force,
-            strict,
-            offline,
-            wait,
-        } => {
-            let config = load_checked(&path, output)?;
-            let dataset_dir = config.dataset_dir();
-            tracing::info!(
-                dataset = %config.dataset.name,
-                folder = %dataset_dir.display(),
-                "building {} into {}",
-                config.dataset.name,
-                dataset_dir.display()
-            );
-            let started = std::time::Instant::now();
-            let report = build(
-                &config,
-                &BuildOptions {
-                    force,
-                    offline,
-                    progress: ui.progress(),
-                    lock_wait: wait,
-                    through: None,
-                },
-            )?;
-            ui.clear_bars();
-            let seconds = started.elapsed().as_secs_f64();
-            tracing::info!(
-                clips = report.clips,
-                captures = report.captures,
-                rejects = report.rejects.len(),
-                seconds,
-                "built {} clips from {} captures in {seconds:.1} s",
-                report.clips,
-                report.captures
-            );
-            if !report.rejects.is_empty() {
-                tracing::warn!(
-                    rejects = report.rejects.len(),
-                    "{} inputs rejected ({}), listed in {}",
-                    report.rejects.len(),
-                    counts(&report.rejects_by_reason),
-                    dataset_dir.join(motionforge::build::REJECTS_FILE).display()
-                );
-            }
-            if ui.log.json {
-                writeln!(
-                    std::io::stdout(),
-                    "{}",
-                    serde_json::to_string_pretty(&report)?
-                )?;
-            } else if ui.status() {
-                print_report(&report)?;
-            }
-            if strict && !report.rejects.is_empty() {
-                return Ok(ExitCode::from(3));
-            }
-        }
-        Command::Run {
-            stages,
-            config,
-            output,
-            force,
-            strict,
-            offline,
-            wait,
-        } => {
-            let config = load_checked(&config, output)?;
-            let through = stages.iter().copied().max();
-            let report = build(
-                &config,
-                &BuildOptions {
-                    force,
-                    offline,
-                    through,
-                    progress: ui.progress(),
-                    lock_wait: wait,
-                },
-            )?;
-            ui.clear_bars();
-            if ui.log.json {
-                writeln!(
-                    std::io::stdout(),
-                    "{}",
-                    serde_json::to_string_pretty(&report)?
-                )?;
-            } else if ui.status() {
-                print_report(&report)?;
-            }
-            if strict && !report.rejects.is_empty() {
-                return Ok(ExitCode::from(3));
-            }
+        Command::Build { args } => return build_command(args, None, ui),
+        Command::Run { stages, args } => {
+            return build_command(args, stages.iter().copied().max(), ui);
         }
         Command::Plan {
             config,
@@ -692,6 +591,63 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
 }
 
 /// Loads a config for a build: its values and every file it names, all problems at once.
+/// `build`, or `run` up to `through`: the build with logs, progress and the summary.
+fn build_command(args: BuildArgs, through: Option<Stage>, ui: &Ui) -> Result<ExitCode> {
+    let config = load_checked(&args.config, args.output)?;
+    let dataset_dir = config.dataset_dir();
+    tracing::info!(
+        dataset = %config.dataset.name,
+        folder = %dataset_dir.display(),
+        "building {} into {}",
+        config.dataset.name,
+        dataset_dir.display()
+    );
+    let started = std::time::Instant::now();
+    let report = build(
+        &config,
+        &BuildOptions {
+            force: args.force,
+            offline: args.offline,
+            progress: ui.progress(),
+            lock_wait: args.wait,
+            through,
+        },
+    )?;
+    ui.clear_bars();
+    let seconds = started.elapsed().as_secs_f64();
+    tracing::info!(
+        clips = report.clips,
+        captures = report.captures,
+        rejects = report.rejects.len(),
+        seconds,
+        "built {} clips from {} captures in {seconds:.1} s",
+        report.clips,
+        report.captures
+    );
+    if !report.rejects.is_empty() {
+        tracing::warn!(
+            rejects = report.rejects.len(),
+            "{} inputs rejected ({}), listed in {}",
+            report.rejects.len(),
+            counts(&report.rejects_by_reason),
+            dataset_dir.join(motionforge::build::REJECTS_FILE).display()
+        );
+    }
+    if ui.log.json {
+        writeln!(
+            std::io::stdout(),
+            "{}",
+            serde_json::to_string_pretty(&report)?
+        )?;
+    } else if ui.status() {
+        print_report(&report)?;
+    }
+    if args.strict && !report.rejects.is_empty() {
+        return Ok(ExitCode::from(3));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn load_checked(path: &Path, output: Option<PathBuf>) -> Result<Config> {
     let (config, summary) = Config::load_checked(path, output)?;
     for warning in &summary.warnings {

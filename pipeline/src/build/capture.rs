@@ -226,16 +226,7 @@ pub(super) fn mirror_capture(
         shared
             .workspace
             .try_item(mirror::NAME, &item.key, &fp, || {
-                let full: Vec<Clip> = item
-                    .clips
-                    .iter()
-                    .zip(&item.refs)
-                    .map(|(clip, at)| {
-                        let mut c = clip.clone();
-                        c.motion = motions.motion(at)?;
-                        Ok(c)
-                    })
-                    .collect::<Result<_, BuildError>>()?;
+                let full = motions.hydrate_refs(&item.clips, &item.refs)?;
                 Ok::<_, BuildError>(mirror::run(&full, spec, shared.types.taxonomy()))
             })?
     else {

@@ -805,16 +805,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             &table,
             &companions,
         )?;
-        let run = StageRun {
-            stage: Stage::Write.name().into(),
-            items: 1,
-            ran: usize::from(write_ran),
-            reused: usize::from(!write_ran),
-        };
-        options
-            .progress
-            .stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-        stages.push(run);
+        stages.push(single_run(options, Stage::Write, write_ran));
         stamps.push(Miss {
             stage: Stage::Write.name().into(),
             key: "*".into(),
@@ -831,16 +822,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
                     .map_err(|e| BuildError::Report(e.to_string()))?;
                 write_atomic(&marker, table_fingerprint.as_bytes())?;
             }
-            let run = StageRun {
-                stage: Stage::Report.name().into(),
-                items: 1,
-                ran: usize::from(report_ran),
-                reused: usize::from(!report_ran),
-            };
-            options
-                .progress
-                .stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-            stages.push(run);
+            stages.push(single_run(options, Stage::Report, report_ran));
         }
     }
 
@@ -878,6 +860,19 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     }
     save_ledger(workspace, &report.stages, &stamps)?;
     Ok(report)
+}
+
+/// The run of a stage with one item (write, report), reported as finished.
+fn single_run(options: &BuildOptions, stage: Stage, ran: bool) -> StageRun {
+    options
+        .progress
+        .stage_finished(stage.name(), u64::from(ran), u64::from(!ran));
+    StageRun {
+        stage: stage.name().into(),
+        items: 1,
+        ran: usize::from(ran),
+        reused: usize::from(!ran),
+    }
 }
 
 /// Inside the workspace: the table fingerprint the report in `report/` was made from.

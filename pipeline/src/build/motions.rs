@@ -95,6 +95,23 @@ impl MotionSource {
             .ok_or_else(|| missing(at, "the entry has fewer clips"))
     }
 
+    /// `clips` with their frames read back from `refs` (in the same order).
+    pub(super) fn hydrate_refs(
+        &self,
+        clips: &[Clip],
+        refs: &[MotionRef],
+    ) -> Result<Vec<Clip>, BuildError> {
+        clips
+            .iter()
+            .zip(refs)
+            .map(|(clip, at)| {
+                let mut full = clip.clone();
+                full.motion = self.motion(at)?;
+                Ok(full)
+            })
+            .collect()
+    }
+
     /// `clip` with its frames read back.
     pub(super) fn hydrate(&self, clip: &Clip, index: &MotionIndex) -> Result<Clip, BuildError> {
         let at = index.get(&key(clip)).ok_or_else(|| {

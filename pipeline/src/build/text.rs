@@ -117,16 +117,7 @@ pub(super) fn run(
         let mut by_clip = BTreeMap::new();
         let mut agreement = (0.0, 0usize);
         for item in items.iter() {
-            let mut full: Vec<Clip> = item
-                .clips
-                .iter()
-                .zip(&item.refs)
-                .map(|(clip, at)| {
-                    let mut c = clip.clone();
-                    c.motion = motions.motion(at)?;
-                    Ok(c)
-                })
-                .collect::<Result<_, BuildError>>()?;
+            let mut full = motions.hydrate_refs(&item.clips, &item.refs)?;
             let mut part = LabelReport::default();
             label::apply_labels(&mut full, &labels, |c| shared.profile_of(c), &mut part);
             for (source, n) in part.sources {

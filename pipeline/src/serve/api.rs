@@ -238,7 +238,7 @@ async fn create_build(
                     StatusCode::BAD_REQUEST,
                     format!(
                         "`dataset` is required: this service serves {}",
-                        served(&shared)
+                        shared.served_names()
                     ),
                 ));
             }
@@ -263,21 +263,12 @@ async fn create_build(
     ))
 }
 
-fn served(shared: &Shared) -> String {
-    shared
-        .datasets
-        .keys()
-        .map(|n| format!("`{n}`"))
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
 fn unknown_dataset(shared: &Shared, name: &str) -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
         format!(
             "no dataset `{name}`; this service serves {}",
-            served(shared)
+            shared.served_names()
         ),
     )
 }

@@ -148,6 +148,15 @@ pub(crate) struct Shared {
 }
 
 impl Shared {
+    /// The served dataset names, quoted, for messages.
+    fn served_names(&self) -> String {
+        self.datasets
+            .keys()
+            .map(|n| format!("`{n}`"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     fn now_ms(&self) -> i64 {
         self.clock.now().timestamp_millis()
     }
@@ -387,12 +396,7 @@ impl Service {
         });
         say(&format!(
             "serving {} on http://{addr}",
-            shared
-                .datasets
-                .keys()
-                .map(|n| format!("`{n}`"))
-                .collect::<Vec<_>>()
-                .join(", ")
+            shared.served_names()
         ));
         Ok(Service {
             addr,
