@@ -344,6 +344,10 @@ fn run_stages<'a>(
             clip.split = splits.split_of(&clip.capture.path, &stem);
         }
     }
+    let mut stages = vec![capture_run(&items, 0, progress)];
+    if through >= Stage::Segment {
+        stages.push(capture_run(&items, 1, progress));
+    }
     let run_text = through >= Stage::Label && !upstream_pending;
     let text = if run_text {
         text::run(
@@ -359,6 +363,10 @@ fn run_stages<'a>(
             ..Default::default()
         }
     };
+    for run in &text.runs {
+        progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+    }
+    stages.extend(text.runs.iter().cloned());
     let run_mirror = config.mirror.enabled && through >= Stage::Mirror && !text.pending;
     if run_mirror {
         progress.stage_started(mirror::NAME, items.len() as u64);
@@ -374,29 +382,7 @@ fn run_stages<'a>(
     let mirror_pending = items.iter().any(|i| i.pending == Some(mirror::NAME));
     let first_pending = items_pending_stage(&items);
 
-    let mut stages = Vec::new();
     let names = [ingest::NAME, segment::NAME, mirror::NAME];
-    for (k, name) in names.iter().enumerate() {
-        if k == 1 && through < Stage::Segment {
-            continue;
-        }
-        if k == 2 && !run_mirror {
-            continue;
-        }
-        if k == 2 {
-            stages.extend(text.runs.iter().cloned());
-        }
-        let covered: Vec<&Item> = items
-            .iter()
-            .filter(|i| i.fingerprints.iter().any(|(s, _)| s == name))
-            .collect();
-        stages.push(StageRun {
-            stage: (*name).into(),
-            items: covered.len(),
-            ran: covered.iter().filter(|i| i.ran[k]).count(),
-            reused: covered.iter().filter(|i| !i.ran[k]).count(),
-        });
-    }
     for name in names {
         let live: BTreeSet<String> = items
             .iter()
@@ -410,8 +396,8 @@ fn run_stages<'a>(
         shared.workspace.prune(name, &live);
     }
 
-    if !run_mirror {
-        stages.extend(text.runs.iter().cloned());
+    if run_mirror {
+        stages.push(capture_run(&items, 2, progress));
     }
 
     let mut clips: Vec<Clip> = Vec::new();
@@ -494,15 +480,13 @@ fn run_stages<'a>(
             options.offline || probe,
         )? {
             Some((report, check, run)) => {
+                progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
                 compose_report = report;
                 pair_check = check;
                 stages.push(run);
             }
             None => blocked = Some(Stage::Compose),
         }
-    }
-    for run in &stages {
-        progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
     }
     Ok(Staged {
         output,
@@ -520,6 +504,24 @@ fn run_stages<'a>(
         index,
         shared,
     })
+}
+
+/// What per-capture stage `k` (0 ingest, 1 segment, 2 mirror) did over `items`, reported as
+/// finished.
+fn capture_run(items: &[Item], k: usize, progress: &crate::progress::ProgressSink) -> StageRun {
+    let name = [ingest::NAME, segment::NAME, mirror::NAME][k];
+    let covered: Vec<&Item> = items
+        .iter()
+        .filter(|i| i.fingerprints.iter().any(|(s, _)| *s == name))
+        .collect();
+    let run = StageRun {
+        stage: name.into(),
+        items: covered.len(),
+        ran: covered.iter().filter(|i| i.ran[k]).count(),
+        reused: covered.iter().filter(|i| !i.ran[k]).count(),
+    };
+    progress.stage_finished(name, run.ran as u64, run.reused as u64);
+    run
 }
 
 /// The first stage a pending (probe-mode) capture stopped at.
