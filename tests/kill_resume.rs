@@ -113,14 +113,52 @@ fn assert_same(dataset: &Path, expected: &BTreeMap<String, Vec<u8>>, what: &str)
     );
 }
 
-fn finish(output: &Path) {
-    let child = start(output);
-    let out = child.wait_with_output().unwrap();
+/// Runs a build to the end; its report (stage counts) as JSON.
+fn finish(output: &Path) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["--json", "build", "--config"])
+        .arg(common::repo().join("fixtures/demo.toml"))
+        .arg("--output")
+        .arg(output)
+        .output()
+        .unwrap();
     assert!(
         out.status.success(),
         "resumed build failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Items of `stage` the build took from the cache.
+fn reused(report: &serde_json::Value, stage: &str) -> u64 {
+    report["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == stage)
+        .map_or(0, |s| s["reused"].as_u64().unwrap())
+}
+
+/// What a build killed at `point` must have finished, so its resumption reuses it: per stage,
+/// the fewest items reused. Captures are ingested and segmented in parallel, all before
+/// mirroring starts; compose follows the mirrors, write follows compose.
+fn finished_before(point: &str) -> Vec<(&'static str, u64)> {
+    let order = POINTS.iter().position(|p| *p == point).unwrap();
+    let mut done = Vec::new();
+    if order >= 1 {
+        done.push(("ingest", 1));
+    }
+    if order >= 2 {
+        done = vec![("ingest", 9), ("segment", 9)];
+    }
+    if order >= 3 {
+        done.push(("mirror", 9));
+    }
+    if order >= 4 {
+        done.push(("compose", 5));
+    }
+    done
 }
 
 #[test]
@@ -139,7 +177,14 @@ fn killed_builds_resume_to_identical_bytes() {
             "the build finished before `{point}` appeared"
         );
         assert_consistent(&dir.path().join("demo"));
-        finish(dir.path());
+        let report = finish(dir.path());
+        for (stage, least) in finished_before(point) {
+            assert!(
+                reused(&report, stage) >= least,
+                "killed at `{point}`: the resumed build reused {} {stage} items, expected at least {least}",
+                reused(&report, stage)
+            );
+        }
         assert_same(
             &dir.path().join("demo"),
             &expected,
