@@ -1323,17 +1323,18 @@ fn export_bvh(
     let config = load_checked(path, None)?;
     // The stages read and refresh the dataset's stage cache, which a running build is writing.
     let _lock = motionforge::build::lock::WorkspaceLock::acquire(&config.dataset_dir(), wait)?;
-    let clips = motionforge::build::collect_clips(
+    let (found, ids) = motionforge::build::find_clip(
         &config,
         &BuildOptions {
             offline,
             ..BuildOptions::default()
         },
+        clip_id,
     )?;
-    let Some(clip) = clips.iter().find(|c| c.clip_id == clip_id) else {
-        let near: Vec<&str> = clips
+    let Some(clip) = found else {
+        let near: Vec<&str> = ids
             .iter()
-            .map(|c| c.clip_id.as_str())
+            .map(String::as_str)
             .filter(|id| id.contains(clip_id) || clip_id.contains(*id))
             .take(5)
             .collect();
@@ -1344,7 +1345,7 @@ fn export_bvh(
         };
         bail!(
             "no clip `{clip_id}` in this build ({} clips){hint}",
-            clips.len()
+            ids.len()
         );
     };
     let text = motionforge::motion::write_bvh(&clip.motion)

@@ -660,20 +660,23 @@ pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip
         .collect()
 }
 
-/// The clip `clip_id` as a build would write it, frames included (see [`collect_clips`]).
+/// The clip `clip_id` as a build would write it, frames included (see [`collect_clips`]), and
+/// the ids of every clip (to suggest one when `clip_id` is not there). Only that clip's frames
+/// are read.
 pub fn find_clip(
     config: &Config,
     options: &BuildOptions,
     clip_id: &str,
-) -> Result<Option<Clip>, BuildError> {
+) -> Result<(Option<Clip>, Vec<String>), BuildError> {
     let staged = run_stages(config, options, false)?;
     let motions = MotionSource::new(&staged.shared.workspace);
-    staged
+    let found = staged
         .clips
         .iter()
         .find(|c| c.clip_id == clip_id)
         .map(|c| motions.hydrate(c, &staged.index))
-        .transpose()
+        .transpose()?;
+    Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
 }
 
 /// Runs every stage of the build described by `config` and writes the dataset.
