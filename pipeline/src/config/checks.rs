@@ -1,552 +1,10 @@
-//! Build configuration (TOML), one typed section per stage, validated on load.
-//!
-//! Relative paths in a config resolve against the folder of the config file, so a build gives the
-//! same result whatever the working folder.
+//! Config checks: every value against what it may be, and every file the config names, each
+//! problem with its key, value, expectation and line, all reported at once.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-
-use serde::{Deserialize, Serialize};
-
-/// A configuration error that names the file, the key and what was expected.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
-    /// The file does not exist.
-    #[error("{}", not_found_message(path))]
-    NotFound {
-        /// The config path.
-        path: PathBuf,
-    },
-    /// The file cannot be read.
-    #[error("cannot read config {path}: {source}")]
-    Read {
-        /// The config path.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The TOML does not parse or does not fit the schema.
-    #[error("config {}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
-    Parse {
-        /// The config path.
-        path: PathBuf,
-        /// 1-based line, when known and not already in the message.
-        line: Option<usize>,
-        /// What the parser reported, with the key.
-        message: String,
-    },
-    /// Values parse but are not acceptable: every problem found, not only the first.
-    #[error("{}", invalid_message(path, problems))]
-    Invalid {
-        /// The config path.
-        path: PathBuf,
-        /// What is wrong, in file order where lines are known.
-        problems: Vec<Problem>,
-    },
-}
-
-/// The config file commands read when `--config` is not given, in the working folder.
-pub const DEFAULT_CONFIG: &str = "motionforge.toml";
-
-/// One unacceptable value: its dotted key, the value found, what is expected and its line.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    /// Dotted key, with array positions: `sources[1].segment.max_seconds`.
-    pub key: String,
-    /// The value found, as TOML-ish text.
-    pub value: String,
-    /// What is expected instead.
-    pub expected: String,
-    /// 1-based line of the key (or of its table when the key was left at its default).
-    pub line: Option<usize>,
-}
-
-impl std::fmt::Display for Problem {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{}: {}: expected {}",
-            self.key, self.value, self.expected
-        )
-    }
-}
-
-fn not_found_message(path: &Path) -> String {
-    let cwd = std::env::current_dir()
-        .map(|d| d.display().to_string())
-        .unwrap_or_else(|_| "the working folder".into());
-    if path.as_os_str() == DEFAULT_CONFIG {
-        format!(
-            "no {DEFAULT_CONFIG} in the working folder ({cwd}), the default config; pass one with --config FILE"
-        )
-    } else {
-        format!(
-            "config {} not found (relative paths start from the working folder, {cwd}); check the --config path",
-            path.display()
-        )
-    }
-}
-
-fn invalid_message(path: &Path, problems: &[Problem]) -> String {
-    let at = |p: &Problem| match p.line {
-        Some(line) => format!("{}:{line}: {p}", path.display()),
-        None => format!("{}: {p}", path.display()),
-    };
-    match problems {
-        [one] => format!("config {}", at(one)),
-        many => {
-            let mut text = format!("config {} has {} problems:", path.display(), many.len());
-            for p in many {
-                text.push_str("\n  ");
-                text.push_str(&at(p));
-            }
-            text
-        }
-    }
-}
-
-/// What a config's inputs add up to once [`Config::check_inputs`] found them all.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct InputSummary {
-    /// Capture files per source, in config order.
-    pub captures: Vec<usize>,
-    /// Things that do not stop a build but may surprise (an unset API key variable).
-    pub warnings: Vec<String>,
-}
-
-/// The whole build configuration.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Config {
-    /// Dataset-wide settings.
-    pub dataset: DatasetConfig,
-    /// Mirroring.
-    #[serde(default)]
-    pub mirror: MirrorConfig,
-    /// Motion types: taxonomy and how dataset labels map to it.
-    #[serde(default)]
-    pub motion_types: crate::annotate::taxonomy::TypeMapConfig,
-    /// Derived feature columns (6D rotations, velocities, foot contacts, future root).
-    #[serde(default)]
-    pub features: crate::features::FeatureConfig,
-    /// Train/validation/test splits.
-    #[serde(default)]
-    pub splits: crate::stages::split::SplitConfig,
-    /// Synthetic simultaneous pairs and their plausibility checks.
-    #[serde(default)]
-    pub synthetic: crate::stages::compose::SyntheticConfig,
-    /// Body-part labelling.
-    #[serde(default)]
-    pub part_labels: PartLabelConfig,
-    /// LINGO task plans for action texts.
-    #[serde(default)]
-    pub task_plans: TaskPlanConfig,
-    /// Alternative descriptions of action texts.
-    #[serde(default)]
-    pub paraphrases: ParaphraseConfig,
-    /// The LLM server; without it no request is ever sent (cached answers are still used).
-    #[serde(default)]
-    pub llm: Option<crate::llm::client::LlmConfig>,
-    /// Response cache shared by the LLM stages; default `<output>/llm-cache.jsonl`.
-    #[serde(default)]
-    pub llm_cache: Option<PathBuf>,
-    /// A folder of edited prompt templates and data (`part_labels.j2`, ...); bundled ones otherwise.
-    #[serde(default)]
-    pub prompts_dir: Option<PathBuf>,
-    /// Capture sources.
-    #[serde(rename = "sources")]
-    pub sources: Vec<SourceConfig>,
-    /// Folder of the config file; relative paths resolve against it.
-    #[serde(skip)]
-    pub base_dir: PathBuf,
-}
-
-/// Dataset-wide settings.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct DatasetConfig {
-    /// Dataset name (file names, manifest).
-    pub name: String,
-    /// Output folder.
-    pub output: PathBuf,
-    /// Frame rate every clip is resampled to.
-    #[serde(default = "default_fps")]
-    pub fps: f64,
-    /// Seed for every random choice.
-    #[serde(default)]
-    pub seed: u64,
-    /// Target size of a Parquet shard in bytes (uncompressed estimate; default 256 MiB).
-    #[serde(default = "default_shard_bytes")]
-    pub shard_bytes: u64,
-    /// When `motionforge serve` rebuilds the dataset: a five-field cron expression in UTC
-    /// (`"0 3 * * *"`), checked when the service loads the config.
-    // Not serialised: it says when to build, not what, so it must not change the config fingerprint.
-    #[serde(default, skip_serializing)]
-    pub schedule: Option<String>,
-}
-
-fn default_shard_bytes() -> u64 {
-    256 * 1024 * 1024
-}
-
-fn default_fps() -> f64 {
-    30.0
-}
-
-/// Who labels body parts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum Labeller {
-    /// The embedded labeller: lexicon, then motion velocity; offline and deterministic.
-    #[default]
-    Embedded,
-    /// The LLM (through the response cache), with SINC's prompt.
-    Llm,
-}
-
-/// What to do with a text whose LLM answer is not in the cache and cannot be asked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum OnMiss {
-    /// Label it with the embedded labeller (and say so in `label_source`).
-    #[default]
-    Embedded,
-    /// Fail the build, listing the missing texts.
-    Fail,
-}
-
-/// Body-part labelling settings.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub struct PartLabelConfig {
-    /// `embedded` (default) or `llm`.
-    #[serde(default)]
-    pub labeller: Labeller,
-    /// SINC Table 1 prompt variant for the LLM.
-    #[serde(default)]
-    pub variant: crate::llm::prompt::PartPromptVariant,
-    /// Never send requests; answers come from the cache only.
-    #[serde(default)]
-    pub offline: bool,
-    /// Cache misses that cannot be asked: `embedded` (default) or `fail`.
-    #[serde(default)]
-    pub on_miss: OnMiss,
-}
-
-/// Task-plan settings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TaskPlanConfig {
-    /// Plan every unique action text (with an LLM or cached answers; skipped and reported
-    /// otherwise).
-    #[serde(default = "yes")]
-    pub enabled: bool,
-}
-
-impl Default for TaskPlanConfig {
-    fn default() -> Self {
-        TaskPlanConfig { enabled: true }
-    }
-}
-
-/// Paraphrase settings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ParaphraseConfig {
-    /// Ask for alternatives of every unique action text (LLM or cache; skipped and reported
-    /// otherwise).
-    #[serde(default = "yes")]
-    pub enabled: bool,
-    /// Alternatives asked for per text.
-    #[serde(default = "default_paraphrases")]
-    pub n: usize,
-}
-
-fn default_paraphrases() -> usize {
-    3
-}
-
-impl Default for ParaphraseConfig {
-    fn default() -> Self {
-        ParaphraseConfig {
-            enabled: true,
-            n: default_paraphrases(),
-        }
-    }
-}
-
-/// Mirroring settings.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct MirrorConfig {
-    /// Add a mirrored copy of every clip.
-    #[serde(default = "yes")]
-    pub enabled: bool,
-}
-
-fn yes() -> bool {
-    true
-}
-
-impl Default for MirrorConfig {
-    fn default() -> Self {
-        MirrorConfig { enabled: true }
-    }
-}
-
-/// One set of captures sharing a skeleton profile and an annotation source.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SourceConfig {
-    /// Source name (provenance, reports).
-    pub name: String,
-    /// Glob patterns of capture files, relative to the config file.
-    pub captures: Vec<String>,
-    /// Skeleton profile: a bundled name (`bandai-namco`, `cmu`, `smpl-22`) or a path to a TOML file.
-    pub profile: String,
-    /// Per-file frame-rate overrides (file name or glob -> fps), for headers that state the wrong
-    /// rate.
-    #[serde(default)]
-    pub fps_override: BTreeMap<String, f64>,
-    /// A JSON object of true frame rates by annotation path (BABEL's `featp_2_fps.json`), matched
-    /// to captures by the same key as annotations; `fps_override` wins over it.
-    #[serde(default)]
-    pub fps_table: Option<String>,
-    /// Licence of the captures, carried to the dataset card.
-    #[serde(default)]
-    pub licence: String,
-    /// Left/right pairs that override the profile's (joint name -> partner).
-    #[serde(default)]
-    pub pairs: BTreeMap<String, String>,
-    /// Mirror reflections that override the profile's (joint name -> `x`, `y`, `z` or `xyz`).
-    #[serde(default)]
-    pub reflections: BTreeMap<String, crate::motion::Reflection>,
-    /// Where action labels come from.
-    pub labels: LabelConfig,
-    /// How annotations become clips.
-    #[serde(default)]
-    pub segment: SegmentConfig,
-}
-
-/// How a source's captures get their labels.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum LabelConfig {
-    /// One action per file, taken from the file name (and an optional sidecar JSON).
-    Filename {
-        /// File-stem pattern with `{name}` placeholders (each matches up to the next `_`), e.g.
-        /// `dataset-1_{content}_{style}_{take}`; or a full regex with named groups when it starts
-        /// with `^`.
-        pattern: String,
-        /// Action label template, e.g. `{content}`.
-        action: String,
-        /// Caption template, e.g. `{content}, {style} style`; `-` and `_` in values become spaces.
-        text: String,
-        /// Read `<stem>.json` beside each capture when present; its keys join the attributes and
-        /// `action`/`text` keys override the templates.
-        #[serde(default)]
-        sidecar: bool,
-    },
-    /// BABEL JSON: frame labels in seconds, overlapping labels are simultaneous actions.
-    Babel {
-        /// The BABEL JSON file(s), a path or glob relative to the config.
-        path: String,
-        /// Regex with a named group `key` that turns a record's `feat_p` into the capture's file
-        /// stem; default: the file name without `_poses` and extension.
-        #[serde(default)]
-        key_pattern: Option<String>,
-    },
-    /// LINGO-style event logs (CSV or JSON): each instruction lasts until the next one.
-    EventLog {
-        /// The log file(s), a path or glob relative to the config; one per capture unless rows
-        /// name their `capture`.
-        path: String,
-        /// Rate of `frame` columns.
-        #[serde(default = "default_fps")]
-        fps: f64,
-    },
-    /// A frame-range index such as HumanML3D's `index.csv`: independent crops.
-    FrameIndex {
-        /// The index CSV, relative to the config.
-        path: String,
-        /// Rate the index counts frames at (HumanML3D: 20).
-        fps: f64,
-        /// Folder of caption files `<new_name>.txt` (HumanML3D `texts/`), relative to the config.
-        #[serde(default)]
-        texts: Option<String>,
-        /// Caption for rows without a caption file.
-        #[serde(default)]
-        default_text: String,
-        /// Regex with a named group `key` that turns `source_path` into the capture's file stem.
-        #[serde(default)]
-        key_pattern: Option<String>,
-    },
-}
-
-impl LabelConfig {
-    /// The format name recorded in clips.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            LabelConfig::Filename { .. } => "filename",
-            LabelConfig::Babel { .. } => "babel",
-            LabelConfig::EventLog { .. } => "event_log",
-            LabelConfig::FrameIndex { .. } => "frame_index",
-        }
-    }
-}
-
-/// How a source's annotations become clips.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SegmentConfig {
-    /// Shortest clip kept, seconds after resampling (SINC: 15 frames at 30 fps).
-    #[serde(default = "default_min_seconds")]
-    pub min_seconds: f64,
-    /// Longest clip kept, seconds (SINC: 600 frames at 30 fps).
-    #[serde(default = "default_max_seconds")]
-    pub max_seconds: f64,
-    /// Labels dropped before segmentation (compared lowercase, `-` and `_` as spaces).
-    #[serde(default = "default_drop_labels")]
-    pub drop_labels: Vec<String>,
-    /// Real pairs involving a label that contains one of these words are dropped (SINC drops
-    /// pairs with `stand` from validation).
-    #[serde(default)]
-    pub pair_exclude: Vec<String>,
-    /// Seconds cut from the start of every capture (HumanML3D trims T-pose starts per dataset).
-    #[serde(default)]
-    pub trim_start_seconds: f64,
-    /// Frames of the capture before the annotations' time zero (CMU BVH conversions add a
-    /// T-pose frame 0 that AMASS-based annotations do not count).
-    #[serde(default)]
-    pub timeline_offset_frames: u64,
-    /// Most actions one real simultaneous clip may combine.
-    #[serde(default = "default_max_simultaneous")]
-    pub max_simultaneous: usize,
-}
-
-fn default_min_seconds() -> f64 {
-    0.5
-}
-
-fn default_max_seconds() -> f64 {
-    20.0
-}
-
-fn default_max_simultaneous() -> usize {
-    2
-}
-
-fn default_drop_labels() -> Vec<String> {
-    ["transition", "t pose", "tpose", "a pose", "apose"]
-        .map(String::from)
-        .to_vec()
-}
-
-impl Default for SegmentConfig {
-    fn default() -> Self {
-        SegmentConfig {
-            min_seconds: default_min_seconds(),
-            max_seconds: default_max_seconds(),
-            drop_labels: default_drop_labels(),
-            pair_exclude: Vec::new(),
-            trim_start_seconds: 0.0,
-            timeline_offset_frames: 0,
-            max_simultaneous: default_max_simultaneous(),
-        }
-    }
-}
+use super::*;
 
 impl Config {
-    /// Reads and validates a config file.
-    pub fn load(path: &Path) -> Result<Config, ConfigError> {
-        Config::parse(&read_config(path)?, path)
-    }
-
-    /// Parses and validates config text; `path` names the file in errors and sets the base folder.
-    pub fn parse(text: &str, path: &Path) -> Result<Config, ConfigError> {
-        let (config, checks) = Config::parse_unchecked(text, path)?;
-        checks.finish(path)?;
-        Ok(config)
-    }
-
-    /// Reads a config and checks its values and the files it names, reporting every problem of
-    /// both kinds at once (`motionforge config check`, and before a build). `output` replaces
-    /// `dataset.output`, as `build --output` does.
-    pub fn load_checked(
-        path: &Path,
-        output: Option<PathBuf>,
-    ) -> Result<(Config, InputSummary), ConfigError> {
-        let text = read_config(path)?;
-        let (mut config, mut checks) = Config::parse_unchecked(&text, path)?;
-        if let Some(output) = output {
-            config.dataset.output = std::path::absolute(&output).unwrap_or(output);
-        }
-        let summary = config.check_inputs_into(&mut checks);
-        checks.finish(path)?;
-        Ok((config, summary))
-    }
-
-    /// Deserialises the config and runs the value checks, leaving their problems to report.
-    fn parse_unchecked<'i>(
-        text: &'i str,
-        path: &Path,
-    ) -> Result<(Config, Checks<'i>), ConfigError> {
-        // Parsed once into a spanned tree: it deserialises the config and tells problems' lines.
-        let tree = toml::de::DeTable::parse(text).map_err(|e| ConfigError::Parse {
-            path: path.to_path_buf(),
-            line: None,
-            message: e.to_string().trim_end().to_string(),
-        })?;
-        let parsed: Result<Config, _> =
-            serde_path_to_error::deserialize(toml::Deserializer::from(tree.clone()));
-        let mut checks = Checks::new(text, tree.into_inner());
-        let mut config = parsed.map_err(|e| {
-            use serde_path_to_error::Segment;
-            let mut keys: Vec<Seg<'_>> = e
-                .path()
-                .iter()
-                .filter_map(|s| match s {
-                    Segment::Seq { index } => Some(Seg::I(*index)),
-                    Segment::Map { key } => Some(Seg::K(key.as_str())),
-                    _ => None,
-                })
-                .collect();
-            let inner = e.inner();
-            // Inside tagged tables (`[sources.labels]`) serde loses the span: find the key in
-            // the file instead, the unknown one itself when that is the complaint.
-            let unknown = inner
-                .message()
-                .strip_prefix("unknown field `")
-                .and_then(|rest| rest.split('`').next());
-            if let Some(field) = unknown
-                && !matches!(keys.last(), Some(Seg::K(k)) if *k == field)
-            {
-                keys.push(Seg::K(field));
-            }
-            let exact = unknown.and_then(|_| checks.exact_line(&keys));
-            let line = exact
-                .or_else(|| inner.span().map(|s| line_of(text, s.start)))
-                .or_else(|| checks.line(&keys));
-            let key = e.path().to_string();
-            let key = if key == "." {
-                String::new()
-            } else {
-                format!("{key}: ")
-            };
-            ConfigError::Parse {
-                path: path.to_path_buf(),
-                line,
-                message: format!("{key}{}", inner.message().trim_end()),
-            }
-        })?;
-        // Lexically normalised, so `a/../fixtures/x.toml` and `fixtures/x.toml` show the same
-        // capture paths (which splits are hashed from).
-        config.base_dir = path.parent().map(normalize).unwrap_or_default();
-        config.validate(&mut checks);
-        Ok((config, checks))
-    }
-
-    fn validate(&self, c: &mut Checks<'_>) {
+    pub(super) fn validate(&self, c: &mut Checks<'_>) {
         use Seg::{I, K};
         let d = &self.dataset;
         if d.name.is_empty()
@@ -799,7 +257,7 @@ impl Config {
         }
     }
 
-    fn validate_splits(&self, c: &mut Checks<'_>) {
+    pub(super) fn validate_splits(&self, c: &mut Checks<'_>) {
         use Seg::K;
         let splits = &self.splits;
         let shown = || {
@@ -884,7 +342,7 @@ impl Config {
         Ok(summary)
     }
 
-    fn check_inputs_into(&self, c: &mut Checks<'_>) -> InputSummary {
+    pub(super) fn check_inputs_into(&self, c: &mut Checks<'_>) -> InputSummary {
         use Seg::{I, K};
         let mut summary = InputSummary::default();
         for (key, dir) in [("output", self.output_dir()), ("name", self.dataset_dir())] {
@@ -1043,7 +501,7 @@ impl Config {
     }
 
     /// Files a pattern relative to the config matches (none for a malformed pattern).
-    fn glob_files(&self, pattern: &str) -> Vec<PathBuf> {
+    pub(super) fn glob_files(&self, pattern: &str) -> Vec<PathBuf> {
         let resolved = self.resolve(Path::new(pattern));
         glob::glob(&resolved.to_string_lossy())
             .map(|paths| paths.flatten().filter(|p| p.is_file()).collect())
@@ -1051,7 +509,7 @@ impl Config {
     }
 
     /// What a pattern that matched nothing was expected to match, and why it may not have.
-    fn no_match(&self, pattern: &str, what: &str) -> String {
+    pub(super) fn no_match(&self, pattern: &str, what: &str) -> String {
         let resolved = self.resolve(Path::new(pattern));
         // The folder part before the first wildcard: missing folders are the usual mistake.
         let fixed: PathBuf = resolved
@@ -1073,85 +531,14 @@ impl Config {
             resolved.display()
         )
     }
-
-    /// A path from the config, resolved against the config's folder.
-    pub fn resolve(&self, p: &Path) -> PathBuf {
-        if p.is_absolute() {
-            p.to_path_buf()
-        } else {
-            normalize(&self.base_dir.join(p))
-        }
-    }
-
-    /// The output folder.
-    pub fn output_dir(&self) -> PathBuf {
-        self.resolve(&self.dataset.output)
-    }
-
-    /// The dataset's folder, `<output>/<name>`: shards under `data/`, card, manifest, reports and
-    /// the build workspace.
-    pub fn dataset_dir(&self) -> PathBuf {
-        self.output_dir().join(&self.dataset.name)
-    }
-
-    /// The prompt templates: bundled, with any file in `prompts_dir` in its place.
-    pub fn prompts(&self) -> Result<crate::llm::prompt::Prompts, crate::llm::prompt::PromptError> {
-        match &self.prompts_dir {
-            Some(dir) => crate::llm::prompt::Prompts::with_overrides(&self.resolve(dir)),
-            None => crate::llm::prompt::Prompts::bundled(),
-        }
-    }
-
-    /// The LLM response cache file.
-    pub fn llm_cache_path(&self) -> PathBuf {
-        match &self.llm_cache {
-            Some(p) => self.resolve(p),
-            None => self.dataset_dir().join("llm-cache.jsonl"),
-        }
-    }
 }
 
-/// Removes `.` and folds `dir/..` lexically, so paths print the way people wrote them.
-fn normalize(path: &Path) -> PathBuf {
-    use std::path::Component;
-    let mut out: Vec<Component<'_>> = Vec::new();
-    for c in path.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
-                out.pop();
-            }
-            other => out.push(other),
-        }
-    }
-    if out.is_empty() {
-        PathBuf::from(".")
-    } else {
-        out.iter().collect()
-    }
-}
-
-fn read_config(path: &Path) -> Result<String, ConfigError> {
-    std::fs::read_to_string(path).map_err(|source| {
-        if source.kind() == std::io::ErrorKind::NotFound {
-            ConfigError::NotFound {
-                path: path.to_path_buf(),
-            }
-        } else {
-            ConfigError::Read {
-                path: path.to_path_buf(),
-                source,
-            }
-        }
-    })
-}
-
-fn round6(x: f64) -> f64 {
+pub(super) fn round6(x: f64) -> f64 {
     (x * 1e6).round() / 1e6
 }
 
 /// 1-based line of a byte offset.
-fn line_of(text: &str, offset: usize) -> usize {
+pub(super) fn line_of(text: &str, offset: usize) -> usize {
     text.as_bytes()[..offset.min(text.len())]
         .iter()
         .filter(|b| **b == b'\n')
@@ -1161,20 +548,20 @@ fn line_of(text: &str, offset: usize) -> usize {
 
 /// One step of a key path: a table key or an array position.
 #[derive(Debug, Clone, Copy)]
-enum Seg<'a> {
+pub(super) enum Seg<'a> {
     K(&'a str),
     I(usize),
 }
 
 /// Problems found while checking a config, with the lines of their keys.
-struct Checks<'i> {
+pub(super) struct Checks<'i> {
     text: &'i str,
     root: toml::de::DeValue<'i>,
     problems: Vec<Problem>,
 }
 
 impl<'i> Checks<'i> {
-    fn new(text: &'i str, root: toml::de::DeTable<'i>) -> Checks<'i> {
+    pub(super) fn new(text: &'i str, root: toml::de::DeTable<'i>) -> Checks<'i> {
         Checks {
             text,
             root: toml::de::DeValue::Table(root),
@@ -1182,7 +569,7 @@ impl<'i> Checks<'i> {
         }
     }
 
-    fn push(&mut self, path: &[Seg<'_>], value: String, expected: &str) {
+    pub(super) fn push(&mut self, path: &[Seg<'_>], value: String, expected: &str) {
         let mut key = String::new();
         for seg in path {
             match seg {
@@ -1212,12 +599,12 @@ impl<'i> Checks<'i> {
 
     /// The line of the deepest part of `path` the file spells out (a key left at its default
     /// points at its table).
-    fn line(&self, path: &[Seg<'_>]) -> Option<usize> {
+    pub(super) fn line(&self, path: &[Seg<'_>]) -> Option<usize> {
         self.find(path).1.map(|s| line_of(self.text, s.start))
     }
 
     /// The line of `path` itself, if the file spells all of it out.
-    fn exact_line(&self, path: &[Seg<'_>]) -> Option<usize> {
+    pub(super) fn exact_line(&self, path: &[Seg<'_>]) -> Option<usize> {
         match self.find(path) {
             (found, Some(span)) if found == path.len() => Some(line_of(self.text, span.start)),
             _ => None,
@@ -1225,7 +612,7 @@ impl<'i> Checks<'i> {
     }
 
     /// How many steps of `path` the file has, and the span of the last one found.
-    fn find(&self, path: &[Seg<'_>]) -> (usize, Option<std::ops::Range<usize>>) {
+    pub(super) fn find(&self, path: &[Seg<'_>]) -> (usize, Option<std::ops::Range<usize>>) {
         let mut value = &self.root;
         let mut span = None;
         let mut found = 0;
@@ -1242,7 +629,7 @@ impl<'i> Checks<'i> {
         (found, span)
     }
 
-    fn finish(mut self, path: &Path) -> Result<(), ConfigError> {
+    pub(super) fn finish(mut self, path: &Path) -> Result<(), ConfigError> {
         if self.problems.is_empty() {
             return Ok(());
         }
@@ -1254,7 +641,7 @@ impl<'i> Checks<'i> {
     }
 }
 
-fn validate_llm(llm: &crate::llm::client::LlmConfig, c: &mut Checks<'_>) {
+pub(super) fn validate_llm(llm: &crate::llm::client::LlmConfig, c: &mut Checks<'_>) {
     use Seg::K;
     let key = |k: &'static str| [K("llm"), K(k)];
     let root = llm.base_url.trim_end_matches('/');

@@ -1,0 +1,257 @@
+//! `prompt render` and `labels import|eval`.
+
+use anyhow::{Context, Result};
+use clap::Subcommand;
+use motionforge::config::{Config, DEFAULT_CONFIG};
+use motionforge::llm::cache::ResponseCache;
+use motionforge::llm::prompt::{PartPromptVariant, Prompts};
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(Subcommand)]
+pub(crate) enum PromptCommand {
+    /// Print the exact prompt a stage sends for a text (for a paper's appendix, or debugging).
+    Render {
+        /// Template: part_labels, task_plan, paraphrase or pair_compat.
+        template: String,
+        /// The action text (the first one, for pair_compat).
+        #[arg(long)]
+        text: String,
+        /// The second action text (pair_compat).
+        #[arg(long)]
+        second: Option<String>,
+        /// part_labels variant: list_few_shot (SINC's prompt), list, or free_form.
+        #[arg(long, default_value = "list_few_shot")]
+        variant: String,
+        /// Alternatives asked for (paraphrase).
+        #[arg(long, default_value_t = 3)]
+        n: usize,
+        /// A folder of edited templates to use instead of the bundled ones.
+        #[arg(long)]
+        prompts_dir: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand)]
+pub(crate) enum LabelsCommand {
+    /// Load existing answers into the build's LLM response cache, so labelling needs no request.
+    ///
+    /// Reads SINC's format, `{text: [answer_v1, answer_v2, answer_v3]}`, and stores the chosen
+    /// answer under the key of the part_labels prompt for that text with the config's [llm]
+    /// model and sampling parameters (for SINC's file: model text-davinci-003, kind completion,
+    /// temperature 0, max_tokens 256).
+    Import {
+        /// The answers file (e.g. ../shared/data/sinc/gpt3-labels-list.json).
+        file: PathBuf,
+        /// Build configuration with an [llm] section; its llm_cache is written.
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
+        config: PathBuf,
+        /// Position of the answer to import in each list (SINC's Listing 1 prompt is the third).
+        #[arg(long, default_value_t = 2)]
+        answer: usize,
+        /// The part_labels prompt variant the answers answer.
+        #[arg(long, default_value = "list_few_shot")]
+        variant: String,
+    },
+    /// Evaluate labellers on a gold file with SINC's Table 1 protocol (Yes/No as 1/0,
+    /// Sometimes skipped): accuracy per part and their mean.
+    Eval {
+        /// Gold labels: {text: [global, torso, left arm, right arm, left leg, right leg]} with
+        /// 1, 0 or 0.5 (sometimes).
+        #[arg(long)]
+        gold: PathBuf,
+        /// Labeller to score: `embedded`, `cache` (the config's LLM cache), or a SINC-format
+        /// answers file. Repeat to compare side by side.
+        #[arg(long = "source", default_value = "embedded")]
+        sources: Vec<String>,
+        /// Build configuration, for `--source cache`.
+        #[arg(long, short, default_value = DEFAULT_CONFIG)]
+        config: PathBuf,
+    },
+}
+
+pub(crate) fn part_variant(name: &str) -> Result<PartPromptVariant> {
+    PartPromptVariant::ALL
+        .into_iter()
+        .find(|v| v.as_str() == name)
+        .with_context(|| {
+            format!(
+                "unknown part_labels variant `{name}` (expected list_few_shot, list or free_form)"
+            )
+        })
+}
+
+pub(crate) fn prompt_command(command: PromptCommand) -> Result<()> {
+    let PromptCommand::Render {
+        template,
+        text,
+        second,
+        variant,
+        n,
+        prompts_dir,
+    } = command;
+    let prompts = match prompts_dir {
+        Some(dir) => Prompts::with_overrides(&dir)?,
+        None => Prompts::bundled()?,
+    };
+    // The build asks about normalised texts; show the prompt it would send.
+    let text = motionforge::stages::label::normalize_text(&text);
+    let rendered = match template.as_str() {
+        "part_labels" => prompts.part_labels(&text, part_variant(&variant)?)?,
+        "task_plan" => prompts.task_plan(&text)?,
+        "paraphrase" => prompts.paraphrase(&text, n)?,
+        "pair_compat" => prompts.pair_compat(
+            &text,
+            &motionforge::stages::label::normalize_text(
+                second.as_deref().context("pair_compat needs --second")?,
+            ),
+        )?,
+        other => {
+            return Err(motionforge::llm::prompt::PromptError::Unknown(other.to_string()).into());
+        }
+    };
+    let mut out = std::io::stdout().lock();
+    out.write_all(rendered.as_bytes())?;
+    Ok(())
+}
+
+pub(crate) fn labels_command(command: LabelsCommand, json: bool) -> Result<()> {
+    match command {
+        LabelsCommand::Import {
+            file,
+            config,
+            answer,
+            variant,
+        } => {
+            let config = Config::load(&config)?;
+            let llm = config.llm.as_ref().context(
+                "labels import needs an [llm] section naming the model whose answers these are (SINC: model = \"text-davinci-003\", kind = \"completion\", temperature = 0, max_tokens = 256)",
+            )?;
+            let prompts = config.prompts()?;
+            let json = std::fs::read_to_string(&file)
+                .with_context(|| format!("cannot read {}", file.display()))?;
+            let cache_path = config.llm_cache_path();
+            let mut cache = ResponseCache::open(&cache_path)
+                .with_context(|| format!("{}", cache_path.display()))?;
+            let report = motionforge::stages::label::import_answers(
+                &json,
+                &file.display().to_string(),
+                answer,
+                part_variant(&variant)?,
+                &prompts,
+                llm,
+                &mut cache,
+            )?;
+            let mut out = std::io::stdout().lock();
+            writeln!(
+                out,
+                "imported {} answers into {} ({} already there)",
+                report.imported,
+                cache_path.display(),
+                report.already
+            )?;
+            if !report.without_answer.is_empty() {
+                writeln!(
+                    out,
+                    "{} texts had no answer at position {answer}",
+                    report.without_answer.len()
+                )?;
+            }
+            writeln!(
+                out,
+                "{} answers use words outside the prompt's list:",
+                report.outside_list.len()
+            )?;
+            for (text, words) in &report.outside_list {
+                writeln!(out, "  {text}: {words}")?;
+            }
+            writeln!(
+                out,
+                "{} answers flagged (no synonym maps them, or no part):",
+                report.flagged.len()
+            )?;
+            for (text, why) in &report.flagged {
+                writeln!(out, "  {text}: {why}")?;
+            }
+        }
+        LabelsCommand::Eval {
+            gold,
+            sources,
+            config,
+        } => {
+            let gold_text = std::fs::read_to_string(&gold)
+                .with_context(|| format!("cannot read {}", gold.display()))?;
+            let gold_set = motionforge::parts::eval::read_gold(&gold_text)
+                .with_context(|| format!("{}", gold.display()))?;
+            let mut rows: Vec<(String, motionforge::parts::eval::Evaluation)> = Vec::new();
+            for source in &sources {
+                let evaluation = match source.as_str() {
+                    // Gold files hold texts only: an unknown text gets the lexicon's default, as a
+                    // clip would without motion to look at.
+                    "embedded" => motionforge::parts::eval::evaluate(&gold_set, |t| {
+                        Some(motionforge::parts::lexicon::label_text(t).parts)
+                    }),
+                    "cache" => {
+                        let config = Config::load(&config)?;
+                        let llm = config
+                            .llm
+                            .as_ref()
+                            .context("--source cache needs an [llm] section in the config")?;
+                        let prompts = config.prompts()?;
+                        let cache = ResponseCache::open(&config.llm_cache_path())?;
+                        let variant = config.part_labels.variant;
+                        motionforge::parts::eval::evaluate(&gold_set, |t| {
+                            let prompt = prompts
+                                .part_labels(
+                                    &motionforge::stages::label::normalize_text(t),
+                                    variant,
+                                )
+                                .ok()?;
+                            let answer = cache.get(&llm.cache_key(&prompt))?;
+                            let parsed = motionforge::parts::answer::parse_part_answer(answer);
+                            (!parsed.empty).then_some(parsed.parts)
+                        })
+                    }
+                    file => {
+                        let text = std::fs::read_to_string(file)
+                            .with_context(|| format!("cannot read answers file {file}"))?;
+                        let map: std::collections::BTreeMap<String, Vec<String>> =
+                            serde_json::from_str(&text).with_context(|| {
+                                format!("{file}: expected {{text: [answer, ...]}}")
+                            })?;
+                        motionforge::parts::eval::evaluate(&gold_set, |t| {
+                            let parsed =
+                                motionforge::parts::answer::parse_part_answer(map.get(t)?.last()?);
+                            (!parsed.empty).then_some(parsed.parts)
+                        })
+                    }
+                };
+                rows.push((source.clone(), evaluation));
+            }
+            let mut out = std::io::stdout().lock();
+            if json {
+                let value: serde_json::Value = rows
+                    .iter()
+                    .map(|(s, e)| (s.clone(), serde_json::to_value(e).unwrap_or_default()))
+                    .collect::<serde_json::Map<_, _>>()
+                    .into();
+                writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+            } else {
+                let table: Vec<(&str, &motionforge::parts::eval::Evaluation)> =
+                    rows.iter().map(|(s, e)| (s.as_str(), e)).collect();
+                write!(out, "{}", motionforge::parts::eval::format_table(&table))?;
+                for (source, e) in &rows {
+                    if !e.missing.is_empty() {
+                        writeln!(
+                            out,
+                            "{source}: no label for {} texts: {}",
+                            e.missing.len(),
+                            e.missing.join("; ")
+                        )?;
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,5 @@
+//! The commands' implementations, grouped by concern; `main.rs` parses and dispatches.
+
+pub(crate) mod labels;
+pub(crate) mod summary;
+pub(crate) mod tools;

@@ -1,0 +1,246 @@
+//! Human-readable output of builds, plans and status.
+
+use motionforge::build::BuildReport;
+use std::io::Write;
+
+pub(crate) fn counts(map: &std::collections::BTreeMap<String, usize>) -> String {
+    if map.is_empty() {
+        return "none".to_string();
+    }
+    map.iter()
+        .map(|(k, n)| format!("{k} {n}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+pub(crate) fn reasons(map: &std::collections::BTreeMap<String, usize>) -> String {
+    map.iter()
+        .map(|(why, n)| format!("{why} ({n})"))
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "plan for {} ({}):",
+        plan.dataset,
+        plan.output.display()
+    )?;
+    for stage in &plan.stages {
+        if stage.fresh() {
+            writeln!(
+                out,
+                "{:>10}  up to date ({} items)",
+                stage.stage.name(),
+                stage.items
+            )?;
+        } else {
+            writeln!(
+                out,
+                "{:>10}  {} of {} to run: {}",
+                stage.stage.name(),
+                stage.to_run,
+                stage.items.max(stage.to_run),
+                reasons(&stage.reasons)
+            )?;
+            for example in &stage.examples {
+                writeln!(out, "{:>10}    {example}", "")?;
+            }
+        }
+    }
+    if plan.nothing_to_run() {
+        writeln!(out, "nothing to run: a build would reuse everything")?;
+    }
+    Ok(())
+}
+
+/// `YYYY-MM-DD HH:MM UTC` of Unix seconds (days to civil date as in Howard Hinnant's algorithm).
+pub(crate) fn utc(secs: u64) -> String {
+    let days = (secs / 86_400) as i64;
+    let rem = secs % 86_400;
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02} {:02}:{:02} UTC",
+        rem / 3_600,
+        (rem % 3_600) / 60
+    )
+}
+
+pub(crate) fn print_status(status: &motionforge::build::Status) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    let rows = if status.splits.is_empty() {
+        "not written yet".to_string()
+    } else {
+        status
+            .splits
+            .iter()
+            .map(|(split, n)| format!("{split} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    writeln!(
+        out,
+        "{} ({}): {rows}",
+        status.dataset,
+        status.output.display()
+    )?;
+    writeln!(
+        out,
+        "{:>10}  {:<6} {:<21} {:>6} {:>6} {:>6}",
+        "stage", "state", "last run", "items", "ran", "reused"
+    )?;
+    for s in &status.stages {
+        let last = s.last_run.map_or_else(|| "never".to_string(), utc);
+        writeln!(
+            out,
+            "{:>10}  {:<6} {:<21} {:>6} {:>6} {:>6}",
+            s.stage.name(),
+            if s.fresh { "fresh" } else { "stale" },
+            last,
+            s.items,
+            s.ran,
+            s.reused
+        )?;
+        if !s.fresh {
+            writeln!(
+                out,
+                "{:>10}    {} to run: {}",
+                "",
+                s.to_run,
+                reasons(&s.reasons)
+            )?;
+        }
+    }
+    Ok(())
+}
+
+pub(crate) fn print_report(report: &BuildReport) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    for stage in &report.stages {
+        let what = if stage.ran == 0 {
+            "up to date, nothing re-run".to_string()
+        } else {
+            format!(
+                "ran {} of {} ({} reused)",
+                stage.ran, stage.items, stage.reused
+            )
+        };
+        writeln!(out, "{:>10}  {what}", stage.stage)?;
+    }
+    writeln!(
+        out,
+        "{} captures -> {} clips ({} mirrored) in {}/",
+        report.captures,
+        report.clips,
+        report.mirrored,
+        report.output.join(motionforge::build::DATA_DIR).display()
+    )?;
+    writeln!(out, "by kind: {}", counts(&report.kinds))?;
+    writeln!(
+        out,
+        "motion types (originals): {}",
+        counts(&report.motion_types)
+    )?;
+    if !report.unmapped_labels.is_empty() {
+        writeln!(
+            out,
+            "labels with no motion type: {}",
+            counts(&report.unmapped_labels)
+        )?;
+    }
+    writeln!(out, "dropped segments: {}", counts(&report.drops_by_reason))?;
+    if !report.notes_by_kind.is_empty() {
+        writeln!(out, "annotation notes: {}", counts(&report.notes_by_kind))?;
+    }
+    let l = &report.labels;
+    writeln!(
+        out,
+        "part labels: {} ({} texts, {} requests, {} cache hits, {} flagged)",
+        counts(&l.sources),
+        l.texts,
+        l.requests,
+        l.cache_hits,
+        l.flagged.len()
+    )?;
+    if let Some((agreement, n)) = l.velocity_agreement {
+        writeln!(
+            out,
+            "  motion velocity agrees with the lexicon on {:.0}% of parts ({n} clips)",
+            agreement * 100.0
+        )?;
+    }
+    for (name, r) in [
+        ("paraphrases", &report.paraphrases),
+        ("task plans", &report.plans),
+    ] {
+        let skipped = if r.skipped.is_empty() {
+            String::new()
+        } else {
+            format!("; skipped: {}", counts(&r.skipped))
+        };
+        writeln!(
+            out,
+            "{name}: {} of {} texts answered, {} requests, {} rejected{skipped}",
+            r.answered,
+            r.texts,
+            r.requests,
+            r.rejected.len()
+        )?;
+    }
+    let c = &report.synthetic;
+    writeln!(
+        out,
+        "synthetic pairs: {} candidates, {} compatible pairs, {} sampled, {} composed, dropped: {}",
+        c.candidates,
+        c.compatible,
+        c.sampled,
+        c.composed,
+        counts(&c.dropped)
+    )?;
+    let pc = &report.pair_check;
+    if pc.texts > 0 {
+        writeln!(
+            out,
+            "pair check (LLM): {} of {} pairs answered, {} requests{}",
+            pc.answered,
+            pc.texts,
+            pc.requests,
+            if pc.skipped.is_empty() {
+                String::new()
+            } else {
+                format!("; skipped: {}", counts(&pc.skipped))
+            }
+        )?;
+    }
+    if report.rejects.is_empty() {
+        writeln!(out, "rejects: none")?;
+    } else {
+        writeln!(
+            out,
+            "rejects: {} ({}), listed in {}:",
+            report.rejects.len(),
+            counts(&report.rejects_by_reason),
+            report
+                .output
+                .join(motionforge::build::REJECTS_FILE)
+                .display()
+        )?;
+        for r in report.rejects.iter().take(10) {
+            writeln!(out, "  {r}")?;
+        }
+    }
+    if report.nothing_ran() {
+        writeln!(out, "nothing changed since the last build")?;
+    }
+    Ok(())
+}
