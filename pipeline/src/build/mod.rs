@@ -577,7 +577,7 @@ fn compose(
                 config.dataset.seed,
                 |c| c.split.clone(),
                 |c| shared.profile_of(c),
-                |c| motions.hydrate(c, index).map(|full| full.motion),
+                |c| motions.motion_of(c, index),
                 |a, b| {
                     let key = (
                         label::normalize_text(&a.text),

@@ -112,13 +112,18 @@ impl MotionSource {
             .collect()
     }
 
-    /// `clip` with its frames read back.
-    pub(super) fn hydrate(&self, clip: &Clip, index: &MotionIndex) -> Result<Clip, BuildError> {
+    /// The frames of a held `clip`.
+    pub(super) fn motion_of(&self, clip: &Clip, index: &MotionIndex) -> Result<Motion, BuildError> {
         let at = index.get(&key(clip)).ok_or_else(|| {
             BuildError::Motion(format!("no motion recorded for clip `{}`", clip.clip_id))
         })?;
+        self.motion(at)
+    }
+
+    /// `clip` with its frames read back.
+    pub(super) fn hydrate(&self, clip: &Clip, index: &MotionIndex) -> Result<Clip, BuildError> {
         let mut full = clip.clone();
-        full.motion = self.motion(at)?;
+        full.motion = self.motion_of(clip, index)?;
         Ok(full)
     }
 
