@@ -1,5 +1,5 @@
 //! The demo dataset opened by the loaders its users have: Hugging Face `datasets` (from the
-//! dataset card alone) and DuckDB. `.ci/run` installs both.
+//! dataset card alone, whose features must be what `datasets` infers from the shards) and DuckDB. `.ci/run` installs both.
 
 mod common;
 
@@ -18,7 +18,14 @@ root = sys.argv[1]
 manifest = json.load(open(os.path.join(root, 'manifest.json')))
 expected = {split: entry['rows'] for split, entry in manifest['splits'].items()}
 
-import datasets
+import datasets, yaml
+import pyarrow.parquet as pq
+# The card's features are what `datasets` itself infers from the shards' schema.
+card = yaml.safe_load(open(os.path.join(root, 'README.md')).read().split('---')[1])
+shard = os.path.join(root, manifest['splits']['train']['shards'][0]['file'])
+inferred = datasets.Features.from_arrow_schema(pq.read_schema(shard))._to_yaml_list()
+assert card['dataset_info']['features'] == inferred, 'card features differ from the Parquet schema'
+assert [s['name'] for s in card['dataset_info']['splits']] == ['train', 'val', 'test']
 ds = datasets.load_dataset(root)
 assert list(ds.keys()) == ['train', 'val', 'test'], list(ds.keys())
 assert {k: v.num_rows for k, v in ds.items()} == expected, ({k: v.num_rows for k, v in ds.items()}, expected)

@@ -249,6 +249,60 @@ pub(super) fn card_body(
     b
 }
 
+/// A column's type in the dataset card's `features` (the form Hugging Face `datasets` writes:
+/// `dtype`, `list`, `struct`), at `indent` spaces, from the same Arrow type the writer uses.
+fn hf_feature(y: &mut String, data_type: &arrow_schema::DataType, indent: usize) {
+    use arrow_schema::DataType;
+    let pad = " ".repeat(indent);
+    match data_type {
+        DataType::List(item) => match scalar_dtype(item.data_type()) {
+            Some(dtype) => y.push_str(&format!("{pad}list: {dtype}\n")),
+            None => {
+                y.push_str(&format!("{pad}list:\n"));
+                hf_nested(y, item.data_type(), indent + 2);
+            }
+        },
+        DataType::Struct(fields) => {
+            y.push_str(&format!("{pad}struct:\n"));
+            hf_fields(y, fields, indent);
+        }
+        other => y.push_str(&format!(
+            "{pad}dtype: {}\n",
+            scalar_dtype(other).unwrap_or("string")
+        )),
+    }
+}
+
+/// The inside of a `list:` that is not a scalar: a struct's fields, or another list.
+fn hf_nested(y: &mut String, data_type: &arrow_schema::DataType, indent: usize) {
+    match data_type {
+        arrow_schema::DataType::Struct(fields) => hf_fields(y, fields, indent - 2),
+        other => hf_feature(y, other, indent),
+    }
+}
+
+fn hf_fields(y: &mut String, fields: &arrow_schema::Fields, indent: usize) {
+    let pad = " ".repeat(indent);
+    for f in fields {
+        y.push_str(&format!("{pad}- name: {}\n", f.name()));
+        hf_feature(y, f.data_type(), indent + 2);
+    }
+}
+
+/// The `datasets` dtype name of a scalar Arrow type.
+fn scalar_dtype(data_type: &arrow_schema::DataType) -> Option<&'static str> {
+    use arrow_schema::DataType;
+    Some(match data_type {
+        DataType::Utf8 => "string",
+        DataType::Boolean => "bool",
+        DataType::Int32 => "int32",
+        DataType::Int64 => "int64",
+        DataType::Float32 => "float32",
+        DataType::Float64 => "float64",
+        _ => return None,
+    })
+}
+
 fn card(
     name: &str,
     splits: &BTreeMap<String, usize>,
@@ -269,7 +323,12 @@ fn card(
             "  - split: {split}\n    path: {DATA_DIR}/{split}-*.parquet\n"
         ));
     }
-    y.push_str("dataset_info:\n  splits:\n");
+    y.push_str("dataset_info:\n  features:\n");
+    for field in crate::io::schema::clip_schema().fields() {
+        y.push_str(&format!("  - name: {}\n", field.name()));
+        hf_feature(&mut y, field.data_type(), 4);
+    }
+    y.push_str("  splits:\n");
     for split in &order {
         let rows = splits.get(split).copied().unwrap_or(0);
         let bytes = split_bytes.get(split).copied().unwrap_or(0);
