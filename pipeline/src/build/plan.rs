@@ -71,8 +71,9 @@ impl Plan {
 }
 
 /// Works out what `build` (or `run` up to `options.through`) would compute, and why, from the
-/// stage cache and the ledger of the last run. Reads captures and cached outputs; computes and
-/// writes nothing, and sends no LLM request.
+/// stage cache and the ledger of the last run. Reads captures and cached outputs; runs no stage,
+/// writes no stage output or dataset file, and sends no LLM request (with an `[llm]` section it
+/// opens the response cache, creating the empty file if there is none).
 pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError> {
     let options = BuildOptions {
         force: false,
