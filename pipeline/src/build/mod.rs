@@ -981,16 +981,7 @@ fn llm_vetoes(
         .collect();
     let texts: Vec<(String, String)> = texts.into_iter().collect();
     let prompts = config.prompts()?;
-    let mut cache = match &config.llm {
-        Some(_) => {
-            let path = config.llm_cache_path();
-            Some(
-                crate::llm::cache::ResponseCache::open(&path)
-                    .map_err(|e| BuildError::Llm(format!("{}: {e}", path.display())))?,
-            )
-        }
-        None => None,
-    };
+    let mut cache = text::open_cache(shared)?;
     let vetoed = crate::stages::augment::incompatible_pairs(
         &texts,
         &prompts,

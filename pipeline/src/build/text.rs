@@ -57,7 +57,8 @@ struct ClipLabels {
     report: LabelReport,
 }
 
-fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> {
+/// The LLM response cache, when the config can use one (an `[llm]` section or the LLM labeller).
+pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> {
     let config = shared.config;
     let wanted = config.llm.is_some() || config.part_labels.labeller == Labeller::Llm;
     if !wanted {
@@ -198,7 +199,9 @@ pub(super) fn run(
                 .cloned()
                 .unwrap_or_default();
         }
-        outcome.runs.push(augment_run("paraphrase", &report));
+        outcome
+            .runs
+            .push(augment_run(Stage::Paraphrase.name(), &report));
         outcome.paraphrase = report;
     }
     // Task plans of every single action.
@@ -222,11 +225,14 @@ pub(super) fn run(
             &mut report,
         )?;
         for (text, reason) in &report.rejected {
-            outcome
-                .rejects
-                .push(text_reject("plan", text, "invalid_plan", reason.clone()));
+            outcome.rejects.push(text_reject(
+                Stage::Plan.name(),
+                text,
+                "invalid_plan",
+                reason.clone(),
+            ));
         }
-        outcome.runs.push(augment_run("plan", &report));
+        outcome.runs.push(augment_run(Stage::Plan.name(), &report));
         outcome.plan = report;
     }
     Ok(outcome)
