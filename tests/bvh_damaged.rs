@@ -6,6 +6,7 @@ mod common;
 use std::sync::OnceLock;
 
 use common::*;
+use motionforge::motion::bvh::MAX_JOINTS;
 use motionforge::motion::*;
 use proptest::prelude::*;
 
@@ -410,14 +411,26 @@ fn zero_negative_or_absurd_frame_time() {
         ("0.0e0", 0.0),
         // Positive but subnormal: 1 / t is infinite.
         ("1e-320", 1e-320),
+        // Outside the plausible capture rates (1 to 10,000 fps): a damaged header, which would
+        // otherwise size resampling by the duration it implies (1000 s per frame: 7 GB).
+        ("1000", 1000.0),
+        ("1000000", 1e6),
+        ("1e20", 1e20),
+        ("1.5", 1.5),
+        ("0.00001", 1e-5),
     ] {
         let e = err(&with_line(FRAME_TIME_LINE, &format!("Frame Time:\t{time}")));
         assert_eq!(e.kind, BvhErrorKind::FrameTime(value), "{time}");
         assert_eq!(e.line, FRAME_TIME_LINE, "{time}");
+        assert!(e.to_string().contains("1 to 10000 fps"), "{e}");
     }
-    // A very slow rate is kept, not snapped to 0 fps.
-    let bvh = read_bvh(&with_line(FRAME_TIME_LINE, "Frame Time: 1000")).unwrap();
-    assert_eq!(bvh.header_fps, 0.001);
+    // The ends of the range are accepted; a slow rate is kept, not snapped.
+    let bvh = read_bvh(&with_line(FRAME_TIME_LINE, "Frame Time: 1")).unwrap();
+    assert_eq!(bvh.header_fps, 1.0);
+    let bvh = read_bvh(&with_line(FRAME_TIME_LINE, "Frame Time: 0.0001")).unwrap();
+    assert_eq!(bvh.header_fps, 10_000.0);
+    let bvh = read_bvh(&with_line(FRAME_TIME_LINE, "Frame Time: 0.7")).unwrap();
+    assert!((bvh.header_fps - 1.0 / 0.7).abs() < 1e-12);
     // Anything after the frame time on its line.
     let e = err(&with_line(FRAME_TIME_LINE, "Frame Time: 0.0333333 0.5"));
     assert_eq!(
@@ -437,12 +450,34 @@ fn extra_frames() {
     let last = *l.last().unwrap();
     l.push(last);
     let e = err(&join(&l));
-    assert_eq!(e.kind, BvhErrorKind::ExtraFrames { declared: 20 });
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::ExtraFrames {
+            declared: 20,
+            header_line: FRAMES_LINE,
+            found: 21
+        }
+    );
     assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 20, Some(20)));
-    // Header says 19.
+    // Header says 19, or far fewer: the reject gives both numbers.
     let e = err(&with_line(FRAMES_LINE, "Frames: 19"));
-    assert_eq!(e.kind, BvhErrorKind::ExtraFrames { declared: 19 });
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::ExtraFrames {
+            declared: 19,
+            header_line: FRAMES_LINE,
+            found: 20
+        }
+    );
     assert_eq!((e.line, e.frame), (FIRST_FRAME_LINE + 19, Some(19)));
+    let e = err(&with_line(FRAMES_LINE, "Frames: 2"));
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "line {} (frame 2): header declares 2 frames (line {FRAMES_LINE}), file has 20",
+            FIRST_FRAME_LINE + 2
+        )
+    );
     // Blank lines after the last frame are not frames.
     let text = format!("{}\n\n  \t\n", walk20());
     assert_eq!(read_bvh(&text).unwrap().motion.num_frames(), FRAMES);
@@ -493,8 +528,8 @@ fn crlf_errors_report_the_same_lines() {
 #[test]
 fn deeply_nested_hierarchy_does_not_overflow_the_stack() {
     // Was a recursive descent: about 1,000 nested joints overflowed a test thread's 2 MB stack
-    // (an abort, not a panic).
-    for depth in [1_000usize, 100_000] {
+    // (an abort, not a panic). 999 joints under the root: the most a hierarchy may have.
+    for depth in [MAX_JOINTS - 1] {
         let mut s = String::from("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
         for _ in 0..depth {
             s.push_str("JOINT b\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
@@ -514,6 +549,14 @@ fn deeply_nested_hierarchy_does_not_overflow_the_stack() {
         assert_eq!(bvh.skeleton.len(), depth + 1);
         assert_eq!(bvh.skeleton.joints[depth].parent, Some(depth - 1));
     }
+    // Deeper than that is refused at the first joint too many, not read into memory.
+    let mut s = String::from("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
+    for _ in 0..100_000 {
+        s.push_str("JOINT b\n{\nOFFSET 0 0 0\nCHANNELS 0\n");
+    }
+    let e = err(&s);
+    assert_eq!(e.kind, BvhErrorKind::TooManyJoints);
+    assert_eq!(e.line, 5 + 4 * (MAX_JOINTS - 1) + 1);
 }
 
 #[test]
@@ -530,9 +573,191 @@ fn huge_frame_count_is_truncated_not_an_allocation_failure() {
     }
 }
 
+#[test]
+fn cr_only_line_endings_read_like_lf() {
+    // Classic Mac exports end lines with a lone CR. Read whole, not as one line (which once put
+    // the whole motion body into a reject message).
+    let lf = read_bvh(walk20()).unwrap();
+    let cr = read_bvh(&walk20().replace('\n', "\r")).unwrap();
+    assert_eq!(cr.motion.rotations, lf.motion.rotations);
+    assert_eq!(cr.motion.translations, lf.motion.translations);
+    assert_eq!(cr.channels, lf.channels);
+    // And damage in a CR-only file is reported on its own line, quoting only a short excerpt.
+    let n = FIRST_FRAME_LINE + 5;
+    let mut values: Vec<&str> = lines()[n - 1].split_ascii_whitespace().collect();
+    values[3] = "oops";
+    let damaged = with_line(n, &values.join(" ")).replace('\n', "\r");
+    let e = err(&damaged);
+    assert_eq!((e.line, e.frame), (n, Some(5)));
+}
+
+#[test]
+fn errors_quote_a_short_excerpt_of_the_offending_text() {
+    // A 100 kB token where a number belongs, and a whole frame line after `Frame Time`.
+    let long = "x".repeat(100_000);
+    let e = err(&with_line(FIRST_FRAME_LINE + 1, &long));
+    assert!(e.to_string().len() < 200, "{} bytes", e.to_string().len());
+    assert!(e.to_string().contains('…'));
+    let frame_line = lines()[FIRST_FRAME_LINE - 1];
+    let glued = with_line(
+        FRAME_TIME_LINE,
+        &format!("Frame Time: 0.0333333 {}", frame_line.repeat(50)),
+    );
+    let e = err(&glued);
+    assert_eq!(e.line, FRAME_TIME_LINE);
+    assert!(e.to_string().len() < 200, "{}", e);
+}
+
+#[test]
+fn a_value_beyond_any_real_capture_is_rejected_with_its_joint_and_channel() {
+    // A root position of 1e300 is finite, but positions, velocities and statistics computed from
+    // it overflow to infinity: rejected at read, with line, frame, joint and channel.
+    let n = FIRST_FRAME_LINE + 7;
+    let mut values: Vec<String> = lines()[n - 1]
+        .split_ascii_whitespace()
+        .map(String::from)
+        .collect();
+    values[0] = "1e300".into();
+    let e = err(&with_line(n, &values.join(" ")));
+    assert_eq!((e.line, e.frame), (n, Some(7)));
+    let root = read_bvh(walk20()).unwrap().skeleton.joints[0].name.clone();
+    assert_eq!(
+        e.kind,
+        BvhErrorKind::OutOfRange {
+            what: format!("joint `{root}` channel Xposition"),
+            value: 1e300
+        }
+    );
+    // Offsets too.
+    let e = err(&with_line(FIRST_CHANNELS_LINE - 1, "\tOFFSET 0 -1e9 0"));
+    assert!(matches!(e.kind, BvhErrorKind::OutOfRange { .. }), "{e}");
+    // The bound itself is accepted.
+    values[0] = format!("{}", motionforge::motion::bvh::MAX_MAGNITUDE);
+    assert!(read_bvh(&with_line(n, &values.join(" "))).is_ok());
+}
+
+/// A hierarchy of `joints` joints without channels under a root with one, and `frames` frame
+/// lines of one value each: frame lines that cost two bytes of text but a pose of every joint.
+fn zero_channel_rig(joints: usize, declared: &str, frames: usize) -> String {
+    let mut text = String::from("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 1 Xposition\n");
+    for i in 0..joints {
+        text.push_str(&format!("JOINT j{i}\n{{\nOFFSET 0 1 0\nCHANNELS 0\n}}\n"));
+    }
+    text.push_str(&format!(
+        "}}\nMOTION\nFrames: {declared}\nFrame Time: 0.0333333\n"
+    ));
+    text.push_str(&"0\n".repeat(frames));
+    text
+}
+
+#[test]
+fn claimed_and_real_sizes_are_bounded_before_anything_is_allocated() {
+    // Once `Frames: 1e12` with 2,000 joints reserved (body length / 2) x joints poses: 64 GB.
+    let e = err(&zero_channel_rig(2_000, "1000000000000", 10));
+    assert_eq!(e.kind, BvhErrorKind::TooManyJoints);
+    let text = zero_channel_rig(900, "1000000000000", 20_000);
+    let (result, peak) = peak_allocation(|| read_bvh(&text));
+    let e = result.unwrap_err();
+    assert!(matches!(e.kind, BvhErrorKind::TooLarge { .. }), "{e}");
+    assert!(
+        peak < 1_000_000_000,
+        "peak {peak} bytes for {} bytes",
+        text.len()
+    );
+    // A capture inside the bound, with more frames than declared: both numbers in the reject.
+    let e = err(&zero_channel_rig(10, "3", 8));
+    assert!(
+        matches!(
+            e.kind,
+            BvhErrorKind::ExtraFrames {
+                declared: 3,
+                found: 8,
+                ..
+            }
+        ),
+        "{e}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Allocation accounting: the bytes this thread holds, and their peak.
+// ---------------------------------------------------------------------------------------------
+
+struct Counting;
+
+thread_local! {
+    static HELD: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    static PEAK: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+fn note_alloc(size: usize) {
+    let _ = HELD.try_with(|h| {
+        let now = h.get().saturating_add(size);
+        h.set(now);
+        let _ = PEAK.try_with(|p| p.set(p.get().max(now)));
+    });
+}
+
+fn note_free(size: usize) {
+    let _ = HELD.try_with(|h| h.set(h.get().saturating_sub(size)));
+}
+
+// SAFETY: forwards every call to the system allocator unchanged; only counts sizes.
+unsafe impl std::alloc::GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        let p = unsafe { std::alloc::System.alloc(layout) };
+        if !p.is_null() {
+            note_alloc(layout.size());
+        }
+        p
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        unsafe { std::alloc::System.dealloc(ptr, layout) };
+        note_free(layout.size());
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
+        let p = unsafe { std::alloc::System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            note_free(layout.size());
+            note_alloc(new_size);
+        }
+        p
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// What `f` returns, and the most bytes this thread held beyond what it held before, while `f` ran.
+fn peak_allocation<T>(f: impl FnOnce() -> T) -> (T, usize) {
+    let before = HELD.with(|h| h.get());
+    PEAK.with(|p| p.set(before));
+    let out = f();
+    let peak = PEAK.with(|p| p.get());
+    (out, peak - before)
+}
+
 // ---------------------------------------------------------------------------------------------
 // Random damage.
 // ---------------------------------------------------------------------------------------------
+
+/// Extreme header numbers: absurd frame counts, frame times and channel counts.
+const EXTREMES: &[&str] = &[
+    "1000000000000",
+    "18446744073709551615",
+    "1e18",
+    "1e300",
+    "1000000",
+    "1000",
+    "0.001",
+    "0.0000001",
+    "1e-300",
+    "-1",
+    "7",
+    "2147483648",
+];
 
 /// Tokens worth inserting: BVH keywords, braces, odd numbers and characters.
 const TOKENS: &[&str] = &[
@@ -595,6 +820,10 @@ enum Damage {
     DeleteLine(usize),
     /// Flip the n-th brace (`{` <-> `}`).
     SwapBrace(usize),
+    /// Set the n-th `CHANNELS` count to this text (the names after it stay).
+    SetChannels(usize, String),
+    /// Turn every line end into this one (LF, CRLF or a lone CR).
+    LineEnds(&'static str),
 }
 
 fn boundary(text: &str, pos: usize) -> usize {
@@ -678,6 +907,24 @@ fn apply(mut text: String, damage: &Damage) -> String {
             }
             text = lines.concat();
         }
+        Damage::SetChannels(n, value) => {
+            let at: Vec<usize> = text.match_indices("CHANNELS").map(|(i, _)| i).collect();
+            if !at.is_empty() {
+                let from = at[n % at.len()] + "CHANNELS".len();
+                let rest = &text[from..];
+                let start = from + rest.len() - rest.trim_start().len();
+                let end = text[start..]
+                    .find(|c: char| c.is_ascii_whitespace())
+                    .map_or(text.len(), |e| start + e);
+                text.replace_range(start..end, value);
+            }
+        }
+        Damage::LineEnds(end) => {
+            text = text
+                .replace("\r\n", "\n")
+                .replace('\r', "\n")
+                .replace('\n', end);
+        }
         Damage::SwapBrace(n) => {
             let braces: Vec<usize> = text.match_indices(['{', '}']).map(|(i, _)| i).collect();
             if !braces.is_empty() {
@@ -704,6 +951,7 @@ fn garbage() -> impl Strategy<Value = String> {
 fn header_value() -> impl Strategy<Value = String> {
     prop_oneof![
         (0u64..40).prop_map(|v| v.to_string()),
+        prop::sample::select(EXTREMES).prop_map(String::from),
         any::<u64>().prop_map(|v| v.to_string()),
         any::<f64>().prop_map(|v| v.to_string()),
         (-3i32..3, -330i32..330).prop_map(|(m, e)| format!("{m}e{e}")),
@@ -722,13 +970,32 @@ fn damage() -> impl Strategy<Value = Damage> {
         any::<usize>().prop_map(Damage::DuplicateLine),
         any::<usize>().prop_map(Damage::DeleteLine),
         any::<usize>().prop_map(Damage::SwapBrace),
+        (any::<usize>(), header_value()).prop_map(|(n, v)| Damage::SetChannels(n, v)),
+        prop::sample::select(&["\n", "\r\n", "\r"][..]).prop_map(Damage::LineEnds),
     ]
+}
+
+/// Lines as the reader counts them: ended by LF, CRLF or a lone CR.
+fn line_count(text: &str) -> usize {
+    text.replace("\r\n", "\n")
+        .replace('\r', "\n")
+        .lines()
+        .count()
 }
 
 /// `read_bvh` returns (never panics); an error's line is a line of the text (an empty text counts
 /// as one line); a success is self-consistent.
 fn check(text: &str) -> Result<(), TestCaseError> {
-    match read_bvh(text) {
+    let (result, peak) = peak_allocation(|| read_bvh(text));
+    // Memory follows the text, never a number the text claims: a frame value takes at least two
+    // bytes of text and becomes at most a few tens of bytes of decoded pose (doubled by growth).
+    prop_assert!(
+        peak <= 64 * text.len() + (1 << 20),
+        "{} bytes allocated for {} bytes of text",
+        peak,
+        text.len()
+    );
+    match result {
         Ok(bvh) => {
             let n = bvh.skeleton.len();
             prop_assert!(n > 0);
@@ -737,7 +1004,7 @@ fn check(text: &str) -> Result<(), TestCaseError> {
             prop_assert!(bvh.header_fps.is_finite() && bvh.header_fps > 0.0);
         }
         Err(e) => {
-            let lines = text.lines().count().max(1);
+            let lines = line_count(text).max(1);
             prop_assert!(
                 (1..=lines).contains(&e.line),
                 "error line {} outside 1..={}: {}",

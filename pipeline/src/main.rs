@@ -28,6 +28,8 @@ Exit codes:
   2  usage or config error: bad arguments, a config that is missing, does not parse or
      fails its checks, or names files that do not exist (`motionforge config check`)
   3  build --strict finished, but some inputs were rejected (see rejects.jsonl)
+  4  build finished with 0 clips: every capture was rejected or every segment dropped
+     (see rejects.jsonl and build-report.json)
 
 Logging: progress and log lines go to standard error (bars on a terminal, plain lines
 otherwise, JSON lines with --json); results go to standard output.";
@@ -280,6 +282,7 @@ enum ConfigCommand {
 }
 
 fn main() -> ExitCode {
+    ignore_file_size_signal();
     let cli = Cli::parse();
     let ui = Ui::new(&cli);
     let result = run(cli, &ui);
@@ -303,6 +306,17 @@ fn main() -> ExitCode {
             }
             ExitCode::from(code)
         }
+    }
+}
+
+/// Past a file size limit (`ulimit -f`), the kernel sends SIGXFSZ, whose default action kills
+/// the process mid-write. Ignored, the write fails with EFBIG instead, which the build reports as
+/// "File too large" (exit code 1) after removing its temporary file.
+fn ignore_file_size_signal() {
+    // SAFETY: setting a signal's disposition to SIG_IGN installs no handler code; it runs before
+    // any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }
 }
 
@@ -582,10 +596,38 @@ fn build_command(args: BuildArgs, through: Option<Stage>, ui: &Ui) -> Result<Exi
     } else if ui.status() {
         print_report(&report)?;
     }
+    if report.clips == 0 && through.is_none_or(|t| t >= Stage::Write) {
+        let dropped: usize = report.drops_by_reason.values().sum();
+        tracing::error!(
+            captures = report.captures,
+            rejects = report.rejects.len(),
+            dropped,
+            "0 clips: {}; see {} and {}",
+            empty_reason(report.captures, report.rejects.len(), dropped),
+            dataset_dir.join(motionforge::build::REJECTS_FILE).display(),
+            dataset_dir.join(motionforge::build::REPORT_FILE).display()
+        );
+        return Ok(ExitCode::from(EXIT_EMPTY));
+    }
     if args.strict && !report.rejects.is_empty() {
         return Ok(ExitCode::from(3));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Exit code of a build that finished but wrote no row (every capture rejected or dropped).
+const EXIT_EMPTY: u8 = 4;
+
+/// Why a build has no rows, in words.
+fn empty_reason(captures: usize, rejects: usize, dropped: usize) -> String {
+    let captures_word = if captures == 1 { "capture" } else { "captures" };
+    match (captures, rejects, dropped) {
+        (0, _, _) => "no capture was found".to_string(),
+        (c, r, 0) if r >= c => format!("every capture was rejected ({r} of {c} {captures_word})"),
+        (c, r, d) => format!(
+            "{r} of {c} {captures_word} rejected and every segment of the others dropped ({d} segments)"
+        ),
+    }
 }
 
 fn load_checked(path: &Path, output: Option<PathBuf>) -> Result<Config> {

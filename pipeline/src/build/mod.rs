@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
-pub use reject::Reject;
+pub use reject::{Dropped, Reject};
 pub use workspace::{
     Fingerprint, Ledger, Miss, StageLedger, Stamp, Workspace, WorkspaceError, sha256_hex,
     temp_path, write_atomic, write_atomic_with,
@@ -219,6 +219,8 @@ pub struct BuildReport {
     pub unmapped_labels: BTreeMap<String, usize>,
     /// Segments dropped during segmentation, by reason.
     pub drops_by_reason: BTreeMap<String, usize>,
+    /// Every dropped segment: file, reason, text and frames.
+    pub drops: Vec<Dropped>,
     /// Annotation quirks handled (clamped ends, null labels, ...), by kind.
     pub notes_by_kind: BTreeMap<String, usize>,
     /// Every annotation quirk, for people.
@@ -404,6 +406,7 @@ fn run_stages<'a>(
     let mut index = MotionIndex::new();
     let mut rejects: Vec<Reject> = Vec::new();
     let mut drops_by_reason = BTreeMap::new();
+    let mut drops: Vec<Dropped> = Vec::new();
     let mut unmapped_labels = BTreeMap::new();
     let mut notes: Vec<Note> = Vec::new();
     for item in items {
@@ -419,6 +422,7 @@ fn run_stages<'a>(
         clips.extend(item.mirrored);
         rejects.extend(item.rejects);
         add_counts(&mut drops_by_reason, item.segment.drops);
+        drops.extend(item.segment.dropped);
         add_counts(&mut unmapped_labels, item.segment.unmapped);
         notes.extend(item.segment.notes);
     }
@@ -449,6 +453,7 @@ fn run_stages<'a>(
     }
 
     rejects.extend(text.rejects.iter().cloned());
+    let mut rejects: Vec<Reject> = rejects.into_iter().map(Reject::bounded).collect();
     // Row order: by clip id, so the table does not depend on scheduling or glob order.
     clips.sort_by(|a, b| {
         a.clip_id
@@ -457,6 +462,7 @@ fn run_stages<'a>(
     });
     rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
     notes.sort();
+    drops.sort();
 
     // Synthetic pairs from the labelled originals and mirrors, and plausibility for every clip.
     let mut compose_report = crate::stages::compose::ComposeReport::default();
@@ -496,6 +502,7 @@ fn run_stages<'a>(
         rejects,
         notes,
         drops_by_reason,
+        drops,
         unmapped_labels,
         text,
         compose: compose_report,
@@ -638,6 +645,7 @@ struct Staged<'a> {
     rejects: Vec<Reject>,
     notes: Vec<Note>,
     drops_by_reason: BTreeMap<String, usize>,
+    drops: Vec<Dropped>,
     unmapped_labels: BTreeMap<String, usize>,
     text: text::TextOutcome,
     compose: crate::stages::compose::ComposeReport,
@@ -693,6 +701,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         rejects,
         notes,
         drops_by_reason,
+        drops,
         unmapped_labels,
         text,
         compose,
@@ -816,7 +825,22 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             key: "*".into(),
             stamp: table_stamp,
         });
-        if through >= Stage::Report {
+        if through >= Stage::Report && clips.is_empty() {
+            // Nothing to describe: a report of an earlier build would describe rows that are gone.
+            let stale = output.join("report");
+            if stale.exists() {
+                std::fs::remove_dir_all(&stale).map_err(workspace::io_err(&stale))?;
+            }
+            let _ = std::fs::remove_file(workspace.root().join(REPORT_MARKER));
+            options.progress.stage_started(Stage::Report.name(), 0);
+            options.progress.stage_finished(Stage::Report.name(), 0, 0);
+            stages.push(StageRun {
+                stage: Stage::Report.name().into(),
+                items: 0,
+                ran: 0,
+                reused: 0,
+            });
+        } else if through >= Stage::Report {
             // The report is derived from the shards: redo it when they changed or it is missing.
             options.progress.stage_started(Stage::Report.name(), 1);
             let report_ran = !report_is_current(&output, workspace, &table_fingerprint);
@@ -847,6 +871,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         motion_types,
         unmapped_labels,
         drops_by_reason,
+        drops,
         notes_by_kind,
         notes,
         rejects_by_reason,

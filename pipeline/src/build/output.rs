@@ -125,13 +125,16 @@ fn plan_shards(clips: &[Clip], index: &MotionIndex, target: u64) -> Vec<ShardPla
 
 /// Reads back `split` and `source_path` of every written shard and refuses a capture found in
 /// two splits: the guarantee is checked on what was written, not assumed.
-fn check_splits(output: &Path, plans: &[ShardPlan]) -> Result<(), BuildError> {
+fn check_splits(
+    plans: &[ShardPlan],
+    path_of: impl Fn(&ShardPlan) -> std::path::PathBuf,
+) -> Result<(), BuildError> {
     use arrow_array::{Array, StringArray};
     use parquet::arrow::ProjectionMask;
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
     let mut seen: BTreeMap<String, std::collections::BTreeSet<String>> = BTreeMap::new();
     for plan in plans {
-        let path = output.join(&plan.file);
+        let path = path_of(plan);
         let table_err = |e: parquet::errors::ParquetError| BuildError::Table {
             path: path.clone(),
             source: e.into(),
@@ -363,6 +366,70 @@ pub(super) fn written(
     Ok(())
 }
 
+/// Inside the workspace: where a write stages the new dataset's files before switching.
+const STAGING_DIR: &str = "staging";
+
+/// Moves a fully written dataset from `staging` into `output`, by renames only (no new bytes, so
+/// no disk-space failure part-way). The old manifest goes first and the new one comes last:
+/// while the switch runs, the folder has no manifest, which readers are told means "not a
+/// finished dataset" (user guide, "Write faults"); before and after, the manifest describes
+/// exactly the shards in `data/`.
+fn switch(
+    output: &Path,
+    staging: &Path,
+    plans: &[ShardPlan],
+    has_normalization: bool,
+) -> Result<(), BuildError> {
+    let rename = |from: &Path, to: &Path| -> Result<(), BuildError> {
+        std::fs::rename(from, to).map_err(|e| {
+            BuildError::Workspace(workspace::io_err(to)(std::io::Error::new(
+                e.kind(),
+                format!("cannot move the new file into place: {e}"),
+            )))
+        })
+    };
+    let manifest = output.join(MANIFEST_FILE);
+    if manifest.exists() {
+        std::fs::remove_file(&manifest).map_err(workspace::io_err(&manifest))?;
+    }
+    let data = output.join(DATA_DIR);
+    std::fs::create_dir_all(&data).map_err(workspace::io_err(&data))?;
+    for plan in plans {
+        let staged = staging.join(&plan.file);
+        if staged.is_file() {
+            rename(&staged, &output.join(&plan.file))?;
+        }
+    }
+    // Shards of an earlier layout (other split names or counts) would look like part of the set.
+    let planned: std::collections::BTreeSet<&str> = plans.iter().map(|p| p.file.as_str()).collect();
+    if let Ok(entries) = std::fs::read_dir(&data) {
+        for entry in entries.flatten() {
+            let name = format!("{DATA_DIR}/{}", entry.file_name().to_string_lossy());
+            if name.ends_with(".parquet") && !planned.contains(name.as_str()) {
+                std::fs::remove_file(entry.path()).map_err(workspace::io_err(&entry.path()))?;
+            }
+        }
+    }
+    let normalization = output.join(NORMALIZATION_DIR);
+    if normalization.exists() {
+        std::fs::remove_dir_all(&normalization).map_err(workspace::io_err(&normalization))?;
+    }
+    if has_normalization {
+        rename(&staging.join(NORMALIZATION_DIR), &normalization)?;
+    }
+    for name in [
+        SKELETONS_FILE,
+        REJECTS_FILE,
+        PLANS_FILE,
+        CARD_FILE,
+        MANIFEST_FILE,
+    ] {
+        rename(&staging.join(name), &output.join(name))?;
+    }
+    let _ = std::fs::remove_dir_all(staging);
+    Ok(())
+}
+
 pub(super) fn write_outputs(
     force: bool,
     output: &Path,
@@ -398,23 +465,15 @@ pub(super) fn write_outputs(
         plans_for_shards.first().map(|p| p.split.clone())
     };
     let mut normalization = crate::io::normalization::NormalizationStats::default();
-    // From here until the new manifest is written the folder is not a finished dataset: the old
-    // manifest goes first, so a failure part-way leaves no manifest vouching for mixed shards.
-    let manifest_path = output.join(MANIFEST_FILE);
-    if manifest_path.exists() {
-        std::fs::remove_file(&manifest_path).map_err(workspace::io_err(&manifest_path))?;
+    // Everything new is written into a staging folder first; the dataset folder keeps the
+    // previous dataset, complete and valid, until the new one is fully written (a full disk
+    // fails here and leaves it untouched). Then `switch` moves the new files in, by renames only.
+    let staging = workspace.root().join(STAGING_DIR);
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging).map_err(workspace::io_err(&staging))?;
     }
-    // Shards of an earlier layout (other split names or counts) would look like part of the set.
-    let planned: std::collections::BTreeSet<&str> =
-        plans_for_shards.iter().map(|p| p.file.as_str()).collect();
-    if let Ok(entries) = std::fs::read_dir(output.join(DATA_DIR)) {
-        for entry in entries.flatten() {
-            let name = format!("{DATA_DIR}/{}", entry.file_name().to_string_lossy());
-            if name.ends_with(".parquet") && !planned.contains(name.as_str()) {
-                let _ = std::fs::remove_file(entry.path());
-            }
-        }
-    }
+    let staged_data = staging.join(DATA_DIR);
+    std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
@@ -435,13 +494,19 @@ pub(super) fn write_outputs(
             .json("schema version", &crate::io::schema::SCHEMA_VERSION)
             .json("config features", &companions.features)
             .finish();
-        let path = output.join(&plan.file);
+        let in_place = output.join(&plan.file);
         let fresh = !force
             && state.shards.get(&plan.file) == Some(&fp)
             && state
                 .outputs
                 .get(&plan.file)
-                .is_some_and(|sha| std::fs::read(&path).is_ok_and(|b| &sha256_hex(&b) == sha));
+                .is_some_and(|sha| std::fs::read(&in_place).is_ok_and(|b| &sha256_hex(&b) == sha));
+        // Unchanged shards stay where they are; changed ones are written to the staging folder.
+        let path = if fresh {
+            in_place
+        } else {
+            staging.join(&plan.file)
+        };
         let for_stats = stats_split.as_deref() == Some(plan.split.as_str());
         // One shard's rows with their frames at a time.
         let rows: Vec<Clip> = if !fresh || for_stats {
@@ -473,8 +538,9 @@ pub(super) fn write_outputs(
                 })
             })
             .map_err(|e| match table_error.take() {
+                // Named by where it goes: the staging folder is an implementation detail.
                 Some(source) => BuildError::Table {
-                    path: path.clone(),
+                    path: output.join(&plan.file),
                     source,
                 },
                 None => BuildError::Workspace(e),
@@ -494,19 +560,27 @@ pub(super) fn write_outputs(
         *split_bytes.entry(plan.split.clone()).or_insert(0) += bytes.len();
         shard_fingerprints.insert(plan.file.clone(), fp);
     }
-    check_splits(output, &plans_for_shards)?;
+    let staged_path = |plan: &ShardPlan| {
+        let staged = staging.join(&plan.file);
+        if staged.is_file() {
+            staged
+        } else {
+            output.join(&plan.file)
+        }
+    };
+    check_splits(&plans_for_shards, staged_path)?;
     if stats_split.is_some() {
-        normalization.write(&output.join(NORMALIZATION_DIR))?;
+        normalization.write(&staging.join(NORMALIZATION_DIR))?;
     }
-    write_atomic(&output.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
+    write_atomic(&staging.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
     let mut lines = String::new();
     for r in rejects {
         lines.push_str(&serde_json::to_string(r).unwrap_or_default());
         lines.push('\n');
     }
-    write_atomic(&output.join(REJECTS_FILE), lines.as_bytes())?;
+    write_atomic(&staging.join(REJECTS_FILE), lines.as_bytes())?;
     let mut outputs = BTreeMap::new();
-    let plans_path = output.join(PLANS_FILE);
+    let plans_path = staging.join(PLANS_FILE);
     let mut plans_error = None;
     write_atomic_with(&plans_path, |file| {
         crate::io::parquet::write_plans(file.try_clone()?, plans)
@@ -518,7 +592,7 @@ pub(super) fn write_outputs(
     })
     .map_err(|e| match plans_error.take() {
         Some(source) => BuildError::Table {
-            path: plans_path.clone(),
+            path: output.join(PLANS_FILE),
             source,
         },
         None => BuildError::Workspace(e),
@@ -531,16 +605,14 @@ pub(super) fn write_outputs(
         })
         .collect();
     manifest["splits"] = serde_json::Value::Object(splits_json);
-    write_atomic(
-        &output.join(MANIFEST_FILE),
-        &serde_json::to_vec_pretty(&manifest).unwrap_or_default(),
-    )?;
+    let manifest_bytes = serde_json::to_vec_pretty(&manifest).unwrap_or_default();
+    write_atomic(&staging.join(MANIFEST_FILE), &manifest_bytes)?;
     let name = manifest["dataset"]
         .as_str()
         .unwrap_or("dataset")
         .to_string();
     write_atomic(
-        &output.join(CARD_FILE),
+        &staging.join(CARD_FILE),
         card(&name, &split_rows, &split_bytes, companions).as_bytes(),
     )?;
     let mut names: Vec<String> = [
@@ -553,11 +625,15 @@ pub(super) fn write_outputs(
     .map(String::from)
     .to_vec();
     names.extend(plans_for_shards.iter().map(|p| p.file.clone()));
-    for name in names {
-        let path = output.join(&name);
+    for name in &names {
+        let path = match plans_for_shards.iter().find(|p| &p.file == name) {
+            Some(plan) => staged_path(plan),
+            None => staging.join(name),
+        };
         let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
-        outputs.insert(name, sha256_hex(&bytes));
+        outputs.insert(name.clone(), sha256_hex(&bytes));
     }
+    switch(output, &staging, &plans_for_shards, stats_split.is_some())?;
     let state = State {
         table_fingerprint: fingerprint.to_string(),
         shards: shard_fingerprints,

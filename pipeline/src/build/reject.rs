@@ -20,6 +20,21 @@ pub struct Reject {
     pub message: String,
 }
 
+/// Longest reject message kept, in characters: a message quoting a damaged file must not carry
+/// the file into `rejects.jsonl`, the build report, the terminal and the service history.
+pub const MAX_MESSAGE_CHARS: usize = 400;
+
+impl Reject {
+    /// This reject with its message cut to [`MAX_MESSAGE_CHARS`] (marked with `…`).
+    pub fn bounded(mut self) -> Reject {
+        if let Some((cut, _)) = self.message.char_indices().nth(MAX_MESSAGE_CHARS) {
+            self.message.truncate(cut);
+            self.message.push('…');
+        }
+        self
+    }
+}
+
 impl std::fmt::Display for Reject {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}", self.file)?;
@@ -28,4 +43,17 @@ impl std::fmt::Display for Reject {
         }
         write!(f, ": {}", self.message)
     }
+}
+
+/// A segment that became no clip: which file, why, and what it said.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct Dropped {
+    /// The capture file.
+    pub file: String,
+    /// Short machine-readable reason (`too_short`, `duplicate`, `empty_text`, ...).
+    pub reason: String,
+    /// The segment's text (an excerpt), or its annotation id where it has no text.
+    pub text: String,
+    /// The segment's frame range at the capture's rate, where it got that far.
+    pub frames: Option<(u64, u64)>,
 }

@@ -2,6 +2,14 @@
 //! problem with its key, value, expectation and line, all reported at once.
 
 use super::*;
+use crate::motion::bvh::FPS_RANGE;
+
+/// Longest dataset name: a folder name, within the 255-byte file-name limit of common file
+/// systems with room for the prefixes and suffixes of temporary files.
+const MAX_NAME_BYTES: usize = 200;
+/// Longest `<output>/<name>`: the files under it (`.motionforge/cache/<stage>/<sha256>.bin`, up to
+/// about 120 bytes more) must stay within Linux's 4096-byte path limit.
+const MAX_DATASET_PATH_BYTES: usize = 3800;
 
 impl Config {
     pub(super) fn validate(&self, c: &mut Checks<'_>) {
@@ -19,6 +27,24 @@ impl Config {
                 &[K("dataset"), K("name")],
                 format!("{:?}", d.name),
                 "a non-empty name of letters, digits, `-`, `_`, `.` (not `.` or `..`): it names the dataset folder",
+            );
+        }
+        if d.name.len() > MAX_NAME_BYTES {
+            c.push(
+                &[K("dataset"), K("name")],
+                format!("{} characters", d.name.len()),
+                &format!(
+                    "at most {MAX_NAME_BYTES} characters: it names the dataset folder, and file systems refuse names over 255 bytes (the rest is room for temporary-file prefixes and suffixes)"
+                ),
+            );
+        }
+        if d.output.as_os_str().len() + d.name.len() > MAX_DATASET_PATH_BYTES {
+            c.push(
+                &[K("dataset"), K("output")],
+                format!("{} bytes with the name", d.output.as_os_str().len() + d.name.len()),
+                &format!(
+                    "a dataset folder path of at most {MAX_DATASET_PATH_BYTES} bytes: files inside it must stay within the system's 4096-byte path limit"
+                ),
             );
         }
         if d.output.as_os_str().is_empty() {
@@ -166,11 +192,15 @@ impl Config {
                 );
             }
             for (file, fps) in &s.fps_override {
-                if !(fps.is_finite() && *fps > 0.0) {
+                if !FPS_RANGE.contains(fps) {
                     c.push(
                         &[K("sources"), I(i), K("fps_override"), K(file)],
                         fps.to_string(),
-                        "a frame rate above 0",
+                        &format!(
+                            "a capture frame rate from {} to {} fps",
+                            FPS_RANGE.start(),
+                            FPS_RANGE.end()
+                        ),
                     );
                 }
             }
@@ -218,12 +248,16 @@ impl Config {
             }
             if let LabelConfig::EventLog { fps, .. } | LabelConfig::FrameIndex { fps, .. } =
                 &s.labels
-                && !(fps.is_finite() && *fps > 0.0)
+                && !FPS_RANGE.contains(fps)
             {
                 c.push(
                     &at(&[K("labels"), K("fps")]),
                     fps.to_string(),
-                    "a frame rate above 0",
+                    &format!(
+                        "a frame rate from {} to {} fps",
+                        FPS_RANGE.start(),
+                        FPS_RANGE.end()
+                    ),
                 );
             }
             let seg = &s.segment;

@@ -37,6 +37,14 @@ pub enum TableError {
     /// Parquet encoding or I/O failed.
     #[error("writing Parquet: {0}{hint}", hint = parquet_hint(.0))]
     Parquet(#[from] ParquetError),
+    /// A value that is NaN or infinite (never written).
+    #[error("clip `{clip}`: column `{column}` would hold a value that is not finite; not written")]
+    NonFinite {
+        /// The clip.
+        clip: String,
+        /// The column.
+        column: String,
+    },
     /// A clip's skeleton profile was not supplied.
     #[error("clip `{clip}` uses skeleton profile `{profile}`, which the writer was not given")]
     MissingProfile {
@@ -404,7 +412,52 @@ pub fn clips_to_batch(
                 .map(|v| v.iter().map(|x| *x as f64).collect())
         })),
     ];
-    Ok(RecordBatch::try_new(schema, columns)?)
+    let batch = RecordBatch::try_new(schema, columns)?;
+    // Upstream checks (value bounds at ingest) keep every number finite; this is the last guard,
+    // so that a missed case fails the write instead of putting NaN or infinity in a dataset.
+    for (c, column) in batch.columns().iter().enumerate() {
+        if all_finite(column.as_ref()) {
+            continue;
+        }
+        for (r, clip) in clips.iter().enumerate() {
+            if !all_finite(column.slice(r, 1).as_ref()) {
+                return Err(TableError::NonFinite {
+                    clip: clip.clip_id.clone(),
+                    column: batch.schema().field(c).name().clone(),
+                });
+            }
+        }
+    }
+    Ok(batch)
+}
+
+/// True when every float in `array` (nested lists and structs included) is finite.
+fn all_finite(array: &dyn arrow_array::Array) -> bool {
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::{Float32Type, Float64Type};
+    match array.data_type() {
+        DataType::Float32 => array
+            .as_primitive::<Float32Type>()
+            .iter()
+            .all(|v| v.is_none_or(f32::is_finite)),
+        DataType::Float64 => array
+            .as_primitive::<Float64Type>()
+            .iter()
+            .all(|v| v.is_none_or(f64::is_finite)),
+        DataType::List(_) => {
+            let list = array.as_list::<i32>();
+            let offsets = list.value_offsets();
+            let (start, end) = (offsets[0] as usize, offsets[offsets.len() - 1] as usize);
+            all_finite(list.values().slice(start, end - start).as_ref())
+        }
+        DataType::FixedSizeList(_, _) => all_finite(array.as_fixed_size_list().values().as_ref()),
+        DataType::Struct(_) => array
+            .as_struct()
+            .columns()
+            .iter()
+            .all(|c| all_finite(c.as_ref())),
+        _ => true,
+    }
 }
 
 /// Clips per row group: large enough for efficient scans, small enough that one group's buffers

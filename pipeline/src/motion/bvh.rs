@@ -71,17 +71,107 @@ pub enum BvhErrorKind {
         found: usize,
     },
     /// More motion lines than `Frames:` declares.
-    #[error("header declares {declared} frames, file has more")]
+    #[error("header declares {declared} frames (line {header_line}), file has {found}")]
     ExtraFrames {
         /// Frames declared in the header.
         declared: usize,
+        /// The line of the `Frames:` header.
+        header_line: usize,
+        /// Frame lines present.
+        found: usize,
     },
-    /// `Frame Time` is zero, negative or not finite.
-    #[error("frame time must be a positive number of seconds, found {0}")]
+    /// `Frame Time` is outside the plausible range [`FRAME_TIME_RANGE`].
+    #[error(
+        "frame time must be between {lo} and {hi} seconds ({fps_lo} to {fps_hi} fps), found {0}",
+        lo = FRAME_TIME_RANGE.start(),
+        hi = FRAME_TIME_RANGE.end(),
+        fps_lo = FPS_RANGE.start(),
+        fps_hi = FPS_RANGE.end()
+    )]
     FrameTime(f64),
+    /// A value beyond [`MAX_MAGNITUDE`]: finite, but far outside any real capture, and large
+    /// enough to overflow positions, velocities or statistics computed from it.
+    #[error("{what} is {value:e}, beyond the plausible ±{max:e} (a damaged value)", max = MAX_MAGNITUDE)]
+    OutOfRange {
+        /// Which value (joint and channel, or offset axis).
+        what: String,
+        /// The value in the file.
+        value: f64,
+    },
+    /// More joints than [`MAX_JOINTS`].
+    #[error("more than {max} joints in the HIERARCHY", max = MAX_JOINTS)]
+    TooManyJoints,
+    /// More frames x joints than [`MAX_JOINT_FRAMES`].
+    #[error(
+        "capture too long: {frames} frames of {joints} joints exceed the limit of {max} joint-frames; split the capture",
+        max = MAX_JOINT_FRAMES
+    )]
+    TooLarge {
+        /// Frames read so far (or declared).
+        frames: usize,
+        /// Joints of the hierarchy.
+        joints: usize,
+    },
     /// The hierarchy has no joint.
     #[error("HIERARCHY defines no joint")]
     NoJoints,
+}
+
+/// Capture frame rates motionforge accepts, in frames per second, from headers and overrides alike.
+/// Real capture systems record between a few and a few thousand frames per second; a value outside
+/// this range is a damaged header, and accepting it would size resampling by an absurd duration.
+pub const FPS_RANGE: std::ops::RangeInclusive<f64> = 1.0..=10_000.0;
+
+/// `Frame Time` values accepted in a BVH header (seconds): the reciprocal of [`FPS_RANGE`].
+pub const FRAME_TIME_RANGE: std::ops::RangeInclusive<f64> = 0.0001..=1.0;
+
+/// Largest magnitude accepted for an offset or channel value (any unit: 10 km in millimetres,
+/// a million degrees). Real captures stay orders of magnitude below; anything beyond is damage
+/// that would overflow features and statistics downstream.
+pub const MAX_MAGNITUDE: f64 = 1e6;
+
+/// Most joints a hierarchy may have. Full-body rigs with fingers and faces stay in the hundreds.
+pub const MAX_JOINTS: usize = 1_000;
+
+/// Most frames x joints one capture may hold (about 0.6 GB of decoded motion in f64). Frame
+/// lines of joints without channels take no text, so without this bound a small file could
+/// claim gigabytes.
+pub const MAX_JOINT_FRAMES: usize = 10_000_000;
+
+/// Longest excerpt of a file's text quoted in an error, in characters.
+pub const EXCERPT_CHARS: usize = 60;
+
+/// At most [`EXCERPT_CHARS`] characters of `text`, with `…` when cut, so a damaged line (or a
+/// whole file on one line) never floods a reject list.
+pub fn excerpt(text: &str) -> String {
+    match text.char_indices().nth(EXCERPT_CHARS) {
+        Some((cut, _)) => format!("{}…", &text[..cut]),
+        None => text.to_string(),
+    }
+}
+
+/// Lines of `text` split at LF, CRLF or a lone CR (classic Mac exports end lines with CR only),
+/// each with the byte offset where it starts.
+fn split_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    let bytes = text.as_bytes();
+    let mut start = 0usize;
+    std::iter::from_fn(move || {
+        if start >= bytes.len() {
+            return None;
+        }
+        let from = start;
+        let mut i = from;
+        while i < bytes.len() && bytes[i] != b'\n' && bytes[i] != b'\r' {
+            i += 1;
+        }
+        let line = &text[from..i];
+        start = if i + 1 < bytes.len() && bytes[i] == b'\r' && bytes[i + 1] == b'\n' {
+            i + 2
+        } else {
+            i + 1
+        };
+        Some((from, line))
+    })
 }
 
 /// A read BVH file: its hierarchy, motion and the frame rate its header states.
@@ -100,21 +190,19 @@ pub struct Bvh {
 }
 
 struct Tokens<'a> {
-    lines: std::iter::Enumerate<std::str::Lines<'a>>,
+    lines: Box<dyn Iterator<Item = (usize, (usize, &'a str))> + 'a>,
     current: std::str::SplitAsciiWhitespace<'a>,
     line: usize,
     rest_offset: usize,
-    text: &'a str,
 }
 
 impl<'a> Tokens<'a> {
     fn new(text: &'a str) -> Self {
         Tokens {
-            lines: text.lines().enumerate(),
+            lines: Box::new(split_lines(text).enumerate()),
             current: "".split_ascii_whitespace(),
             line: 0,
             rest_offset: 0,
-            text,
         }
     }
 
@@ -123,9 +211,9 @@ impl<'a> Tokens<'a> {
             if let Some(tok) = self.current.next() {
                 return Some(tok);
             }
-            let (i, line) = self.lines.next()?;
+            let (i, (start, line)) = self.lines.next()?;
             self.line = i + 1;
-            self.rest_offset = line.as_ptr() as usize - self.text.as_ptr() as usize + line.len();
+            self.rest_offset = start + line.len();
             self.current = line.split_ascii_whitespace();
         }
     }
@@ -153,7 +241,7 @@ impl<'a> Tokens<'a> {
         parse_finite(tok).ok_or_else(|| {
             self.error(BvhErrorKind::BadNumber {
                 what,
-                found: tok.to_string(),
+                found: excerpt(tok),
             })
         })
     }
@@ -161,7 +249,7 @@ impl<'a> Tokens<'a> {
     fn unexpected(&self, expected: &'static str, found: &str) -> BvhError {
         self.error(BvhErrorKind::Unexpected {
             expected,
-            found: found.to_string(),
+            found: excerpt(found),
         })
     }
 
@@ -203,6 +291,7 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
     }
     tokens.expect("Frames:")?;
     let declared = tokens.number("the frame count")?;
+    let frames_line = tokens.line;
     if declared < 0.0 || declared.fract() != 0.0 {
         return Err(tokens.error(BvhErrorKind::BadNumber {
             what: "the frame count",
@@ -213,8 +302,7 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
     tokens.expect("Frame")?;
     tokens.expect("Time:")?;
     let frame_time = tokens.number("the frame time")?;
-    // A positive but subnormal frame time would give an infinite rate.
-    if frame_time <= 0.0 || !(1.0 / frame_time).is_finite() {
+    if !FRAME_TIME_RANGE.contains(&frame_time) {
         return Err(tokens.error(BvhErrorKind::FrameTime(frame_time)));
     }
     // Anything after `Frame Time: x` on the same line is an error, caught below as a value line.
@@ -225,14 +313,18 @@ pub fn read_bvh(text: &str) -> Result<Bvh, BvhError> {
     let body = body
         .strip_prefix("\r\n")
         .or_else(|| body.strip_prefix('\n'))
+        .or_else(|| body.strip_prefix('\r'))
         .unwrap_or(body);
     let skeleton = Arc::new(Skeleton { joints });
     let (motion, channels) = read_motion(
         &skeleton,
         body,
-        first_motion_line,
-        declared,
-        header_fps,
+        Header {
+            first_line: first_motion_line,
+            frames_line,
+            declared,
+            fps: header_fps,
+        },
         &mut rest_tokens,
     )?;
     Ok(Bvh {
@@ -292,6 +384,9 @@ fn read_joint_header(
         return Err(tokens.unexpected("a joint name", name));
     }
     let index = joints.len();
+    if index >= MAX_JOINTS {
+        return Err(tokens.error(BvhErrorKind::TooManyJoints));
+    }
     joints.push(Joint {
         name: name.to_string(),
         parent,
@@ -316,18 +411,24 @@ fn read_joint_header(
     for _ in 0..count as usize {
         let tok = tokens.expect_any("a channel name")?;
         let channel = Channel::parse(tok)
-            .ok_or_else(|| tokens.error(BvhErrorKind::UnknownChannel(tok.to_string())))?;
+            .ok_or_else(|| tokens.error(BvhErrorKind::UnknownChannel(excerpt(tok))))?;
         joints[index].channels.push(channel);
     }
     Ok(index)
 }
 
 fn read_vec3(tokens: &mut Tokens<'_>) -> Result<DVec3, BvhError> {
-    Ok(DVec3::new(
-        tokens.number("OFFSET x")?,
-        tokens.number("OFFSET y")?,
-        tokens.number("OFFSET z")?,
-    ))
+    let mut v = [0.0; 3];
+    for (k, what) in ["OFFSET x", "OFFSET y", "OFFSET z"].into_iter().enumerate() {
+        v[k] = tokens.number(what)?;
+        if v[k].abs() > MAX_MAGNITUDE {
+            return Err(tokens.error(BvhErrorKind::OutOfRange {
+                what: what.to_string(),
+                value: v[k],
+            }));
+        }
+    }
+    Ok(DVec3::from_array(v))
 }
 
 /// Where each joint's channels sit in a frame's values, precomputed once per skeleton.
@@ -355,6 +456,16 @@ impl ChannelLayout {
         }
     }
 
+    /// `joint Xrotation` for the `index`-th value of a frame.
+    fn channel_name(&self, skeleton: &Skeleton, index: usize) -> String {
+        for (j, (start, channels, _)) in self.joints.iter().enumerate() {
+            if let Some(c) = index.checked_sub(*start).and_then(|k| channels.get(k)) {
+                return format!("joint `{}` channel {}", skeleton.joints[j].name, c.name());
+            }
+        }
+        format!("channel value {}", index + 1)
+    }
+
     /// Converts one frame of channel values (degrees) into local rotations and translations.
     pub(crate) fn decode(
         &self,
@@ -379,42 +490,56 @@ impl ChannelLayout {
     }
 }
 
+/// What the MOTION header says.
+struct Header {
+    /// The line after `Frame Time`.
+    first_line: usize,
+    /// The line of `Frames:`.
+    frames_line: usize,
+    /// Frames the header declares.
+    declared: usize,
+    /// The header's rate.
+    fps: f64,
+}
+
 fn read_motion(
     skeleton: &Arc<Skeleton>,
     body: &str,
-    first_line: usize,
-    declared: usize,
-    fps: f64,
+    header: Header,
     leftover: &mut Vec<&str>,
 ) -> Result<(Motion, Vec<f64>), BvhError> {
+    let Header {
+        first_line,
+        frames_line,
+        declared,
+        fps,
+    } = header;
     let layout = ChannelLayout::new(skeleton);
     let n = skeleton.len();
-    // A damaged `Frames:` count must not drive the allocation: a frame needs at least one
-    // non-blank line, so the body cannot hold more than `body.len() / 2 + 1` frames.
-    let capacity = declared.min(body.len() / 2 + 1).saturating_mul(n);
-    let mut rotations = Vec::with_capacity(capacity);
-    let mut translations = Vec::with_capacity(capacity);
-    let mut values = Vec::with_capacity(layout.total);
-    let mut channels = Vec::with_capacity(
-        declared
-            .min(body.len() / 2 + 1)
-            .saturating_mul(layout.total),
-    );
-    let mut frame = 0usize;
     if !leftover.is_empty() {
         return Err(BvhError {
             line: first_line - 1,
             frame: None,
             kind: BvhErrorKind::Unexpected {
                 expected: "end of line after Frame Time",
-                found: leftover.join(" "),
+                found: excerpt(&leftover.join(" ")),
             },
         });
     }
     leftover.clear();
+    // A damaged `Frames:` count must not drive the allocation: a frame line holds every channel
+    // value and a separator after each, so the body cannot hold more frames than this.
+    let can_hold = body.len() / (2 * layout.total.max(1)) + 1;
+    let frames = declared.min(can_hold).min(MAX_JOINT_FRAMES / n.max(1));
+    let mut rotations = Vec::with_capacity(frames.saturating_mul(n));
+    let mut translations = Vec::with_capacity(frames.saturating_mul(n));
+    let mut values = Vec::with_capacity(layout.total);
+    let mut channels = Vec::with_capacity(frames.saturating_mul(layout.total));
+    let mut frame = 0usize;
     // The Frame Time line, when no line follows it.
     let mut last_line = first_line - 1;
-    for (i, line) in body.lines().enumerate() {
+    let mut lines = split_lines(body).enumerate();
+    while let Some((i, (_, line))) = lines.next() {
         let line_no = first_line + i;
         last_line = line_no;
         let mut fields = line.split_ascii_whitespace().peekable();
@@ -422,10 +547,28 @@ fn read_motion(
             continue;
         }
         if frame == declared {
+            // Count every frame line, so the reject says how many the file really holds.
+            let extra = lines
+                .filter(|(_, (_, l))| l.split_ascii_whitespace().next().is_some())
+                .count();
             return Err(BvhError {
                 line: line_no,
                 frame: Some(frame),
-                kind: BvhErrorKind::ExtraFrames { declared },
+                kind: BvhErrorKind::ExtraFrames {
+                    declared,
+                    header_line: frames_line,
+                    found: declared + 1 + extra,
+                },
+            });
+        }
+        if (frame + 1).saturating_mul(n) > MAX_JOINT_FRAMES {
+            return Err(BvhError {
+                line: line_no,
+                frame: Some(frame),
+                kind: BvhErrorKind::TooLarge {
+                    frames: declared,
+                    joints: n,
+                },
             });
         }
         values.clear();
@@ -435,9 +578,19 @@ fn read_motion(
                 frame: Some(frame),
                 kind: BvhErrorKind::BadNumber {
                     what: "a channel value",
-                    found: tok.to_string(),
+                    found: excerpt(tok),
                 },
             })?;
+            if v.abs() > MAX_MAGNITUDE {
+                return Err(BvhError {
+                    line: line_no,
+                    frame: Some(frame),
+                    kind: BvhErrorKind::OutOfRange {
+                        what: layout.channel_name(skeleton, values.len()),
+                        value: v,
+                    },
+                });
+            }
             values.push(v);
         }
         if values.len() != layout.total {

@@ -124,6 +124,18 @@ impl Motion {
         }
     }
 
+    /// How many frames [`Motion::resample`] gives for `frames` frames at `from` fps resampled
+    /// to `to` fps (saturating, so an absurd rate gives a huge count, never a wrapped one); for
+    /// checking a clip's length before any frame is made.
+    pub fn resampled_frames(frames: usize, from: f64, to: f64) -> usize {
+        if frames == 0 || !(to.is_finite() && to > 0.0) || (to - from).abs() < 1e-9 {
+            return frames;
+        }
+        let last_time = (frames - 1) as f64 / from;
+        // A small epsilon keeps exact multiples (120 -> 30 fps) from losing their last frame.
+        ((last_time * to + 1e-9).floor() as usize).saturating_add(1)
+    }
+
     /// The motion resampled to `fps`: rotations by slerp, translations by linear interpolation,
     /// between the two source frames around each target time. The last target frame is the last one
     /// whose time falls inside the source, so no frame is invented past the end.
@@ -137,11 +149,12 @@ impl Motion {
                 ..self.clone()
             };
         }
-        let last_time = (frames - 1) as f64 / self.fps;
-        // A small epsilon keeps exact multiples (120 -> 30 fps) from losing their last frame.
-        let out_frames = (last_time * fps + 1e-9).floor() as usize + 1;
-        let mut rotations = Vec::with_capacity(out_frames * n);
-        let mut translations = Vec::with_capacity(out_frames * n);
+        let out_frames = Motion::resampled_frames(frames, self.fps, fps);
+        // The length is checked by callers before resampling; the capacity is only a hint, and
+        // capped so that a wrong rate can never reserve more than the source holds many times.
+        let hint = out_frames.min(frames.saturating_mul(16)).saturating_mul(n);
+        let mut rotations = Vec::with_capacity(hint);
+        let mut translations = Vec::with_capacity(hint);
         for i in 0..out_frames {
             let src = i as f64 * self.fps / fps;
             let lo = (src.floor() as usize).min(frames - 1);

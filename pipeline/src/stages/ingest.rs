@@ -4,13 +4,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::build::{Fingerprint, Reject, Stamp, sha256_hex};
 use crate::clip::{Capture, CaptureRef};
+use crate::motion::bvh::FPS_RANGE;
 use crate::motion::{ProfileSpec, read_bvh};
 use crate::source::CaptureFile;
 
 /// Stage name.
 pub const NAME: &str = "ingest";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 /// What the stage reads for one capture.
 #[derive(Debug)]
@@ -111,6 +112,16 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
             None,
             None,
         ));
+    }
+    if let Some(fps) = input.fps_override
+        && !FPS_RANGE.contains(&fps)
+    {
+        let message = format!(
+            "frame-rate override {fps} (sources.fps_override or fps_table) is outside the plausible range {} to {} fps",
+            FPS_RANGE.start(),
+            FPS_RANGE.end()
+        );
+        return refuse(reject(NAME, file, "fps", message, None, None));
     }
     let fps = input.fps_override.unwrap_or(bvh.header_fps);
     let mut motion = bvh.motion;

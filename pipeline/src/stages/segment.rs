@@ -11,16 +11,17 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::overlap::overlaps;
 use crate::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
 use crate::annotate::taxonomy::TypeMap;
-use crate::build::{Fingerprint, Stamp};
+use crate::build::{Dropped, Fingerprint, Stamp};
 use crate::clip::{Capture, Clip, SourceKind};
 use crate::config::SegmentConfig;
+use crate::motion::bvh::excerpt;
 use crate::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
-use crate::motion::{BodyPart, Profile};
+use crate::motion::{BodyPart, Motion, Profile};
 
 /// Stage name.
 pub const NAME: &str = "segment";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 /// What the stage reads for one capture.
 pub struct SegmentInput<'a> {
@@ -51,6 +52,8 @@ pub struct SegmentOutput {
     pub unmapped: BTreeMap<String, usize>,
     /// Annotation quirks met (from the reader and from segmentation).
     pub notes: Vec<Note>,
+    /// Every dropped segment, with its file and reason (`drops` counts them).
+    pub dropped: Vec<Dropped>,
 }
 
 /// Fingerprint of segmenting one capture.
@@ -97,14 +100,40 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
         .iter()
         .map(|l| normalize_label(l))
         .collect();
-    let mut drop = |reason: &str| *out.drops.entry(reason.to_string()).or_insert(0) += 1;
+    let path = capture.capture.path.clone();
+    let mut dropped: Vec<Dropped> = Vec::new();
+    let mut drop = |reason: &'static str, text: &str, frames: Option<(u64, u64)>| {
+        dropped.push(Dropped {
+            file: path.clone(),
+            reason: reason.to_string(),
+            text: excerpt(text),
+            frames,
+        });
+    };
 
     let mut kept: Vec<Kept<'_>> = Vec::new();
+    // Identical rows (same range, text, label and details) would give identical clips: each is
+    // kept once, the others dropped as duplicates with one note per merged group.
+    let mut merged: BTreeMap<String, usize> = BTreeMap::new();
+    // Per kept span: how many rows it stands for, and the first few row ids.
+    let mut groups: Vec<(usize, Vec<String>)> = Vec::new();
     for span in &input.annotation.spans {
+        if span.raw_text.trim().is_empty() || span.label.trim().is_empty() {
+            drop("empty_text", &span.id, None);
+            out.notes.push(Note::new(
+                "empty_text",
+                format!(
+                    "`{}`: annotation `{}` has an empty caption; skipped",
+                    capture.capture.path,
+                    excerpt(&span.id)
+                ),
+            ));
+            continue;
+        }
         if drop_labels.contains(&normalize_label(&span.label))
             || drop_labels.contains(&normalize_label(&span.raw_text))
         {
-            drop("dropped_label");
+            drop("dropped_label", &span.raw_text, None);
             continue;
         }
         let start =
@@ -121,20 +150,64 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
             end = len as i64;
         }
         if start >= len as i64 {
-            drop("past_end");
+            drop("past_end", &span.raw_text, None);
             continue;
         }
         let start = (start.max(0) as u64).max(trim);
         let end = end.max(0) as u64;
         if end <= start {
-            drop(if start == trim && trim > 0 {
+            let reason = if start == trim && trim > 0 {
                 "trimmed"
             } else {
                 "empty_range"
-            });
+            };
+            drop(reason, &span.raw_text, None);
             continue;
         }
-        kept.push(Kept { span, start, end });
+        let key = serde_json::to_string(&(
+            start,
+            end,
+            &span.raw_text,
+            &span.label,
+            &span.categories,
+            &span.motion_type,
+            &span.hand,
+            &span.object,
+            &span.grasp,
+        ))
+        .unwrap_or_default();
+        match merged.get(&key) {
+            Some(&at) => {
+                let (count, ids) = &mut groups[at];
+                *count += 1;
+                if ids.len() < 5 {
+                    ids.push(span.id.clone());
+                }
+                drop("duplicate", &span.raw_text, Some((start, end)));
+            }
+            None => {
+                merged.insert(key, kept.len());
+                groups.push((1, vec![span.id.clone()]));
+                kept.push(Kept { span, start, end });
+            }
+        }
+    }
+    for (k, (count, ids)) in kept.iter().zip(&groups) {
+        if *count > 1 {
+            let shown: Vec<String> = ids.iter().map(|i| excerpt(i)).collect();
+            out.notes.push(Note::new(
+                "duplicate_annotation",
+                format!(
+                    "`{}`: `{}` on frames {}-{} appears {count} times (rows {}{}); kept once",
+                    capture.capture.path,
+                    excerpt(&k.span.raw_text),
+                    k.start,
+                    k.end,
+                    shown.join(", "),
+                    if *count > ids.len() { ", ..." } else { "" },
+                ),
+            ));
+        }
     }
 
     let positions_cache = ClipMaker { input };
@@ -147,7 +220,7 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
                 }
                 clips.push(clip);
             }
-            Err(reason) => drop(reason),
+            Err(reason) => drop(reason, &k.span.raw_text, Some((k.start, k.end))),
         }
     }
     if input.annotation.simultaneous {
@@ -159,8 +232,15 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
             .map(|w| normalize_label(w))
             .collect();
         for o in overlaps(&ranges) {
+            let texts = || {
+                o.members
+                    .iter()
+                    .map(|&i| kept[i].span.raw_text.as_str())
+                    .collect::<Vec<_>>()
+                    .join(" + ")
+            };
             if o.members.len() > input.config.max_simultaneous {
-                drop("too_many_simultaneous");
+                drop("too_many_simultaneous", &texts(), Some((o.start, o.end)));
                 continue;
             }
             let members: Vec<&Kept<'_>> = o.members.iter().map(|&i| &kept[i]).collect();
@@ -171,12 +251,12 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
                     .any(|x| words.split(' ').any(|w| w == x) || &words == x)
             });
             if excluded {
-                drop("excluded_pair");
+                drop("excluded_pair", &texts(), Some((o.start, o.end)));
                 continue;
             }
             match positions_cache.pair(&members, o.start, o.end) {
                 Ok(clip) => clips.push(clip),
-                Err(reason) => drop(reason),
+                Err(reason) => drop(reason, &texts(), Some((o.start, o.end))),
             }
         }
     }
@@ -189,6 +269,10 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
             clip.clip_id = format!("{}~{n}", clip.clip_id);
         }
     }
+    for d in &dropped {
+        *out.drops.entry(d.reason.clone()).or_insert(0) += 1;
+    }
+    out.dropped = dropped;
     out.clips = clips;
     out
 }
@@ -201,17 +285,21 @@ impl ClipMaker<'_, '_> {
     fn base(&self, start: u64, end: u64) -> Result<Clip, &'static str> {
         let input = self.input;
         let capture = input.capture;
-        let motion = capture
-            .motion
-            .slice(start as usize, end as usize)
-            .resample(input.fps);
-        let seconds = motion.num_frames() as f64 / input.fps;
+        // The length is known before any frame is made: a wrong rate must cost a drop, not an
+        // allocation for the duration it implies.
+        let source_frames = (end.min(capture.motion.num_frames() as u64) - start.min(end)) as usize;
+        let frames = Motion::resampled_frames(source_frames, capture.capture.fps, input.fps);
+        let seconds = frames as f64 / input.fps;
         if seconds < input.config.min_seconds {
             return Err("too_short");
         }
         if seconds > input.config.max_seconds {
             return Err("too_long");
         }
+        let motion = capture
+            .motion
+            .slice(start as usize, end as usize)
+            .resample(input.fps);
         Ok(Clip {
             clip_id: format!("{}/{}:{start}-{end}", capture.capture.source, capture.stem),
             kind: SourceKind::RealSingle,
