@@ -17,6 +17,16 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
+/// The binary under an address-space limit of `mib` MiB.
+fn run_limited_to(mib: u64, args: &[&std::ffi::OsStr]) -> Output {
+    Command::new("prlimit")
+        .arg(format!("--as={}", mib << 20))
+        .arg(BIN)
+        .args(args)
+        .output()
+        .expect("prlimit (util-linux) runs the binary")
+}
+
 /// The binary under an address-space limit of 2 GiB (`prlimit --as`): an allocation sized by a
 /// damaged header fails there instead of taking the machine's memory.
 fn run_limited(args: &[&std::ffi::OsStr]) -> Output {
@@ -445,4 +455,70 @@ fn a_dataset_name_longer_than_a_file_name_can_be_is_a_config_error() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("dataset.name"), "{stderr}");
     assert!(stderr.contains("at most 200 characters"), "{stderr}");
+}
+
+/// Defect 3, for clips that are not identical: 800 distinct segments over one real capture (a
+/// BABEL record of CMU 01_01, each about 9 s) make 1,600 clips with their mirrors. The clips'
+/// frames go to disk as they are made and are read back one at a time, so the build stays within
+/// 1.2 GB of address space (it needed more than that, and aborted, when a capture's clips were
+/// held in memory together).
+#[test]
+fn many_distinct_clips_of_one_capture_keep_memory_bounded() {
+    let case = Case::new();
+    std::fs::copy(
+        repo().join("fixtures/cmu/01_01.bvh"),
+        case.path("cmu/01_01.bvh"),
+    )
+    .unwrap();
+    let labels: Vec<Value> = (0..800)
+        .map(|i| {
+            serde_json::json!({
+                "act_cat": ["walk"],
+                "start_t": 0.5,
+                "end_t": 9.5 + f64::from(i % 10) * 0.01,
+                "proc_label": format!("move {i}"),
+                "raw_label": format!("move number {i}"),
+                "seg_id": format!("s{i}"),
+            })
+        })
+        .collect();
+    let record = serde_json::json!({"1": {
+        "babel_sid": 1,
+        "dur": 22.9,
+        "feat_p": "CMU/CMU/01/01_01_poses.npz",
+        "frame_ann": {"labels": labels, "mul_act": true},
+        "seq_ann": {"labels": []},
+    }});
+    std::fs::write(case.path("babel.json"), record.to_string()).unwrap();
+    let config = case.path("many.toml");
+    std::fs::write(
+        &config,
+        r#"
+[dataset]
+name = "hard"
+output = "out"
+fps = 30
+
+[mirror]
+enabled = true
+
+[synthetic]
+enabled = false
+
+[[sources]]
+name = "cmu"
+captures = ["cmu/01_01.bvh"]
+profile = "cmu"
+
+[sources.labels]
+kind = "babel"
+path = "babel.json"
+"#,
+    )
+    .unwrap();
+    let out = run_limited_to(1200, &build_args(&config));
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let report = case.json("build-report.json");
+    assert_eq!(report["clips"], 1600, "{report:#}");
+    assert_eq!(report["mirrored"], 800);
 }

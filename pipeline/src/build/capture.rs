@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use super::motions::{MotionRef, MotionSource, hollow};
+use super::motions::{MIRROR_CHUNKS, MotionRef, MotionSource, MotionSpill, SEGMENT_CHUNKS};
 use super::{BuildError, Reject, Workspace, WorkspaceError, sha256_hex};
 use crate::annotate::filename::filename_annotation;
 use crate::annotate::taxonomy::TypeMap;
@@ -178,12 +178,14 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         fps: config.dataset.fps,
     };
     let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &shared.types_digest);
-    let Some((segmented, ran)): Option<(SegmentOutput, bool)> =
-        shared
-            .workspace
-            .item(segment::NAME, &item.key, &seg_fp, || {
-                segment::run(&seg_input)
-            })?
+    // The cached output is the clips without frames and where their frames went.
+    let Some(((segmented, refs), ran)): Option<((SegmentOutput, Vec<MotionRef>), bool)> = shared
+        .workspace
+        .try_item(segment::NAME, &item.key, &seg_fp, || {
+            let mut spill = MotionSpill::new(&shared.workspace, SEGMENT_CHUNKS);
+            let out = segment::run_with(&seg_input, |clip| spill.push(clip))?;
+            Ok::<_, BuildError>((out, spill.finish()?))
+        })?
     else {
         item.pending = Some(segment::NAME);
         return Ok(item);
@@ -191,12 +193,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
     item.ran[1] = ran;
     let mut segmented = segmented;
     item.clips = std::mem::take(&mut segmented.clips);
-    item.refs = item
-        .clips
-        .iter_mut()
-        .enumerate()
-        .map(|(i, clip)| hollow(clip, segment::NAME, &seg_fp.fingerprint, i))
-        .collect();
+    item.refs = refs;
     item.fingerprints.push((segment::NAME, seg_fp.fingerprint));
     item.segment = segmented;
     Ok(item)
@@ -222,12 +219,25 @@ pub(super) fn mirror_capture(
             message: e.to_string(),
         })?;
     let fp = mirror::fingerprint(&sha256_hex(&encoded), spec, &shared.types_digest);
-    let Some((mirrored, ran)): Option<(mirror::MirrorOutput, bool)> =
+    // One clip's frames at a time: read, mirrored, spilled.
+    let Some(((mirrored, refs), ran)): Option<((mirror::MirrorOutput, Vec<MotionRef>), bool)> =
         shared
             .workspace
             .try_item(mirror::NAME, &item.key, &fp, || {
-                let full = motions.hydrate_refs(&item.clips, &item.refs)?;
-                Ok::<_, BuildError>(mirror::run(&full, spec, shared.types.taxonomy()))
+                let mut spill = MotionSpill::new(&shared.workspace, MIRROR_CHUNKS);
+                let mut out = mirror::MirrorOutput::default();
+                for (clip, at) in item.clips.iter().zip(&item.refs) {
+                    let mut full = clip.clone();
+                    full.motion = motions.motion(at)?;
+                    let one =
+                        mirror::run(std::slice::from_ref(&full), spec, shared.types.taxonomy());
+                    for mut copy in one.clips {
+                        spill.push(&mut copy)?;
+                        out.clips.push(copy);
+                    }
+                    out.rejects.extend(one.rejects);
+                }
+                Ok::<_, BuildError>((out, spill.finish()?))
             })?
     else {
         item.pending = Some(mirror::NAME);
@@ -235,12 +245,7 @@ pub(super) fn mirror_capture(
     };
     item.ran[2] = ran;
     item.mirrored = mirrored.clips;
-    item.mirrored_refs = item
-        .mirrored
-        .iter_mut()
-        .enumerate()
-        .map(|(i, clip)| hollow(clip, mirror::NAME, &fp.fingerprint, i))
-        .collect();
+    item.mirrored_refs = refs;
     item.fingerprints.push((mirror::NAME, fp.fingerprint));
     item.rejects.extend(mirrored.rejects);
     Ok(())

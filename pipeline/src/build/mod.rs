@@ -398,6 +398,19 @@ fn run_stages<'a>(
         shared.workspace.prune(name, &live);
     }
 
+    // Frame chunks that no held clip points to belong to outputs that are gone.
+    for (folder, mirrored) in [
+        (motions::SEGMENT_CHUNKS, false),
+        (motions::MIRROR_CHUNKS, true),
+    ] {
+        let live: BTreeSet<String> = items
+            .iter()
+            .flat_map(|i| if mirrored { &i.mirrored_refs } else { &i.refs })
+            .map(|r| r.fingerprint.clone())
+            .collect();
+        shared.workspace.prune(folder, &live);
+    }
+
     if run_mirror {
         stages.push(capture_run(&items, 2, progress));
     }
@@ -577,7 +590,7 @@ fn compose(
     let composed = shared
         .workspace
         .try_item(crate::stages::compose::NAME, "*", &stamp, || {
-            let mut spill = motions::SyntheticSpill::new(&shared.workspace);
+            let mut spill = motions::MotionSpill::new(&shared.workspace, motions::SYNTHETIC_CHUNKS);
             let out = crate::stages::compose::run(
                 &all,
                 &config.synthetic,
@@ -585,6 +598,7 @@ fn compose(
                 |c| c.split.clone(),
                 |c| shared.profile_of(c),
                 |c| motions.motion_of(c, index),
+                |c| index.get(&motions::key(c)).cloned(),
                 |a, b| {
                     let key = (
                         label::normalize_text(&a.text),

@@ -1,6 +1,6 @@
 //! Motions stay on disk while the build holds the rest of every clip: a clip's frames are read back
-//! from the stage output that made them (segment, mirror, synthetic chunks) only when a stage needs
-//! them, so memory grows with the number of clips, not with their frames.
+//! from the chunks the stage that made them spilled (segment, mirror, synthetic) only when a stage
+//! needs them, so memory grows with the number of clips, not with their frames.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -10,10 +10,13 @@ use serde::{Deserialize, Serialize};
 use super::{BuildError, Workspace, WorkspaceError, sha256_hex};
 use crate::clip::Clip;
 use crate::motion::Motion;
-use crate::stages::{mirror, segment};
 
 /// Stage-cache folder of synthetic motions, in chunks.
 pub(super) const SYNTHETIC_CHUNKS: &str = "synthetic";
+/// Stage-cache folder of segmented clips' motions, in chunks.
+pub(super) const SEGMENT_CHUNKS: &str = "segment-motions";
+/// Stage-cache folder of mirrored clips' motions, in chunks.
+pub(super) const MIRROR_CHUNKS: &str = "mirror-motions";
 /// Synthetic motions per chunk file.
 pub(super) const CHUNK: usize = 32;
 /// Decoded entries kept: a capture's originals and mirrors, and the chunk being written.
@@ -22,7 +25,7 @@ const RECENT: usize = 4;
 /// Where a clip's frames are: a stage-cache entry and the clip's place in it.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub(super) struct MotionRef {
-    /// Stage folder of the entry (`segment`, `mirror` or `synthetic`).
+    /// Stage-cache folder of the chunk (`segment-motions`, `mirror-motions` or `synthetic`).
     pub(super) stage: String,
     /// The entry's fingerprint.
     pub(super) fingerprint: String,
@@ -30,19 +33,6 @@ pub(super) struct MotionRef {
     pub(super) index: u32,
     /// Frames of the motion (the held clip has none).
     pub(super) frames: u32,
-}
-
-/// Takes the frames out of `clip` (keeping skeleton and rate) and says where they are.
-pub(super) fn hollow(clip: &mut Clip, stage: &str, fingerprint: &str, index: usize) -> MotionRef {
-    let frames = clip.motion.num_frames() as u32;
-    clip.motion.rotations = Vec::new();
-    clip.motion.translations = Vec::new();
-    MotionRef {
-        stage: stage.to_string(),
-        fingerprint: fingerprint.to_string(),
-        index: index as u32,
-        frames,
-    }
 }
 
 /// Every held clip's motion location, by clip id and capture path.
@@ -95,23 +85,6 @@ impl MotionSource {
             .ok_or_else(|| missing(at, "the entry has fewer clips"))
     }
 
-    /// `clips` with their frames read back from `refs` (in the same order).
-    pub(super) fn hydrate_refs(
-        &self,
-        clips: &[Clip],
-        refs: &[MotionRef],
-    ) -> Result<Vec<Clip>, BuildError> {
-        clips
-            .iter()
-            .zip(refs)
-            .map(|(clip, at)| {
-                let mut full = clip.clone();
-                full.motion = self.motion(at)?;
-                Ok(full)
-            })
-            .collect()
-    }
-
     /// The frames of a held `clip`.
     pub(super) fn motion_of(&self, clip: &Clip, index: &MotionIndex) -> Result<Motion, BuildError> {
         let at = index.get(&key(clip)).ok_or_else(|| {
@@ -129,15 +102,7 @@ impl MotionSource {
 
     fn read(&self, at: &MotionRef) -> Result<Vec<Motion>, BuildError> {
         let motions = match at.stage.as_str() {
-            segment::NAME => self
-                .workspace
-                .load::<segment::SegmentOutput>(&at.stage, &at.fingerprint)
-                .map(|o| o.clips.into_iter().map(|c| c.motion).collect()),
-            mirror::NAME => self
-                .workspace
-                .load::<mirror::MirrorOutput>(&at.stage, &at.fingerprint)
-                .map(|o| o.clips.into_iter().map(|c| c.motion).collect()),
-            SYNTHETIC_CHUNKS => self
+            SEGMENT_CHUNKS | MIRROR_CHUNKS | SYNTHETIC_CHUNKS => self
                 .workspace
                 .load::<Vec<Motion>>(&at.stage, &at.fingerprint),
             _ => None,
@@ -156,18 +121,22 @@ fn missing(at: &MotionRef, why: &str) -> BuildError {
     })
 }
 
-/// Moves synthetic clips' frames to disk as they are made, in chunks of [`CHUNK`].
-pub(super) struct SyntheticSpill<'w> {
+/// Moves clips' frames to disk as they are made, in chunks of [`CHUNK`] named by their content,
+/// so a stage holds one chunk of frames however many clips it makes.
+pub(super) struct MotionSpill<'w> {
     workspace: &'w Workspace,
+    /// Stage-cache folder of the chunks.
+    stage: &'static str,
     pending: Vec<Motion>,
     refs: Vec<MotionRef>,
 }
 
-impl<'w> SyntheticSpill<'w> {
-    /// Spills into `workspace`'s cache.
-    pub(super) fn new(workspace: &'w Workspace) -> Self {
-        SyntheticSpill {
+impl<'w> MotionSpill<'w> {
+    /// Spills into the `stage` folder of `workspace`'s cache.
+    pub(super) fn new(workspace: &'w Workspace, stage: &'static str) -> Self {
+        MotionSpill {
             workspace,
+            stage,
             pending: Vec::new(),
             refs: Vec::new(),
         }
@@ -183,7 +152,7 @@ impl<'w> SyntheticSpill<'w> {
         };
         let motion = std::mem::replace(&mut clip.motion, held);
         self.refs.push(MotionRef {
-            stage: SYNTHETIC_CHUNKS.to_string(),
+            stage: self.stage.to_string(),
             fingerprint: String::new(),
             index: self.pending.len() as u32,
             frames: motion.num_frames() as u32,
@@ -200,12 +169,12 @@ impl<'w> SyntheticSpill<'w> {
             return Ok(());
         }
         let bytes = postcard::to_stdvec(&self.pending).map_err(|e| WorkspaceError::Encode {
-            what: "synthetic motions".into(),
+            what: format!("{} chunk", self.stage),
             message: e.to_string(),
         })?;
         let fingerprint = sha256_hex(&bytes);
         self.workspace
-            .store_bytes(SYNTHETIC_CHUNKS, &fingerprint, &bytes)?;
+            .store_bytes(self.stage, &fingerprint, &bytes)?;
         let start = self.refs.len() - self.pending.len();
         for r in &mut self.refs[start..] {
             r.fingerprint.clone_from(&fingerprint);

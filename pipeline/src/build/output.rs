@@ -510,9 +510,14 @@ pub(super) fn write_outputs(
         let for_stats = stats_split.as_deref() == Some(plan.split.as_str());
         // One shard's rows with their frames at a time.
         let rows: Vec<Clip> = if !fresh || for_stats {
-            held.iter()
-                .map(|c| motions.hydrate(c, index))
-                .collect::<Result<_, _>>()?
+            // Read in storage order (neighbours on disk together), kept in row order.
+            let mut order: Vec<usize> = (0..held.len()).collect();
+            order.sort_by_key(|&i| refs[i]);
+            let mut slots: Vec<Option<Clip>> = vec![None; held.len()];
+            for i in order {
+                slots[i] = Some(motions.hydrate(held[i], index)?);
+            }
+            slots.into_iter().flatten().collect()
         } else {
             Vec::new()
         };

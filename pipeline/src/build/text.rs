@@ -118,20 +118,28 @@ pub(super) fn run(
         let mut by_clip = BTreeMap::new();
         let mut agreement = (0.0, 0usize);
         for item in items.iter() {
-            let mut full = motions.hydrate_refs(&item.clips, &item.refs)?;
-            let mut part = LabelReport::default();
-            label::apply_labels(&mut full, &labels, |c| shared.profile_of(c), &mut part);
-            for (source, n) in part.sources {
-                *report.sources.entry(source).or_insert(0) += n;
+            // Per capture, summed in clip order as one call over the capture would.
+            let mut capture_agreement = (0.0, 0usize);
+            for (clip, at) in item.clips.iter().zip(&item.refs) {
+                let mut full = clip.clone();
+                full.motion = motions.motion(at)?;
+                let mut part = LabelReport::default();
+                let one = std::slice::from_mut(&mut full);
+                label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);
+                for (source, n) in part.sources {
+                    *report.sources.entry(source).or_insert(0) += n;
+                }
+                if let Some((value, n)) = part.velocity_agreement {
+                    capture_agreement.0 += value * n as f64;
+                    capture_agreement.1 += n;
+                }
+                by_clip.insert(full.clip_id, (full.parts, full.label_source));
             }
-            if let Some((mean, n)) = part.velocity_agreement {
-                agreement.0 += mean * n as f64;
-                agreement.1 += n;
+            if capture_agreement.1 > 0 {
+                let mean = capture_agreement.0 / capture_agreement.1 as f64;
+                agreement.0 += mean * capture_agreement.1 as f64;
+                agreement.1 += capture_agreement.1;
             }
-            by_clip.extend(
-                full.into_iter()
-                    .map(|c| (c.clip_id, (c.parts, c.label_source))),
-            );
         }
         if agreement.1 > 0 {
             report.velocity_agreement = Some((agreement.0 / agreement.1 as f64, agreement.1));

@@ -225,13 +225,14 @@ pub fn sample<'c>(
 /// frames (the clips may be held without them, one motion is read at a time); `keep` sees each
 /// composed clip before it joins the output (the build moves its frames to disk there).
 #[allow(clippy::too_many_arguments)]
-pub fn run<E>(
+pub fn run<E, K: Ord>(
     clips: &[&Clip],
     config: &SyntheticConfig,
     seed: u64,
     split_of: impl Fn(&Clip) -> String,
     profile_of: impl Fn(&Clip) -> Option<Profile>,
     motion_of: impl Fn(&Clip) -> Result<Motion, E>,
+    read_key: impl Fn(&Clip) -> K,
     veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
     mut keep: impl FnMut(&mut Clip) -> Result<(), E>,
 ) -> Result<ComposeOutput, E> {
@@ -246,7 +247,11 @@ pub fn run<E>(
         profiles.insert(key, p.clone());
         Some(p)
     };
-    for c in clips {
+    // Frames are read in the order they are stored (`read_key`), so a clip's neighbours on disk
+    // are read together; the metrics do not depend on the order.
+    let mut by_storage: Vec<&Clip> = clips.to_vec();
+    by_storage.sort_by_cached_key(|c| read_key(c));
+    for c in by_storage {
         if let Some(p) = bound(c) {
             let motion = motion_of(c)?;
             let positions = dataset_positions(&motion, &p);

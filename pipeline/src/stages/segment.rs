@@ -83,8 +83,21 @@ struct Kept<'a> {
     end: u64,
 }
 
-/// Runs the stage on one capture.
+/// Runs the stage on one capture, the clips with their frames.
 pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
+    match run_with(input, |_| Ok::<(), std::convert::Infallible>(())) {
+        Ok(out) => out,
+        Err(never) => match never {},
+    }
+}
+
+/// Runs the stage on one capture, handing each clip to `take_frames` as soon as it is made (in
+/// the order of the output's clips), so a caller can move its frames to disk: however many clips a
+/// capture yields, only one holds frames at a time.
+pub fn run_with<E>(
+    input: &SegmentInput<'_>,
+    mut take_frames: impl FnMut(&mut Clip) -> Result<(), E>,
+) -> Result<SegmentOutput, E> {
     let mut out = SegmentOutput {
         notes: input.annotation.notes.clone(),
         ..SegmentOutput::default()
@@ -214,10 +227,11 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
     let mut clips: Vec<Clip> = Vec::new();
     for k in &kept {
         match positions_cache.single(k) {
-            Ok(clip) => {
+            Ok(mut clip) => {
                 if clip.motion_type.is_none() {
                     *out.unmapped.entry(clip.labels[0].clone()).or_insert(0) += 1;
                 }
+                take_frames(&mut clip)?;
                 clips.push(clip);
             }
             Err(reason) => drop(reason, &k.span.raw_text, Some((k.start, k.end))),
@@ -255,7 +269,10 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
                 continue;
             }
             match positions_cache.pair(&members, o.start, o.end) {
-                Ok(clip) => clips.push(clip),
+                Ok(mut clip) => {
+                    take_frames(&mut clip)?;
+                    clips.push(clip);
+                }
                 Err(reason) => drop(reason, &texts(), Some((o.start, o.end))),
             }
         }
@@ -274,7 +291,7 @@ pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
     }
     out.dropped = dropped;
     out.clips = clips;
-    out
+    Ok(out)
 }
 
 struct ClipMaker<'a, 'b> {
