@@ -53,15 +53,6 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
             return;
         }
     };
-    match shared.history.start(id, shared.now_ms()) {
-        Ok(true) => {}
-        // No longer queued (already run by an earlier service on this history).
-        Ok(false) => return,
-        Err(e) => {
-            say(&format!("build {id}: cannot start: {e}"));
-            return;
-        }
-    }
     let log = Arc::new(BuildLog::new());
     log.line(&format!(
         "build {id} of `{dataset}` started ({} request{}{})",
@@ -72,7 +63,21 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
             None => String::new(),
         }
     ));
+    // Live before it is `running`: a reader who sees it running finds its log.
     shared.set_live(id, Some(log.clone()));
+    match shared.history.start(id, shared.now_ms()) {
+        Ok(true) => {}
+        // No longer queued (already run by an earlier service on this history).
+        Ok(false) => {
+            shared.set_live(id, None);
+            return;
+        }
+        Err(e) => {
+            shared.set_live(id, None);
+            say(&format!("build {id}: cannot start: {e}"));
+            return;
+        }
+    }
     say(&format!("build {id} of `{dataset}` started"));
 
     let config = served.config.clone();
