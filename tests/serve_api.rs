@@ -34,6 +34,7 @@ async fn start(state: &Path, configs: Vec<Config>) -> (Service, String) {
             state_dir: state.to_path_buf(),
             token: Token::new(TOKEN).unwrap(),
             clock: Arc::new(SystemClock),
+            builder: env!("CARGO_BIN_EXE_motionforge").into(),
         },
         listener,
     )
@@ -407,6 +408,7 @@ async fn with_two_datasets_a_build_must_name_one() {
             state_dir: state.path().to_path_buf(),
             token: Token::new(TOKEN).unwrap(),
             clock: Arc::new(SystemClock),
+            builder: env!("CARGO_BIN_EXE_motionforge").into(),
         },
         tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap(),
     )
