@@ -1,7 +1,8 @@
 //! `motionforge serve` runs each build in a process of its own: a build that aborts fails alone
 //! (the service answers on, records the signal and the last lines, and does not resume it), a
-//! stop kills the build process, a real build goes through the binary's `serve-build`, and that
-//! process stops when the service is gone.
+//! stop kills the build process, a resume build the service died in is not resumed again, a
+//! real build goes through the binary's `serve-build`, and that process stops when the service
+//! is gone.
 mod common;
 
 use std::os::unix::fs::PermissionsExt;
@@ -10,7 +11,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use motionforge::config::Config;
-use motionforge::serve::history::History;
+use motionforge::serve::history::{History, Left, Trigger};
 use motionforge::serve::schedule::SystemClock;
 use motionforge::serve::worker::Job;
 use motionforge::serve::{Service, ServiceSetup, Token};
@@ -248,6 +249,49 @@ async fn a_stop_kills_the_build_process_and_the_next_start_resumes_the_build() {
     let new = poll_build(&client, &base, resume, |b| b["state"] == "running").await;
     assert_eq!(new["trigger"], "resume");
     wait_for_file(&pid_file).await;
+    service.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_resume_build_the_service_died_in_is_failed_not_resumed_again() {
+    let tmp = tempfile::tempdir().unwrap();
+    let state = tmp.path().join("state");
+    // The service died in build `first`, resumed it with `second`, and died again.
+    let (first, second) = {
+        let history = History::open(&state).unwrap();
+        let first = history
+            .enqueue("demo", Trigger::Api, false, false, None, 1_000)
+            .unwrap();
+        assert!(history.start(first, 2_000).unwrap());
+        history
+            .interrupt_running(
+                "the service stopped while this build ran",
+                Left::Died,
+                3_000,
+            )
+            .unwrap();
+        let second = history.resume_interrupted(&["demo"], 3_000).unwrap()[0];
+        assert!(history.start(second, 4_000).unwrap());
+        (first, second)
+    };
+
+    let (service, base) = start(&state, demo_config(tmp.path()), real_builder()).await;
+    let client = reqwest::Client::new();
+    let (_, b) = get(&client, &format!("{base}/builds/{second}")).await;
+    assert_eq!(b["state"], "failed", "{b}");
+    assert_eq!(b["resumes"], first, "{b}");
+    let error = b["error"].as_str().unwrap();
+    assert!(
+        error.contains("interrupted twice; not resumed again, request a new build"),
+        "{error}"
+    );
+    assert!(b["resumed_by"].is_null(), "{b}");
+    let (_, builds) = get(&client, &format!("{base}/builds")).await;
+    assert_eq!(
+        builds["builds"].as_array().unwrap().len(),
+        2,
+        "no third build: {builds}"
+    );
     service.stop().await.unwrap();
 }
 

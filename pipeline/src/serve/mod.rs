@@ -26,7 +26,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
 use crate::config::{Config, ConfigError};
-use history::{BuildId, History, HistoryError, Trigger};
+use history::{BuildId, BuildState, History, HistoryError, Left, Trigger};
 use log::BuildLog;
 use schedule::{Clock, SystemClock, Timetable};
 
@@ -377,12 +377,18 @@ impl Service {
             source,
         })?;
         let now = setup.clock.now().timestamp_millis();
-        let interrupted =
-            history.interrupt_running("the service stopped while this build ran", now)?;
-        for id in &interrupted {
-            say(&format!(
-                "build {id} was running when the service stopped: interrupted"
-            ));
+        let ended = history.interrupt_running(
+            "the service stopped while this build ran",
+            Left::Died,
+            now,
+        )?;
+        for (id, state) in &ended {
+            say(&match state {
+                BuildState::Failed => format!(
+                    "build {id} was running when the service died, and it resumed an earlier interrupted build: failed, not resumed again"
+                ),
+                _ => format!("build {id} was running when the service stopped: interrupted"),
+            });
         }
         let names: Vec<&str> = datasets.keys().map(String::as_str).collect();
         for id in history.resume_interrupted(&names, now)? {
@@ -476,8 +482,9 @@ impl Service {
             let _ = task.await;
         }
         let now = self.shared.now_ms();
-        for id in self.shared.history.interrupt_running(
+        for (id, _) in self.shared.history.interrupt_running(
             "the service stopped during this build; it resumes on the next start",
+            Left::Stopped,
             now,
         )? {
             say(&format!("build {id} interrupted by the shutdown"));
