@@ -9,8 +9,10 @@ pub mod api;
 mod child;
 pub mod history;
 pub mod log;
+mod public;
 mod queue;
 pub mod schedule;
+mod wire;
 pub mod worker;
 
 use std::collections::{BTreeMap, HashMap};
@@ -28,6 +30,7 @@ use tokio::task::JoinHandle;
 use crate::config::{Config, ConfigError};
 use history::{BuildId, BuildState, History, HistoryError, Left, Trigger};
 use log::BuildLog;
+use public::PathShield;
 use schedule::{Clock, SystemClock, Timetable};
 
 /// Default address: loopback only, so nothing outside the machine reaches it unless asked.
@@ -174,6 +177,8 @@ pub(crate) struct Shared {
     builder: PathBuf,
     /// Where build jobs and reports are written.
     jobs_dir: PathBuf,
+    /// How paths are shown to callers.
+    shield: PathShield,
 }
 
 impl Shared {
@@ -420,6 +425,7 @@ impl Service {
             shutdown: shutdown.clone(),
             builder: setup.builder,
             jobs_dir,
+            shield: PathShield::new(std::env::current_dir().ok()),
         });
         for build in shared.history.queued()? {
             if shared.datasets.contains_key(&build.dataset) {
@@ -448,7 +454,7 @@ impl Service {
         let router = api::router(shared.clone());
         let mut server_stop = shutdown;
         let server = tokio::spawn(async move {
-            axum::serve(listener, router)
+            axum::serve(wire::JsonErrors::new(listener), router)
                 .with_graceful_shutdown(async move {
                     let _ = server_stop.wait_for(|s| *s).await;
                 })
