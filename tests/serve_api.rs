@@ -1,6 +1,7 @@
 //! `motionforge serve` over real HTTP on loopback: auth, builds of the demo to completion, the
 //! per-dataset queue, statistics, history across restarts, recovery of an interrupted build, the
-//! OpenAPI description, and the command's clean stop.
+//! OpenAPI description, answers that show no absolute path and errors that are short JSON
+//! whatever the request, and the command's clean stop.
 mod common;
 
 use std::collections::BTreeSet;
@@ -34,6 +35,7 @@ async fn start(state: &Path, configs: Vec<Config>) -> (Service, String) {
             state_dir: state.to_path_buf(),
             token: Token::new(TOKEN).unwrap(),
             clock: Arc::new(SystemClock),
+            builder: env!("CARGO_BIN_EXE_motionforge").into(),
         },
         listener,
     )
@@ -235,6 +237,9 @@ async fn builds_over_http_with_auth_queue_stats_and_history_across_restarts() {
         serde_json::from_slice(&std::fs::read(out.path().join("demo/report/stats.json")).unwrap())
             .unwrap();
     assert_eq!(stats, on_disk);
+    for (what, answer) in [("stats", &stats), ("datasets", &datasets), ("build", &b1)] {
+        assert_no_absolute_path(answer, out.path(), what);
+    }
 
     // Errors answer JSON with the right status.
     let (status, body) = get(&client, &format!("{base}/datasets/nope/stats")).await;
@@ -407,6 +412,7 @@ async fn with_two_datasets_a_build_must_name_one() {
             state_dir: state.path().to_path_buf(),
             token: Token::new(TOKEN).unwrap(),
             clock: Arc::new(SystemClock),
+            builder: env!("CARGO_BIN_EXE_motionforge").into(),
         },
         tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap(),
     )
@@ -515,6 +521,204 @@ fn the_command_refuses_to_start_without_a_token_and_stops_cleanly_on_sigterm() {
     assert!(status.success(), "exit {status:?}: {rest:?}");
     assert!(rest.iter().any(|l| l.contains("stopping")), "{rest:?}");
     assert!(state.path().join("history.sqlite3").is_file());
+}
+
+/// Every string inside `value`.
+fn strings(value: &Value) -> Vec<&str> {
+    match value {
+        Value::String(s) => vec![s.as_str()],
+        Value::Array(items) => items.iter().flat_map(strings).collect(),
+        Value::Object(map) => map
+            .iter()
+            .flat_map(|(k, v)| std::iter::once(k.as_str()).chain(strings(v)))
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Asserts that no string of `value` is an absolute path or names the folder `secret`.
+fn assert_no_absolute_path(value: &Value, secret: &Path, what: &str) {
+    let secret = secret.to_str().unwrap();
+    for s in strings(value) {
+        assert!(
+            !s.starts_with('/') || s.starts_with("/builds/") || s.starts_with("/datasets/"),
+            "{what}: absolute path {s:?} in {value}"
+        );
+        assert!(!s.contains(secret), "{what}: {secret} in {s:?}");
+    }
+}
+
+/// Sends `request` as is on a new connection and reads the answer to its end: (status, headers,
+/// body). For requests an HTTP client would not send.
+async fn raw_http(addr: std::net::SocketAddr, request: &[u8]) -> (u16, String, Vec<u8>) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream.write_all(request).await.unwrap();
+    let mut answer = Vec::new();
+    tokio::time::timeout(Duration::from_secs(30), stream.read_to_end(&mut answer))
+        .await
+        .unwrap_or_else(|_| {
+            panic!(
+                "no answer to {:?}",
+                String::from_utf8_lossy(&request[..request.len().min(80)])
+            )
+        })
+        .unwrap();
+    let split = answer
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .unwrap_or_else(|| panic!("no head in {:?}", String::from_utf8_lossy(&answer)));
+    let head = String::from_utf8_lossy(&answer[..split]).to_lowercase();
+    let status = head[9..12].parse().unwrap();
+    (status, head, answer[split + 4..].to_vec())
+}
+
+/// Asserts an error answer is `{"error": "..."}` JSON with the status, under 1 KB.
+fn assert_json_error(status: u16, head: &str, body: &[u8], expected: u16, what: &str) -> String {
+    let text = String::from_utf8_lossy(body);
+    assert_eq!(status, expected, "{what}: {head}\n{text}");
+    assert!(
+        head.contains("content-type: application/json"),
+        "{what}: {head}"
+    );
+    assert!(body.len() < 1024, "{what}: {} bytes: {text}", body.len());
+    let json: Value =
+        serde_json::from_slice(body).unwrap_or_else(|e| panic!("{what}: {e}: {text}"));
+    let error = json["error"]
+        .as_str()
+        .unwrap_or_else(|| panic!("{what}: {json}"));
+    assert!(!error.is_empty(), "{what}");
+    error.to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn answers_show_no_absolute_path_and_every_error_is_short_json() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let mut broken = demo_config(out.path());
+    broken.dataset.name = "broken".into();
+    // Captures that do not exist, named by an absolute path the error will quote.
+    broken.sources[0].captures = vec![format!("{}/missing/*.bvh", out.path().display())];
+    let (service, base) = start(state.path(), vec![demo_config(out.path()), broken]).await;
+    let addr = service.local_addr();
+    let client = reqwest::Client::new();
+
+    for path in ["/health", "/datasets", "/datasets/demo/stats", "/builds"] {
+        let (_, body) = get(&client, &format!("{base}{path}")).await;
+        assert_no_absolute_path(&body, out.path(), path);
+    }
+    let (_, datasets) = get(&client, &format!("{base}/datasets")).await;
+    assert_eq!(datasets["datasets"][1]["name"], "demo");
+    assert_eq!(
+        datasets["datasets"][1]["output"], "…/demo",
+        "a folder outside the working folder shows by its name"
+    );
+    // A build error quoting absolute paths shows them shortened.
+    let (status, queued) = post_build(&client, &base, Some(TOKEN), r#"{"dataset":"broken"}"#).await;
+    assert_eq!(status, 202, "{queued}");
+    let failed = wait_final(&client, &base, queued["id"].as_i64().unwrap()).await;
+    assert_eq!(failed["state"], "failed", "{failed}");
+    assert_no_absolute_path(&failed, out.path(), "failed build");
+    let (_, listed) = get(&client, &format!("{base}/builds")).await;
+    assert_no_absolute_path(&listed, out.path(), "build list");
+
+    // Echoed input is cut to an excerpt: a 100 KB name, in a body and in paths.
+    let long = "n".repeat(100_000);
+    let response = client
+        .post(format!("{base}/builds"))
+        .bearer_auth(TOKEN)
+        .json(&serde_json::json!({ "dataset": long }))
+        .send()
+        .await
+        .unwrap();
+    let status = response.status().as_u16();
+    let head = format!(
+        "content-type: {}",
+        response.headers()["content-type"].to_str().unwrap()
+    );
+    let body = response.bytes().await.unwrap();
+    let error = assert_json_error(status, &head, &body, 404, "100 KB dataset name");
+    assert!(error.contains("nnnn…`"), "{error}");
+    let long = &long[..60_000];
+    for path in [
+        format!("/datasets/{long}/stats"),
+        format!("/builds/{long}"),
+        format!("/{long}"),
+        format!("/builds?state={long}"),
+        format!("/builds?{long}=1"),
+    ] {
+        let request = format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+        let (status, head, body) = raw_http(addr, request.as_bytes()).await;
+        let expected = if path.contains('?') { 400 } else { 404 };
+        assert_json_error(status, &head, &body, expected, &path[..20]);
+    }
+    let request = format!(
+        "POST /builds HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nContent-Type: application/json\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{{\"{long}\": 1}}",
+        long.len() + 7
+    );
+    let (status, head, body) = raw_http(addr, request.as_bytes()).await;
+    assert_json_error(status, &head, &body, 400, "unknown 60 KB field");
+
+    // A body over the limit: refused from its declared length, before it is sent; and, sent
+    // without a length (chunked), once the limit is read.
+    let limit = motionforge::serve::api::BODY_LIMIT;
+    let request = format!(
+        "POST /builds HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nConnection: close\r\nContent-Length: {}\r\n\r\n",
+        limit + 1
+    );
+    let (status, head, body) = raw_http(addr, request.as_bytes()).await;
+    let error = assert_json_error(status, &head, &body, 413, "oversized body");
+    assert!(error.contains("too large"), "{error}");
+    let chunk = "x".repeat(limit + 1);
+    let request = format!(
+        "POST /builds HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nConnection: close\r\nTransfer-Encoding: chunked\r\n\r\n{:x}\r\n{chunk}\r\n0\r\n\r\n",
+        chunk.len()
+    );
+    let (status, head, body) = raw_http(addr, request.as_bytes()).await;
+    assert_json_error(status, &head, &body, 413, "oversized chunked body");
+
+    // Over hyper's URI limit (65534 bytes): hyper answers by itself, in JSON all the same.
+    let request = format!("GET /{} HTTP/1.1\r\nHost: x\r\n\r\n", "u".repeat(70_000));
+    let (status, head, body) = raw_http(addr, request.as_bytes()).await;
+    let error = assert_json_error(status, &head, &body, 414, "70 KB URI");
+    assert!(error.contains("URI too long"), "{error}");
+    // And after an answered request on the same connection.
+    let request = format!(
+        "GET /health HTTP/1.1\r\nHost: x\r\n\r\nGET /{} HTTP/1.1\r\nHost: x\r\n\r\n",
+        "u".repeat(70_000)
+    );
+    let (status, _, body) = raw_http(addr, request.as_bytes()).await;
+    assert_eq!(status, 200);
+    let second = String::from_utf8_lossy(&body);
+    assert!(
+        second.contains("HTTP/1.1 414 URI Too Long\r\n")
+            && second.contains("content-type: application/json")
+            && second.ends_with(
+                r#"{"error":"URI too long: the server reads URIs of at most 65534 bytes"}"#
+            ),
+        "{second}"
+    );
+    // A request line that does not parse.
+    let (status, head, body) = raw_http(addr, b"GARBAGE\r\n\r\n").await;
+    assert_json_error(status, &head, &body, 400, "malformed request line");
+
+    // Invalid UTF-8, percent-encoded in a path parameter, and raw in a body.
+    for path in ["/datasets/%FF%FE/stats", "/builds/%C3%28"] {
+        let request = format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+        let (status, head, body) = raw_http(addr, request.as_bytes()).await;
+        assert_json_error(status, &head, &body, 400, path);
+    }
+    let mut request = format!(
+        "POST /builds HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nConnection: close\r\nContent-Length: 17\r\n\r\n"
+    )
+    .into_bytes();
+    request.extend(b"{\"dataset\": \"\xff\xfe\"}");
+    let (status, head, body) = raw_http(addr, &request).await;
+    assert_json_error(status, &head, &body, 400, "invalid UTF-8 body");
+
+    let (status, _) = get(&client, &format!("{base}/health")).await;
+    assert_eq!(status, 200);
+    service.stop().await.unwrap();
 }
 
 /// `GET /health` status, from a test without a runtime.

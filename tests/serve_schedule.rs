@@ -197,6 +197,7 @@ async fn a_scheduled_rebuild_with_nothing_changed_is_a_no_op() {
             state_dir: state.path().to_path_buf(),
             token: Token::new("t").unwrap(),
             clock: clock.clone(),
+            builder: env!("CARGO_BIN_EXE_motionforge").into(),
         },
         listener,
     )

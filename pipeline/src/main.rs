@@ -239,6 +239,14 @@ enum Command {
         #[arg(long, default_value = motionforge::serve::DEFAULT_TOKEN_ENV)]
         token_env: String,
     },
+    /// Run one build for `motionforge serve`, in a process of its own (the service starts it;
+    /// docs/service.md describes the protocol).
+    #[command(name = "serve-build", hide = true)]
+    ServeBuild {
+        /// The job file the service wrote.
+        #[arg(long)]
+        job: PathBuf,
+    },
     /// Work with prompt templates.
     Prompt {
         #[command(subcommand)]
@@ -524,7 +532,11 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             bind,
             state_dir: state,
             token_env,
+            // Builds run in processes of this very binary, so service and builds agree.
+            builder: std::env::current_exe()
+                .map_err(|e| anyhow::anyhow!("cannot find this program's own path: {e}"))?,
         })?,
+        Command::ServeBuild { job } => return Ok(motionforge::serve::worker::main(&job)),
         Command::Labels { command } => labels_command(command, ui.log.json)?,
         Command::Schema => writeln!(
             std::io::stdout(),

@@ -1,11 +1,13 @@
-//! The HTTP routes. Every answer is JSON, errors as `{"error": "..."}`; calls other than GET
-//! need `Authorization: Bearer <token>`.
+//! The HTTP routes. Every answer is JSON, errors as `{"error": "..."}` (those of axum's
+//! extractors and hyper's own included); calls other than GET need `Authorization: Bearer
+//! <token>`. Since reading needs no token, answers show no absolute path and echo at most an
+//! excerpt of what the client sent.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use axum::body::Bytes;
-use axum::extract::{Path, Query, Request, State};
+use axum::extract::{DefaultBodyLimit, Path, Query, Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -16,13 +18,18 @@ use serde_json::{Value, json};
 
 use super::history::{BuildId, BuildRecord, BuildState, ListFilter, Trigger};
 use super::log::StageProgress;
-use super::{Shared, rfc3339, schedule};
+use super::public::{excerpt, excerpt_of};
+use super::{Shared, rfc3339, say, schedule};
 use crate::build::BuildReport;
 
 /// Builds listed by `GET /builds` unless `limit` says otherwise.
 const DEFAULT_LIMIT: usize = 50;
 /// Most builds one listing returns.
 const MAX_LIMIT: usize = 1000;
+/// Largest request body read. `POST /builds` needs a few hundred bytes; this is generous.
+pub const BODY_LIMIT: usize = 256 * 1024;
+/// Longest message of a library error (which may quote the client's input) in an answer.
+const MAX_QUOTED_ERROR: usize = 300;
 
 type AppState = Arc<Shared>;
 
@@ -104,7 +111,58 @@ pub(crate) fn router(shared: AppState) -> Router {
         ))
         .fallback(no_route)
         .method_not_allowed_fallback(method_not_allowed)
+        // Bodies without a length (chunked) are cut at the limit while read.
+        .layer(DefaultBodyLimit::max(BODY_LIMIT))
+        .layer(middleware::from_fn(refuse_long_bodies))
+        // Outermost, so it sees every answer: extractor rejections and the body limit too.
+        .layer(middleware::from_fn(json_errors))
         .with_state(shared)
+}
+
+/// Refuses a body whose declared length is over [`BODY_LIMIT`] before reading any of it.
+async fn refuse_long_bodies(request: Request, next: Next) -> Response {
+    let declared = request
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.trim().parse::<u64>().ok());
+    if declared.is_some_and(|n| n > BODY_LIMIT as u64) {
+        return ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("request body too large: at most {BODY_LIMIT} bytes"),
+        )
+        .into_response();
+    }
+    next.run(request).await
+}
+
+/// Rewrites an error answer that is not JSON (axum's rejections answer plain text) into the
+/// `{"error": "..."}` form every other error has.
+async fn json_errors(request: Request, next: Next) -> Response {
+    let response = next.run(request).await;
+    let status = response.status();
+    let is_json = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return response;
+    }
+    let body = axum::body::to_bytes(response.into_body(), 16 * 1024)
+        .await
+        .unwrap_or_default();
+    let text = String::from_utf8_lossy(&body);
+    let message = if status == StatusCode::PAYLOAD_TOO_LARGE {
+        format!("request body too large: at most {BODY_LIMIT} bytes")
+    } else if text.trim().is_empty() {
+        status
+            .canonical_reason()
+            .unwrap_or("request refused")
+            .to_string()
+    } else {
+        excerpt_of(text.trim(), MAX_QUOTED_ERROR).into_owned()
+    };
+    ApiError::new(status, message).into_response()
 }
 
 /// An error answer.
@@ -122,8 +180,14 @@ impl ApiError {
         }
     }
 
+    /// A failure of the service itself: the details (paths, SQLite errors) go to its log, not
+    /// to a caller who may not hold the token.
     fn internal(err: impl std::fmt::Display) -> ApiError {
-        ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, err.to_string())
+        say(&format!("internal error answering a request: {err}"));
+        ApiError::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal error; the service's log has the details",
+        )
     }
 }
 
@@ -173,7 +237,7 @@ async fn no_route(method: Method, uri: axum::http::Uri) -> ApiError {
         StatusCode::NOT_FOUND,
         format!(
             "no route {method} {}; the routes are in docs/openapi.json",
-            uri.path()
+            excerpt(uri.path())
         ),
     )
 }
@@ -181,7 +245,7 @@ async fn no_route(method: Method, uri: axum::http::Uri) -> ApiError {
 async fn method_not_allowed(method: Method, uri: axum::http::Uri) -> ApiError {
     ApiError::new(
         StatusCode::METHOD_NOT_ALLOWED,
-        format!("{} does not accept {method}", uri.path()),
+        format!("{} does not accept {method}", excerpt(uri.path())),
     )
 }
 
@@ -219,7 +283,8 @@ async fn create_build(
             ApiError::new(
                 StatusCode::BAD_REQUEST,
                 format!(
-                    "body: {e}; expected {{\"dataset\": \"<name>\", \"force\": false, \"offline\": false}}"
+                    "body: {}; expected {{\"dataset\": \"<name>\", \"force\": false, \"offline\": false}}",
+                    excerpt_of(&e.to_string(), MAX_QUOTED_ERROR)
                 ),
             )
         })?
@@ -267,7 +332,8 @@ fn unknown_dataset(shared: &Shared, name: &str) -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
         format!(
-            "no dataset `{name}`; this service serves {}",
+            "no dataset `{}`; this service serves {}",
+            excerpt(name),
             shared.served_names()
         ),
     )
@@ -290,7 +356,8 @@ async fn list_builds(
                     ApiError::new(
                         StatusCode::BAD_REQUEST,
                         format!(
-                            "state `{value}`: expected queued, running, succeeded, failed or interrupted"
+                            "state `{}`: expected queued, running, succeeded, failed or interrupted",
+                            excerpt(&value)
                         ),
                     )
                 })?);
@@ -304,7 +371,8 @@ async fn list_builds(
                         ApiError::new(
                             StatusCode::BAD_REQUEST,
                             format!(
-                                "limit `{value}`: expected a whole number from 1 to {MAX_LIMIT}"
+                                "limit `{}`: expected a whole number from 1 to {MAX_LIMIT}",
+                                excerpt(&value)
                             ),
                         )
                     })?;
@@ -312,7 +380,10 @@ async fn list_builds(
             other => {
                 return Err(ApiError::new(
                     StatusCode::BAD_REQUEST,
-                    format!("unknown query parameter `{other}`: expected dataset, state or limit"),
+                    format!(
+                        "unknown query parameter `{}`: expected dataset, state or limit",
+                        excerpt(other)
+                    ),
                 ));
             }
         }
@@ -331,7 +402,12 @@ async fn get_build(
     State(shared): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<BuildView>, ApiError> {
-    let missing = || ApiError::new(StatusCode::NOT_FOUND, format!("no build `{id}`"));
+    let missing = || {
+        ApiError::new(
+            StatusCode::NOT_FOUND,
+            format!("no build `{}`", excerpt(&id)),
+        )
+    };
     let number: BuildId = id.parse().map_err(|_| missing())?;
     let record = shared
         .history
@@ -390,6 +466,15 @@ fn view(shared: &Shared, record: BuildRecord, with_log: bool) -> BuildView {
             record.log,
         ),
     };
+    // Build errors and logs name input files; callers need no token, so no absolute path.
+    let log: Vec<String> = log
+        .iter()
+        .map(|l| shared.shield.text(l).into_owned())
+        .collect();
+    let error = record
+        .error
+        .as_deref()
+        .map(|e| shared.shield.text(e).into_owned());
     let counts = record
         .report
         .as_deref()
@@ -418,7 +503,7 @@ fn view(shared: &Shared, record: BuildRecord, with_log: bool) -> BuildView {
         resumed_by: record.resumed_by,
         stages,
         counts,
-        error: record.error,
+        error,
         log: with_log.then_some(log),
     }
 }
@@ -454,7 +539,7 @@ async fn list_datasets(State(shared): State<AppState>) -> Result<Json<Value>, Ap
         let folder = dataset.config.dataset_dir();
         out.push(json!({
             "name": name,
-            "output": folder,
+            "output": shared.shield.path(&folder),
             "schedule": dataset.schedule.as_ref().map(|(text, _)| text),
             "next_scheduled": dataset
                 .schedule
@@ -502,7 +587,7 @@ async fn dataset_stats(
             StatusCode::NOT_FOUND,
             format!(
                 "dataset `{name}` has no statistics yet ({} is missing): build it first",
-                path.display()
+                shared.shield.path(&path)
             ),
         )),
         Err(e) => Err(ApiError::internal(format!("{}: {e}", path.display()))),

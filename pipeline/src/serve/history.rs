@@ -34,7 +34,8 @@ pub enum BuildState {
     Succeeded,
     /// Stopped by an error.
     Failed,
-    /// The service stopped while it ran; a `resume` build follows it.
+    /// The service stopped while it ran; a `resume` build follows it (see
+    /// [`History::interrupt_running`]).
     Interrupted,
 }
 
@@ -99,6 +100,15 @@ impl Trigger {
             .into_iter()
             .find(|t| t.as_str() == text)
     }
+}
+
+/// How the service left the builds it was running.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Left {
+    /// It stopped cleanly (Ctrl-C, SIGTERM, [`super::Service::stop`]) and killed the build.
+    Stopped,
+    /// It died while they ran (killed, out of memory, power loss): found on the next start.
+    Died,
 }
 
 /// One build as the history keeps it.
@@ -355,34 +365,56 @@ impl History {
         Ok(n == 1)
     }
 
-    /// Marks every running build interrupted, noting `reason` in its error and log; returns their
-    /// ids. Called on start (a crash left them) and on shutdown (the build is abandoned).
-    pub fn interrupt_running(&self, reason: &str, now: i64) -> Result<Vec<BuildId>, HistoryError> {
+    /// Ends every running build the service left behind, noting `reason` in its error and log,
+    /// and returns them with the state each was given.
+    ///
+    /// A build is `interrupted` (and [`History::resume_interrupted`] resumes it), except when
+    /// the service died ([`Left::Died`]) during a build that was itself resuming an interrupted
+    /// one: that build is `failed`, so a build that takes the whole service down is retried once,
+    /// not on every restart.
+    pub fn interrupt_running(
+        &self,
+        reason: &str,
+        left: Left,
+        now: i64,
+    ) -> Result<Vec<(BuildId, BuildState)>, HistoryError> {
         let mut conn = self.lock();
         let tx = conn.transaction().map_err(|e| self.err(e))?;
-        let rows: Vec<(BuildId, String)> = {
+        let rows: Vec<(BuildId, String, Option<BuildId>)> = {
             let mut stmt = tx
-                .prepare("SELECT id, log FROM builds WHERE state = 'running' ORDER BY id")
+                .prepare("SELECT id, log, resumes FROM builds WHERE state = 'running' ORDER BY id")
                 .map_err(|e| self.err(e))?;
-            stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+            stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
                 .and_then(Iterator::collect)
                 .map_err(|e| self.err(e))?
         };
-        for (id, log) in &rows {
+        let mut ended = Vec::new();
+        for (id, log, resumes) in &rows {
+            let (state, error) = match (left, resumes) {
+                (Left::Died, Some(first)) => (
+                    BuildState::Failed,
+                    format!(
+                        "{reason}, and this build was itself resuming interrupted build {first}: \
+                         interrupted twice; not resumed again, request a new build"
+                    ),
+                ),
+                _ => (BuildState::Interrupted, reason.to_string()),
+            };
             let mut lines: Vec<String> = serde_json::from_str(log).unwrap_or_default();
-            lines.push(reason.to_string());
+            lines.push(error.clone());
             let excess = lines.len().saturating_sub(LOG_TAIL);
             lines.drain(..excess);
             let log = serde_json::to_string(&lines).unwrap_or_else(|_| "[]".into());
             tx.execute(
-                "UPDATE builds SET state = 'interrupted', finished_at = ?2, error = ?3, log = ?4 \
+                "UPDATE builds SET state = ?2, finished_at = ?3, error = ?4, log = ?5 \
                  WHERE id = ?1",
-                params![id, now, reason, log],
+                params![id, state.as_str(), now, error, log],
             )
             .map_err(|e| self.err(e))?;
+            ended.push((*id, state));
         }
         tx.commit().map_err(|e| self.err(e))?;
-        Ok(rows.into_iter().map(|(id, _)| id).collect())
+        Ok(ended)
     }
 
     /// Queues a `resume` build for each interrupted build of the given datasets that has none
@@ -587,7 +619,10 @@ mod tests {
         assert_eq!(rec.log, vec!["done".to_string()]);
 
         assert!(h.start(b, 6).unwrap());
-        assert_eq!(h.interrupt_running("stopped", 7).unwrap(), vec![b]);
+        assert_eq!(
+            h.interrupt_running("stopped", Left::Stopped, 7).unwrap(),
+            vec![(b, BuildState::Interrupted)]
+        );
         assert!(
             !h.finish(b, &outcome, 8).unwrap(),
             "an abandoned build's late end must not overwrite `interrupted`"
@@ -612,6 +647,45 @@ mod tests {
             h.queued().unwrap().iter().map(|r| r.id).collect::<Vec<_>>(),
             vec![new.id]
         );
+    }
+
+    #[test]
+    fn a_resume_build_the_service_died_in_fails_instead_of_resuming_again() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = History::open(dir.path()).unwrap();
+        let first = h
+            .enqueue("demo", Trigger::Api, false, false, None, 1)
+            .unwrap();
+        assert!(h.start(first, 2).unwrap());
+        assert_eq!(
+            h.interrupt_running("died", Left::Died, 3).unwrap(),
+            vec![(first, BuildState::Interrupted)],
+            "a first interruption is resumed"
+        );
+        let resume = h.resume_interrupted(&["demo"], 4).unwrap()[0];
+
+        // A clean stop during the resume build keeps it resumable.
+        assert!(h.start(resume, 5).unwrap());
+        assert_eq!(
+            h.interrupt_running("stopped", Left::Stopped, 6).unwrap(),
+            vec![(resume, BuildState::Interrupted)]
+        );
+        let again = h.resume_interrupted(&["demo"], 7).unwrap()[0];
+        assert_eq!(h.get(again).unwrap().unwrap().resumes, Some(resume));
+
+        // The service dying during a resume build ends the chain.
+        assert!(h.start(again, 8).unwrap());
+        assert_eq!(
+            h.interrupt_running("died", Left::Died, 9).unwrap(),
+            vec![(again, BuildState::Failed)]
+        );
+        let rec = h.get(again).unwrap().unwrap();
+        let error = rec.error.unwrap();
+        assert!(error.contains("interrupted twice"), "{error}");
+        assert!(error.contains("request a new build"), "{error}");
+        assert_eq!(rec.log.last(), Some(&error));
+        assert!(h.resume_interrupted(&["demo"], 10).unwrap().is_empty());
+        assert!(h.queued().unwrap().is_empty());
     }
 
     #[test]

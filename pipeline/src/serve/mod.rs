@@ -2,13 +2,18 @@
 //! one build at a time per dataset, with its run history in SQLite.
 //!
 //! The routes are in [`api`], the history in [`history`], schedules and the clock in
-//! [`schedule`]; `docs/service.md` explains running it and `docs/openapi.json` describes the API.
+//! [`schedule`]. Each build runs in a process of its own ([`worker`]), so no build can take the
+//! service down. `docs/service.md` explains running it and `docs/openapi.json` describes the API.
 
 pub mod api;
+mod child;
 pub mod history;
 pub mod log;
+mod public;
 mod queue;
 pub mod schedule;
+mod wire;
+pub mod worker;
 
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
@@ -23,8 +28,9 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
 use crate::config::{Config, ConfigError};
-use history::{BuildId, History, HistoryError, Trigger};
+use history::{BuildId, BuildState, History, HistoryError, Left, Trigger};
 use log::BuildLog;
+use public::PathShield;
 use schedule::{Clock, SystemClock, Timetable};
 
 /// Default address: loopback only, so nothing outside the machine reaches it unless asked.
@@ -33,6 +39,9 @@ pub const DEFAULT_BIND: &str = "127.0.0.1:7878";
 pub const DEFAULT_TOKEN_ENV: &str = "MOTIONFORGE_TOKEN";
 /// Default state folder (run history), relative to the working folder.
 pub const DEFAULT_STATE_DIR: &str = ".motionforge-serve";
+/// Folder inside the state folder where build jobs and reports pass between the service and its
+/// build processes.
+pub const JOBS_DIR: &str = "jobs";
 
 /// Errors that keep the service from starting or stopping cleanly.
 #[derive(Debug, thiserror::Error)]
@@ -75,6 +84,22 @@ pub enum ServeError {
     /// The async runtime cannot start.
     #[error("cannot start the async runtime: {0}")]
     Runtime(#[source] std::io::Error),
+    /// The executable that runs builds is missing.
+    #[error(
+        "cannot run builds with {path}: it is not a file (it should be the motionforge binary)"
+    )]
+    NoBuilder {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// The folder for build jobs cannot be prepared.
+    #[error("cannot prepare the build job folder {path}: {source}")]
+    Jobs {
+        /// The folder.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
 }
 
 /// The bearer token that state-changing calls must present. Only its digest is kept, and
@@ -126,6 +151,9 @@ pub struct ServiceSetup {
     pub token: Token,
     /// The clock that schedules and timestamps follow.
     pub clock: Arc<dyn Clock>,
+    /// The executable each build runs in, as `<builder> serve-build --job <file>`: the
+    /// motionforge binary (`std::env::current_exe()` in the binary itself).
+    pub builder: PathBuf,
 }
 
 /// A served dataset.
@@ -145,6 +173,12 @@ pub(crate) struct Shared {
     live: Mutex<HashMap<BuildId, Arc<BuildLog>>>,
     queues: BTreeMap<String, mpsc::UnboundedSender<BuildId>>,
     shutdown: watch::Receiver<bool>,
+    /// The executable builds run in.
+    builder: PathBuf,
+    /// Where build jobs and reports are written.
+    jobs_dir: PathBuf,
+    /// How paths are shown to callers.
+    shield: PathShield,
 }
 
 impl Shared {
@@ -279,6 +313,18 @@ fn schedule_problem(path: &std::path::Path, text: &str, why: &str) -> ConfigErro
     }
 }
 
+/// Creates the job folder, emptied of what an earlier run left.
+fn clear_jobs(dir: &std::path::Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.is_file() {
+            std::fs::remove_file(&path)?;
+        }
+    }
+    Ok(())
+}
+
 /// Loads config files for a service. A schedule error names the file.
 pub fn load_configs(paths: &[PathBuf]) -> Result<Vec<Config>, ServeError> {
     let mut configs = Vec::new();
@@ -323,14 +369,31 @@ impl Service {
             addr: "listener".into(),
             source,
         })?;
+        if !setup.builder.is_file() {
+            return Err(ServeError::NoBuilder {
+                path: setup.builder,
+            });
+        }
         let history = History::open(&setup.state_dir)?;
+        // The history's lock is held: no other service uses these jobs, so any left are stale.
+        let jobs_dir = setup.state_dir.join(JOBS_DIR);
+        clear_jobs(&jobs_dir).map_err(|source| ServeError::Jobs {
+            path: jobs_dir.clone(),
+            source,
+        })?;
         let now = setup.clock.now().timestamp_millis();
-        let interrupted =
-            history.interrupt_running("the service stopped while this build ran", now)?;
-        for id in &interrupted {
-            say(&format!(
-                "build {id} was running when the service stopped: interrupted"
-            ));
+        let ended = history.interrupt_running(
+            "the service stopped while this build ran",
+            Left::Died,
+            now,
+        )?;
+        for (id, state) in &ended {
+            say(&match state {
+                BuildState::Failed => format!(
+                    "build {id} was running when the service died, and it resumed an earlier interrupted build: failed, not resumed again"
+                ),
+                _ => format!("build {id} was running when the service stopped: interrupted"),
+            });
         }
         let names: Vec<&str> = datasets.keys().map(String::as_str).collect();
         for id in history.resume_interrupted(&names, now)? {
@@ -360,6 +423,9 @@ impl Service {
             live: Mutex::new(HashMap::new()),
             queues,
             shutdown: shutdown.clone(),
+            builder: setup.builder,
+            jobs_dir,
+            shield: PathShield::new(std::env::current_dir().ok()),
         });
         for build in shared.history.queued()? {
             if shared.datasets.contains_key(&build.dataset) {
@@ -388,7 +454,7 @@ impl Service {
         let router = api::router(shared.clone());
         let mut server_stop = shutdown;
         let server = tokio::spawn(async move {
-            axum::serve(listener, router)
+            axum::serve(wire::JsonErrors::new(listener), router)
                 .with_graceful_shutdown(async move {
                     let _ = server_stop.wait_for(|s| *s).await;
                 })
@@ -412,9 +478,9 @@ impl Service {
         self.addr
     }
 
-    /// Stops serving: finishes open requests, stops the queues and schedules, and marks builds
-    /// still running as interrupted (the next start resumes them). A build's thread cannot be
-    /// cancelled; its outputs are written atomically, so leaving it is as safe as a crash.
+    /// Stops serving: finishes open requests, stops the queues and schedules, kills the build
+    /// processes still running and marks their builds interrupted (the next start resumes them).
+    /// A build's outputs are written atomically, so killing it is as safe as a crash.
     pub async fn stop(self) -> Result<(), ServeError> {
         let _ = self.stop.send(true);
         let served = self.server.await;
@@ -422,8 +488,9 @@ impl Service {
             let _ = task.await;
         }
         let now = self.shared.now_ms();
-        for id in self.shared.history.interrupt_running(
+        for (id, _) in self.shared.history.interrupt_running(
             "the service stopped during this build; it resumes on the next start",
+            Left::Stopped,
             now,
         )? {
             say(&format!("build {id} interrupted by the shutdown"));
@@ -454,6 +521,8 @@ pub struct ServeCommand {
     pub state_dir: PathBuf,
     /// Environment variable holding the token.
     pub token_env: String,
+    /// The executable builds run in (see [`ServiceSetup::builder`]).
+    pub builder: PathBuf,
 }
 
 /// Runs the service until Ctrl-C or SIGTERM, then stops it cleanly.
@@ -477,6 +546,7 @@ pub fn run(command: &ServeCommand) -> Result<(), ServeError> {
                 state_dir: command.state_dir.clone(),
                 token,
                 clock: Arc::new(SystemClock),
+                builder: command.builder.clone(),
             },
             listener,
         )
@@ -485,7 +555,7 @@ pub fn run(command: &ServeCommand) -> Result<(), ServeError> {
         say("stopping");
         service.stop().await
     })?;
-    // Build threads still running are abandoned here, as the history already says.
+    // Build processes were killed when their builds were dropped, as the history already says.
     runtime.shutdown_background();
     Ok(())
 }

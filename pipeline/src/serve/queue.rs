@@ -2,15 +2,20 @@
 //! builds of one dataset would write the same folder.
 
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, watch};
 
+use super::child::{self, Ended};
 use super::history::{BuildId, BuildState, Outcome};
 use super::log::BuildLog;
+use super::worker::Job;
 use super::{Shared, say};
-use crate::build::{BuildOptions, BuildReport, build};
-use crate::progress::ProgressSink;
+use crate::build::BuildReport;
+
+/// How long a build process killed by a stop signal waits for the service's own stop before it
+/// is recorded as failed.
+const STOP_GRACE: Duration = Duration::from_secs(2);
 
 /// Resolves once the service is stopping (or its stop sender is gone).
 async fn stopping(mut shutdown: watch::Receiver<bool>) {
@@ -34,7 +39,7 @@ pub(crate) async fn work(
         };
         tokio::select! {
             biased;
-            // The build's thread runs on; `Service::stop` marks the build interrupted.
+            // Dropping the build kills its process; `Service::stop` marks it interrupted.
             () = stopping(shared.shutdown.clone()) => return,
             () = run_build(&shared, &dataset, id) => {}
         }
@@ -53,15 +58,6 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
             return;
         }
     };
-    match shared.history.start(id, shared.now_ms()) {
-        Ok(true) => {}
-        // No longer queued (already run by an earlier service on this history).
-        Ok(false) => return,
-        Err(e) => {
-            say(&format!("build {id}: cannot start: {e}"));
-            return;
-        }
-    }
     let log = Arc::new(BuildLog::new());
     log.line(&format!(
         "build {id} of `{dataset}` started ({} request{}{})",
@@ -72,24 +68,39 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
             None => String::new(),
         }
     ));
+    // Live before it is `running`: a reader who sees it running finds its log.
     shared.set_live(id, Some(log.clone()));
+    match shared.history.start(id, shared.now_ms()) {
+        Ok(true) => {}
+        // No longer queued (already run by an earlier service on this history).
+        Ok(false) => {
+            shared.set_live(id, None);
+            return;
+        }
+        Err(e) => {
+            shared.set_live(id, None);
+            say(&format!("build {id}: cannot start: {e}"));
+            return;
+        }
+    }
     say(&format!("build {id} of `{dataset}` started"));
 
-    let config = served.config.clone();
-    let options = BuildOptions {
+    let job = Job {
+        build: id,
+        config: served.config.clone(),
+        base_dir: served.config.base_dir.clone(),
         force: record.force,
         offline: record.offline,
-        progress: ProgressSink::new(log.clone()),
-        ..BuildOptions::default()
+        report: shared.jobs_dir.join(format!("{id}.report.json")),
     };
     let clock = Instant::now();
-    // The build is CPU-bound and uses rayon: keep it off the async workers.
-    let result = tokio::task::spawn_blocking(move || build(&config, &options)).await;
+    // A process of its own: whatever ends the build (an abort, a signal) leaves the service up.
+    let ended = child::run(&shared.builder, &shared.jobs_dir, job, &log).await;
     let duration_ms = i64::try_from(clock.elapsed().as_millis()).unwrap_or(i64::MAX);
     let seconds = duration_ms as f64 / 1000.0;
 
-    let outcome = match result {
-        Ok(Ok(report)) => {
+    let outcome = match ended {
+        Ended::Succeeded(report) => {
             log.line(&summary(&report, seconds));
             Outcome {
                 state: BuildState::Succeeded,
@@ -100,26 +111,30 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
                 duration_ms,
             }
         }
-        Ok(Err(err)) => failed(&log, error_chain(&err), duration_ms),
-        Err(join) => {
-            let why = if join.is_panic() {
-                let payload = join.into_panic();
-                let text = payload
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| payload.downcast_ref::<String>().cloned())
-                    .unwrap_or_else(|| "unknown panic".into());
-                format!("the build panicked: {text}")
-            } else {
-                "the build was cancelled".to_string()
-            };
-            failed(&log, why, duration_ms)
+        Ended::Failed(why) => failed(&log, why, duration_ms),
+        Ended::Killed { signal, message } => {
+            if child::is_stop_request(signal) {
+                // Under systemd a stop signals every process of the unit at once: when the
+                // service is stopping too, the build was interrupted, not failed. `work` drops
+                // this future as soon as the stop is seen, and `Service::stop` records it.
+                let _ = tokio::time::timeout(STOP_GRACE, stopping(shared.shutdown.clone())).await;
+                if *shared.shutdown.borrow() {
+                    return;
+                }
+            }
+            failed(&log, message, duration_ms)
         }
     };
     match shared.history.finish(id, &outcome, shared.now_ms()) {
         Ok(true) => say(&format!(
-            "build {id} of `{dataset}` {} in {seconds:.2} s",
-            outcome.state.as_str()
+            "build {id} of `{dataset}` {} in {seconds:.2} s{}",
+            outcome.state.as_str(),
+            outcome
+                .error
+                .as_deref()
+                .and_then(|e| e.lines().next())
+                .map(|e| format!(": {e}"))
+                .unwrap_or_default()
         )),
         Ok(false) => say(&format!(
             "build {id} ended after it was marked interrupted; its result is not recorded"
@@ -130,7 +145,11 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
 }
 
 fn failed(log: &BuildLog, error: String, duration_ms: i64) -> Outcome {
-    log.line(&format!("failed: {error}"));
+    // The error may quote the process's last lines, which the log already has.
+    log.line(&format!(
+        "failed: {}",
+        error.lines().next().unwrap_or_default()
+    ));
     Outcome {
         state: BuildState::Failed,
         report: None,
@@ -160,18 +179,4 @@ fn summary(report: &BuildReport, seconds: f64) -> String {
         report.clips,
         report.rejects.len()
     )
-}
-
-/// The error and its causes on one line, skipping causes its message already quotes.
-fn error_chain(err: &dyn std::error::Error) -> String {
-    let mut message = err.to_string();
-    let mut cause = err.source();
-    while let Some(c) = cause {
-        let text = c.to_string();
-        if !message.contains(&text) {
-            message = format!("{message}: {text}");
-        }
-        cause = c.source();
-    }
-    message
 }
