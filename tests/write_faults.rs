@@ -291,10 +291,9 @@ fn a_full_disk_while_writing_shards_fails_naming_the_shard_and_leaves_no_partial
     assert_nothing_half_written_looks_complete(&dataset);
 }
 
-/// A rebuild that changes the shard layout and runs out of space part-way. The write stage
-/// withdraws the old manifest and the shards of the old layout before writing any new shard, so a
-/// failure in between leaves no manifest vouching for a mix, and no old shard beside new ones for
-/// a `data/train-*.parquet` reader to count twice.
+/// A rebuild that changes the shard layout and runs out of space part-way. The write stage stages
+/// the new dataset in `.motionforge/staging/` and switches only when all of it is written, so the
+/// failure leaves the previous dataset complete: its manifest, and exactly its shards, unchanged.
 #[test]
 fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for() {
     let dir = tempfile::tempdir().unwrap();
@@ -305,6 +304,15 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
         .output()
         .unwrap();
     assert!(first.status.success(), "{}", text(&first.stderr));
+    let dataset = output.join("demo");
+    let before: Vec<(PathBuf, Vec<u8>)> = files_under(&dataset)
+        .into_iter()
+        .filter(|p| !p.starts_with(dataset.join(".motionforge")))
+        .map(|p| {
+            let bytes = std::fs::read(&p).unwrap();
+            (p, bytes)
+        })
+        .collect();
     // One clip per shard, and a feature change so every row changes.
     let config = demo_config_in(
         dir.path(),
@@ -315,5 +323,17 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
     let run = with_size_limit(1000, &build_args(&config, &output));
     assert_eq!(run.status.code(), Some(1), "{}", text(&run.stderr));
     assert!(text(&run.stderr).contains("File too large"));
-    assert_nothing_half_written_looks_complete(&output.join("demo"));
+    assert_nothing_half_written_looks_complete(&dataset);
+    // The previous dataset, file for file and byte for byte (build-report.json is the record of
+    // the failed run, written only by a build that finishes).
+    assert!(dataset.join("manifest.json").is_file());
+    let after: Vec<(PathBuf, Vec<u8>)> = files_under(&dataset)
+        .into_iter()
+        .filter(|p| !p.starts_with(dataset.join(".motionforge")))
+        .map(|p| {
+            let bytes = std::fs::read(&p).unwrap();
+            (p, bytes)
+        })
+        .collect();
+    assert!(before == after, "the previous dataset changed");
 }

@@ -156,6 +156,10 @@ pub enum BuildError {
         /// The splits it appears in.
         splits: Vec<String>,
     },
+    /// A computed statistic is NaN or infinite (never written; inputs are bounded at ingest, so
+    /// this is a bug to report).
+    #[error("{0}")]
+    NonFinite(String),
     /// The statistics report cannot be made.
     #[error("report: {0}")]
     Report(String),

@@ -168,6 +168,12 @@ impl NormalizationStats {
         );
         for ((profile, feature), moments) in &stats {
             let (mean, std) = moments.finish();
+            // The last guard of "nothing non-finite is written" (inputs are bounded at ingest).
+            if mean.iter().chain(&std).any(|v| !v.is_finite()) {
+                return Err(BuildError::NonFinite(format!(
+                    "normalisation statistics of `{feature}` for profile `{profile}` are not finite; not written"
+                )));
+            }
             let shape = [mean.len() / moments.dims, moments.dims];
             for (suffix, values) in [("mean", &mean), ("std", &std)] {
                 let path = dir.join(profile).join(format!("{feature}_{suffix}.npy"));
