@@ -1,5 +1,6 @@
 //! motionforge: a dataset builder for text-to-motion research.
 pub mod annotate;
+pub mod base;
 pub mod build;
 pub mod clip;
 pub mod compose_text;

@@ -120,28 +120,13 @@ fn display_path(base: &Path, path: &Path) -> String {
     shown.to_string_lossy().replace('\\', "/")
 }
 
-/// The profile a source names (bundled, or a TOML file relative to the config), with the source's
-/// `pairs` and `reflections` overrides applied.
+/// The source's skeleton profile (bundled or from a file), with the source's `pairs` and
+/// `reflections` overrides applied.
 pub fn resolve_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, SourceError> {
-    let mut spec = load_profile(config, source)?;
-    spec.pairs.extend(source.pairs.clone());
-    spec.reflections.extend(source.reflections.clone());
-    Ok(spec)
-}
-
-fn load_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, SourceError> {
-    let err = |message: String| SourceError::Profile {
+    crate::config::resolve_profile(config, source).map_err(|message| SourceError::Profile {
         source_name: source.name.clone(),
         message,
-    };
-    if source.profile.ends_with(".toml") {
-        let path = config.resolve(Path::new(&source.profile));
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| err(format!("profile {}: {e}", path.display())))?;
-        ProfileSpec::from_toml(&source.profile, &text).map_err(|e| err(e.to_string()))
-    } else {
-        ProfileSpec::bundled(&source.profile).map_err(|e| err(e.to_string()))
-    }
+    })
 }
 
 /// The frame-rate override for a file, if any: `fps_override` (file name or glob on the name),

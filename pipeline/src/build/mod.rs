@@ -3,13 +3,13 @@
 
 mod capture;
 pub mod clean;
-pub mod lock;
 mod motions;
 mod output;
 mod plan;
-mod reject;
 mod text;
 pub mod workspace;
+
+pub use crate::base::lock;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
@@ -17,12 +17,12 @@ use std::path::PathBuf;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
-pub use reject::{Dropped, Reject};
-pub use workspace::{
-    Fingerprint, Ledger, Miss, StageLedger, Stamp, Workspace, WorkspaceError, sha256_hex,
-    temp_path, write_atomic, write_atomic_with,
+pub use crate::base::{
+    Dropped, Fingerprint, Reject, Stamp, WorkspaceError, sha256_hex, temp_path, write_atomic,
+    write_atomic_with,
 };
+pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
+pub use workspace::{Ledger, Miss, StageLedger, Workspace};
 
 use capture::{Item, Shared};
 use motions::{MotionIndex, MotionSource};
@@ -38,24 +38,10 @@ use crate::source::{self, SourceAnnotations, SourceError};
 use crate::stages::{ingest, mirror};
 use crate::stages::{label, segment};
 
-/// Folder of the Parquet shards inside the dataset folder (`<split>-NNNNN-of-NNNNN.parquet`).
-pub const DATA_DIR: &str = "data";
-/// Normalisation statistics (mean/std per feature over the training split).
-pub const NORMALIZATION_DIR: &str = "normalization";
-/// Shard list, checksums, counts and provenance.
-pub const MANIFEST_FILE: &str = "manifest.json";
-/// Dataset card (Hugging Face style, YAML front matter).
-pub const CARD_FILE: &str = "README.md";
-/// Skeleton descriptions beside the table.
-pub const SKELETONS_FILE: &str = "skeletons.json";
-/// One JSON object per rejected input.
-pub const REJECTS_FILE: &str = "rejects.jsonl";
-/// What the last build did.
-pub const REPORT_FILE: &str = "build-report.json";
-/// Task plans, one row per step.
-pub const PLANS_FILE: &str = "plans.parquet";
-/// The report's statistics, inside the dataset folder.
-pub const REPORT_STATS: &str = "report/stats.json";
+pub use crate::base::layout::{
+    CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE, REPORT_FILE,
+    REPORT_STATS, SKELETONS_FILE,
+};
 
 /// Version of the table-writing stage.
 const WRITE_VERSION: u32 = 2;
@@ -156,10 +142,9 @@ pub enum BuildError {
         /// The splits it appears in.
         splits: Vec<String>,
     },
-    /// A computed statistic is NaN or infinite (never written; inputs are bounded at ingest, so
-    /// this is a bug to report).
-    #[error("{0}")]
-    NonFinite(String),
+    /// Normalisation statistics cannot be written.
+    #[error(transparent)]
+    Normalization(Box<crate::io::normalization::NormalizationError>),
     /// The statistics report cannot be made.
     #[error("report: {0}")]
     Report(String),
@@ -183,6 +168,12 @@ pub enum BuildError {
         /// The error.
         source: TableError,
     },
+}
+
+impl From<crate::io::normalization::NormalizationError> for BuildError {
+    fn from(e: crate::io::normalization::NormalizationError) -> Self {
+        BuildError::Normalization(Box::new(e))
+    }
 }
 
 /// What one stage did in a build.

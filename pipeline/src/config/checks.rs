@@ -470,7 +470,7 @@ impl Config {
                 files.extend(found);
             }
             summary.captures.push(files.len());
-            if let Err(e) = crate::source::resolve_profile(self, s)
+            if let Err(e) = super::resolve_profile(self, s)
                 && !s.profile.trim().is_empty()
             {
                 c.push(

@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::motion::ProfileSpec;
+use crate::quality::Thresholds;
+
 /// A configuration error that names the file, the key and what was expected.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -134,10 +137,10 @@ pub struct Config {
     pub features: crate::features::FeatureConfig,
     /// Train/validation/test splits.
     #[serde(default)]
-    pub splits: crate::stages::split::SplitConfig,
+    pub splits: SplitConfig,
     /// Synthetic simultaneous pairs and their plausibility checks.
     #[serde(default)]
-    pub synthetic: crate::stages::compose::SyntheticConfig,
+    pub synthetic: SyntheticConfig,
     /// Body-part labelling.
     #[serde(default)]
     pub part_labels: PartLabelConfig,
@@ -619,4 +622,105 @@ fn read_config(path: &Path) -> Result<String, ConfigError> {
             }
         }
     })
+}
+
+/// Split settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SplitConfig {
+    /// Split names and their share of captures (or subjects); normalised to sum to 1.
+    #[serde(default = "default_ratios")]
+    pub ratios: BTreeMap<String, f64>,
+    /// Regex with a named group `subject` matched against each capture's path: captures of one
+    /// subject share a split. Absent: each capture is its own unit.
+    #[serde(default)]
+    pub subject_pattern: Option<String>,
+    /// A CSV of `capture,split` rows (capture = file stem or path as shown in the table), relative
+    /// to the config; listed captures take that split, the rest are hashed.
+    #[serde(default)]
+    pub file: Option<String>,
+}
+
+fn default_ratios() -> BTreeMap<String, f64> {
+    BTreeMap::from([
+        ("train".to_string(), 0.8),
+        ("val".to_string(), 0.1),
+        ("test".to_string(), 0.1),
+    ])
+}
+
+impl Default for SplitConfig {
+    fn default() -> Self {
+        SplitConfig {
+            ratios: default_ratios(),
+            subject_pattern: None,
+            file: None,
+        }
+    }
+}
+
+/// Synthetic-pair settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SyntheticConfig {
+    /// Build synthetic pairs at all.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// Chance that an eligible clip is paired with a random compatible partner (SINC: 0.5).
+    #[serde(default = "half")]
+    pub probability: f64,
+    /// Most composites one clip may take part in (none when absent).
+    #[serde(default)]
+    pub max_per_clip: Option<usize>,
+    /// Compose every compatible pair instead of sampling (small sets).
+    #[serde(default)]
+    pub exhaustive: bool,
+    /// Trim the longer clip from its start (SINC) or from a seeded random offset.
+    #[serde(default)]
+    pub random_offset: bool,
+    /// Plausibility thresholds; composites that fail are dropped, counted by reason.
+    #[serde(default)]
+    pub thresholds: Thresholds,
+    /// Ask the LLM (the `pair_compat` prompt, cached) whether a person can do both actions at
+    /// once, and drop the pairs it says no to. Off by default; needs an `[llm]` section.
+    #[serde(default)]
+    pub llm_check: bool,
+}
+
+fn half() -> f64 {
+    0.5
+}
+
+impl Default for SyntheticConfig {
+    fn default() -> Self {
+        SyntheticConfig {
+            enabled: true,
+            probability: half(),
+            max_per_clip: None,
+            exhaustive: false,
+            random_offset: false,
+            thresholds: Thresholds::default(),
+            llm_check: false,
+        }
+    }
+}
+
+/// The profile a source names (bundled, or a TOML file relative to the config), with the source's
+/// `pairs` and `reflections` overrides applied.
+pub fn resolve_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, String> {
+    let mut spec = load_profile(config, source)?;
+    spec.pairs.extend(source.pairs.clone());
+    spec.reflections.extend(source.reflections.clone());
+    Ok(spec)
+}
+
+fn load_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, String> {
+    if source.profile.ends_with(".toml") {
+        let path = config.resolve(Path::new(&source.profile));
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| format!("profile {}: {e}", path.display()))?;
+        ProfileSpec::from_toml(&source.profile, &text).map_err(|e| e.to_string())
+    } else {
+        ProfileSpec::bundled(&source.profile).map_err(|e| e.to_string())
+    }
 }

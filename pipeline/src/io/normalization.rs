@@ -11,7 +11,34 @@ use arrow_schema::{DataType, Field, Schema};
 use parquet::arrow::ArrowWriter;
 
 use super::parquet::{TableError, dataset_motion};
-use crate::build::{BuildError, write_atomic, write_atomic_with};
+use crate::base::{WorkspaceError, write_atomic, write_atomic_with};
+
+/// Why normalisation statistics could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum NormalizationError {
+    /// A file could not be written.
+    #[error(transparent)]
+    Write(#[from] WorkspaceError),
+    /// The statistics table could not be encoded.
+    #[error("{path}: {source}")]
+    Table {
+        /// The table path.
+        path: PathBuf,
+        /// The error.
+        source: Box<TableError>,
+    },
+    /// A statistic is NaN or infinite (never written; inputs are bounded at ingest, so this is a
+    /// bug to report).
+    #[error(
+        "normalisation statistics of `{feature}` for profile `{profile}` are not finite; not written"
+    )]
+    NonFinite {
+        /// The skeleton profile.
+        profile: String,
+        /// The feature.
+        feature: String,
+    },
+}
 use crate::clip::Clip;
 use crate::features::{FeatureConfig, features};
 use crate::motion::Profile;
@@ -90,7 +117,7 @@ pub fn write_normalization(
     split: &str,
     profiles: &BTreeMap<String, Profile>,
     config: &FeatureConfig,
-) -> Result<Vec<PathBuf>, BuildError> {
+) -> Result<Vec<PathBuf>, NormalizationError> {
     let mut stats = NormalizationStats::default();
     for clip in clips.iter().filter(|c| c.split == split) {
         stats.add(clip, profiles, config);
@@ -148,7 +175,7 @@ impl NormalizationStats {
     }
 
     /// Writes the statistics gathered (see [`write_normalization`]).
-    pub fn write(self, dir: &Path) -> Result<Vec<PathBuf>, BuildError> {
+    pub fn write(self, dir: &Path) -> Result<Vec<PathBuf>, NormalizationError> {
         let stats = self.stats;
         let mut written = Vec::new();
         let (
@@ -170,9 +197,10 @@ impl NormalizationStats {
             let (mean, std) = moments.finish();
             // The last guard of "nothing non-finite is written" (inputs are bounded at ingest).
             if mean.iter().chain(&std).any(|v| !v.is_finite()) {
-                return Err(BuildError::NonFinite(format!(
-                    "normalisation statistics of `{feature}` for profile `{profile}` are not finite; not written"
-                )));
+                return Err(NormalizationError::NonFinite {
+                    profile: profile.clone(),
+                    feature: feature.to_string(),
+                });
             }
             let shape = [mean.len() / moments.dims, moments.dims];
             for (suffix, values) in [("mean", &mean), ("std", &std)] {
@@ -217,9 +245,9 @@ impl NormalizationStats {
             }
         }
         let path = dir.join("normalization.parquet");
-        let table = |e: TableError| BuildError::Table {
+        let table = |e: TableError| NormalizationError::Table {
             path: path.clone(),
-            source: e,
+            source: Box::new(e),
         };
         let batch =
             RecordBatch::try_new(Arc::clone(&schema), columns).map_err(|e| table(e.into()))?;
@@ -238,11 +266,11 @@ impl NormalizationStats {
             })
         })
         .map_err(|e| match failure.take() {
-            Some(source) => BuildError::Table {
+            Some(source) => NormalizationError::Table {
                 path: path.clone(),
-                source,
+                source: Box::new(source),
             },
-            None => BuildError::Workspace(e),
+            None => NormalizationError::Write(e),
         })?;
         written.push(path);
         Ok(written)

@@ -60,7 +60,7 @@ fn parquet_hint(error: &ParquetError) -> &'static str {
     match error {
         ParquetError::External(e) => e
             .downcast_ref::<std::io::Error>()
-            .map(crate::build::workspace::io_hint)
+            .map(crate::base::io_hint)
             .unwrap_or(""),
         _ => "",
     }

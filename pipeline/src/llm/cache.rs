@@ -13,9 +13,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::build::sha256_hex;
+use crate::base::hex;
+use crate::base::sha256_hex;
 use crate::llm::client::{RequestKind, SamplingParams};
-use crate::motion::skeleton::hex;
 
 /// Characters of the prompt kept in each record, so a human can tell entries apart.
 const PREVIEW_CHARS: usize = 120;

@@ -16,7 +16,7 @@ use super::stats::{
     type_order, whiskers,
 };
 use super::{ClipRow, ReportError};
-use crate::build::{temp_path, write_atomic};
+use crate::base::{temp_path, write_atomic};
 
 /// A figure of the report: its file stem under `figures/`, caption and pixel size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

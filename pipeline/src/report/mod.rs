@@ -25,7 +25,7 @@ pub use stats::{
 };
 pub use tables::{latex_escape, markdown_escape};
 
-use crate::build::WorkspaceError;
+use crate::base::WorkspaceError;
 
 /// What a report is made from besides the clip rows.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -177,14 +177,14 @@ pub fn write_report(
     let rows = stats::sorted_rows(rows);
 
     let tex_path = out_dir.join("tables.tex");
-    crate::build::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
+    crate::base::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
     written.push(tex_path);
 
     let figure_dir = out_dir.join("figures");
     written.extend(figures::write_figures(&rows, stats, &figure_dir)?);
 
     let md_path = out_dir.join("report.md");
-    crate::build::write_atomic(&md_path, tables::markdown(stats).as_bytes())?;
+    crate::base::write_atomic(&md_path, tables::markdown(stats).as_bytes())?;
     written.push(md_path);
 
     // Last, so a report cut short by a crash has no `stats.json` and does not look finished.
@@ -194,7 +194,7 @@ pub fn write_report(
         message: e.to_string(),
     })?;
     json.push('\n');
-    crate::build::write_atomic(&json_path, json.as_bytes())?;
+    crate::base::write_atomic(&json_path, json.as_bytes())?;
     written.insert(0, json_path);
     Ok(written)
 }
@@ -202,7 +202,7 @@ pub fn write_report(
 /// The report of a built dataset folder, from its shards (`data/`) and `manifest.json` alone,
 /// written to `out_dir` (default `<dataset>/report`). Returns the files written.
 pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<PathBuf>, ReportError> {
-    let manifest_path = dataset.join(crate::build::MANIFEST_FILE);
+    let manifest_path = dataset.join(crate::base::layout::MANIFEST_FILE);
     let manifest: serde_json::Value = std::fs::read(&manifest_path)
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok())
@@ -217,7 +217,7 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
             })
             .unwrap_or_default()
     };
-    let tables = find_clip_tables(&dataset.join(crate::build::DATA_DIR))?;
+    let tables = find_clip_tables(&dataset.join(crate::base::layout::DATA_DIR))?;
     let title = manifest["dataset"]
         .as_str()
         .map(str::to_string)

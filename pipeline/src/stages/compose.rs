@@ -13,62 +13,14 @@ use crate::motion::canonical::dataset_positions;
 use crate::motion::compose::{Trim, compose};
 use crate::motion::{BodyPart, Motion, Profile};
 use crate::parts::PartSet;
-use crate::quality::{Plausibility, Thresholds, plausibility};
+use crate::quality::{Plausibility, plausibility};
 
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
 pub const VERSION: u32 = 2;
 
-/// Synthetic-pair settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SyntheticConfig {
-    /// Build synthetic pairs at all.
-    #[serde(default = "yes")]
-    pub enabled: bool,
-    /// Chance that an eligible clip is paired with a random compatible partner (SINC: 0.5).
-    #[serde(default = "half")]
-    pub probability: f64,
-    /// Most composites one clip may take part in (none when absent).
-    #[serde(default)]
-    pub max_per_clip: Option<usize>,
-    /// Compose every compatible pair instead of sampling (small sets).
-    #[serde(default)]
-    pub exhaustive: bool,
-    /// Trim the longer clip from its start (SINC) or from a seeded random offset.
-    #[serde(default)]
-    pub random_offset: bool,
-    /// Plausibility thresholds; composites that fail are dropped, counted by reason.
-    #[serde(default)]
-    pub thresholds: Thresholds,
-    /// Ask the LLM (the `pair_compat` prompt, cached) whether a person can do both actions at
-    /// once, and drop the pairs it says no to. Off by default; needs an `[llm]` section.
-    #[serde(default)]
-    pub llm_check: bool,
-}
-
-fn yes() -> bool {
-    true
-}
-
-fn half() -> f64 {
-    0.5
-}
-
-impl Default for SyntheticConfig {
-    fn default() -> Self {
-        SyntheticConfig {
-            enabled: true,
-            probability: half(),
-            max_per_clip: None,
-            exhaustive: false,
-            random_offset: false,
-            thresholds: Thresholds::default(),
-            llm_check: false,
-        }
-    }
-}
+pub use crate::config::SyntheticConfig;
 
 /// Counts for the build report: candidates, compatible pairs, composed, dropped by reason.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]

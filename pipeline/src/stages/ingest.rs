@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::build::{Fingerprint, Reject, Stamp, sha256_hex};
+use crate::base::{Fingerprint, Reject, Stamp, sha256_hex};
 use crate::clip::{Capture, CaptureRef};
 use crate::motion::bvh::FPS_RANGE;
 use crate::motion::{ProfileSpec, read_bvh};

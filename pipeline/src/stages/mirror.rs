@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::Taxonomy;
-use crate::build::{Fingerprint, Reject, Stamp};
+use crate::base::{Fingerprint, Reject, Stamp};
 use crate::clip::Clip;
 use crate::llm::plans::mirror_paraphrases;
 use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::overlap::overlaps;
 use crate::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
 use crate::annotate::taxonomy::TypeMap;
-use crate::build::{Dropped, Fingerprint, Stamp};
+use crate::base::{Dropped, Fingerprint, Stamp};
 use crate::clip::{Capture, Clip, SourceKind};
 use crate::config::SegmentConfig;
 use crate::motion::bvh::excerpt;

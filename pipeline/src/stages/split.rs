@@ -3,43 +3,9 @@
 
 use std::collections::BTreeMap;
 
-use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-/// Split settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SplitConfig {
-    /// Split names and their share of captures (or subjects); normalised to sum to 1.
-    #[serde(default = "default_ratios")]
-    pub ratios: BTreeMap<String, f64>,
-    /// Regex with a named group `subject` matched against each capture's path: captures of one
-    /// subject share a split. Absent: each capture is its own unit.
-    #[serde(default)]
-    pub subject_pattern: Option<String>,
-    /// A CSV of `capture,split` rows (capture = file stem or path as shown in the table), relative
-    /// to the config; listed captures take that split, the rest are hashed.
-    #[serde(default)]
-    pub file: Option<String>,
-}
-
-fn default_ratios() -> BTreeMap<String, f64> {
-    BTreeMap::from([
-        ("train".to_string(), 0.8),
-        ("val".to_string(), 0.1),
-        ("test".to_string(), 0.1),
-    ])
-}
-
-impl Default for SplitConfig {
-    fn default() -> Self {
-        SplitConfig {
-            ratios: default_ratios(),
-            subject_pattern: None,
-            file: None,
-        }
-    }
-}
+pub use crate::config::SplitConfig;
 
 /// Why splits cannot be assigned.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

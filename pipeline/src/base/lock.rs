@@ -74,7 +74,7 @@ pub enum LockError {
     /// The lock file cannot be created or locked (an unwritable or missing folder).
     #[error(
         "{path}: cannot take the workspace lock: {source}{}",
-        match super::workspace::io_hint(source) {
+        match super::io_hint(source) {
             "" => "; check that the output folder can be created and written",
             hint => hint,
         }

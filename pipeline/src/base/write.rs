@@ -1,0 +1,184 @@
+//! Content fingerprints, digests and atomic writes: how every output is named and written.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+/// Bytes as lowercase hexadecimal.
+pub fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write;
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        let _ = write!(s, "{b:02x}");
+    }
+    s
+}
+
+/// Errors of the workspace: always name the file involved.
+#[derive(Debug, thiserror::Error)]
+pub enum WorkspaceError {
+    /// An I/O error on a file.
+    #[error("{path}: {source}{}", io_hint(source))]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A value could not be serialised for the cache.
+    #[error("cannot encode {what}: {message}")]
+    Encode {
+        /// What was being encoded.
+        what: String,
+        /// The encoder's message.
+        message: String,
+    },
+    /// Another process is building the same dataset folder, or its lock cannot be taken.
+    #[error(transparent)]
+    Lock(#[from] super::lock::LockError),
+}
+
+/// What to do about the I/O errors a person can fix, for error messages.
+pub fn io_hint(error: &std::io::Error) -> &'static str {
+    use std::io::ErrorKind;
+    match error.kind() {
+        ErrorKind::StorageFull | ErrorKind::QuotaExceeded => {
+            "; the disk is full: free some space, or build into another folder with --output"
+        }
+        ErrorKind::FileTooLarge => {
+            "; the file size limit was reached (`ulimit -f`, or the file system's limit)"
+        }
+        ErrorKind::PermissionDenied => {
+            "; no permission to write there: fix the folder's permissions, or build into another folder with --output"
+        }
+        ErrorKind::ReadOnlyFilesystem => {
+            "; the file system is read-only: build into another folder with --output"
+        }
+        ErrorKind::NotADirectory => "; a file stands where this path needs a folder",
+        _ => "",
+    }
+}
+
+/// Turns an I/O error on `path` into a [`WorkspaceError`] naming it.
+pub fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WorkspaceError + '_ {
+    move |source| WorkspaceError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// SHA-256 of bytes, hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+/// A content fingerprint: stage name and version, its config, and its inputs' digests. Each
+/// piece is named, so `plan` can say which one changed since the last run.
+#[derive(Debug, Clone)]
+pub struct Fingerprint {
+    hasher: Sha256,
+    parts: BTreeMap<String, String>,
+}
+
+/// A finished fingerprint with the digest of each named piece.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct Stamp {
+    /// The fingerprint (hex).
+    pub fingerprint: String,
+    /// Digest of each named piece (short hex), by name.
+    pub parts: BTreeMap<String, String>,
+}
+
+impl Fingerprint {
+    /// Starts a fingerprint for a stage at a version.
+    pub fn new(stage: &str, version: u32) -> Self {
+        let mut h = Sha256::new();
+        h.update(stage.as_bytes());
+        h.update([0]);
+        h.update(version.to_le_bytes());
+        Fingerprint {
+            hasher: h,
+            parts: BTreeMap::from([("stage version".to_string(), version.to_string())]),
+        }
+    }
+
+    /// Adds a string, named for reports (length-prefixed so concatenations cannot collide).
+    pub fn text(mut self, name: &str, s: &str) -> Self {
+        self.hasher.update((s.len() as u64).to_le_bytes());
+        self.hasher.update(s.as_bytes());
+        let digest = sha256_hex(s.as_bytes());
+        self.parts
+            .insert(name.to_string(), digest[..16.min(digest.len())].to_string());
+        self
+    }
+
+    /// Adds a serialisable value through its JSON form (configs, options), named for reports.
+    pub fn json<T: Serialize>(self, name: &str, value: &T) -> Self {
+        let s = serde_json::to_string(value).unwrap_or_default();
+        self.text(name, &s)
+    }
+
+    /// The hex digest.
+    pub fn finish(self) -> String {
+        hex(&self.hasher.finalize())
+    }
+
+    /// The hex digest with its named pieces.
+    pub fn stamp(self) -> Stamp {
+        let parts = self.parts.clone();
+        Stamp {
+            fingerprint: self.finish(),
+            parts,
+        }
+    }
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same folder, fsync, rename. An
+/// interrupted write leaves at most a `.tmp` file, never a file that looks complete.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WorkspaceError> {
+    write_atomic_with(path, |file| file.write_all(bytes))
+}
+
+/// Like [`write_atomic`], with a writer callback for streamed output.
+pub fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut fs::File) -> std::io::Result<()>,
+) -> Result<(), WorkspaceError> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let tmp = temp_path(path);
+    let result = (|| {
+        let mut file = fs::File::create(&tmp)?;
+        write(&mut file)?;
+        file.sync_all()?;
+        fs::rename(&tmp, path)
+    })();
+    if let Err(source) = result {
+        let _ = fs::remove_file(&tmp);
+        return Err(WorkspaceError::Io {
+            path: path.to_path_buf(),
+            source,
+        });
+    }
+    // Make the rename itself durable; not every platform can open a folder, so this is best effort.
+    if let Ok(d) = fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+/// The temporary name used while writing `path`.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
