@@ -221,7 +221,7 @@ fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
             .unwrap_or_else(|| panic!("no reject for {file}: {:?}", report.rejects))
     };
     let truncated = find("truncated");
-    assert_eq!(truncated.reason, "bvh");
+    assert_eq!(truncated.reason.as_str(), "bvh");
     assert!(truncated.message.contains("truncated"), "{truncated}");
     let short = find("short-line");
     assert_eq!(short.line, Some(motion_at as u64 + 6));
@@ -233,7 +233,7 @@ fn bad_captures_are_rejected_with_file_and_line_and_the_build_goes_on() {
     let missing = find("no-motion");
     assert!(missing.message.contains("MOTION"), "{missing}");
     let pattern = find("kick.bvh");
-    assert_eq!(pattern.reason, "label_pattern");
+    assert_eq!(pattern.reason.as_str(), "label_pattern");
     assert!(
         pattern
             .message

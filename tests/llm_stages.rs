@@ -500,7 +500,7 @@ fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
     assert!(
         label_rejects
             .iter()
-            .all(|r| r.reason == "llm_request" && r.message.contains("500")),
+            .all(|r| r.reason.as_str() == "llm_request" && r.message.contains("500")),
         "{label_rejects:?}"
     );
     // The clips were still labelled, by the configured fallback, and the other stages ran.

@@ -5,6 +5,8 @@ use std::collections::BTreeMap;
 
 use regex::Regex;
 
+use crate::base::RejectReason;
+
 use super::span::{CaptureAnnotation, Span, Time};
 
 /// Why a file-name pattern or template cannot be used.
@@ -137,7 +139,7 @@ pub fn sidecar_fields(json: &serde_json::Value) -> Option<BTreeMap<String, Strin
 #[derive(Debug, Clone, PartialEq)]
 pub struct LabelRefusal {
     /// `label_pattern`, `sidecar` or `label_template`.
-    pub reason: &'static str,
+    pub reason: RejectReason,
     /// What was expected and found.
     pub message: String,
 }
@@ -152,11 +154,11 @@ pub fn filename_annotation(
     sidecar: Option<&[u8]>,
 ) -> Result<CaptureAnnotation, LabelRefusal> {
     let refuse = |reason, message| LabelRefusal { reason, message };
-    let compiled =
-        FilenamePattern::new(pattern).map_err(|e| refuse("label_pattern", e.to_string()))?;
+    let compiled = FilenamePattern::new(pattern)
+        .map_err(|e| refuse(RejectReason::LabelPattern, e.to_string()))?;
     let mut fields = compiled.captures(stem).ok_or_else(|| {
         refuse(
-            "label_pattern",
+            RejectReason::LabelPattern,
             format!("file name `{stem}` does not match the label pattern `{pattern}`"),
         )
     })?;
@@ -168,7 +170,7 @@ pub fn filename_annotation(
             .and_then(sidecar_fields)
             .ok_or_else(|| {
                 refuse(
-                    "sidecar",
+                    RejectReason::Sidecar,
                     format!("sidecar `{stem}.json` is not a JSON object"),
                 )
             })?;
@@ -183,7 +185,7 @@ pub fn filename_annotation(
     let fill = |template: &str, words: bool, key: &str| match overrides.get(key) {
         Some(v) => Ok(v.clone()),
         None => fill_template(template, &fields, words)
-            .map_err(|e| refuse("label_template", e.to_string())),
+            .map_err(|e| refuse(RejectReason::LabelTemplate, e.to_string())),
     };
     let label = fill(action, false, "action")?;
     let caption = fill(text, true, "text")?;

@@ -7,7 +7,7 @@ pub mod lock;
 mod reject;
 mod write;
 
-pub use reject::{Dropped, MAX_MESSAGE_CHARS, Reject};
+pub use reject::{DropReason, Dropped, MAX_MESSAGE_CHARS, Reject, RejectReason};
 pub use write::{
     Fingerprint, Stamp, WorkspaceError, hex, io_err, io_hint, sha256_hex, temp_path, write_atomic,
     write_atomic_with,

@@ -14,8 +14,8 @@ pub struct Reject {
     pub line: Option<u64>,
     /// 0-based frame, where known.
     pub frame: Option<u64>,
-    /// Short machine-readable reason (`bvh`, `label_pattern`, `profile`, ...).
-    pub reason: String,
+    /// Why, in one machine-readable word (`bvh`, `label_pattern`, `profile`, ...).
+    pub reason: RejectReason,
     /// What was expected and found, for people.
     pub message: String,
 }
@@ -50,10 +50,98 @@ impl std::fmt::Display for Reject {
 pub struct Dropped {
     /// The capture file.
     pub file: String,
-    /// Short machine-readable reason (`too_short`, `duplicate`, `empty_text`, ...).
-    pub reason: String,
+    /// Why it became no clip.
+    pub reason: DropReason,
     /// The segment's text (an excerpt), or its annotation id where it has no text.
     pub text: String,
     /// The segment's frame range at the capture's rate, where it got that far.
     pub frames: Option<(u64, u64)>,
+}
+
+/// Generates a reason enum that serialises (and prints) as its snake_case name.
+macro_rules! reasons {
+    ($(#[$meta:meta])* $name:ident { $($(#[$vmeta:meta])* $variant:ident => $text:literal,)* }) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+        #[serde(rename_all = "snake_case")]
+        pub enum $name {
+            $($(#[$vmeta])* $variant,)*
+        }
+
+        impl $name {
+            /// Every reason, in declaration order.
+            pub const ALL: &'static [$name] = &[$($name::$variant,)*];
+
+            /// The reason as written in `rejects.jsonl` and `build-report.json`.
+            pub fn as_str(self) -> &'static str {
+                match self {
+                    $($name::$variant => $text,)*
+                }
+            }
+        }
+
+        impl std::fmt::Display for $name {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+    };
+}
+
+reasons! {
+    /// Why an input was refused (`docs/formats.md`, "Reject reasons").
+    RejectReason {
+        /// The file cannot be read.
+        Io => "io",
+        /// The file is not UTF-8.
+        Encoding => "encoding",
+        /// The BVH does not parse, or holds implausible values.
+        Bvh => "bvh",
+        /// A frame-rate override outside the plausible range.
+        Fps => "fps",
+        /// The skeleton profile does not fit the capture.
+        Profile => "profile",
+        /// The capture has no frames.
+        Empty => "empty",
+        /// The file name does not match the label pattern.
+        LabelPattern => "label_pattern",
+        /// The sidecar JSON is not an object.
+        Sidecar => "sidecar",
+        /// A label template names a field the file name does not give.
+        LabelTemplate => "label_template",
+        /// No annotation names the capture.
+        NoAnnotation => "no_annotation",
+        /// An LLM request failed after its last retry.
+        LlmRequest => "llm_request",
+        /// A task plan still invalid after one repair.
+        InvalidPlan => "invalid_plan",
+        /// The profile cannot mirror the skeleton.
+        Mirror => "mirror",
+    }
+}
+
+reasons! {
+    /// Why a segment became no clip (`docs/formats.md`, segment drop reasons).
+    DropReason {
+        /// Its label is in `drop_labels`.
+        DroppedLabel => "dropped_label",
+        /// Its caption is empty or blank.
+        EmptyText => "empty_text",
+        /// It starts past the capture's end.
+        PastEnd => "past_end",
+        /// The start trim removes all of it.
+        Trimmed => "trimmed",
+        /// It ends where it starts (or before).
+        EmptyRange => "empty_range",
+        /// An identical row of the same capture came first.
+        Duplicate => "duplicate",
+        /// Shorter than `min_seconds` after resampling.
+        TooShort => "too_short",
+        /// Longer than `max_seconds` after resampling.
+        TooLong => "too_long",
+        /// More simultaneous actions than `max_simultaneous`.
+        TooManySimultaneous => "too_many_simultaneous",
+        /// A real pair with a word of `pair_exclude`.
+        ExcludedPair => "excluded_pair",
+    }
 }

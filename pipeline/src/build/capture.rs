@@ -6,6 +6,7 @@ use super::motions::{MIRROR_CHUNKS, MotionRef, MotionSource, MotionSpill, SEGMEN
 use super::{BuildError, Reject, Workspace, WorkspaceError, sha256_hex};
 use crate::annotate::filename::filename_annotation;
 use crate::annotate::taxonomy::TypeMap;
+use crate::base::RejectReason;
 use crate::clip::Clip;
 use crate::config::Config;
 use crate::motion::ProfileSpec;
@@ -74,7 +75,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             item.rejects.push(ingest::reject(
                 ingest::NAME,
                 file,
-                "io",
+                RejectReason::Io,
                 format!("cannot read: {e}"),
                 None,
                 None,
@@ -145,7 +146,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
                 item.rejects.push(ingest::reject(
                     segment::NAME,
                     file,
-                    "no_annotation",
+                    RejectReason::NoAnnotation,
                     message,
                     None,
                     None,
@@ -160,7 +161,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             item.rejects.push(ingest::reject(
                 segment::NAME,
                 file,
-                "profile",
+                RejectReason::Profile,
                 e.to_string(),
                 None,
                 None,

@@ -765,7 +765,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     }
     let mut rejects_by_reason = BTreeMap::new();
     for r in &rejects {
-        *rejects_by_reason.entry(r.reason.clone()).or_insert(0) += 1;
+        *rejects_by_reason.entry(r.reason.to_string()).or_insert(0) += 1;
     }
     let mut label_sources = BTreeMap::new();
     for clip in &clips {

@@ -2,6 +2,7 @@
 //! it): part labels, paraphrases, task plans. They run between segmentation and mirroring, so
 //! mirrors inherit mirrored labels and paraphrases.
 
+use crate::base::RejectReason;
 use std::collections::{BTreeMap, BTreeSet};
 
 use serde::{Deserialize, Serialize};
@@ -39,13 +40,13 @@ pub(super) struct TextOutcome {
     pub(super) pending: bool,
 }
 
-fn text_reject(stage: &str, text: &str, reason: &str, message: String) -> Reject {
+fn text_reject(stage: &str, text: &str, reason: RejectReason, message: String) -> Reject {
     Reject {
         stage: stage.to_string(),
         file: format!("text: {text}"),
         line: None,
         frame: None,
-        reason: reason.to_string(),
+        reason,
         message,
     }
 }
@@ -166,7 +167,7 @@ pub(super) fn run(
             outcome.rejects.push(text_reject(
                 label::NAME,
                 text,
-                "llm_request",
+                RejectReason::LlmRequest,
                 reason.clone(),
             ));
         }
@@ -236,7 +237,7 @@ pub(super) fn run(
             outcome.rejects.push(text_reject(
                 Stage::Plan.name(),
                 text,
-                "invalid_plan",
+                RejectReason::InvalidPlan,
                 reason.clone(),
             ));
         }

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::base::{Fingerprint, Reject, Stamp, sha256_hex};
+use crate::base::{Fingerprint, Reject, RejectReason, Stamp, sha256_hex};
 use crate::clip::{Capture, CaptureRef};
 use crate::motion::bvh::FPS_RANGE;
 use crate::motion::{ProfileSpec, read_bvh};
@@ -52,7 +52,7 @@ pub fn fingerprint(input: &CaptureInput<'_>) -> Stamp {
 pub fn reject(
     stage: &str,
     file: &CaptureFile,
-    reason: &str,
+    reason: RejectReason,
     message: String,
     line: Option<u64>,
     frame: Option<u64>,
@@ -62,7 +62,7 @@ pub fn reject(
         file: file.display.clone(),
         line,
         frame,
-        reason: reason.to_string(),
+        reason,
         message,
     }
 }
@@ -83,7 +83,14 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
                 .count() as u64
                 + 1;
             let message = format!("not UTF-8 text (byte {})", e.valid_up_to());
-            return refuse(reject(NAME, file, "encoding", message, Some(line), None));
+            return refuse(reject(
+                NAME,
+                file,
+                RejectReason::Encoding,
+                message,
+                Some(line),
+                None,
+            ));
         }
     };
     let bvh = match read_bvh(text) {
@@ -93,7 +100,7 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
             return refuse(reject(
                 NAME,
                 file,
-                "bvh",
+                RejectReason::Bvh,
                 e.kind.to_string(),
                 Some(e.line as u64),
                 frame,
@@ -101,13 +108,20 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
         }
     };
     if let Err(e) = input.profile.bind(&bvh.skeleton) {
-        return refuse(reject(NAME, file, "profile", e.to_string(), None, None));
+        return refuse(reject(
+            NAME,
+            file,
+            RejectReason::Profile,
+            e.to_string(),
+            None,
+            None,
+        ));
     }
     if bvh.motion.num_frames() == 0 {
         return refuse(reject(
             NAME,
             file,
-            "empty",
+            RejectReason::Empty,
             "capture has no frames".into(),
             None,
             None,
@@ -121,7 +135,7 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
             FPS_RANGE.start(),
             FPS_RANGE.end()
         );
-        return refuse(reject(NAME, file, "fps", message, None, None));
+        return refuse(reject(NAME, file, RejectReason::Fps, message, None, None));
     }
     let fps = input.fps_override.unwrap_or(bvh.header_fps);
     let mut motion = bvh.motion;

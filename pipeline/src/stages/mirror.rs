@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::Taxonomy;
-use crate::base::{Fingerprint, Reject, Stamp};
+use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
 use crate::clip::Clip;
 use crate::llm::plans::mirror_paraphrases;
 use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};
@@ -15,7 +15,7 @@ use crate::text::mirror_text;
 /// Stage name.
 pub const NAME: &str = "mirror";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 /// Fingerprint of mirroring one segmented capture.
 pub fn fingerprint(
@@ -58,7 +58,7 @@ pub fn run(clips: &[Clip], profile: &ProfileSpec, taxonomy: &Taxonomy) -> Mirror
                 file: clip.capture.path.clone(),
                 line: None,
                 frame: None,
-                reason: "mirror".to_string(),
+                reason: RejectReason::Mirror,
                 message: format!("cannot mirror clip `{}`: {message}", clip.clip_id),
             }),
         }

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::overlap::overlaps;
 use crate::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
 use crate::annotate::taxonomy::TypeMap;
-use crate::base::{Dropped, Fingerprint, Stamp};
+use crate::base::{DropReason, Dropped, Fingerprint, Stamp};
 use crate::clip::{Capture, Clip, SourceKind};
 use crate::config::SegmentConfig;
 use crate::motion::bvh::excerpt;
@@ -115,10 +115,10 @@ pub fn run_with<E>(
         .collect();
     let path = capture.capture.path.clone();
     let mut dropped: Vec<Dropped> = Vec::new();
-    let mut drop = |reason: &'static str, text: &str, frames: Option<(u64, u64)>| {
+    let mut drop = |reason: DropReason, text: &str, frames: Option<(u64, u64)>| {
         dropped.push(Dropped {
             file: path.clone(),
-            reason: reason.to_string(),
+            reason,
             text: excerpt(text),
             frames,
         });
@@ -132,7 +132,7 @@ pub fn run_with<E>(
     let mut groups: Vec<(usize, Vec<String>)> = Vec::new();
     for span in &input.annotation.spans {
         if span.raw_text.trim().is_empty() || span.label.trim().is_empty() {
-            drop("empty_text", &span.id, None);
+            drop(DropReason::EmptyText, &span.id, None);
             out.notes.push(Note::new(
                 "empty_text",
                 format!(
@@ -146,7 +146,7 @@ pub fn run_with<E>(
         if drop_labels.contains(&normalize_label(&span.label))
             || drop_labels.contains(&normalize_label(&span.raw_text))
         {
-            drop("dropped_label", &span.raw_text, None);
+            drop(DropReason::DroppedLabel, &span.raw_text, None);
             continue;
         }
         let start =
@@ -163,16 +163,16 @@ pub fn run_with<E>(
             end = len as i64;
         }
         if start >= len as i64 {
-            drop("past_end", &span.raw_text, None);
+            drop(DropReason::PastEnd, &span.raw_text, None);
             continue;
         }
         let start = (start.max(0) as u64).max(trim);
         let end = end.max(0) as u64;
         if end <= start {
             let reason = if start == trim && trim > 0 {
-                "trimmed"
+                DropReason::Trimmed
             } else {
-                "empty_range"
+                DropReason::EmptyRange
             };
             drop(reason, &span.raw_text, None);
             continue;
@@ -196,7 +196,7 @@ pub fn run_with<E>(
                 if ids.len() < 5 {
                     ids.push(span.id.clone());
                 }
-                drop("duplicate", &span.raw_text, Some((start, end)));
+                drop(DropReason::Duplicate, &span.raw_text, Some((start, end)));
             }
             None => {
                 merged.insert(key, kept.len());
@@ -254,7 +254,11 @@ pub fn run_with<E>(
                     .join(" + ")
             };
             if o.members.len() > input.config.max_simultaneous {
-                drop("too_many_simultaneous", &texts(), Some((o.start, o.end)));
+                drop(
+                    DropReason::TooManySimultaneous,
+                    &texts(),
+                    Some((o.start, o.end)),
+                );
                 continue;
             }
             let members: Vec<&Kept<'_>> = o.members.iter().map(|&i| &kept[i]).collect();
@@ -265,7 +269,7 @@ pub fn run_with<E>(
                     .any(|x| words.split(' ').any(|w| w == x) || &words == x)
             });
             if excluded {
-                drop("excluded_pair", &texts(), Some((o.start, o.end)));
+                drop(DropReason::ExcludedPair, &texts(), Some((o.start, o.end)));
                 continue;
             }
             match positions_cache.pair(&members, o.start, o.end) {
@@ -287,7 +291,7 @@ pub fn run_with<E>(
         }
     }
     for d in &dropped {
-        *out.drops.entry(d.reason.clone()).or_insert(0) += 1;
+        *out.drops.entry(d.reason.to_string()).or_insert(0) += 1;
     }
     out.dropped = dropped;
     out.clips = clips;
@@ -299,7 +303,7 @@ struct ClipMaker<'a, 'b> {
 }
 
 impl ClipMaker<'_, '_> {
-    fn base(&self, start: u64, end: u64) -> Result<Clip, &'static str> {
+    fn base(&self, start: u64, end: u64) -> Result<Clip, DropReason> {
         let input = self.input;
         let capture = input.capture;
         // The length is known before any frame is made: a wrong rate must cost a drop, not an
@@ -308,10 +312,10 @@ impl ClipMaker<'_, '_> {
         let frames = Motion::resampled_frames(source_frames, capture.capture.fps, input.fps);
         let seconds = frames as f64 / input.fps;
         if seconds < input.config.min_seconds {
-            return Err("too_short");
+            return Err(DropReason::TooShort);
         }
         if seconds > input.config.max_seconds {
-            return Err("too_long");
+            return Err(DropReason::TooLong);
         }
         let motion = capture
             .motion
@@ -347,7 +351,7 @@ impl ClipMaker<'_, '_> {
         })
     }
 
-    fn single(&self, k: &Kept<'_>) -> Result<Clip, &'static str> {
+    fn single(&self, k: &Kept<'_>) -> Result<Clip, DropReason> {
         let mut clip = self.base(k.start, k.end)?;
         let span = k.span;
         clip.annotation_origin = format!("{}#{}", clip.annotation_origin, span.id);
@@ -380,7 +384,7 @@ impl ClipMaker<'_, '_> {
         Ok(clip)
     }
 
-    fn pair(&self, members: &[&Kept<'_>], start: u64, end: u64) -> Result<Clip, &'static str> {
+    fn pair(&self, members: &[&Kept<'_>], start: u64, end: u64) -> Result<Clip, DropReason> {
         let mut clip = self.base(start, end)?;
         clip.kind = SourceKind::RealPair;
         clip.clip_id = format!("{}:pair", clip.clip_id);
