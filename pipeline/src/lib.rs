@@ -1,4 +1,65 @@
-//! motionforge: a dataset builder for text-to-motion research.
+//! motionforge turns motion-capture recordings into training sets for text-to-motion models:
+//! captures in, labelled, mirrored and composed Parquet shards out, with a manifest, a dataset
+//! card, normalisation statistics and a statistics report.
+//!
+//! # The principal types
+//!
+//! * [`config::Config`]: one build, as written in its TOML file (sources, segmentation, splits,
+//!   mirroring, synthetic pairs, features, LLM).
+//! * [`motion::Skeleton`] and [`motion::Motion`]: a joint hierarchy and its local rotations and
+//!   translations per frame, read from BVH by [`motion::read_bvh`]; a [`motion::Profile`] says
+//!   which joint is which (left/right pairs, body parts, axes and units).
+//! * [`annotate::span::CaptureAnnotation`]: what an annotation format (file names, BABEL, event
+//!   logs, frame-range indexes) says about one capture, as labelled time spans.
+//! * [`clip::Capture`] and [`clip::Clip`]: a read capture, and one row of the dataset (its text,
+//!   labels, [`parts::PartSet`], provenance and motion).
+//! * [`build::Stage`], [`build::Workspace`] and [`base::Fingerprint`]: the stages in order, the
+//!   per-item stage cache, and the content fingerprint that decides what re-runs.
+//! * [`base::Reject`] and [`base::Dropped`]: an input refused (file, line, frame, reason) and a
+//!   segment that became no clip; nothing is lost silently.
+//!
+//! # How one clip travels from a capture to a shard row
+//!
+//! 1. **Source** ([`source`]): the config's globs find the capture files; each source's
+//!    annotations are read once ([`annotate`]).
+//! 2. **ingest** ([`stages::ingest`]): the BVH is parsed into a [`clip::Capture`] at its own frame
+//!    rate, or refused with a [`base::Reject`].
+//! 3. **segment** ([`stages::segment`]): each labelled span becomes a [`clip::Clip`], resampled
+//!    to the dataset rate, typed by the motion-type taxonomy and given its goals; its frames go to
+//!    the stage cache at once, so a build holds clips without frames.
+//! 4. **label, paraphrase, plan** ([`stages::label`], [`stages::augment`]): body parts from the
+//!    embedded labeller or an LLM through a cached client ([`llm`]).
+//! 5. **mirror** ([`stages::mirror`]): the left/right reflection of motion, texts and labels.
+//! 6. **compose** ([`stages::compose`]): plausibility of every clip and synthetic simultaneous
+//!    pairs stitched by body part.
+//! 7. **write** (the runner, with [`io`]): rows become Parquet shards per split, with the
+//!    manifest, the card and normalisation statistics, staged and switched in atomically;
+//!    **report** ([`report`]) then reads the shards back for the statistics report.
+//!
+//! [`build::build`] runs it all, reusing every cached output whose fingerprint is unchanged.
+//! Modules depend on each other one way (sources, then stages, then sinks, over the leaf
+//! [`base`]); `tests/module_graph.rs` keeps it so.
+//!
+//! # Example
+//!
+//! ```no_run
+//! use std::path::Path;
+//! use motionforge::build::{BuildOptions, build};
+//! use motionforge::config::Config;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let config = Config::load(Path::new("fixtures/demo.toml"))?;
+//! let report = build(&config, &BuildOptions::default())?;
+//! println!(
+//!     "{} rows from {} captures; {} rejected (see {})",
+//!     report.clips,
+//!     report.captures,
+//!     report.rejects.len(),
+//!     report.output.join(motionforge::base::layout::REJECTS_FILE).display()
+//! );
+//! # Ok(())
+//! # }
+//! ```
 pub mod annotate;
 pub mod base;
 pub mod build;
