@@ -319,8 +319,8 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
         "shard_bytes = 1024\n",
         "[features]\ncontact_speed = 0.5\n",
     );
-    // About 500 kB: the first single-clip shards fit, a later, longer one does not.
-    let run = with_size_limit(1000, &build_args(&config, &output));
+    // About 400 kB: the first single-clip shards fit, a later, longer one (470 kB) does not.
+    let run = with_size_limit(800, &build_args(&config, &output));
     assert_eq!(run.status.code(), Some(1), "{}", text(&run.stderr));
     assert!(text(&run.stderr).contains("File too large"));
     assert_nothing_half_written_looks_complete(&dataset);

@@ -460,6 +460,29 @@ fn all_finite(array: &dyn arrow_array::Array) -> bool {
     }
 }
 
+/// Every float leaf column of `schema` encoded BYTE_STREAM_SPLIT, without a dictionary. Motion
+/// floats are nearly unique, so dictionaries only cost time; splitting each value's bytes into
+/// separate streams puts the slowly varying exponent and high mantissa bytes together, where zstd
+/// finds the redundancy that plain encoding hides (`docs/decisions.md`, "Float encoding").
+fn float_encoding(
+    schema: &arrow_schema::Schema,
+    mut props: parquet::file::properties::WriterPropertiesBuilder,
+) -> Result<parquet::file::properties::WriterPropertiesBuilder, ParquetError> {
+    let descriptor = parquet::arrow::ArrowSchemaConverter::new().convert(schema)?;
+    for column in descriptor.columns() {
+        if matches!(
+            column.physical_type(),
+            parquet::basic::Type::FLOAT | parquet::basic::Type::DOUBLE
+        ) {
+            let path = column.path().clone();
+            props = props
+                .set_column_dictionary_enabled(path.clone(), false)
+                .set_column_encoding(path, parquet::basic::Encoding::BYTE_STREAM_SPLIT);
+        }
+    }
+    Ok(props)
+}
+
 /// Clips per row group: large enough for efficient scans, small enough that one group's buffers
 /// stay a few tens of MB for long captures.
 pub const ROWS_PER_GROUP: usize = 64;
@@ -473,7 +496,7 @@ pub fn write_clips(
     skeletons_json: &str,
     features: &FeatureConfig,
 ) -> Result<File, TableError> {
-    let props = WriterProperties::builder()
+    let props = float_encoding(&clip_schema(), WriterProperties::builder())?
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
         .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
         .set_key_value_metadata(Some(vec![
