@@ -145,6 +145,9 @@ pub enum BuildError {
     /// Normalisation statistics cannot be written.
     #[error(transparent)]
     Normalization(Box<crate::io::normalization::NormalizationError>),
+    /// The embedded labeller's lexicon (`schemas/lexicon.toml`) is invalid.
+    #[error(transparent)]
+    Lexicon(#[from] crate::parts::lexicon::LexiconError),
     /// The statistics report cannot be made.
     #[error("report: {0}")]
     Report(String),
@@ -277,6 +280,7 @@ fn run_stages<'a>(
     if options.force && !probe {
         let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
     }
+    crate::parts::lexicon::check_lexicon()?;
     let files = source::discover(config)?;
     let specs: Vec<ProfileSpec> = config
         .sources

@@ -52,8 +52,10 @@
 //! (training data); the manual gold labels were not used to build the lexicon (see
 //! `docs/part-labels.md`).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::LazyLock;
+
+use serde::Deserialize;
 
 use super::PartSet;
 use crate::motion::BodyPart;
@@ -81,7 +83,6 @@ const RL: u8 = 32;
 const ARMS: u8 = LA | RA;
 const LEGS: u8 = LL | RL;
 const ALL: u8 = 63;
-const LOCO: u8 = G | LEGS;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Limb {
@@ -153,930 +154,243 @@ const fn strong(extra: u8) -> Kind {
         contact: false,
     }
 }
-const fn arm_act() -> Kind {
-    Kind::Act {
-        strength: Strength::Strong,
-        limb: Some(Limb::Arm),
-        extra: 0,
-        contact: false,
-    }
-}
-const fn contact() -> Kind {
-    Kind::Act {
-        strength: Strength::Strong,
-        limb: Some(Limb::Arm),
-        extra: 0,
-        contact: true,
-    }
-}
-const fn leg_act(extra: u8) -> Kind {
-    Kind::Act {
-        strength: Strength::Strong,
-        limb: Some(Limb::Leg),
-        extra,
-        contact: false,
-    }
-}
-const fn generic(extra: u8) -> Kind {
-    Kind::Act {
-        strength: Strength::Generic,
-        limb: None,
-        extra,
-        contact: false,
-    }
-}
-const fn generic_arm(extra: u8) -> Kind {
-    Kind::Act {
-        strength: Strength::Generic,
-        limb: Some(Limb::Arm),
-        extra,
-        contact: false,
-    }
-}
-const fn weak(extra: u8) -> Kind {
-    Kind::Act {
-        strength: Strength::Weak,
-        limb: None,
-        extra,
-        contact: false,
-    }
-}
-const fn arm(plural: bool) -> Kind {
-    Kind::Limb {
-        limb: Limb::Arm,
-        plural,
-        self_moving: true,
-    }
-}
-const fn shoulder(plural: bool) -> Kind {
-    Kind::Limb {
-        limb: Limb::Arm,
-        plural,
-        self_moving: false,
-    }
-}
-const fn leg(plural: bool) -> Kind {
-    Kind::Limb {
-        limb: Limb::Leg,
-        plural,
-        self_moving: false,
-    }
-}
-const fn trunk(parts: u8) -> Kind {
-    Kind::Trunk { parts, hip: false }
+
+/// The bundled lexicon (`schemas/lexicon.toml`).
+const LEXICON_TOML: &str = include_str!("../../../schemas/lexicon.toml");
+
+/// A set of words from the lexicon file.
+type WordSet = HashSet<&'static str>;
+
+/// The lexicon file as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LexiconFile {
+    phrases: BTreeMap<String, String>,
+    words: WordLists,
+    irregular: BTreeMap<String, String>,
 }
 
-/// The lexicon: phrase (lemmas, space separated) and what it means.
-const LEXICON: &[(&str, Kind)] = &[
-    // --- body parts: arms (hands included; SINC's arm chain runs from collar to hand) ---
-    ("hand", arm(false)),
-    ("hands", arm(true)),
-    ("handed", arm(false)),
-    ("arm", arm(false)),
-    ("arms", arm(true)),
-    ("upper arm", arm(false)),
-    ("forearm", arm(false)),
-    ("forearms", arm(true)),
-    ("wrist", arm(false)),
-    ("wrists", arm(true)),
-    ("elbow", arm(false)),
-    ("elbows", arm(true)),
-    ("fist", arm(false)),
-    ("fists", arm(true)),
-    ("palm", arm(false)),
-    ("palms", arm(true)),
-    ("finger", arm(false)),
-    ("fingers", arm(true)),
-    ("fingertips", arm(true)),
-    ("thumb", arm(false)),
-    ("thumbs", arm(true)),
-    ("knuckles", arm(true)),
-    ("bicep", arm(false)),
-    ("biceps", arm(true)),
-    ("shoulder", shoulder(false)),
-    ("shoulders", shoulder(true)),
-    // --- legs ---
-    ("leg", leg(false)),
-    ("legs", leg(true)),
-    ("foot", leg(false)),
-    ("feet", leg(true)),
-    ("knee", leg(false)),
-    ("knees", leg(true)),
-    ("ankle", leg(false)),
-    ("ankles", leg(true)),
-    ("toe", leg(false)),
-    ("toes", leg(true)),
-    ("thigh", leg(false)),
-    ("thighs", leg(true)),
-    ("calf", leg(false)),
-    ("calves", leg(true)),
-    ("heel", leg(false)),
-    ("heels", leg(true)),
-    ("shin", leg(false)),
-    ("shins", leg(true)),
-    // --- trunk ---
-    ("torso", trunk(T)),
-    ("upper body", trunk(T)),
-    ("upper torso", trunk(T)),
-    ("trunk", trunk(T)),
-    ("chest", trunk(T)),
-    ("spine", trunk(T)),
-    ("abdomen", trunk(T)),
-    ("stomach", trunk(T)),
-    ("belly", trunk(T)),
-    ("lower back", trunk(T)),
-    ("upper back", trunk(T)),
-    ("head", trunk(T)),
-    ("neck", trunk(T)),
-    ("body", trunk(G | T)),
-    ("lower body", trunk(G | LEGS)),
-    ("whole body", trunk(ALL)),
-    ("full body", trunk(ALL)),
-    ("entire body", trunk(ALL)),
-    ("waist", trunk(G)),
-    ("pelvis", trunk(G)),
-    ("buttocks", trunk(G)),
-    ("butt", trunk(G)),
-    ("hips", trunk(G)),
-    (
-        "hip",
-        Kind::Trunk {
-            parts: G,
-            hip: true,
-        },
-    ),
-    // --- face features: touched, not moved ---
-    ("face", Kind::Feature),
-    ("mouth", Kind::Feature),
-    ("chin", Kind::Feature),
-    ("nose", Kind::Feature),
-    ("ear", Kind::Feature),
-    ("ears", Kind::Feature),
-    ("eye", Kind::Feature),
-    ("eyes", Kind::Feature),
-    ("forehead", Kind::Feature),
-    ("brow", Kind::Feature),
-    ("hair", Kind::Feature),
-    ("lip", Kind::Feature),
-    ("lips", Kind::Feature),
-    ("cheek", Kind::Feature),
-    ("cheeks", Kind::Feature),
-    ("jaw", Kind::Feature),
-    ("teeth", Kind::Feature),
-    ("armpit", Kind::Feature),
-    ("armpits", Kind::Feature),
-    ("rib", Kind::Feature),
-    ("ribs", Kind::Feature),
-    ("heart", Kind::Feature),
-    // --- locomotion: global + both legs ---
-    ("walk", strong(LOCO)),
-    ("run", strong(LOCO)),
-    ("jog", strong(LOCO)),
-    ("sprint", strong(LOCO)),
-    ("dash", strong(LOCO)),
-    ("step", strong(LOCO)),
-    ("stride", strong(LOCO)),
-    ("march", strong(LOCO)),
-    ("stroll", strong(LOCO)),
-    ("saunter", strong(LOCO)),
-    ("strut", strong(LOCO)),
-    ("pace", strong(LOCO)),
-    ("wander", strong(LOCO)),
-    ("sneak", strong(LOCO)),
-    ("tiptoe", strong(LOCO)),
-    ("creep", strong(LOCO)),
-    ("limp", strong(LOCO)),
-    ("hobble", strong(LOCO)),
-    ("shuffle", strong(LOCO)),
-    ("stumble", strong(LOCO)),
-    ("stagger", strong(LOCO)),
-    ("trip", strong(LOCO)),
-    ("skip", strong(LOCO)),
-    ("gallop", strong(LOCO)),
-    ("waddle", strong(LOCO)),
-    ("sidestep", strong(LOCO)),
-    ("side step", strong(LOCO)),
-    ("sidle", strong(LOCO)),
-    ("jump", strong(LOCO)),
-    ("leap", strong(LOCO)),
-    ("bounce", strong(LOCO)),
-    ("hop", leg_act(G)),
-    ("climb", strong(LOCO)),
-    ("descend", strong(LOCO)),
-    ("ascend", strong(LOCO)),
-    ("stairs", strong(LOCO)),
-    ("stair", strong(LOCO)),
-    ("staircase", strong(LOCO)),
-    ("upstairs", strong(LOCO)),
-    ("downstairs", strong(LOCO)),
-    ("lunge", strong(LOCO)),
-    ("squat", strong(LOCO)),
-    ("crouch", strong(LOCO)),
-    ("kneel", strong(LOCO)),
-    ("sit", strong(LOCO)),
-    ("sit down", strong(LOCO)),
-    ("stand up", strong(LOCO)),
-    ("get up", strong(LOCO)),
-    ("rise", generic(LOCO)),
-    ("dodge", strong(LOCO)),
-    ("back off", strong(LOCO)),
-    ("back away", strong(LOCO)),
-    ("moonwalk", strong(LOCO)),
-    ("skate", strong(LOCO)),
-    ("sit up", strong(G | T)),
-    ("fall", strong(G | T | LEGS)),
-    ("lie", strong(G | T | LEGS)),
-    ("lay down", strong(G | T | LEGS)),
-    ("lay back", strong(G | T | LEGS)),
-    ("duck", strong(G | T | LEGS)),
-    ("go", generic(LOCO)),
-    ("approach", generic(LOCO)),
-    ("advance", generic(LOCO)),
-    ("retreat", generic(LOCO)),
-    ("enter", generic(LOCO)),
-    ("exit", generic(LOCO)),
-    ("leave", generic(LOCO)),
-    ("come", generic(LOCO)),
-    ("balance", generic(LOCO)),
-    ("stance", weak(LOCO)),
-    ("stand", weak(LOCO)),
-    // --- turning the whole body: the pelvis turns and the feet step ---
-    ("turn", generic(LOCO)),
-    ("spin", generic(LOCO)),
-    ("twirl", generic(LOCO)),
-    ("pivot", generic(LOCO)),
-    ("rotate", generic(LOCO)),
-    ("turn on", arm_act()),
-    ("turn off", arm_act()),
-    // --- whole-body activities ---
-    ("dance", strong(ALL)),
-    ("waltz", strong(ALL)),
-    ("ballet", strong(ALL)),
-    ("breakdance", strong(ALL)),
-    ("crawl", strong(ALL)),
-    ("swim", strong(ALL)),
-    ("cartwheel", strong(ALL)),
-    ("somersault", strong(ALL)),
-    ("handstand", strong(ALL)),
-    ("hand stand", strong(ALL)),
-    ("push up", strong(ALL)),
-    ("pushup", strong(ALL)),
-    ("jump jack", strong(ALL)),
-    ("jack", strong(ALL)),
-    ("all fours", strong(ALL)),
-    ("fight", strong(ALL)),
-    ("karate", strong(ALL)),
-    ("kung fu", strong(ALL)),
-    ("martial art", strong(ALL)),
-    ("tai chi", strong(ALL)),
-    ("yoga", weak(ALL)),
-    ("exercise", weak(ALL)),
-    ("workout", weak(ALL)),
-    ("warm up", weak(ALL)),
-    ("roll over", strong(ALL)),
-    ("jump rope", strong(LOCO | ARMS)),
-    // --- torso and head ---
-    ("look", strong(T)),
-    ("glance", strong(T)),
-    ("gaze", strong(T)),
-    ("stare", strong(T)),
-    ("peek", strong(T)),
-    ("peer", strong(T)),
-    ("scan", strong(T)),
-    ("nod", strong(T)),
-    ("watch", strong(T)),
-    ("bow", generic(G | T)),
-    ("bend", generic(G | T)),
-    ("bend over", strong(G | T)),
-    ("lean", generic(G | T)),
-    ("stoop", generic(G | T)),
-    ("sway", generic(G | T)),
-    ("twist", generic(T)),
-    ("tilt", generic(T)),
-    ("hunch", generic(T)),
-    ("slouch", generic(T)),
-    ("arch", generic(T)),
-    ("cough", weak(T)),
-    ("sneeze", weak(T)),
-    ("yawn", weak(T)),
-    ("laugh", weak(T)),
-    ("talk", weak(T)),
-    ("speak", weak(T)),
-    ("shout", weak(T)),
-    ("yell", weak(T)),
-    ("sing", weak(T)),
-    ("listen", weak(T)),
-    ("shrug", strong(ARMS)),
-    ("stretch", generic_arm(T)),
-    // --- leg actions ---
-    ("kick", leg_act(0)),
-    ("stomp", leg_act(0)),
-    ("stamp", leg_act(0)),
-    // --- arm actions (side from the text, else both) ---
-    ("wave", arm_act()),
-    ("bye", arm_act()),
-    ("byebye", arm_act()),
-    ("goodbye", arm_act()),
-    ("hello", arm_act()),
-    ("greet", arm_act()),
-    ("salute", arm_act()),
-    ("beckon", arm_act()),
-    ("signal", arm_act()),
-    ("gesture", arm_act()),
-    ("guide", arm_act()),
-    ("call", arm_act()),
-    ("clap", arm_act()),
-    ("applaud", arm_act()),
-    ("cheer", arm_act()),
-    ("punch", arm_act()),
-    ("jab", arm_act()),
-    ("uppercut", arm_act()),
-    ("box", arm_act()),
-    ("shadow box", arm_act()),
-    ("slash", arm_act()),
-    ("stab", arm_act()),
-    ("swat", arm_act()),
-    ("swipe", arm_act()),
-    ("chop", arm_act()),
-    ("throw", arm_act()),
-    ("toss", arm_act()),
-    ("pitch", arm_act()),
-    ("catch", arm_act()),
-    ("juggle", arm_act()),
-    ("dribble", arm_act()),
-    ("serve", arm_act()),
-    ("shoot", arm_act()),
-    ("aim", arm_act()),
-    ("flap", arm_act()),
-    ("fly", arm_act()),
-    ("conduct", arm_act()),
-    ("drink", arm_act()),
-    ("eat", arm_act()),
-    ("sip", arm_act()),
-    ("smoke", arm_act()),
-    ("pour", arm_act()),
-    ("stir", arm_act()),
-    ("mix", arm_act()),
-    ("cut", arm_act()),
-    ("write", arm_act()),
-    ("draw", arm_act()),
-    ("paint", arm_act()),
-    ("type", arm_act()),
-    ("text", arm_act()),
-    ("dial", arm_act()),
-    ("phone", arm_act()),
-    ("read", arm_act()),
-    ("sweep", arm_act()),
-    ("mop", arm_act()),
-    ("vacuum", arm_act()),
-    ("scrub", arm_act()),
-    ("polish", arm_act()),
-    ("dust", arm_act()),
-    ("iron", arm_act()),
-    ("cook", arm_act()),
-    ("hammer", arm_act()),
-    ("saw", arm_act()),
-    ("dig", arm_act()),
-    ("shovel", arm_act()),
-    ("rake", arm_act()),
-    ("row", arm_act()),
-    ("paddle", arm_act()),
-    ("steer", arm_act()),
-    ("strum", arm_act()),
-    ("drum", arm_act()),
-    ("play", generic_arm(0)),
-    ("pick", arm_act()),
-    ("pick up", arm_act()),
-    ("take", arm_act()),
-    ("give", arm_act()),
-    ("pass", arm_act()),
-    ("receive", arm_act()),
-    ("carry", arm_act()),
-    ("fetch", arm_act()),
-    ("push", arm_act()),
-    ("pull", arm_act()),
-    ("drag", arm_act()),
-    ("shove", arm_act()),
-    ("press", arm_act()),
-    ("knock", arm_act()),
-    ("open", arm_act()),
-    ("close", arm_act()),
-    ("shut", arm_act()),
-    ("unscrew", arm_act()),
-    ("screw", arm_act()),
-    ("tie", arm_act()),
-    ("untie", arm_act()),
-    ("button", arm_act()),
-    ("zip", arm_act()),
-    ("fold", generic_arm(0)),
-    ("release", arm_act()),
-    ("check watch", arm_act()),
-    ("check time", arm_act()),
-    ("check the time", arm_act()),
-    ("t pose", strong(ARMS)),
-    ("t position", strong(ARMS)),
-    // --- more locomotion, from BABEL's vocabulary ---
-    ("backpedal", strong(LOCO)),
-    ("back pedal", strong(LOCO)),
-    ("back peddle", strong(LOCO)),
-    ("backtrack", strong(LOCO)),
-    ("back up", strong(LOCO)),
-    ("catwalk", strong(LOCO)),
-    ("charge", strong(LOCO)),
-    ("hurry", strong(LOCO)),
-    ("rush", strong(LOCO)),
-    ("scamper", strong(LOCO)),
-    ("scoot", strong(LOCO)),
-    ("toddle", strong(LOCO)),
-    ("prance", strong(LOCO)),
-    ("sleepwalk", strong(LOCO)),
-    ("strafe", strong(LOCO)),
-    ("swagger", strong(LOCO)),
-    ("glide", strong(LOCO)),
-    ("slide", strong(LOCO)),
-    ("slip", strong(LOCO)),
-    ("ski", strong(LOCO)),
-    ("land", strong(LOCO)),
-    ("tread", strong(LOCO)),
-    ("trot", strong(LOCO)),
-    ("amble", strong(LOCO)),
-    ("trudge", strong(LOCO)),
-    ("plod", strong(LOCO)),
-    ("sidewalk", strong(LOCO)),
-    ("walkaway", strong(LOCO)),
-    ("chase", strong(LOCO)),
-    ("flee", strong(LOCO)),
-    ("escape", strong(LOCO)),
-    ("evade", strong(LOCO)),
-    ("avoid", strong(LOCO)),
-    ("ride", strong(LOCO)),
-    ("curtsy", strong(LOCO)),
-    ("get down", strong(LOCO)),
-    ("lay on", strong(G | T | LEGS)),
-    ("shift", generic(LOCO)),
-    ("stop", weak(LOCO)),
-    ("halt", weak(LOCO)),
-    ("slow down", weak(LOCO)),
-    // --- more whole-body activities ---
-    ("dive", strong(ALL)),
-    ("flip", strong(ALL)),
-    ("tumble", strong(ALL)),
-    ("roll", generic(ALL)),
-    ("headstand", strong(ALL)),
-    ("bridge", strong(ALL)),
-    ("plank", strong(ALL)),
-    ("aerobics", strong(ALL)),
-    ("kickbox", strong(ALL)),
-    ("kickboxing", strong(ALL)),
-    ("salsa", strong(ALL)),
-    ("crunch", strong(G | T)),
-    ("attack", weak(ALL)),
-    ("chicken", weak(ALL)),
-    ("monkey", weak(ALL)),
-    ("gorilla", weak(ALL)),
-    ("robot", weak(ALL)),
-    ("animal", weak(ALL)),
-    ("elephant", weak(ALL)),
-    ("bird", weak(ALL)),
-    ("zombie", weak(ALL)),
-    // --- trunk motions ---
-    ("gyrate", generic(G | T)),
-    ("wiggle", generic(G | T)),
-    ("rock", generic(G | T)),
-    ("wobble", generic(G | T)),
-    ("jerk", generic(G | T)),
-    ("lurch", generic(G | T)),
-    ("shimmy", generic(T | ARMS)),
-    ("see", strong(T)),
-    ("view", strong(T)),
-    ("observe", strong(T)),
-    ("notice", strong(T)),
-    ("peck", strong(T)),
-    ("vomit", strong(T)),
-    ("kiss", weak(T)),
-    ("smell", weak(T)),
-    ("sniff", weak(T)),
-    ("taste", weak(T)),
-    ("flinch", weak(T | ARMS)),
-    ("startle", weak(T | ARMS)),
-    ("cower", weak(T | ARMS)),
-    ("shiver", weak(T | ARMS)),
-    ("tremble", weak(T | ARMS)),
-    ("quiver", weak(T | ARMS)),
-    ("shudder", weak(T | ARMS)),
-    ("twitch", weak(T | ARMS)),
-    ("fidget", weak(T | ARMS)),
-    // --- more arm actions ---
-    ("hook", arm_act()),
-    ("shadowbox", arm_act()),
-    ("flail", arm_act()),
-    ("block", arm_act()),
-    ("guard", arm_act()),
-    ("defend", arm_act()),
-    ("pray", arm_act()),
-    ("surrender", arm_act()),
-    ("wear", arm_act()),
-    ("dress", arm_act()),
-    ("measure", arm_act()),
-    ("build", arm_act()),
-    ("stack", arm_act()),
-    ("sort", arm_act()),
-    ("arrange", arm_act()),
-    ("rearrange", arm_act()),
-    ("hang", arm_act()),
-    ("gather", arm_act()),
-    ("knead", arm_act()),
-    ("milk", arm_act()),
-    ("putt", arm_act()),
-    ("golf", arm_act()),
-    ("bowling", arm_act()),
-    ("volley", arm_act()),
-    ("spike", arm_act()),
-    ("slam", arm_act()),
-    ("rinse", arm_act()),
-    ("reel", arm_act()),
-    ("cast", arm_act()),
-    ("pump", arm_act()),
-    ("count", arm_act()),
-    ("sign", arm_act()),
-    ("manipulate", arm_act()),
-    ("operate", arm_act()),
-    ("drive", arm_act()),
-    ("straighten", generic_arm(0)),
-    ("roundhouse", leg_act(0)),
-    ("a pose", strong(ARMS)),
-    // --- contact verbs: the noun after them is touched ---
-    ("touch", contact()),
-    ("scratch", contact()),
-    ("rub", contact()),
-    ("pat", contact()),
-    ("grab", contact()),
-    ("grasp", contact()),
-    ("hold", contact()),
-    ("hit", contact()),
-    ("slap", contact()),
-    ("wipe", contact()),
-    ("clean", contact()),
-    ("wash", contact()),
-    ("massage", contact()),
-    ("brush", contact()),
-    ("cover", contact()),
-    ("stroke", contact()),
-    ("shave", contact()),
-    ("comb", contact()),
-    ("hug", contact()),
-    ("clasp", contact()),
-    ("squeeze", contact()),
-    ("pinch", contact()),
-    ("poke", contact()),
-    ("itch", contact()),
-    ("feel", contact()),
-    ("adjust", contact()),
-    ("fix", contact()),
-    ("tickle", contact()),
-    ("support", contact()),
-    // --- generic verbs: parts from their nouns, else the hands ---
-    ("reach down", generic_arm(G | T)),
-    ("raise", generic_arm(0)),
-    ("lift", generic_arm(0)),
-    ("lower", generic_arm(0)),
-    ("extend", generic_arm(0)),
-    ("reach", generic_arm(0)),
-    ("swing", generic_arm(0)),
-    ("shake", generic_arm(0)),
-    ("circle", generic_arm(0)),
-    ("put", generic_arm(0)),
-    ("place", generic_arm(0)),
-    ("set", generic_arm(0)),
-    ("drop", generic_arm(0)),
-    ("bring", generic_arm(0)),
-    ("cross", generic_arm(0)),
-    ("spread", generic_arm(0)),
-    ("flex", generic_arm(0)),
-    ("point", generic_arm(0)),
-    ("tap", generic_arm(0)),
-    ("move", generic(LOCO)),
-    ("pose", weak(ARMS)),
-];
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WordLists {
+    clause: Vec<String>,
+    location: Vec<String>,
+    modifiers: Vec<String>,
+    act_modifiers: Vec<String>,
+    measures: Vec<String>,
+    objects: Vec<String>,
+    directions: Vec<String>,
+}
 
-/// Words that join clauses; parts of one clause do not decide for another.
-const CLAUSE_WORDS: &[&str] = &[
-    "and", "then", "while", "before", "after", "during", "when", "or", "but", "whilst",
-];
-
-/// Prepositions after which a part is a place, not a mover.
-const LOCATION: &[&str] = &[
-    "to",
-    "toward",
-    "towards",
-    "on",
-    "onto",
-    "at",
-    "above",
-    "below",
-    "over",
-    "under",
-    "underneath",
-    "behind",
-    "near",
-    "beside",
-    "besides",
-    "around",
-    "across",
-    "against",
-    "of",
-    "till",
-    "until",
-    "by",
-    "between",
-    "past",
-    "from",
-    "off",
-    "along",
-    "through",
-    "into",
-    "in",
-    "up",
-    "down",
-    "next",
-    "beneath",
-    "inside",
-    "outside",
-    "within",
-    "about",
-];
-
-/// Words allowed between a side (or preposition) and its noun.
-const MODIFIERS: &[&str] = &[
-    "the",
-    "a",
-    "an",
-    "his",
-    "her",
-    "their",
-    "its",
-    "own",
-    "my",
-    "your",
-    "upper",
-    "lower",
-    "front",
-    "bent",
-    "straight",
-    "extended",
-    "outstretched",
-    "stretched",
-    "raised",
-    "open",
-    "opened",
-    "closed",
-    "inner",
-    "outer",
-    "whole",
-    "entire",
-    "full",
-    "top",
-    "bottom",
-    "side",
-    "back",
-    "palm",
-    "one",
-    "other",
-    "opposite",
-    "each",
-    "either",
-    "single",
-    "both",
-    "two",
-    "flat",
-    "big",
-    "little",
-    "index",
-    "middle",
-    "ring",
-    "pinky",
-    "low",
-    "high",
-    "rear",
-    "lead",
-    "leading",
-    "trailing",
-    "supporting",
-    "free",
-    "left",
-    "right",
-];
-
-/// Words allowed between a side and a limb action (`right front kick`, `left axe kick`).
-const ACT_MODIFIERS: &[&str] = &[
-    "front",
-    "back",
-    "side",
-    "high",
-    "low",
-    "axe",
-    "round",
-    "roundhouse",
-    "spinning",
-    "spin",
-    "straight",
-    "cross",
-    "hard",
-    "small",
-    "big",
-    "large",
-    "quick",
-    "slow",
-    "soft",
-    "crescent",
-    "snap",
-    "power",
-    "drop",
-    "hand",
-    "arm",
-    "foot",
-    "leg",
-    "the",
-    "a",
-];
-
-/// Nouns followed by these are measures (`waist level`, `shoulder width`).
-const MEASURES: &[&str] = &[
-    "level", "height", "high", "width", "wide", "length", "deep", "distance", "apart",
-];
-
-/// Things handled with the hands.
-const OBJECTS: &[&str] = &[
-    "object",
-    "objects",
-    "item",
-    "items",
-    "something",
-    "thing",
-    "things",
-    "phone",
-    "cellphone",
-    "ball",
-    "cup",
-    "glass",
-    "bottle",
-    "box",
-    "bag",
-    "door",
-    "drawer",
-    "handle",
-    "book",
-    "paper",
-    "pen",
-    "knife",
-    "spoon",
-    "cloth",
-    "rag",
-    "towel",
-    "hat",
-    "cap",
-    "bowl",
-    "plate",
-    "tray",
-    "container",
-    "jar",
-    "lid",
-    "key",
-    "keys",
-    "remote",
-    "camera",
-    "racket",
-    "bat",
-    "club",
-    "stick",
-    "rope",
-    "barbell",
-    "dumbbell",
-    "weight",
-    "weights",
-    "guitar",
-    "violin",
-    "piano",
-    "drums",
-    "flute",
-    "trumpet",
-    "instrument",
-    "microphone",
-    "sword",
-    "gun",
-    "bow",
-    "arrow",
-    "flashlight",
-    "hairdryer",
-    "bulb",
-    "cards",
-    "shelf",
-    "beverage",
-    "food",
-    "soda",
-    "toothbrush",
-    "broom",
-    "mirror",
-    "wheel",
-    "baseball",
-    "basketball",
-    "football",
-    "volleyball",
-    "frisbee",
-    "rail",
-    "railing",
-    "handrail",
-    "watch",
-];
-
-/// Irregular verb forms and spellings to their lemma.
-const IRREGULAR: &[(&str, &str)] = &[
-    ("ran", "run"),
-    ("sat", "sit"),
-    ("stood", "stand"),
-    ("threw", "throw"),
-    ("thrown", "throw"),
-    ("caught", "catch"),
-    ("lying", "lie"),
-    ("lay", "lay"),
-    ("laid", "lay"),
-    ("fell", "fall"),
-    ("fallen", "fall"),
-    ("took", "take"),
-    ("taken", "take"),
-    ("gave", "give"),
-    ("went", "go"),
-    ("goes", "go"),
-    ("came", "come"),
-    ("rose", "rise"),
-    ("swam", "swim"),
-    ("swung", "swing"),
-    ("shook", "shake"),
-    ("held", "hold"),
-    ("bent", "bend"),
-    ("leant", "lean"),
-    ("knelt", "kneel"),
-    ("leapt", "leap"),
-    ("drew", "draw"),
-    ("wrote", "write"),
-    ("ate", "eat"),
-    ("drank", "drink"),
-    ("hit", "hit"),
-    ("put", "put"),
-    ("set", "set"),
-    ("cut", "cut"),
-    ("jumpingjack", "jack"),
-    ("jumpingjacks", "jack"),
-    ("tpose", "t pose"),
-    ("apose", "a pose"),
-    ("situp", "sit up"),
-    ("situps", "sit up"),
-    ("pushups", "pushup"),
-    ("handstands", "handstand"),
-    ("jumprope", "jump rope"),
-];
+/// Why the lexicon file cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LexiconError {
+    /// The file does not parse or has unknown keys.
+    #[error("schemas/lexicon.toml: {0}")]
+    Parse(String),
+    /// A phrase's meaning is not in the file's grammar.
+    #[error("schemas/lexicon.toml: phrase `{phrase}`: {message}")]
+    Meaning {
+        /// The phrase.
+        phrase: String,
+        /// What is wrong.
+        message: String,
+    },
+}
 
 struct Lexicon {
     /// First word of a phrase -> (words, kind), longest first.
     by_first: HashMap<&'static str, Vec<(Vec<&'static str>, Kind)>>,
     /// Every word that appears in an action phrase: the targets of lemmatisation.
-    verbs: std::collections::HashSet<&'static str>,
+    verbs: WordSet,
     /// One-word body-part and feature nouns.
-    nouns: std::collections::HashSet<&'static str>,
+    nouns: WordSet,
+    /// Words that join clauses; parts of one clause do not decide for another.
+    clause: WordSet,
+    /// Prepositions after which a part is a place, not a mover.
+    location: WordSet,
+    /// Words allowed between a side (or preposition) and its noun.
+    modifiers: WordSet,
+    /// Words allowed between a side and a limb action (`right front kick`).
+    act_modifiers: WordSet,
+    /// Nouns followed by these are measures (`waist level`).
+    measures: WordSet,
+    /// Things handled with the hands.
+    objects: WordSet,
+    /// Direction words (`face left`).
+    directions: WordSet,
+    /// Irregular forms and their lemma.
+    irregular: HashMap<&'static str, &'static str>,
 }
 
-static LEX: LazyLock<Lexicon> = LazyLock::new(|| {
+/// Parts named in a meaning (`global torso`, `arms`, `all`).
+fn parts_mask(word: &str) -> Option<u8> {
+    Some(match word {
+        "global" => G,
+        "torso" => T,
+        "arms" => ARMS,
+        "legs" => LEGS,
+        "all" => ALL,
+        _ => return None,
+    })
+}
+
+/// A phrase's meaning, from the grammar described at the top of `schemas/lexicon.toml`.
+fn parse_meaning(meaning: &str) -> Result<Kind, String> {
+    let words: Vec<&str> = meaning.split_whitespace().collect();
+    let limb = |limb, plural, self_moving| Kind::Limb {
+        limb,
+        plural,
+        self_moving,
+    };
+    let parts_of = |rest: &[&str]| -> Result<u8, String> {
+        rest.iter().try_fold(0u8, |acc, w| {
+            parts_mask(w)
+                .map(|m| acc | m)
+                .ok_or_else(|| format!("`{w}` is not a part (global, torso, arms, legs, all)"))
+        })
+    };
+    match words.as_slice() {
+        ["arm"] => Ok(limb(Limb::Arm, false, true)),
+        ["arms"] => Ok(limb(Limb::Arm, true, true)),
+        ["shoulder"] => Ok(limb(Limb::Arm, false, false)),
+        ["shoulders"] => Ok(limb(Limb::Arm, true, false)),
+        ["leg"] => Ok(limb(Limb::Leg, false, false)),
+        ["legs"] => Ok(limb(Limb::Leg, true, false)),
+        ["feature"] => Ok(Kind::Feature),
+        ["trunk", rest @ ..] => {
+            let hip = rest.last() == Some(&"hip");
+            let rest = if hip { &rest[..rest.len() - 1] } else { rest };
+            Ok(Kind::Trunk {
+                parts: parts_of(rest)?,
+                hip,
+            })
+        }
+        [strength, rest @ ..] => {
+            let strength = match *strength {
+                "strong" => Strength::Strong,
+                "generic" => Strength::Generic,
+                "weak" => Strength::Weak,
+                other => {
+                    return Err(format!(
+                        "`{other}` is not a meaning (arm, arms, shoulder, shoulders, leg, legs, feature, trunk, strong, generic, weak)"
+                    ));
+                }
+            };
+            let (limb, rest) = match rest.first() {
+                Some(&"arm") => (Some(Limb::Arm), &rest[1..]),
+                Some(&"leg") => (Some(Limb::Leg), &rest[1..]),
+                _ => (None, rest),
+            };
+            let (contact, rest) = match rest.first() {
+                Some(&"contact") => (true, &rest[1..]),
+                _ => (false, rest),
+            };
+            Ok(Kind::Act {
+                strength,
+                limb,
+                extra: parts_of(rest)?,
+                contact,
+            })
+        }
+        [] => Err("empty meaning".into()),
+    }
+}
+
+/// Strings of the lexicon live as long as the program: it is read once.
+fn leak(s: String) -> &'static str {
+    Box::leak(s.into_boxed_str())
+}
+
+fn word_set(words: Vec<String>) -> WordSet {
+    words.into_iter().map(leak).collect()
+}
+
+fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
+    let file: LexiconFile = toml::from_str(text).map_err(|e| LexiconError::Parse(e.to_string()))?;
     let mut by_first: HashMap<&'static str, Vec<(Vec<&'static str>, Kind)>> = HashMap::new();
-    let mut verbs = std::collections::HashSet::new();
-    let mut nouns = std::collections::HashSet::new();
-    for (phrase, kind) in LEXICON {
+    let mut verbs = HashSet::new();
+    let mut nouns = HashSet::new();
+    for (phrase, meaning) in file.phrases {
+        let kind = parse_meaning(&meaning).map_err(|message| LexiconError::Meaning {
+            phrase: phrase.clone(),
+            message,
+        })?;
+        let phrase = leak(phrase);
         let words: Vec<&'static str> = phrase.split(' ').collect();
         if matches!(kind, Kind::Act { .. }) {
             verbs.extend(words.iter().copied());
         } else if words.len() == 1 {
-            nouns.insert(*phrase);
+            nouns.insert(phrase);
         }
         if let Some(first) = words.first() {
-            by_first.entry(first).or_default().push((words, *kind));
+            by_first.entry(first).or_default().push((words, kind));
         }
     }
     for list in by_first.values_mut() {
+        // Longest first; the phrases come sorted, so equal lengths keep a fixed order.
         list.sort_by_key(|(w, _)| std::cmp::Reverse(w.len()));
     }
-    Lexicon {
+    let w = file.words;
+    Ok(Lexicon {
         by_first,
         verbs,
         nouns,
+        clause: word_set(w.clause),
+        location: word_set(w.location),
+        modifiers: word_set(w.modifiers),
+        act_modifiers: word_set(w.act_modifiers),
+        measures: word_set(w.measures),
+        objects: word_set(w.objects),
+        directions: word_set(w.directions),
+        irregular: file
+            .irregular
+            .into_iter()
+            .map(|(k, v)| (leak(k), leak(v)))
+            .collect(),
+    })
+}
+
+static LEX: LazyLock<Result<Lexicon, LexiconError>> = LazyLock::new(|| load_lexicon(LEXICON_TOML));
+
+/// The bundled lexicon, loaded and validated once; `Err` says what is wrong with the file. The
+/// build checks it before labelling ([`check_lexicon`]).
+fn lexicon() -> &'static Lexicon {
+    static EMPTY: LazyLock<Lexicon> = LazyLock::new(|| Lexicon {
+        by_first: HashMap::new(),
+        verbs: HashSet::new(),
+        nouns: HashSet::new(),
+        clause: HashSet::new(),
+        location: HashSet::new(),
+        modifiers: HashSet::new(),
+        act_modifiers: HashSet::new(),
+        measures: HashSet::new(),
+        objects: HashSet::new(),
+        directions: HashSet::new(),
+        irregular: HashMap::new(),
+    });
+    match &*LEX {
+        Ok(lexicon) => lexicon,
+        Err(_) => &EMPTY,
     }
-});
+}
+
+/// Loads and validates the bundled lexicon (`schemas/lexicon.toml`): every phrase's meaning in
+/// the file's grammar, every word list present.
+pub fn check_lexicon() -> Result<(), LexiconError> {
+    match &*LEX {
+        Ok(_) => Ok(()),
+        Err(e) => Err(e.clone()),
+    }
+}
 
 /// The lemma of a word for matching actions: irregular forms, then suffix stripping until a known
 /// action word comes out; other words stay as they are.
 fn lemma(word: &str) -> String {
-    if let Some((_, l)) = IRREGULAR.iter().find(|(w, _)| *w == word) {
+    if let Some(l) = lexicon().irregular.get(word) {
         return (*l).to_string();
     }
-    let lex = &*LEX;
+    let lex = lexicon();
     // Nouns keep their number (`hands` is not `hand`), and known verbs are their own lemma.
     if lex.verbs.contains(word) || lex.nouns.contains(word) {
         return word.to_string();
@@ -1142,7 +456,7 @@ fn push_word(word: &mut String, tokens: &mut Vec<Token>, clause: &mut usize) {
         return;
     }
     let raw = std::mem::take(word);
-    if CLAUSE_WORDS.contains(&raw.as_str()) {
+    if lexicon().clause.contains(raw.as_str()) {
         *clause += 1;
     }
     // Irregular forms may expand to two words (`tpose` -> `t pose`).
@@ -1175,7 +489,7 @@ struct Hit {
 }
 
 fn find_hits(tokens: &[Token]) -> Vec<Hit> {
-    let lex = &*LEX;
+    let lex = lexicon();
     let mut hits = Vec::new();
     let mut i = 0;
     while i < tokens.len() {
@@ -1211,7 +525,7 @@ fn find_hits(tokens: &[Token]) -> Vec<Hit> {
             });
             i += n;
         } else {
-            if OBJECTS.contains(&tokens[i].raw.as_str()) {
+            if lex.objects.contains(tokens[i].raw.as_str()) {
                 hits.push(Hit {
                     start: i,
                     end: i + 1,
@@ -1225,38 +539,6 @@ fn find_hits(tokens: &[Token]) -> Vec<Hit> {
     reinterpret(tokens, &mut hits);
     hits
 }
-
-const DIRECTIONS: &[&str] = &[
-    "left",
-    "right",
-    "forward",
-    "forwards",
-    "front",
-    "back",
-    "backward",
-    "backwards",
-    "away",
-    "up",
-    "down",
-    "around",
-    "sideways",
-    "side",
-    "rear",
-    "ahead",
-    "towards",
-    "toward",
-    "to",
-    "the",
-    "camera",
-    "wall",
-    "other",
-    "opposite",
-    "north",
-    "south",
-    "east",
-    "west",
-    "off",
-];
 
 /// Words whose sense depends on their neighbours.
 fn reinterpret(tokens: &[Token], hits: &mut Vec<Hit>) {
@@ -1272,7 +554,8 @@ fn reinterpret(tokens: &[Token], hits: &mut Vec<Hit>) {
             // `face left`, `face to the wall`, `about face`: turning to face is the torso (SINC's
             // own few-shot example "face to the left" -> torso, neck).
             "face"
-                if (DIRECTIONS.contains(&next) && !DIRECTIONS.contains(&prev))
+                if (lexicon().directions.contains(next)
+                    && !lexicon().directions.contains(prev))
                     || prev == "about" =>
             {
                 hit.kind = strong(T);
@@ -1329,7 +612,7 @@ fn reinterpret(tokens: &[Token], hits: &mut Vec<Hit>) {
 
 /// Side named by the words just before `start` (over `skip` words), if any. `left and right
 /// hands` looks past the conjunction, which otherwise ends a clause.
-fn side_before(tokens: &[Token], start: usize, skip: &[&str]) -> Option<Side> {
+fn side_before(tokens: &[Token], start: usize, skip: &WordSet) -> Option<Side> {
     let mut left = false;
     let mut right = false;
     let mut both = false;
@@ -1375,7 +658,7 @@ fn word_before_phrase(tokens: &[Token], start: usize) -> Option<usize> {
     while j > 0 {
         j -= 1;
         let w = tokens[j].raw.as_str();
-        if !MODIFIERS.contains(&w) {
+        if !lexicon().modifiers.contains(w) {
             return Some(j);
         }
     }
@@ -1417,7 +700,7 @@ pub fn label_text(text: &str) -> TextLabel {
             continue;
         }
         let next = tokens.get(hit.end).map(|t| t.raw.as_str()).unwrap_or("");
-        if MEASURES.contains(&next) {
+        if lexicon().measures.contains(next) {
             roles[k] = Role::Ignored;
             continue;
         }
@@ -1428,7 +711,7 @@ pub fn label_text(text: &str) -> TextLabel {
             hits.iter()
                 .any(|h| h.end == j + 1 && matches!(h.kind, Kind::Act { contact: true, .. }))
         });
-        let after_location = before.is_some_and(|(w, _)| LOCATION.contains(&w));
+        let after_location = before.is_some_and(|(w, _)| lexicon().location.contains(w));
         let support = before.is_some_and(|(w, _)| w == "on" || w == "onto")
             && matches!(
                 hit.kind,
@@ -1480,11 +763,11 @@ pub fn label_text(text: &str) -> TextLabel {
                 Kind::Limb { .. } | Kind::Trunk { .. } if roles[k] == Role::Target => false,
                 _ => continue,
             };
-            let side = side_before(&tokens, hit.start, MODIFIERS).or_else(|| {
+            let side = side_before(&tokens, hit.start, &lexicon().modifiers).or_else(|| {
                 // `right side of face`
                 let j = word_before_phrase(&tokens, hit.start)?;
                 (j >= 1 && tokens[j].raw == "of" && tokens[j - 1].raw == "side")
-                    .then(|| side_before(&tokens, j - 1, MODIFIERS))
+                    .then(|| side_before(&tokens, j - 1, &lexicon().modifiers))
                     .flatten()
             });
             let side = match (side, shoulder) {
@@ -1528,7 +811,7 @@ pub fn label_text(text: &str) -> TextLabel {
                     let side = if plural {
                         Side::Both
                     } else {
-                        side_before(&tokens, hit.start, MODIFIERS).unwrap_or(Side::Both)
+                        side_before(&tokens, hit.start, &lexicon().modifiers).unwrap_or(Side::Both)
                     };
                     let name = side_name(side, plural, &hit.phrase);
                     add(limb.parts(side), &name, &mut matched, &mut parts);
@@ -1538,7 +821,8 @@ pub fn label_text(text: &str) -> TextLabel {
                 Kind::Trunk { parts: p, hip } => {
                     let mut set = PartSet(p);
                     let mut name = hit.phrase.clone();
-                    if hip && let Some(side) = side_before(&tokens, hit.start, MODIFIERS) {
+                    if hip && let Some(side) = side_before(&tokens, hit.start, &lexicon().modifiers)
+                    {
                         set |= Limb::Leg.parts(side);
                         name = side_name(side, false, &hit.phrase);
                     }
@@ -1554,7 +838,7 @@ pub fn label_text(text: &str) -> TextLabel {
         let object = in_clause.iter().copied().find(|&k| {
             hits[k].kind == Kind::Object
                 && word_before_phrase(&tokens, hits[k].start)
-                    .is_none_or(|j| !LOCATION.contains(&tokens[j].raw.as_str()))
+                    .is_none_or(|j| !lexicon().location.contains(tokens[j].raw.as_str()))
         });
         for &k in &in_clause {
             let hit = &hits[k];
@@ -1577,7 +861,7 @@ pub fn label_text(text: &str) -> TextLabel {
                         } else {
                             None
                         };
-                        let side = side_before(&tokens, hit.start, ACT_MODIFIERS)
+                        let side = side_before(&tokens, hit.start, &lexicon().act_modifiers)
                             .or(after)
                             .or(instrument_side)
                             .or(if l == Limb::Arm { target_side } else { None })
@@ -1732,5 +1016,71 @@ mod tests {
         assert_eq!(l.parts, UNKNOWN_DEFAULT);
         assert!(l.matched.is_empty());
         assert!(label_text("stand").known);
+    }
+}
+
+#[cfg(test)]
+mod lexicon_file_tests {
+    use super::*;
+
+    #[test]
+    fn the_bundled_lexicon_loads_and_covers_every_list() {
+        assert_eq!(check_lexicon(), Ok(()));
+        let lex = lexicon();
+        assert!(lex.by_first.values().map(Vec::len).sum::<usize>() > 500);
+        for (name, set) in [
+            ("clause", &lex.clause),
+            ("location", &lex.location),
+            ("modifiers", &lex.modifiers),
+            ("act_modifiers", &lex.act_modifiers),
+            ("measures", &lex.measures),
+            ("objects", &lex.objects),
+            ("directions", &lex.directions),
+        ] {
+            assert!(!set.is_empty(), "{name}");
+        }
+        assert_eq!(lex.irregular.get("ran"), Some(&"run"));
+    }
+
+    #[test]
+    fn meanings_follow_the_grammar_and_errors_name_the_phrase() {
+        assert_eq!(
+            parse_meaning("strong arm contact"),
+            Ok(Kind::Act {
+                strength: Strength::Strong,
+                limb: Some(Limb::Arm),
+                extra: 0,
+                contact: true
+            })
+        );
+        assert_eq!(
+            parse_meaning("trunk global hip"),
+            Ok(Kind::Trunk {
+                parts: G,
+                hip: true
+            })
+        );
+        assert_eq!(
+            parse_meaning("weak torso arms"),
+            Ok(Kind::Act {
+                strength: Strength::Weak,
+                limb: None,
+                extra: T | ARMS,
+                contact: false
+            })
+        );
+        let bad = LEXICON_TOML.replacen("\"walk\" = ", "\"walk\" = \"strong elbows\" # ", 1);
+        match load_lexicon(&bad) {
+            Err(LexiconError::Meaning { phrase, message }) => {
+                assert_eq!(phrase, "walk");
+                assert!(message.contains("`elbows` is not a part"), "{message}");
+            }
+            other => panic!("{:?}", other.err()),
+        }
+        let unknown = format!("{LEXICON_TOML}\n[extra]\nx = 1\n");
+        assert!(matches!(
+            load_lexicon(&unknown),
+            Err(LexiconError::Parse(_))
+        ));
     }
 }
