@@ -54,7 +54,7 @@
 //! (`.!?;:,`) are removed and runs of whitespace become one space. Words are otherwise kept as
 //! written: side words (`left`, `right`) and case are never changed.
 
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 use std::fmt;
 use std::sync::LazyLock;
 
@@ -275,7 +275,7 @@ fn should_double(word: &str) -> bool {
     if before_is_vowel {
         return false;
     }
-    syllables(&c) <= 1 || STRESSED_FINAL.contains(&word)
+    syllables(&c) <= 1 || words().stressed_final.contains(&word)
 }
 
 fn is_vowel(c: char) -> bool {
@@ -318,189 +318,146 @@ fn is_gerund_form(word: &str) -> bool {
     let Some(stem) = word.strip_suffix("ing") else {
         return false;
     };
-    word.len() >= 5 && stem.chars().any(|c| is_vowel(c) || c == 'y') && !NOT_GERUNDS.contains(&word)
+    word.len() >= 5
+        && stem.chars().any(|c| is_vowel(c) || c == 'y')
+        && !words().not_gerunds.contains(&word)
 }
 
-/// Words ending in -ing that are not gerunds.
-const NOT_GERUNDS: &[&str] = &[
-    "something",
-    "nothing",
-    "anything",
-    "everything",
-    "ceiling",
-    "morning",
-    "evening",
-    "during",
-    "pudding",
-];
+/// The bundled word lists (`schemas/compose_text.toml`).
+const WORDS_TOML: &str = include_str!("../../schemas/compose_text.toml");
 
-/// Multi-syllable verbs stressed on the last syllable, which double their final consonant.
-const STRESSED_FINAL: &[&str] = &[
-    "abet", "acquit", "admit", "allot", "annul", "backflip", "befit", "beget", "begin", "commit",
-    "compel", "confer", "control", "defer", "deter", "embed", "enrol", "equip", "excel", "expel",
-    "extol", "forbid", "forget", "format", "handicap", "incur", "infer", "input", "kidnap",
-    "occur", "omit", "outrun", "outstrip", "overstep", "patrol", "permit", "prefer", "program",
-    "propel", "rebel", "recur", "refer", "regret", "remit", "repel", "sidestep", "submit",
-    "transfer", "transmit", "unclip", "unpin", "unplug", "unwrap", "unzip", "upset",
-];
+/// The word lists as written in the file; each is documented there.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WordFile {
+    not_gerunds: Vec<String>,
+    stressed_final: Vec<String>,
+    verbs: Vec<String>,
+    light_verbs: Vec<String>,
+    compound_heads: Vec<String>,
+    gait_nouns: Vec<String>,
+    move_nouns: Vec<String>,
+    nominal_phrases: Vec<String>,
+    subjects: Vec<String>,
+    auxiliaries: Vec<String>,
+    side_words: Vec<String>,
+    body_parts: Vec<String>,
+    positions: Vec<String>,
+    coordinators: Vec<String>,
+    plain_adverbs: Vec<String>,
+    not_adverbs: Vec<String>,
+    particle_verbs: BTreeMap<String, Vec<String>>,
+}
 
-/// Base verbs recognised at the head of a phrase: motion and everyday action verbs, including
-/// every verb that leads a BABEL/SINC label. Words that are mostly body-part or direction nouns
-/// in motion labels (hand, arm, head, back, side, ...) are deliberately absent.
-const VERBS: &str = "
-    abandon acquire act adjust admire adopt advance agree aim align alternate animate answer applaud
-    apply approach arc arch argue arrange ascend assemble assist attack avoid backpedal backtrack
-    balance bang bat bathe be beat beckon become begin bend bite blink block blow bob bobble bounce
-    bow box brace breakdance breathe bring brush buckle budge build bump bury button calibrate call
-    carry cartwheel cast catch celebrate change charge chase check cheer chew chop circle claim clap
-    clasp claw clean clear climb close clutch cock collapse collect comb come conduct connect
-    continue cook cough count cover cower cradle crane crawl creep cross crouch crunch cry cup curl
-    curtsy curve cut dance dangle dash decline defend descend dial die dig dip dive do dodge drag
-    draw dress dribble drink drive drop drum dry duck dust dye eat elevate embrace endure enrage
-    enter escape evade examine exercise exit expand extend face facepalm fake fall falter fan fasten
-    feel fetch fidget fight fill find fire fix flail flap flare flee flex flick flinch flip float
-    flop fly fold follow fumble gain gallop gather gaze gesticulate gesture get giggle give glance
-    glide go grab grasp greet grip guard guide gyrate hammer hang have hiccup hide hike hit hobble
-    hold hop hover hug hunch hurry hurt imitate injure insert interact itch jab jerk jiggle jog join
-    juggle jump jut keep kick kickbox kiss knead kneel knit knock land lather laugh lay lead lean
-    leap leave let lick lie lift limp listen load lock look loosen lose lounge lower lunge lurch
-    maintain make manipulate march massage measure meditate mime mimic mix moonwalk mop motion move
-    navigate nod nudge observe offer open operate outline pace pack paddle paint panic pant pass pat
-    pause peck pedal peek peel peer perform pet pick picnic pinch pitch pivot place plant play plead
-    plug point poke polish ponder pop pose pound pour pout practice prance pray prepare press
-    pretend prop protect pull pulse pump punch punt push put putt quiver raise rake reach read
-    readjust rearrange receive recenter recline recover reel regain relax release remove repeat
-    replace reposition rest retract retreat retrieve return reveal ride rinse rise roam roar rock
-    roll rotate row rub run rush salute saunter saw say scamper scan scare scoop scoot scrape
-    scratch screw scrub search seat see seek separate serve set settle sew shade shadowbox shake
-    shave shift shimmy shine shiver shoot shop shout shove shovel show shower shrug shudder shuffle
-    shut sidestep sidle sign signal sing sink sip sit skate ski skip slam slap slash sleepwalk slide
-    slip slouch smack smell smile snap sneak sneeze sniff soak sob somersault sort speak spike spin
-    splash spread spring sprinkle sprint squat squeeze squint stab stabilize stack stagger stamp
-    stand stare start startle stay steer step stick stir stomp stoop stop strafe straighten stretch
-    stride strike stroke stroll struggle strum strut study stumble style sulk support surrender
-    swagger swap swat sway sweep swerve swim swing swipe swirl switch swivel take talk tap tape
-    taste taunt teeter text think throw tickle tie tighten tilt tip tiptoe toddle toss touch trace
-    transfer travel tread tremble trip try tuck tug tumble turn twirl twist twitch type uncross
-    unfold unscrew untangle untie unwrap unzip uplift use vacuum visit vomit waddle wag waggle wait
-    waive wake walk wander warm wash watch wave wear weave whine whip whirl whistle widen wiggle
-    wind wipe withdraw wobble worry wrap wrestle wring write yawn yell zigzag zip
-";
+/// The composer's vocabulary (`schemas/compose_text.toml`).
+struct Words {
+    not_gerunds: Vec<&'static str>,
+    stressed_final: Vec<&'static str>,
+    verbs: HashSet<&'static str>,
+    light_verbs: Vec<&'static str>,
+    compound_heads: Vec<&'static str>,
+    gait_nouns: Vec<&'static str>,
+    move_nouns: Vec<&'static str>,
+    nominal_phrases: Vec<Vec<&'static str>>,
+    subjects: Vec<Vec<&'static str>>,
+    auxiliaries: Vec<&'static str>,
+    side_words: Vec<&'static str>,
+    body_parts: HashSet<&'static str>,
+    positions: HashSet<&'static str>,
+    coordinators: Vec<&'static str>,
+    plain_adverbs: Vec<&'static str>,
+    not_adverbs: Vec<&'static str>,
+    particle_verbs: Vec<(&'static str, Vec<&'static str>)>,
+}
 
-/// Words that are verbs only before one of the listed particles: "back up" but "back flip",
-/// "slow down" but "slow walk", "cool down" but "cool walk".
-const PARTICLE_VERBS: &[(&str, &[&str])] = &[
-    (
-        "back",
-        &["up", "off", "away", "out", "down", "into", "onto"],
-    ),
-    ("slow", &["down", "to"]),
-    ("cool", &["down", "off"]),
-];
+/// Why the composer's word file cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("schemas/compose_text.toml: {0}")]
+pub struct WordsError(String);
 
-/// Verbs so light that what follows is their object, never a compound noun ("take step").
-const LIGHT_VERBS: &[&str] = &[
-    "change", "do", "get", "give", "go", "have", "hold", "keep", "make", "take",
-];
+/// Strings of the word file live as long as the program: it is read once.
+fn leak(s: String) -> &'static str {
+    Box::leak(s.into_boxed_str())
+}
 
-/// Nouns that turn a preceding verb into a compound noun ("fight stance", "climb motion").
-const COMPOUND_HEADS: &[&str] = &[
-    "stance",
-    "series",
-    "movement",
-    "movements",
-    "motion",
-    "motions",
-    "pattern",
-    "transition",
-];
+fn load_words(text: &str) -> Result<Words, WordsError> {
+    let f: WordFile = toml::from_str(text).map_err(|e| WordsError(e.to_string()))?;
+    let list = |v: Vec<String>| -> Vec<&'static str> { v.into_iter().map(leak).collect() };
+    let phrases = |v: Vec<String>| -> Vec<Vec<&'static str>> {
+        v.into_iter()
+            .map(|p| leak(p).split_whitespace().collect())
+            .collect()
+    };
+    let words = Words {
+        not_gerunds: list(f.not_gerunds),
+        stressed_final: list(f.stressed_final),
+        verbs: list(f.verbs).into_iter().collect(),
+        light_verbs: list(f.light_verbs),
+        compound_heads: list(f.compound_heads),
+        gait_nouns: list(f.gait_nouns),
+        move_nouns: list(f.move_nouns),
+        nominal_phrases: phrases(f.nominal_phrases),
+        subjects: phrases(f.subjects),
+        auxiliaries: list(f.auxiliaries),
+        side_words: list(f.side_words),
+        body_parts: list(f.body_parts).into_iter().collect(),
+        positions: list(f.positions).into_iter().collect(),
+        coordinators: list(f.coordinators),
+        plain_adverbs: list(f.plain_adverbs),
+        not_adverbs: list(f.not_adverbs),
+        particle_verbs: f
+            .particle_verbs
+            .into_iter()
+            .map(|(w, p)| (leak(w), list(p)))
+            .collect(),
+    };
+    if words.verbs.is_empty() || words.subjects.iter().any(Vec::is_empty) {
+        return Err(WordsError(
+            "`verbs` must not be empty, nor any `subjects` phrase".into(),
+        ));
+    }
+    Ok(words)
+}
 
-/// Locomotion nouns: after a verb they name a gait ("limp walk", "duck walk", "zip zag walk").
-const GAIT_NOUNS: &[&str] = &["walk", "run", "jog"];
+static WORDS: LazyLock<Result<Words, WordsError>> = LazyLock::new(|| load_words(WORDS_TOML));
 
-/// Move nouns that make a two-word verb-noun label an action name ("jump spin", "drop kick").
-const MOVE_NOUNS: &[&str] = &[
-    "jump", "hop", "spin", "kick", "squat", "skip", "step", "twist", "flip", "turn",
-];
+/// The composer's vocabulary, loaded and validated once ([`check_words`] reports a bad file).
+fn words() -> &'static Words {
+    static EMPTY: LazyLock<Words> = LazyLock::new(|| Words {
+        not_gerunds: Vec::new(),
+        stressed_final: Vec::new(),
+        verbs: HashSet::new(),
+        light_verbs: Vec::new(),
+        compound_heads: Vec::new(),
+        gait_nouns: Vec::new(),
+        move_nouns: Vec::new(),
+        nominal_phrases: Vec::new(),
+        subjects: Vec::new(),
+        auxiliaries: Vec::new(),
+        side_words: Vec::new(),
+        body_parts: HashSet::new(),
+        positions: HashSet::new(),
+        coordinators: Vec::new(),
+        plain_adverbs: Vec::new(),
+        not_adverbs: Vec::new(),
+        particle_verbs: Vec::new(),
+    });
+    match &*WORDS {
+        Ok(w) => w,
+        Err(_) => &EMPTY,
+    }
+}
 
-/// Whole-label action names that the rules would otherwise read as verb phrases.
-const NOMINAL_PHRASES: &[&[&str]] = &[&["step", "ball", "change"]];
-
-/// Subjects dropped before a verb ("a person walks" → "walking"); `to` covers infinitives.
-const SUBJECTS: &[&[&str]] = &[
-    &["a", "person"],
-    &["the", "person"],
-    &["person"],
-    &["a", "man"],
-    &["the", "man"],
-    &["a", "woman"],
-    &["the", "woman"],
-    &["a", "human"],
-    &["the", "human"],
-    &["human"],
-    &["a", "figure"],
-    &["the", "figure"],
-    &["a", "character"],
-    &["the", "character"],
-    &["a", "subject"],
-    &["the", "subject"],
-    &["an", "individual"],
-    &["the", "individual"],
-    &["someone"],
-    &["somebody"],
-    &["he"],
-    &["she"],
-    &["they"],
-    &["to"],
-];
-
-/// Auxiliaries dropped after a subject ("he is waving", "they will jump").
-const AUXILIARIES: &[&str] = &[
-    "is", "are", "was", "were", "will", "would", "can", "could", "does", "did",
-];
-
-/// Side and determiner words that may precede a body part ("both hands", "the left arm").
-const SIDE_WORDS: &[&str] = &[
-    "left", "right", "both", "one", "two", "each", "the", "his", "her", "their", "upper",
-];
-
-/// Body parts that can lead a body-state phrase.
-const BODY_PARTS: &str = "
-    hand hands arm arms forearm forearms leg legs foot feet head knee knees shoulder shoulders elbow
-    elbows palm palms finger fingers thumb thumbs wrist wrists hip hips chest torso neck calf calves
-    thigh thighs shin shins ankle ankles body chin fist fists heel heels toe toes waist pelvis spine
-    face eye eyes
-";
-
-/// Words after a body part that make the phrase a position ("left arm up", "hands on hips").
-const POSITIONS: &str = "
-    up down forward forwards backward backwards back open out in on at by to till until above below
-    beneath near under over behind together apart sideways left right front beside against around
-    across along into onto off aside overhead upward upwards downward downwards outward outwards
-    inward inwards straight stretched outstretched extended raised lowered crossed closed clasped
-    folded locked relaxed bent spread tight high low halfway close flat wide
-";
-
-/// Words that coordinate a following verb with the lead verb.
-const COORDINATORS: &[&str] = &["and", "or", "then"];
-
-/// Adverbs that are not -ly words but may precede a verb ("just stand").
-const PLAIN_ADVERBS: &[&str] = &["just", "also", "still"];
-
-/// -ly words that are not adverbs.
-const NOT_ADVERBS: &[&str] = &[
-    "belly", "jelly", "family", "bully", "rally", "tally", "curly",
-];
-
-static VERB_SET: LazyLock<HashSet<&'static str>> =
-    LazyLock::new(|| VERBS.split_whitespace().collect());
-static BODY_PART_SET: LazyLock<HashSet<&'static str>> =
-    LazyLock::new(|| BODY_PARTS.split_whitespace().collect());
-static POSITION_SET: LazyLock<HashSet<&'static str>> =
-    LazyLock::new(|| POSITIONS.split_whitespace().collect());
+/// Loads and validates the bundled word file (`schemas/compose_text.toml`).
+pub fn check_words() -> Result<(), WordsError> {
+    match &*WORDS {
+        Ok(_) => Ok(()),
+        Err(e) => Err(e.clone()),
+    }
+}
 
 fn is_verb(word: &str) -> bool {
-    VERB_SET.contains(word)
+    words().verbs.contains(word)
 }
 
 /// The lemma of a third-person singular form of a known verb ("walks" → "walk",
@@ -530,11 +487,11 @@ fn third_person_lemma(word: &str) -> Option<String> {
 }
 
 fn is_adverb(word: &str) -> bool {
-    PLAIN_ADVERBS.contains(&word)
+    words().plain_adverbs.contains(&word)
         || (word.len() >= 5
             && word.ends_with("ly")
             && !is_verb(word)
-            && !NOT_ADVERBS.contains(&word))
+            && !words().not_adverbs.contains(&word))
 }
 
 /// What to do with a verb token when rendering.
@@ -726,9 +683,10 @@ fn analyze(phrase: &str) -> Analysis {
     // "kick series", "hand out gesture series": BABEL's names for routines, whatever leads them.
     if keys.is_empty()
         || keys.last() == Some(&"series")
-        || NOMINAL_PHRASES
+        || words()
+            .nominal_phrases
             .iter()
-            .any(|p| keys.len() >= p.len() && keys[..p.len()] == **p)
+            .any(|p| keys.len() >= p.len() && keys[..p.len()] == p[..])
     {
         return nominal;
     }
@@ -764,12 +722,15 @@ fn analyze(phrase: &str) -> Analysis {
 
 /// Index after a leading subject and auxiliary, if the phrase starts with a subject.
 fn subject_end(keys: &[&str]) -> Option<usize> {
-    let subject = SUBJECTS
+    let subject = words()
+        .subjects
         .iter()
-        .filter(|s| keys.len() > s.len() && keys[..s.len()] == ***s)
+        .filter(|s| keys.len() > s.len() && keys[..s.len()] == s[..])
         .map(|s| s.len())
         .max()?;
-    let aux = keys.get(subject).is_some_and(|k| AUXILIARIES.contains(k));
+    let aux = keys
+        .get(subject)
+        .is_some_and(|k| words().auxiliaries.contains(k));
     Some(subject + usize::from(aux))
 }
 
@@ -780,7 +741,7 @@ fn lead_slot(keys: &[&str], i: usize) -> Option<Slot> {
     if is_gerund_form(word) {
         return Some(Slot::Gerund);
     }
-    if let Some((_, particles)) = PARTICLE_VERBS.iter().find(|(w, _)| *w == word) {
+    if let Some((_, particles)) = words().particle_verbs.iter().find(|(w, _)| *w == word) {
         return next
             .filter(|n| particles.contains(n))
             .map(|_| Slot::Lemma(word.to_owned()));
@@ -794,7 +755,7 @@ fn lead_slot(keys: &[&str], i: usize) -> Option<Slot> {
     if word == "low" {
         // BABEL's "low left hand" means "lower left hand"; "low jump" is an action name.
         return next
-            .filter(|n| SIDE_WORDS.contains(n) || BODY_PART_SET.contains(n))
+            .filter(|n| words().side_words.contains(n) || words().body_parts.contains(n))
             .map(|_| Slot::Lemma("lower".to_owned()));
     }
     // "face look forward": a face that looks, not the verb "face".
@@ -818,22 +779,22 @@ fn is_compound_name(keys: &[&str], i: usize, lemma: &str) -> bool {
     if next == "ups" {
         return true;
     }
-    if LIGHT_VERBS.contains(&lemma) {
+    if words().light_verbs.contains(&lemma) {
         return false;
     }
-    if COMPOUND_HEADS.contains(&next) || GAIT_NOUNS.contains(&next) {
+    if words().compound_heads.contains(&next) || words().gait_nouns.contains(&next) {
         return true;
     }
-    if keys.len() == i + 2 && MOVE_NOUNS.contains(&next) {
+    if keys.len() == i + 2 && words().move_nouns.contains(&next) {
         return true;
     }
     // "zip zag walk", "guide forward walk": a gait noun closing a run of modifiers.
     let last = keys.len() - 1;
     last > i + 1
-        && GAIT_NOUNS.contains(&keys[last])
+        && words().gait_nouns.contains(&keys[last])
         && keys[i + 1..last]
             .iter()
-            .all(|k| !COORDINATORS.contains(k) && !is_function_word(k))
+            .all(|k| !words().coordinators.contains(k) && !is_function_word(k))
 }
 
 /// Prepositions and articles: a gait noun after one of them is an object ("go for a walk").
@@ -880,7 +841,7 @@ fn coordinated(keys: &[&str], commas: &[bool], from: usize) -> Vec<(usize, Slot)
     let mut slots = Vec::new();
     for j in from..keys.len() {
         let after_comma = j > 0 && commas.get(j - 1).copied().unwrap_or(false);
-        if j == 0 || !(COORDINATORS.contains(&keys[j - 1]) || after_comma) {
+        if j == 0 || !(words().coordinators.contains(&keys[j - 1]) || after_comma) {
             continue;
         }
         let mut k = j;
@@ -891,7 +852,7 @@ fn coordinated(keys: &[&str], commas: &[bool], from: usize) -> Vec<(usize, Slot)
             continue;
         };
         // "face" after "and" is the body part ("cover eyes and face").
-        if word == "face" || PARTICLE_VERBS.iter().any(|(w, _)| *w == word) {
+        if word == "face" || words().particle_verbs.iter().any(|(w, _)| *w == word) {
             continue;
         }
         if is_gerund_form(word) {
@@ -919,16 +880,16 @@ fn body_state(keys: &[&str], commas: &[bool]) -> Option<Vec<(usize, Slot)>> {
         if word == "face" && ends_on_part {
             break;
         }
-        if BODY_PART_SET.contains(&word) {
+        if words().body_parts.contains(word) {
             saw_part = true;
             ends_on_part = true;
-        } else if SIDE_WORDS.contains(&word)
+        } else if words().side_words.contains(&word)
             // "left and right hand", "hands and arms".
             || (word == "and"
                 && j > 0
                 && keys
                     .get(j + 1)
-                    .is_some_and(|n| SIDE_WORDS.contains(n) || BODY_PART_SET.contains(n)))
+                    .is_some_and(|n| words().side_words.contains(n) || words().body_parts.contains(n)))
         {
             ends_on_part = false;
         } else {
@@ -940,7 +901,7 @@ fn body_state(keys: &[&str], commas: &[bool]) -> Option<Vec<(usize, Slot)>> {
         return None;
     }
     let word = *keys.get(j)?;
-    if POSITION_SET.contains(&word) {
+    if words().positions.contains(word) {
         return Some(coordinated(keys, commas, j + 1));
     }
     // After a body part these are nouns: "hand gesture", "arm motion".
@@ -958,7 +919,9 @@ fn body_state(keys: &[&str], commas: &[bool]) -> Option<Vec<(usize, Slot)>> {
     // washing"), as does a verb heading a compound ("right foot drop kick", "rowing movement").
     let compound = match &slot {
         Slot::Lemma(lemma) => is_compound_name(keys, j, lemma),
-        Slot::Gerund => keys.get(j + 1).is_some_and(|n| COMPOUND_HEADS.contains(n)),
+        Slot::Gerund => keys
+            .get(j + 1)
+            .is_some_and(|n| words().compound_heads.contains(n)),
     };
     if j + 1 == keys.len() || compound {
         return None;
@@ -1026,5 +989,30 @@ mod tests {
         for seed in 0..50 {
             assert!(all.contains(&compose("walk", "wave", seed)));
         }
+    }
+}
+
+#[cfg(test)]
+mod word_file_tests {
+    use super::*;
+
+    #[test]
+    fn the_bundled_word_file_loads() {
+        assert_eq!(check_words(), Ok(()));
+        let w = words();
+        assert!(w.verbs.len() > 500 && w.verbs.contains("walk"));
+        assert!(w.subjects.iter().any(|s| s[..] == ["a", "person"]));
+        assert!(
+            w.particle_verbs
+                .iter()
+                .any(|(v, p)| *v == "back" && p.contains(&"up"))
+        );
+    }
+
+    #[test]
+    fn a_damaged_word_file_is_an_error_not_an_empty_vocabulary() {
+        let missing = WORDS_TOML.replacen("verbs = [", "verbz = [", 1);
+        assert!(load_words(&missing).is_err());
+        assert!(load_words(&WORDS_TOML.replacen("\"a person\"", "\"  \"", 1)).is_err());
     }
 }

@@ -148,6 +148,9 @@ pub enum BuildError {
     /// The embedded labeller's lexicon (`schemas/lexicon.toml`) is invalid.
     #[error(transparent)]
     Lexicon(#[from] crate::parts::lexicon::LexiconError),
+    /// The synthetic-pair composer's word file (`schemas/compose_text.toml`) is invalid.
+    #[error(transparent)]
+    Words(#[from] crate::compose_text::WordsError),
     /// The statistics report cannot be made.
     #[error("report: {0}")]
     Report(String),
@@ -281,6 +284,7 @@ fn run_stages<'a>(
         let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
     }
     crate::parts::lexicon::check_lexicon()?;
+    crate::compose_text::check_words()?;
     let files = source::discover(config)?;
     let specs: Vec<ProfileSpec> = config
         .sources
