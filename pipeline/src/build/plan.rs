@@ -1,5 +1,6 @@
 //! `plan` and `status`: what a build would run and why, without running it.
 
+use crate::llm::Unanswered;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -133,7 +134,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
             let asked: usize = report
                 .skipped
                 .iter()
-                .filter(|(reason, _)| reason.starts_with("offline"))
+                .filter(|(reason, _)| **reason == Unanswered::Offline.to_string())
                 .map(|(_, n)| n)
                 .sum();
             for _ in 0..asked {
@@ -146,7 +147,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
             .label
             .missing
             .iter()
-            .filter(|(_, reason)| reason.starts_with("offline"))
+            .filter(|(_, reason)| reason.is_offline_miss())
             .count();
         if asked > 0 {
             *label

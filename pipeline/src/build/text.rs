@@ -163,12 +163,12 @@ pub(super) fn run(
     // A request that failed after its last retry is a reject (the text fell back as configured);
     // an offline cache miss is not: it is what offline means.
     for (text, reason) in &report.missing {
-        if !reason.starts_with("offline") && !reason.contains("no [llm] section") {
+        if reason.is_failure() {
             outcome.rejects.push(text_reject(
                 label::NAME,
                 text,
                 RejectReason::LlmRequest,
-                reason.clone(),
+                reason.to_string(),
             ));
         }
     }

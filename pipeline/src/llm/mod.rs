@@ -5,3 +5,6 @@ pub mod cache;
 pub mod client;
 pub mod plans;
 pub mod prompt;
+pub mod unanswered;
+
+pub use unanswered::Unanswered;

@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use serde::{Deserialize, Serialize};
 
+use crate::llm::Unanswered;
 use crate::llm::cache::ResponseCache;
 use crate::llm::client::{LlmClient, LlmConfig};
 use crate::llm::plans::{PlanStep, parse_paraphrases, parse_task_plan, repair_message};
@@ -37,7 +38,7 @@ pub(crate) fn answers(
     let (Some(cfg), Some(cache)) = (llm, cache) else {
         *report
             .skipped
-            .entry("no LLM configured".into())
+            .entry(Unanswered::NoLlm.to_string())
             .or_insert(0) += prompts.len();
         return vec![None; prompts.len()];
     };
@@ -49,7 +50,7 @@ pub(crate) fn answers(
                 if hit.is_none() {
                     *report
                         .skipped
-                        .entry("offline and not in the cache".into())
+                        .entry(Unanswered::Offline.to_string())
                         .or_insert(0) += 1;
                 }
                 hit
@@ -61,7 +62,7 @@ pub(crate) fn answers(
         Err(e) => {
             *report
                 .skipped
-                .entry(format!("LLM client: {e}"))
+                .entry(Unanswered::Client(e.to_string()).to_string())
                 .or_insert(0) += prompts.len();
             return vec![None; prompts.len()];
         }
@@ -77,7 +78,7 @@ pub(crate) fn answers(
             Err(e) => {
                 *report
                     .skipped
-                    .entry(format!("request failed: {e}"))
+                    .entry(Unanswered::RequestFailed(e.to_string()).to_string())
                     .or_insert(0) += 1;
                 None
             }

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::clip::{Clip, SourceKind};
 use crate::config::{Labeller, OnMiss, PartLabelConfig};
+use crate::llm::Unanswered;
 use crate::llm::cache::ResponseCache;
 use crate::llm::client::{LlmClient, LlmConfig};
 use crate::llm::prompt::{PromptError, Prompts};
@@ -55,7 +56,7 @@ pub struct LabelReport {
     /// Flagged answers: text and reason.
     pub flagged: Vec<(String, String)>,
     /// Texts the LLM could not answer (after retries) or the cache lacked, with the reason.
-    pub missing: Vec<(String, String)>,
+    pub missing: Vec<(String, Unanswered)>,
     /// On clips labelled by the lexicon: mean fraction of the six parts on which the motion's
     /// velocity evidence agrees (SINC's baseline), and how many clips that covers.
     pub velocity_agreement: Option<(f64, usize)>,
@@ -138,9 +139,12 @@ pub fn label_texts(
         }
         (Labeller::Llm, Some(cfg), Some(cache)) => (cfg, cache),
         (Labeller::Llm, _, _) => {
-            let reason =
-                "part_labels.labeller = \"llm\" but the config has no [llm] section".to_string();
-            return fallback_all(&texts, input.config.on_miss, reason, report);
+            return fallback_all(
+                &texts,
+                input.config.on_miss,
+                Unanswered::NoLlmSection,
+                report,
+            );
         }
     };
     let prompts: Vec<String> = texts
@@ -149,7 +153,7 @@ pub fn label_texts(
         .collect::<Result<_, _>>()?;
     let offline = input.offline || input.config.offline;
     let mut answers: Vec<Option<(String, String)>> = Vec::with_capacity(texts.len());
-    let mut missing: Vec<(String, String)> = Vec::new();
+    let mut missing: Vec<(String, Unanswered)> = Vec::new();
     if offline {
         for (t, p) in texts.iter().zip(&prompts) {
             match cache.get_entry(&cfg.cache_key(p)) {
@@ -158,7 +162,7 @@ pub fn label_texts(
                     answers.push(Some((e.response.clone(), source_name(&e.source, cfg))));
                 }
                 None => {
-                    missing.push((t.clone(), "offline and not in the cache".into()));
+                    missing.push((t.clone(), Unanswered::Offline));
                     answers.push(None);
                 }
             }
@@ -184,7 +188,7 @@ pub fn label_texts(
                     answers.push(Some((a.text, source_name(&source, cfg))));
                 }
                 Err(e) => {
-                    missing.push((t.clone(), e.to_string()));
+                    missing.push((t.clone(), Unanswered::RequestFailed(e.to_string())));
                     answers.push(None);
                 }
             }
@@ -192,7 +196,7 @@ pub fn label_texts(
     }
     if !missing.is_empty() && input.config.on_miss == OnMiss::Fail {
         return Err(LabelError::Missing {
-            reason: missing[0].1.clone(),
+            reason: missing[0].1.to_string(),
             texts: missing.into_iter().map(|(t, _)| t).collect(),
         });
     }
@@ -234,12 +238,12 @@ fn source_name(cache_source: &str, cfg: &LlmConfig) -> String {
 fn fallback_all(
     texts: &[String],
     on_miss: OnMiss,
-    reason: String,
+    reason: Unanswered,
     report: &mut LabelReport,
 ) -> Result<BTreeMap<String, TextParts>, LabelError> {
     if on_miss == OnMiss::Fail {
         return Err(LabelError::Missing {
-            reason,
+            reason: reason.to_string(),
             texts: texts.to_vec(),
         });
     }
