@@ -151,6 +151,9 @@ pub enum BuildError {
     /// The synthetic-pair composer's word file (`schemas/compose_text.toml`) is invalid.
     #[error(transparent)]
     Words(#[from] crate::compose_text::WordsError),
+    /// A dataset's `manifest.json` cannot be read.
+    #[error(transparent)]
+    Manifest(#[from] crate::io::manifest::ManifestError),
     /// The statistics report cannot be made.
     #[error("report: {0}")]
     Report(String),
@@ -780,11 +783,15 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         let key = clip.label_source.clone().unwrap_or_else(|| "(none)".into());
         *label_sources.entry(key).or_insert(0) += 1;
     }
-    let mut sources: Vec<serde_json::Value> = clips
+    let mut sources: Vec<crate::io::manifest::Source> = clips
         .iter()
-        .map(|c| serde_json::json!({ "source": c.capture.source, "path": c.capture.path, "sha256": c.capture.sha256 }))
+        .map(|c| crate::io::manifest::Source {
+            path: c.capture.path.clone(),
+            sha256: c.capture.sha256.clone(),
+            source: c.capture.source.clone(),
+        })
         .collect();
-    sources.sort_by_key(|v| v.to_string());
+    sources.sort();
     sources.dedup();
     // Where the dataset is written is not part of what it is: the same config built into
     // another folder gives the same bytes.
@@ -793,24 +800,29 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let config_fingerprint = Fingerprint::new("config", 1)
         .json("config", &content_config)
         .finish();
-    let manifest = serde_json::json!({
-        "schema_version": crate::io::schema::SCHEMA_VERSION,
-        "dataset": config.dataset.name,
-        "pipeline": format!("motionforge {}", env!("CARGO_PKG_VERSION")),
-        "config_fingerprint": config_fingerprint,
-        "table_fingerprint": table_fingerprint,
-        "seed": config.dataset.seed,
-        "fps": config.dataset.fps,
-        "files": { "skeletons": SKELETONS_FILE, "plans": PLANS_FILE, "rejects": REJECTS_FILE },
-        "sources": sources,
-        "counts": {
-            "source_kind": kinds,
-            "label_source": label_sources,
-            "motion_type": motion_types,
-            "drop_reason": drops_by_reason,
-            "reject_reason": rejects_by_reason,
+    let manifest = crate::io::manifest::Manifest {
+        config_fingerprint,
+        counts: crate::io::manifest::Counts {
+            drop_reason: drops_by_reason.clone(),
+            label_source: label_sources,
+            motion_type: motion_types.clone(),
+            reject_reason: rejects_by_reason.clone(),
+            source_kind: kinds.clone(),
         },
-    });
+        dataset: config.dataset.name.clone(),
+        files: crate::io::manifest::Files {
+            plans: PLANS_FILE.into(),
+            rejects: REJECTS_FILE.into(),
+            skeletons: SKELETONS_FILE.into(),
+        },
+        fps: config.dataset.fps,
+        pipeline: format!("motionforge {}", env!("CARGO_PKG_VERSION")),
+        schema_version: crate::io::schema::SCHEMA_VERSION,
+        seed: config.dataset.seed,
+        sources,
+        splits: BTreeMap::new(),
+        table_fingerprint: table_fingerprint.clone(),
+    };
     let licences: Vec<String> = config
         .sources
         .iter()

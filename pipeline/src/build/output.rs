@@ -178,7 +178,7 @@ fn check_splits(
 /// Everything written beside the shards that the build computes: manifest fields and card text.
 pub(super) struct Companions {
     /// `manifest.json` without the per-shard entries (added here).
-    pub(super) manifest: serde_json::Value,
+    pub(super) manifest: crate::io::manifest::Manifest,
     /// Dataset card body (Markdown after the YAML front matter).
     pub(super) card_body: String,
     /// Licences of the sources, for the card's front matter.
@@ -475,7 +475,7 @@ pub(super) fn write_outputs(
     let staged_data = staging.join(DATA_DIR);
     std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
     let mut shard_fingerprints = BTreeMap::new();
-    let mut shard_entries: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    let mut shard_entries: BTreeMap<String, Vec<crate::io::manifest::Shard>> = BTreeMap::new();
     let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
     let mut split_bytes: BTreeMap<String, usize> = BTreeMap::new();
     for plan in &plans_for_shards {
@@ -555,12 +555,12 @@ pub(super) fn write_outputs(
         shard_entries
             .entry(plan.split.clone())
             .or_default()
-            .push(serde_json::json!({
-                "file": plan.file,
-                "rows": held.len(),
-                "bytes": bytes.len(),
-                "sha256": sha256_hex(&bytes),
-            }));
+            .push(crate::io::manifest::Shard {
+                bytes: bytes.len(),
+                file: plan.file.clone(),
+                rows: held.len(),
+                sha256: sha256_hex(&bytes),
+            });
         *split_rows.entry(plan.split.clone()).or_insert(0) += held.len();
         *split_bytes.entry(plan.split.clone()).or_insert(0) += bytes.len();
         shard_fingerprints.insert(plan.file.clone(), fp);
@@ -603,19 +603,18 @@ pub(super) fn write_outputs(
         None => BuildError::Workspace(e),
     })?;
     let mut manifest = companions.manifest.clone();
-    let splits_json: serde_json::Map<String, serde_json::Value> = split_rows
+    manifest.splits = split_rows
         .iter()
         .map(|(split, rows)| {
-            (split.clone(), serde_json::json!({ "rows": rows, "shards": shard_entries.get(split).cloned().unwrap_or_default() }))
+            let split_entry = crate::io::manifest::Split {
+                rows: *rows,
+                shards: shard_entries.get(split).cloned().unwrap_or_default(),
+            };
+            (split.clone(), split_entry)
         })
         .collect();
-    manifest["splits"] = serde_json::Value::Object(splits_json);
-    let manifest_bytes = serde_json::to_vec_pretty(&manifest).unwrap_or_default();
-    write_atomic(&staging.join(MANIFEST_FILE), &manifest_bytes)?;
-    let name = manifest["dataset"]
-        .as_str()
-        .unwrap_or("dataset")
-        .to_string();
+    write_atomic(&staging.join(MANIFEST_FILE), &manifest.to_json())?;
+    let name = manifest.dataset.clone();
     write_atomic(
         &staging.join(CARD_FILE),
         card(&name, &split_rows, &split_bytes, companions).as_bytes(),

@@ -223,18 +223,19 @@ pub struct Status {
 pub fn status(config: &Config) -> Result<Status, BuildError> {
     let plan = plan(config, &BuildOptions::default())?;
     let ledger = Ledger::load(&Workspace::new(&plan.output));
-    let manifest: Option<serde_json::Value> = std::fs::read(plan.output.join(super::MANIFEST_FILE))
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
+    let manifest = crate::io::manifest::Manifest::read(&plan.output)?;
     let splits = manifest
-        .as_ref()
-        .and_then(|m| m["splits"].as_object())
         .map(|m| {
-            crate::stages::split::split_order(m.keys().cloned())
+            let rows: BTreeMap<String, u64> = m
+                .splits
+                .iter()
+                .map(|(k, v)| (k.clone(), v.rows as u64))
+                .collect();
+            crate::stages::split::split_order(rows.keys().cloned())
                 .into_iter()
                 .map(|k| {
-                    let rows = m[&k]["rows"].as_u64().unwrap_or(0);
-                    (k, rows)
+                    let n = rows.get(&k).copied().unwrap_or(0);
+                    (k, n)
                 })
                 .collect()
         })

@@ -83,6 +83,9 @@ impl ClipRow {
 /// Errors of reading tables and writing a report; each names the file involved.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
+    /// The dataset's `manifest.json` cannot be read.
+    #[error(transparent)]
+    Manifest(#[from] crate::io::manifest::ManifestError),
     /// A file or folder could not be read.
     #[error("{path}: {source}")]
     Io {
@@ -202,35 +205,23 @@ pub fn write_report(
 /// The report of a built dataset folder, from its shards (`data/`) and `manifest.json` alone,
 /// written to `out_dir` (default `<dataset>/report`). Returns the files written.
 pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<PathBuf>, ReportError> {
-    let manifest_path = dataset.join(crate::base::layout::MANIFEST_FILE);
-    let manifest: serde_json::Value = std::fs::read(&manifest_path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .unwrap_or(serde_json::Value::Null);
-    let counts = |key: &str| -> BTreeMap<String, usize> {
-        manifest["counts"][key]
-            .as_object()
-            .map(|m| {
-                m.iter()
-                    .filter_map(|(k, v)| Some((k.clone(), v.as_u64()? as usize)))
-                    .collect()
-            })
-            .unwrap_or_default()
-    };
+    // Without a manifest (a folder of shards from elsewhere) the counts are empty.
+    let manifest = crate::io::manifest::Manifest::read(dataset)?;
+    let counts = manifest
+        .as_ref()
+        .map(|m| m.counts.clone())
+        .unwrap_or_default();
     let tables = find_clip_tables(&dataset.join(crate::base::layout::DATA_DIR))?;
-    let title = manifest["dataset"]
-        .as_str()
-        .map(str::to_string)
-        .unwrap_or_else(|| {
-            dataset
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        });
+    let title = manifest.map(|m| m.dataset).unwrap_or_else(|| {
+        dataset
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    });
     let input = ReportInput {
         tables,
-        drops: counts("drop_reason"),
-        rejects: counts("reject_reason"),
+        drops: counts.drop_reason,
+        rejects: counts.reject_reason,
         title,
     };
     let rows = read_rows(&input.tables)?;

@@ -1,0 +1,151 @@
+//! `manifest.json`: what a built dataset holds (shards with checksums, counts, sources,
+//! fingerprints), as one typed value that the writer writes and every reader reads.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+// Fields are declared in alphabetical order: the file's keys have always been sorted, and a
+// struct serialises in declaration order.
+
+/// The manifest of a dataset folder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Fingerprint of the config's content (not of where the dataset is written).
+    pub config_fingerprint: String,
+    /// Counts by reason, kind and source.
+    pub counts: Counts,
+    /// Dataset name.
+    pub dataset: String,
+    /// The companion files' names.
+    pub files: Files,
+    /// Frame rate of every clip.
+    pub fps: f64,
+    /// The program that wrote it (`motionforge 0.1.0`).
+    pub pipeline: String,
+    /// Version of the clip table's schema.
+    pub schema_version: u32,
+    /// The config's seed.
+    pub seed: u64,
+    /// Every capture a row comes from, with its checksum.
+    pub sources: Vec<Source>,
+    /// Rows and shards per split.
+    #[serde(default)]
+    pub splits: BTreeMap<String, Split>,
+    /// Fingerprint of the write stage's input.
+    pub table_fingerprint: String,
+}
+
+/// Counts of the dataset, each by name.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Counts {
+    /// Segments dropped, by reason.
+    pub drop_reason: BTreeMap<String, usize>,
+    /// Rows by label source.
+    pub label_source: BTreeMap<String, usize>,
+    /// Original single clips by motion type.
+    pub motion_type: BTreeMap<String, usize>,
+    /// Rejected inputs by reason.
+    pub reject_reason: BTreeMap<String, usize>,
+    /// Rows by source kind.
+    pub source_kind: BTreeMap<String, usize>,
+}
+
+/// The companion files.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Files {
+    /// Task-plan table.
+    pub plans: String,
+    /// Rejects list.
+    pub rejects: String,
+    /// Skeleton descriptions.
+    pub skeletons: String,
+}
+
+/// A capture rows come from.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Source {
+    /// Capture path as shown in the table.
+    pub path: String,
+    /// SHA-256 of the capture file.
+    pub sha256: String,
+    /// Source name.
+    pub source: String,
+}
+
+/// One split: its rows and shards.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Split {
+    /// Rows in the split.
+    pub rows: usize,
+    /// Its shards, in order.
+    pub shards: Vec<Shard>,
+}
+
+/// One shard file.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Shard {
+    /// Size in bytes.
+    pub bytes: usize,
+    /// Path inside the dataset folder (`data/train-00000-of-00001.parquet`).
+    pub file: String,
+    /// Rows in the shard.
+    pub rows: usize,
+    /// SHA-256 of the file.
+    pub sha256: String,
+}
+
+/// Why a manifest cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ManifestError {
+    /// The file cannot be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The file is not a manifest.
+    #[error("{path}:{line}: not a motionforge manifest: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Line of the problem.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl Manifest {
+    /// The manifest of `dataset` (its `manifest.json`); `None` when the folder has none (not a
+    /// finished dataset), an error when it has one that cannot be read.
+    pub fn read(dataset: &Path) -> Result<Option<Manifest>, ManifestError> {
+        let path = dataset.join(crate::base::layout::MANIFEST_FILE);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => return Err(ManifestError::Io { path, source }),
+        };
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .map_err(|e| ManifestError::Invalid {
+                line: e.line(),
+                message: e.to_string(),
+                path,
+            })
+    }
+
+    /// The manifest as written: pretty JSON.
+    pub fn to_json(&self) -> Vec<u8> {
+        serde_json::to_vec_pretty(self).unwrap_or_default()
+    }
+}
