@@ -16,6 +16,7 @@ use motionforge::serve::{Service, ServiceSetup, Token};
 use serde_json::Value;
 
 use common::repo;
+use common::service::{get, start_service};
 
 const TOKEN: &str = "s3cret-test-token";
 /// Generous: a debug-mode demo build on two busy cores.
@@ -28,27 +29,13 @@ fn demo_config(output: &Path) -> Config {
 }
 
 async fn start(state: &Path, configs: Vec<Config>) -> (Service, String) {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let service = Service::start(
-        ServiceSetup {
-            datasets: configs,
-            state_dir: state.to_path_buf(),
-            token: Token::new(TOKEN).unwrap(),
-            clock: Arc::new(SystemClock),
-            builder: env!("CARGO_BIN_EXE_motionforge").into(),
-        },
-        listener,
+    start_service(
+        state,
+        configs,
+        env!("CARGO_BIN_EXE_motionforge").into(),
+        TOKEN,
     )
     .await
-    .unwrap();
-    let base = format!("http://{}", service.local_addr());
-    (service, base)
-}
-
-async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
-    let response = client.get(url).send().await.unwrap();
-    let status = response.status().as_u16();
-    (status, response.json().await.unwrap())
 }
 
 async fn post_build(

@@ -7,17 +7,16 @@ mod common;
 
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use motionforge::config::Config;
+use motionforge::serve::Service;
 use motionforge::serve::history::{History, Left, Trigger};
-use motionforge::serve::schedule::SystemClock;
 use motionforge::serve::worker::Job;
-use motionforge::serve::{Service, ServiceSetup, Token};
 use serde_json::Value;
 
 use common::repo;
+use common::service::{get, start_service};
 
 const TOKEN: &str = "isolation-token";
 /// Generous: a debug-mode demo build on two busy cores.
@@ -42,27 +41,7 @@ fn script(dir: &Path, name: &str, body: &str) -> PathBuf {
 }
 
 async fn start(state: &Path, config: Config, builder: PathBuf) -> (Service, String) {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let service = Service::start(
-        ServiceSetup {
-            datasets: vec![config],
-            state_dir: state.to_path_buf(),
-            token: Token::new(TOKEN).unwrap(),
-            clock: Arc::new(SystemClock),
-            builder,
-        },
-        listener,
-    )
-    .await
-    .unwrap();
-    let base = format!("http://{}", service.local_addr());
-    (service, base)
-}
-
-async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
-    let response = client.get(url).send().await.unwrap();
-    let status = response.status().as_u16();
-    (status, response.json().await.unwrap())
+    start_service(state, vec![config], builder, TOKEN).await
 }
 
 async fn request_build(client: &reqwest::Client, base: &str) -> i64 {

@@ -84,6 +84,18 @@ fn build_args<'a>(config: &'a Path, output: &'a Path) -> Vec<&'a std::ffi::OsStr
     ]
 }
 
+/// Every file of a dataset folder outside `.motionforge/`, with its bytes.
+fn dataset_files(dataset: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    files_under(dataset)
+        .into_iter()
+        .filter(|p| !p.starts_with(dataset.join(".motionforge")))
+        .map(|p| {
+            let bytes = std::fs::read(&p).unwrap();
+            (p, bytes)
+        })
+        .collect()
+}
+
 fn files_under(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
@@ -305,14 +317,7 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
         .unwrap();
     assert!(first.status.success(), "{}", text(&first.stderr));
     let dataset = output.join("demo");
-    let before: Vec<(PathBuf, Vec<u8>)> = files_under(&dataset)
-        .into_iter()
-        .filter(|p| !p.starts_with(dataset.join(".motionforge")))
-        .map(|p| {
-            let bytes = std::fs::read(&p).unwrap();
-            (p, bytes)
-        })
-        .collect();
+    let before = dataset_files(&dataset);
     // One clip per shard, and a feature change so every row changes.
     let config = demo_config_in(
         dir.path(),
@@ -327,13 +332,6 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
     // The previous dataset, file for file and byte for byte (build-report.json is the record of
     // the failed run, written only by a build that finishes).
     assert!(dataset.join("manifest.json").is_file());
-    let after: Vec<(PathBuf, Vec<u8>)> = files_under(&dataset)
-        .into_iter()
-        .filter(|p| !p.starts_with(dataset.join(".motionforge")))
-        .map(|p| {
-            let bytes = std::fs::read(&p).unwrap();
-            (p, bytes)
-        })
-        .collect();
+    let after = dataset_files(&dataset);
     assert!(before == after, "the previous dataset changed");
 }

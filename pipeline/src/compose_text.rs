@@ -375,17 +375,13 @@ struct Words {
 #[error("schemas/compose_text.toml: {0}")]
 pub struct WordsError(String);
 
-/// Strings of the word file live as long as the program: it is read once.
-fn leak(s: String) -> &'static str {
-    Box::leak(s.into_boxed_str())
-}
-
 fn load_words(text: &str) -> Result<Words, WordsError> {
     let f: WordFile = toml::from_str(text).map_err(|e| WordsError(e.to_string()))?;
-    let list = |v: Vec<String>| -> Vec<&'static str> { v.into_iter().map(leak).collect() };
+    let list =
+        |v: Vec<String>| -> Vec<&'static str> { v.into_iter().map(crate::base::leak).collect() };
     let phrases = |v: Vec<String>| -> Vec<Vec<&'static str>> {
         v.into_iter()
-            .map(|p| leak(p).split_whitespace().collect())
+            .map(|p| crate::base::leak(p).split_whitespace().collect())
             .collect()
     };
     let words = Words {
@@ -408,7 +404,7 @@ fn load_words(text: &str) -> Result<Words, WordsError> {
         particle_verbs: f
             .particle_verbs
             .into_iter()
-            .map(|(w, p)| (leak(w), list(p)))
+            .map(|(w, p)| (crate::base::leak(w), list(p)))
             .collect(),
     };
     if words.verbs.is_empty() || words.subjects.iter().any(Vec::is_empty) {

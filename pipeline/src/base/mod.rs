@@ -12,3 +12,25 @@ pub use write::{
     Fingerprint, Stamp, WorkspaceError, hex, io_err, io_hint, sha256_hex, temp_path, write_atomic,
     write_atomic_with,
 };
+
+/// `path` with `.` removed and `dir/..` folded lexically (no file system access), so paths print
+/// the way people wrote them and `strip_prefix` sees through them.
+pub fn lexical_path(path: &std::path::Path) -> std::path::PathBuf {
+    use std::path::Component;
+    let mut out: Vec<Component<'_>> = Vec::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out.iter().collect()
+}
+
+/// A string that lives as long as the program: for vocabularies read once at start.
+pub fn leak(s: String) -> &'static str {
+    Box::leak(s.into_boxed_str())
+}

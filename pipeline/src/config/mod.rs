@@ -547,7 +547,10 @@ impl Config {
         })?;
         // Lexically normalised, so `a/../fixtures/x.toml` and `fixtures/x.toml` show the same
         // capture paths (which splits are hashed from).
-        config.base_dir = path.parent().map(normalize).unwrap_or_default();
+        config.base_dir = path
+            .parent()
+            .map(crate::base::lexical_path)
+            .unwrap_or_default();
         config.validate(&mut checks);
         Ok((config, checks))
     }
@@ -557,7 +560,7 @@ impl Config {
         if p.is_absolute() {
             p.to_path_buf()
         } else {
-            normalize(&self.base_dir.join(p))
+            crate::base::lexical_path(&self.base_dir.join(p))
         }
     }
 
@@ -586,26 +589,6 @@ impl Config {
             Some(p) => self.resolve(p),
             None => self.dataset_dir().join("llm-cache.jsonl"),
         }
-    }
-}
-
-/// Removes `.` and folds `dir/..` lexically, so paths print the way people wrote them.
-fn normalize(path: &Path) -> PathBuf {
-    use std::path::Component;
-    let mut out: Vec<Component<'_>> = Vec::new();
-    for c in path.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
-                out.pop();
-            }
-            other => out.push(other),
-        }
-    }
-    if out.is_empty() {
-        PathBuf::from(".")
-    } else {
-        out.iter().collect()
     }
 }
 

@@ -297,13 +297,8 @@ fn parse_meaning(meaning: &str) -> Result<Kind, String> {
     }
 }
 
-/// Strings of the lexicon live as long as the program: it is read once.
-fn leak(s: String) -> &'static str {
-    Box::leak(s.into_boxed_str())
-}
-
 fn word_set(words: Vec<String>) -> WordSet {
-    words.into_iter().map(leak).collect()
+    words.into_iter().map(crate::base::leak).collect()
 }
 
 fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
@@ -316,7 +311,7 @@ fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
             phrase: phrase.clone(),
             message,
         })?;
-        let phrase = leak(phrase);
+        let phrase = crate::base::leak(phrase);
         let words: Vec<&'static str> = phrase.split(' ').collect();
         if matches!(kind, Kind::Act { .. }) {
             verbs.extend(words.iter().copied());
@@ -346,7 +341,7 @@ fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
         irregular: file
             .irregular
             .into_iter()
-            .map(|(k, v)| (leak(k), leak(v)))
+            .map(|(k, v)| (crate::base::leak(k), crate::base::leak(v)))
             .collect(),
     })
 }

@@ -2,7 +2,7 @@
 //! filesystem path and echo no more than an excerpt of what the client sent.
 
 use std::borrow::Cow;
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 use std::sync::LazyLock;
 
 use regex::Regex;
@@ -48,7 +48,7 @@ impl PathShield {
         if !path.is_absolute() {
             return path.display().to_string();
         }
-        let path = lexical(path);
+        let path = crate::base::lexical_path(path);
         if let Some(root) = &self.root
             && let Ok(inside) = path.strip_prefix(root)
         {
@@ -78,21 +78,6 @@ impl PathShield {
             format!("{lead}{}", self.path(Path::new(path)))
         })
     }
-}
-
-/// `path` with `.` removed and `dir/..` folded, so `strip_prefix` sees through them.
-fn lexical(path: &Path) -> PathBuf {
-    let mut out: Vec<Component<'_>> = Vec::new();
-    for c in path.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
-                out.pop();
-            }
-            other => out.push(other),
-        }
-    }
-    out.iter().collect()
 }
 
 #[cfg(test)]
