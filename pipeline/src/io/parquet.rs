@@ -327,91 +327,159 @@ pub fn clips_to_batch(
         }
         attributes.append(true);
     }
-    let columns: Vec<ArrayRef> = vec![
-        strings(&|c| &c.clip_id),
-        strings(&|c| c.kind.as_str()),
-        strings(&|c| &c.capture.source),
-        strings(&|c| &c.capture.path),
-        strings(&|c| &c.capture.sha256),
-        Arc::new(Float64Array::from_iter_values(
-            clips.iter().map(|c| c.capture.fps),
-        )),
-        Arc::new(frame_range),
-        Arc::new(BooleanArray::from(
-            clips.iter().map(|c| c.mirrored).collect::<Vec<_>>(),
-        )),
-        strings(&|c| &c.split),
-        strings(&|c| &c.action),
-        strings(&|c| &c.text),
-        string_lists(clips.iter().map(|c| c.texts.as_slice())),
-        string_lists(clips.iter().map(|c| c.labels.as_slice())),
-        strings(&|c| &c.annotation),
-        strings(&|c| &c.annotation_origin),
-        Arc::new(StringArray::from(
-            clips
-                .iter()
-                .map(|c| c.motion_type.as_deref())
-                .collect::<Vec<_>>(),
-        )),
-        Arc::new(StringArray::from(
-            clips
-                .iter()
-                .map(|c| c.hand.map(|h| h.as_str()))
-                .collect::<Vec<_>>(),
-        )),
-        Arc::new(StringArray::from(
-            clips
-                .iter()
-                .map(|c| c.object.as_deref())
-                .collect::<Vec<_>>(),
-        )),
-        optional_f32_lists(clips.iter().map(|c| c.goal_pelvis.map(|g| g.to_vec()))),
-        optional_f32_lists(clips.iter().map(|c| c.goal_hand.map(|g| g.to_vec()))),
-        part_lists(clips.iter().map(|c| c.parts)),
-        Arc::new(StringArray::from(
-            clips
-                .iter()
-                .map(|c| c.label_source.as_deref())
-                .collect::<Vec<_>>(),
-        )),
-        string_lists(clips.iter().map(|c| c.paraphrases.as_slice())),
-        string_lists(clips.iter().map(|c| c.composed_from.as_slice())),
-        nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice())),
-        metric(clips, |p| p.foot_skate),
-        metric(clips, |p| p.ground_penetration),
-        metric(clips, |p| p.self_distance),
-        metric(clips, |p| p.lean),
-        Arc::new(attributes.finish()),
-        Arc::new(StringArray::from_iter_values(clips.iter().map(skeleton_id))),
-        Arc::new(Float64Array::from_iter_values(
-            clips.iter().map(|c| c.motion.fps),
-        )),
-        Arc::new(Int32Array::from_iter_values(
-            clips.iter().map(|c| c.motion.num_frames() as i32),
-        )),
-        Arc::new(Int32Array::from_iter_values(
-            clips.iter().map(|c| c.motion.num_joints() as i32),
-        )),
-        list(positions, pl)?,
-        list(rotations, rl)?,
-        list(roots, tl)?,
-        optional_f32_lists(derived.iter().map(|d| {
-            d.rotations_6d
-                .as_ref()
-                .map(|v| v.iter().map(|x| *x as f64).collect())
-        })),
-        optional_f32_lists(derived.iter().map(|d| {
-            d.velocities
-                .as_ref()
-                .map(|v| v.iter().map(|x| *x as f64).collect())
-        })),
-        optional_bool_lists(derived.iter().map(|d| d.foot_contacts.as_deref())),
-        optional_f32_lists(derived.iter().map(|d| {
-            d.future_root
-                .as_ref()
-                .map(|v| v.iter().map(|x| *x as f64).collect())
-        })),
+    // Columns by name: the schema decides their order, so writer and schema cannot drift apart.
+    let named: Vec<(&str, ArrayRef)> = vec![
+        ("clip_id", strings(&|c| &c.clip_id)),
+        ("source_kind", strings(&|c| c.kind.as_str())),
+        ("source_name", strings(&|c| &c.capture.source)),
+        ("source_path", strings(&|c| &c.capture.path)),
+        ("source_sha256", strings(&|c| &c.capture.sha256)),
+        (
+            "source_fps",
+            Arc::new(Float64Array::from_iter_values(
+                clips.iter().map(|c| c.capture.fps),
+            )),
+        ),
+        ("frame_range", Arc::new(frame_range)),
+        (
+            "mirrored",
+            Arc::new(BooleanArray::from(
+                clips.iter().map(|c| c.mirrored).collect::<Vec<_>>(),
+            )),
+        ),
+        ("split", strings(&|c| &c.split)),
+        ("action", strings(&|c| &c.action)),
+        ("text", strings(&|c| &c.text)),
+        (
+            "texts",
+            string_lists(clips.iter().map(|c| c.texts.as_slice())),
+        ),
+        (
+            "labels",
+            string_lists(clips.iter().map(|c| c.labels.as_slice())),
+        ),
+        ("annotation_source", strings(&|c| &c.annotation)),
+        ("annotation_origin", strings(&|c| &c.annotation_origin)),
+        (
+            "motion_type",
+            Arc::new(StringArray::from(
+                clips
+                    .iter()
+                    .map(|c| c.motion_type.as_deref())
+                    .collect::<Vec<_>>(),
+            )),
+        ),
+        (
+            "hand",
+            Arc::new(StringArray::from(
+                clips
+                    .iter()
+                    .map(|c| c.hand.map(|h| h.as_str()))
+                    .collect::<Vec<_>>(),
+            )),
+        ),
+        (
+            "object",
+            Arc::new(StringArray::from(
+                clips
+                    .iter()
+                    .map(|c| c.object.as_deref())
+                    .collect::<Vec<_>>(),
+            )),
+        ),
+        (
+            "goal_pelvis",
+            optional_f32_lists(clips.iter().map(|c| c.goal_pelvis.map(|g| g.to_vec()))),
+        ),
+        (
+            "goal_hand",
+            optional_f32_lists(clips.iter().map(|c| c.goal_hand.map(|g| g.to_vec()))),
+        ),
+        ("parts", part_lists(clips.iter().map(|c| c.parts))),
+        (
+            "label_source",
+            Arc::new(StringArray::from(
+                clips
+                    .iter()
+                    .map(|c| c.label_source.as_deref())
+                    .collect::<Vec<_>>(),
+            )),
+        ),
+        (
+            "paraphrases",
+            string_lists(clips.iter().map(|c| c.paraphrases.as_slice())),
+        ),
+        (
+            "composed_from",
+            string_lists(clips.iter().map(|c| c.composed_from.as_slice())),
+        ),
+        (
+            "composed_parts",
+            nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice())),
+        ),
+        ("foot_skate", metric(clips, |p| p.foot_skate)),
+        (
+            "ground_penetration",
+            metric(clips, |p| p.ground_penetration),
+        ),
+        ("self_distance", metric(clips, |p| p.self_distance)),
+        ("lean", metric(clips, |p| p.lean)),
+        ("attributes", Arc::new(attributes.finish())),
+        (
+            "skeleton",
+            Arc::new(StringArray::from_iter_values(clips.iter().map(skeleton_id))),
+        ),
+        (
+            "fps",
+            Arc::new(Float64Array::from_iter_values(
+                clips.iter().map(|c| c.motion.fps),
+            )),
+        ),
+        (
+            "num_frames",
+            Arc::new(Int32Array::from_iter_values(
+                clips.iter().map(|c| c.motion.num_frames() as i32),
+            )),
+        ),
+        (
+            "num_joints",
+            Arc::new(Int32Array::from_iter_values(
+                clips.iter().map(|c| c.motion.num_joints() as i32),
+            )),
+        ),
+        ("joint_positions", list(positions, pl)?),
+        ("local_rotations", list(rotations, rl)?),
+        ("root_translation", list(roots, tl)?),
+        (
+            "rotations_6d",
+            optional_f32_lists(derived.iter().map(|d| {
+                d.rotations_6d
+                    .as_ref()
+                    .map(|v| v.iter().map(|x| *x as f64).collect())
+            })),
+        ),
+        (
+            "joint_velocities",
+            optional_f32_lists(derived.iter().map(|d| {
+                d.velocities
+                    .as_ref()
+                    .map(|v| v.iter().map(|x| *x as f64).collect())
+            })),
+        ),
+        (
+            "foot_contacts",
+            optional_bool_lists(derived.iter().map(|d| d.foot_contacts.as_deref())),
+        ),
+        (
+            "future_root",
+            optional_f32_lists(derived.iter().map(|d| {
+                d.future_root
+                    .as_ref()
+                    .map(|v| v.iter().map(|x| *x as f64).collect())
+            })),
+        ),
     ];
+    let columns = crate::io::schema::in_schema_order(&schema, named)?;
     let batch = RecordBatch::try_new(schema, columns)?;
     // Upstream checks (value bounds at ingest) keep every number finite; this is the last guard,
     // so that a missed case fails the write instead of putting NaN or infinity in a dataset.

@@ -3,7 +3,8 @@
 
 use std::sync::Arc;
 
-use arrow_schema::{DataType, Field, Fields, Schema};
+use arrow_array::ArrayRef;
+use arrow_schema::{ArrowError, DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
 pub const SCHEMA_VERSION: u32 = 7;
@@ -128,4 +129,59 @@ pub fn clip_schema_json() -> serde_json::Value {
         })
         .collect();
     serde_json::json!({ "table": "clips", "version": SCHEMA_VERSION, "fields": fields })
+}
+
+/// `named` columns in the order of `schema`'s fields, matched by name: every field must have
+/// exactly one column and every column a field, so the writer cannot drift from the schema.
+pub fn in_schema_order(
+    schema: &Schema,
+    named: Vec<(&str, ArrayRef)>,
+) -> Result<Vec<ArrayRef>, ArrowError> {
+    let mut by_name: std::collections::BTreeMap<&str, ArrayRef> = std::collections::BTreeMap::new();
+    for (name, column) in named {
+        if by_name.insert(name, column).is_some() {
+            return Err(ArrowError::SchemaError(format!(
+                "column `{name}` given twice"
+            )));
+        }
+    }
+    let columns = schema
+        .fields()
+        .iter()
+        .map(|f| {
+            by_name.remove(f.name().as_str()).ok_or_else(|| {
+                ArrowError::SchemaError(format!("no column for schema field `{}`", f.name()))
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    match by_name.keys().next() {
+        Some(extra) => Err(ArrowError::SchemaError(format!(
+            "column `{extra}` is not in the schema"
+        ))),
+        None => Ok(columns),
+    }
+}
+
+#[cfg(test)]
+mod order_tests {
+    use super::*;
+    use arrow_array::Int32Array;
+
+    #[test]
+    fn columns_are_matched_by_name_and_every_mismatch_is_an_error() {
+        let schema = Schema::new(vec![
+            Field::new("a", DataType::Int32, false),
+            Field::new("b", DataType::Int32, false),
+        ]);
+        let col = |v: i32| -> ArrayRef { Arc::new(Int32Array::from(vec![v])) };
+        let ordered = in_schema_order(&schema, vec![("b", col(2)), ("a", col(1))]).unwrap();
+        assert_eq!(ordered[0].as_ref(), col(1).as_ref());
+        assert!(in_schema_order(&schema, vec![("a", col(1))]).is_err());
+        assert!(
+            in_schema_order(&schema, vec![("a", col(1)), ("b", col(2)), ("c", col(3))]).is_err()
+        );
+        assert!(
+            in_schema_order(&schema, vec![("a", col(1)), ("a", col(1)), ("b", col(2))]).is_err()
+        );
+    }
 }
