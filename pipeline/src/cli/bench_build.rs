@@ -59,13 +59,10 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     // has held more than one capture file.
     let mut full = Vec::new();
     let mut report = None;
-    for k in 0..repeat {
+    for _ in 0..repeat {
         if dataset.exists() {
             std::fs::remove_dir_all(&dataset)
                 .with_context(|| format!("cannot remove {}", dataset.display()))?;
-        }
-        if k > 0 {
-            reset_peak_rss();
         }
         let (run, r) = timed_build(&config, ui)?;
         if r.clips == 0 {
@@ -91,7 +88,6 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let mut noop = Vec::new();
     let mut noop_ran = Vec::new();
     for _ in 0..repeat {
-        reset_peak_rss();
         let (run, r) = timed_build(&config, ui)?;
         noop_ran.extend(
             r.stages
@@ -106,6 +102,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let mut plan_stale = false;
     for _ in 0..repeat {
         reset_peak_rss();
+        let start_rss_kb = rss_kb();
         let cpu = CpuSnapshot::now();
         let t0 = Instant::now();
         let p = plan(&config, &BuildOptions::default())?;
@@ -114,6 +111,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         plans.push(Timed {
             seconds,
             peak_rss_kb: peak_rss_kb(),
+            start_rss_kb,
             cpu: cpu.since(),
         });
     }
@@ -303,21 +301,42 @@ enum Event {
     },
 }
 
-/// Records when each stage starts and finishes (and the process's CPU time then), and passes
-/// every call on to the terminal's progress.
+/// A moment of a build: when, the process's CPU time then, and its peak memory since the
+/// previous mark.
+#[derive(Debug, Clone, Copy)]
+struct Mark {
+    at: Instant,
+    cpu_ticks: u64,
+    peak_kb: Option<u64>,
+}
+
+impl Mark {
+    /// Now; the peak memory is then reset, so the next mark's covers the stretch in between.
+    fn now() -> Mark {
+        let mark = Mark {
+            at: Instant::now(),
+            cpu_ticks: own_cpu_ticks(),
+            peak_kb: peak_rss_kb(),
+        };
+        reset_peak_rss();
+        mark
+    }
+}
+
+/// Records when each stage starts and finishes (with CPU time and peak memory), and passes every
+/// call on to the terminal's progress.
 struct StageClock {
     inner: ProgressSink,
-    events: Mutex<Vec<(Instant, u64, Event)>>,
+    events: Mutex<Vec<(Mark, Event)>>,
 }
 
 impl StageClock {
     fn record(&self, event: Event) {
-        let now = Instant::now();
-        let cpu = own_cpu_ticks();
+        let mark = Mark::now();
         self.events
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .push((now, cpu, event));
+            .push((mark, event));
     }
 }
 
@@ -354,6 +373,8 @@ struct Phase {
     seconds: f64,
     /// Process CPU seconds over the stretch (all threads).
     cpu_seconds: f64,
+    /// Peak resident memory of the process during the stretch.
+    peak_kb: Option<u64>,
     ran: u64,
     reused: u64,
 }
@@ -362,7 +383,10 @@ struct Phase {
 struct BuildRun {
     phases: Vec<Phase>,
     total: f64,
+    /// The highest of the stretches' peaks.
     peak_rss_kb: Option<u64>,
+    /// Resident memory when the build started.
+    start_rss_kb: Option<u64>,
     cpu: CpuUse,
 }
 
@@ -370,6 +394,7 @@ struct BuildRun {
 struct Timed {
     seconds: f64,
     peak_rss_kb: Option<u64>,
+    start_rss_kb: Option<u64>,
     cpu: CpuUse,
 }
 
@@ -382,22 +407,21 @@ fn timed_build(config: &motionforge::config::Config, ui: &Ui) -> Result<(BuildRu
         progress: ProgressSink::new(clock.clone()),
         ..BuildOptions::default()
     };
+    let start_rss_kb = rss_kb();
     let cpu = CpuSnapshot::now();
-    let start = Instant::now();
-    let start_ticks = own_cpu_ticks();
+    let start = Mark::now();
     let report = build(config, &options)?;
-    let end = Instant::now();
-    let end_ticks = own_cpu_ticks();
+    let end = Mark::now();
     let cpu = cpu.since();
-    let peak_rss_kb = peak_rss_kb();
     ui.clear_bars();
     let events = std::mem::take(&mut *clock.events.lock().unwrap_or_else(|e| e.into_inner()));
-    let phases = phases(start, start_ticks, end, end_ticks, &events);
+    let phases = phases(start, end, &events);
     Ok((
         BuildRun {
+            peak_rss_kb: phases.iter().filter_map(|p| p.peak_kb).max(),
             phases,
-            total: (end - start).as_secs_f64(),
-            peak_rss_kb,
+            total: end.at.duration_since(start.at).as_secs_f64(),
+            start_rss_kb,
             cpu,
         },
         report,
@@ -409,74 +433,61 @@ fn timed_build(config: &motionforge::config::Config, ui: &Ui) -> Result<(BuildRu
 /// stage covers is a gap named after the stage it precedes. A stage finishing at the very moment
 /// the previous one did, without a start of its own, ran inside that one's pass (segment inside
 /// ingest's per-capture pass, paraphrase and plan inside the text pass): they share a row.
-fn phases(
-    start: Instant,
-    start_ticks: u64,
-    end: Instant,
-    end_ticks: u64,
-    events: &[(Instant, u64, Event)],
-) -> Vec<Phase> {
+fn phases(start: Mark, end: Mark, events: &[(Mark, Event)]) -> Vec<Phase> {
     const SAME_MOMENT: f64 = 1e-3;
     let ticks = clock_ticks_per_second();
+    // Stages do not overlap, so every stretch runs from the previous mark to its own.
+    let stretch = |name: String, gap: bool, from: &Mark, to: &Mark, ran: u64, reused: u64| Phase {
+        name,
+        gap,
+        seconds: to.at.duration_since(from.at).as_secs_f64(),
+        cpu_seconds: to.cpu_ticks.saturating_sub(from.cpu_ticks) as f64 / ticks,
+        peak_kb: to.peak_kb,
+        ran,
+        reused,
+    };
     let mut phases: Vec<Phase> = Vec::new();
-    let mut cursor = (start, start_ticks);
-    let mut started: BTreeMap<&str, (Instant, u64)> = BTreeMap::new();
+    let mut cursor = start;
     let mut last_was_finish = false;
-    for (at, cpu, event) in events {
+    for (mark, event) in events {
         match event {
             Event::Started(stage) => {
-                let gap = at.duration_since(cursor.0).as_secs_f64();
-                if gap > 0.0 {
-                    phases.push(Phase {
-                        name: format!("(before {stage})"),
-                        gap: true,
-                        seconds: gap,
-                        cpu_seconds: cpu.saturating_sub(cursor.1) as f64 / ticks,
-                        ran: 0,
-                        reused: 0,
-                    });
-                }
-                started.insert(stage, (*at, *cpu));
-                cursor = (*at, *cpu);
+                phases.push(stretch(
+                    format!("(before {stage})"),
+                    true,
+                    &cursor,
+                    mark,
+                    0,
+                    0,
+                ));
                 last_was_finish = false;
             }
             Event::Finished { stage, ran, reused } => {
-                let from = started.remove(stage.as_str()).unwrap_or(cursor);
-                let seconds = at.duration_since(from.0).as_secs_f64();
-                let cpu_seconds = cpu.saturating_sub(from.1) as f64 / ticks;
+                let phase = stretch(stage.clone(), false, &cursor, mark, *ran, *reused);
                 match phases.last_mut() {
-                    Some(prev) if last_was_finish && !prev.gap && seconds < SAME_MOMENT => {
+                    Some(prev) if last_was_finish && !prev.gap && phase.seconds < SAME_MOMENT => {
                         prev.name = format!("{} + {stage}", prev.name);
-                        prev.ran += ran;
-                        prev.reused += reused;
-                        prev.seconds += seconds;
-                        prev.cpu_seconds += cpu_seconds;
+                        prev.ran += phase.ran;
+                        prev.reused += phase.reused;
+                        prev.seconds += phase.seconds;
+                        prev.cpu_seconds += phase.cpu_seconds;
+                        prev.peak_kb = prev.peak_kb.max(phase.peak_kb);
                     }
-                    _ => phases.push(Phase {
-                        name: stage.clone(),
-                        gap: false,
-                        seconds,
-                        cpu_seconds,
-                        ran: *ran,
-                        reused: *reused,
-                    }),
+                    _ => phases.push(phase),
                 }
-                cursor = (*at, *cpu);
                 last_was_finish = true;
             }
         }
+        cursor = *mark;
     }
-    let tail = end.duration_since(cursor.0).as_secs_f64();
-    if tail > 0.0 {
-        phases.push(Phase {
-            name: "(after the last stage)".into(),
-            gap: true,
-            seconds: tail,
-            cpu_seconds: end_ticks.saturating_sub(cursor.1) as f64 / ticks,
-            ran: 0,
-            reused: 0,
-        });
-    }
+    phases.push(stretch(
+        "(after the last stage)".into(),
+        true,
+        &cursor,
+        &end,
+        0,
+        0,
+    ));
     phases
 }
 
@@ -533,6 +544,15 @@ fn scan(input: &Input, copies: usize, repeat: usize) -> Result<Scan> {
 /// the next `VmHWM` reading covers what follows; silently does nothing where unsupported.
 fn reset_peak_rss() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+/// Resident memory of this process now in kB (Linux `VmRSS`), if readable.
+fn rss_kb() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
 }
 
 /// The 1, 5 and 15 minute load averages (`/proc/loadavg`), as written.
@@ -799,8 +819,8 @@ impl Results<'_> {
         )?;
         writeln!(
             out,
-            "{:<34} {:>9} {:>17} {:>6} {:>6} {:>13}  {:>9}",
-            "stage", "seconds", "range", "share", "cores", "ran/reused", "no-op"
+            "{:<30} {:>8} {:>13} {:>6} {:>5} {:>8} {:>11} {:>7}",
+            "stage", "seconds", "range", "share", "cores", "peak MB", "ran/reused", "no-op"
         )?;
         if let Some(best) = self.best() {
             for phase in &best.phases {
@@ -823,14 +843,19 @@ impl Results<'_> {
                 } else {
                     "-".to_string()
                 };
+                let peak = phase.peak_kb.map_or_else(
+                    || "-".to_string(),
+                    |kb| format!("{:.0}", kb as f64 / 1024.0),
+                );
                 writeln!(
                     out,
-                    "{:<34} {:>9.2} {:>17} {:>5.1}% {:>6} {:>13}  {:>9}",
+                    "{:<30} {:>8.2} {:>13} {:>5.1}% {:>5} {:>8} {:>11} {:>7}",
                     phase.name,
                     phase.seconds,
                     format!("{plo:.2}-{phi:.2}"),
                     100.0 * phase.seconds / best.total,
                     cores,
+                    peak,
                     counts,
                     noop
                 )?;
@@ -838,12 +863,16 @@ impl Results<'_> {
             let (nlo, nhi) = min_max(self.noop.iter().map(|r| r.total));
             writeln!(
                 out,
-                "{:<34} {:>9.2} {:>17} {:>6} {:>6} {:>13}  {:>9.2}",
+                "{:<30} {:>8.2} {:>13} {:>6} {:>5} {:>8} {:>11} {:>7.2}",
                 "total",
                 best.total,
                 format!("{lo:.2}-{hi:.2}"),
                 "100%",
-                "",
+                format!("{:.1}", best.cpu.own * self.threads as f64),
+                best.peak_rss_kb.map_or_else(
+                    || "-".to_string(),
+                    |kb| format!("{:.0}", kb as f64 / 1024.0)
+                ),
                 "",
                 nlo
             )?;
@@ -889,13 +918,19 @@ impl Results<'_> {
                     ", nothing to run"
                 }
             )?;
+            let noop_peak = self.noop.iter().filter_map(|r| r.peak_rss_kb).max();
+            let noop_start = self.noop.iter().filter_map(|r| r.start_rss_kb).max();
+            let plan_peak = self.plans.iter().filter_map(|p| p.peak_rss_kb).max();
+            let plan_start = self.plans.iter().filter_map(|p| p.start_rss_kb).max();
             writeln!(
                 out,
-                "peak RSS: full build {} (process peak after the first build; {} over all), no-op rebuild {}, plan {}, scan {}",
+                "peak RSS: full build {} (first run; highest of all runs {}); in this process after the builds, so above what they leave held: no-op rebuild {} (held {} at its start), plan {} (held {}), scan {}",
                 rss_mb(self.full.first().and_then(|r| r.peak_rss_kb)),
                 rss_mb(self.full.iter().filter_map(|r| r.peak_rss_kb).max()),
-                rss_mb(self.noop.iter().filter_map(|r| r.peak_rss_kb).max()),
-                rss_mb(self.plans.iter().filter_map(|p| p.peak_rss_kb).max()),
+                rss_mb(noop_peak),
+                rss_mb(noop_start),
+                rss_mb(plan_peak),
+                rss_mb(plan_start),
                 rss_mb(self.scan.peak_rss_kb)
             )?;
             let cache_total: u64 = self.cache.values().sum();
@@ -950,6 +985,7 @@ impl Results<'_> {
                         "gap": p.gap,
                         "seconds": p.seconds,
                         "cpu_seconds": p.cpu_seconds,
+                        "peak_rss_kb": p.peak_kb,
                         "ran": p.ran,
                         "reused": p.reused,
                     })
@@ -959,6 +995,7 @@ impl Results<'_> {
                 "seconds": run.total,
                 "stages": phases,
                 "peak_rss_kb": run.peak_rss_kb,
+                "start_rss_kb": run.start_rss_kb,
                 "cpu_share_own": run.cpu.own,
                 "cpu_share_others": run.cpu.others,
             })
