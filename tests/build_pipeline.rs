@@ -370,3 +370,23 @@ fn demo_build_segments_the_long_capture_and_prints_counts() {
         "{cmu:?}"
     );
 }
+
+#[test]
+fn the_same_captures_under_two_source_names_build() {
+    // Identical captures give identical, content-named frame chunks, which two threads then write
+    // at the same moment; each write has a temporary file of its own (`temp_path`).
+    let s = Scratch::new(&THREE);
+    let text = fs::read_to_string(s.config_path()).unwrap();
+    let (_, source) = text.split_once("[[sources]]").unwrap();
+    let copy = format!(
+        "[[sources]]{}",
+        source.replace("bandai-namco-1\"", "copy\"")
+    );
+    fs::write(s.config_path(), format!("{text}\n{copy}")).unwrap();
+    for _ in 0..3 {
+        let _ = fs::remove_dir_all(s.out());
+        let report = s.build();
+        assert_eq!(report.captures, 6);
+        assert_eq!(report.mirrored, 6, "{:?}", report.rejects);
+    }
+}

@@ -645,3 +645,157 @@ fn clean_does_not_run_while_a_build_holds_the_dataset() {
     assert!(text(&run_.stderr).contains("is being built by pid"));
     assert!(dataset.join("manifest.json").is_file());
 }
+
+// ---- bench --build -----------------------------------------------------------------------------
+
+/// The number right after `prefix` on the first line of `text` that starts with it.
+fn number_after(text: &str, prefix: &str) -> f64 {
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix(prefix))
+        .unwrap_or_else(|| panic!("no `{prefix}` in:\n{text}"));
+    let token: String = line
+        .trim_start()
+        .chars()
+        .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == ',')
+        .filter(|c| *c != ',')
+        .collect();
+    token
+        .parse()
+        .unwrap_or_else(|e| panic!("`{prefix}` not followed by a number ({e}) in:\n{text}"))
+}
+
+fn bandai2_subset() -> String {
+    common::shared_data()
+        .join("bandai-namco-2-subset/data")
+        .display()
+        .to_string()
+}
+
+#[test]
+fn bench_build_times_every_stage_beside_the_bare_scan() {
+    let out = run(
+        &[
+            "bench",
+            "--build",
+            "--data",
+            &bandai2_subset(),
+            "--repeat",
+            "1",
+        ],
+        &repo(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    // Timings are not asserted: only that every stage is named and every figure is there.
+    let stages: Vec<&str> = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("stage "))
+        .take_while(|l| !l.starts_with("total "))
+        .collect();
+    for stage in [
+        "ingest", "segment", "label", "mirror", "compose", "write", "report",
+    ] {
+        assert!(
+            stages
+                .iter()
+                .any(|l| l.split_whitespace().any(|w| w == stage)),
+            "no row for `{stage}` in:\n{stdout}"
+        );
+    }
+    assert!(
+        stdout.contains("dataset-2_{content}_{style}_{take}"),
+        "{stdout}"
+    );
+    for prefix in [
+        "ratio:",
+        "total",
+        "bare scan:",
+        "frames/s per core:",
+        "no-op rebuild:",
+        "plan:",
+        "peak RSS: full build",
+        "stage cache:",
+        "shards:",
+    ] {
+        assert!(
+            number_after(&stdout, prefix) > 0.0,
+            "`{prefix}` is not positive in:\n{stdout}"
+        );
+    }
+    assert!(stdout.contains("x the bare scan"), "{stdout}");
+    assert!(
+        stdout.contains("nothing ran"),
+        "the rebuild is a no-op:\n{stdout}"
+    );
+}
+
+#[test]
+fn bench_build_json_lists_the_copies_and_keeps_the_folder() {
+    let keep = tempfile::tempdir().unwrap();
+    let k = keep.path().join("bench").display().to_string();
+    let out = run(
+        &[
+            "--json",
+            "bench",
+            "--build",
+            "--data",
+            &bandai2_subset(),
+            "--repeat",
+            "1",
+            "--copies",
+            "2",
+            "--keep",
+            &k,
+        ],
+        &repo(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let captures = common::bvh_files(&common::shared_data().join("bandai-namco-2-subset/data"));
+    assert_eq!(value["copies"], 2);
+    assert_eq!(value["captures"], 2 * captures.len());
+    for key in [
+        "ratio",
+        "frames_per_second_per_core",
+        "input_frames",
+        "input_bytes",
+        "shard_bytes",
+        "cache_bytes_total",
+    ] {
+        assert!(
+            value[key].as_f64().is_some_and(|v| v > 0.0),
+            "{key}: {}",
+            value[key]
+        );
+    }
+    let stages = value["full_build"]["runs"][0]["stages"].as_array().unwrap();
+    assert!(stages.iter().any(|s| s["stage"] == "write"));
+    assert!(value["noop_rebuild"]["nothing_ran"].as_bool().unwrap());
+    // The scan read the bytes once per copy.
+    assert_eq!(value["scan"]["bytes"], value["input_bytes"]);
+    let config = std::fs::read_to_string(keep.path().join("bench/bench.toml")).unwrap();
+    assert!(config.contains("name = \"bn2-1\"") && config.contains("name = \"bn2-2\""));
+    assert!(keep.path().join("bench/out/bench/manifest.json").is_file());
+    // A second run into the kept folder is allowed; a foreign non-empty folder is refused.
+    let foreign = tempfile::tempdir().unwrap();
+    std::fs::write(foreign.path().join("notes.txt"), "mine").unwrap();
+    let refused = run(
+        &[
+            "bench",
+            "--build",
+            "--data",
+            &bandai2_subset(),
+            "--keep",
+            &foreign.path().display().to_string(),
+        ],
+        &repo(),
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused.stderr).contains("not empty"),
+        "{}",
+        text(&refused.stderr)
+    );
+    assert!(foreign.path().join("notes.txt").is_file());
+}

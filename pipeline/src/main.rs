@@ -15,6 +15,7 @@ use motionforge::progress::ProgressSink;
 use motionforge::terminal::{BarProgress, LogOptions, LogProgress};
 
 mod cli;
+use cli::bench_build::{BuildBench, bench_build};
 use cli::labels::{LabelsCommand, PromptCommand, labels_command, prompt_command};
 use cli::summary::{counts, print_plan, print_report, print_status};
 use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
@@ -257,7 +258,14 @@ enum Command {
         #[command(subcommand)]
         command: LabelsCommand,
     },
-    /// Measure BVH read, forward kinematics and mirroring throughput on a folder of captures.
+    /// Measure BVH read, forward kinematics and mirroring throughput on a folder of captures; or,
+    /// with --build, a whole build of the folder stage by stage beside a bare number scan.
+    ///
+    /// `bench --build` writes a config (file-name labels and sidecars as in fixtures/demo.toml,
+    /// mirror and synthetic pairs on, default features, 30 fps) into a temporary folder and runs:
+    /// full builds from scratch (wall time per stage), no-op rebuilds, `plan`, and a single-thread
+    /// scan that parses every number of the same bytes into f64. It prints the ratio of the build
+    /// to the scan, frames/s per core, peak memory, and the stage cache and shard bytes.
     Bench {
         /// Folder of BVH files (all must share one skeleton profile).
         #[arg(long, default_value = "../shared/data/bandai-namco-1/data")]
@@ -265,13 +273,31 @@ enum Command {
         /// Skeleton profile of the captures.
         #[arg(long, default_value = "bandai-namco")]
         profile: String,
-        /// Repeat the whole folder this many times and keep the fastest pass.
+        /// Repeat the whole folder this many times and keep the fastest pass; with --build, run
+        /// each measurement (full build, no-op rebuild, plan, scan) this many times.
         #[arg(long, default_value_t = 3)]
         repeat: usize,
         /// Instead, measure writing Parquet shards of at least this many frames (the folder's
         /// clips and mirrors, repeated), with the write's peak memory.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "build")]
         write_frames: Option<usize>,
+        /// Instead, time a whole build of the folder stage by stage, beside a bare single-thread
+        /// scan of the same bytes into f64 (issue 12).
+        #[arg(long)]
+        build: bool,
+        /// With --build: list the folder under this many source names (`bn2-1`..`bn2-N`), so the
+        /// build has N times the captures; the scan reads the bytes N times.
+        #[arg(long, default_value_t = 1, requires = "build")]
+        copies: usize,
+        /// With --build: build in this folder (new, empty, or an earlier run's) and keep the
+        /// config and dataset there, instead of a temporary folder removed at the end.
+        #[arg(long, value_name = "DIR", requires = "build")]
+        keep: Option<PathBuf>,
+        /// With --build: the file-name pattern of the labels; default
+        /// `<prefix>_{content}_{style}_{take}` with the prefix of the first file name (Bandai
+        /// Namco: `dataset-2_{content}_{style}_{take}`).
+        #[arg(long, requires = "build")]
+        pattern: Option<String>,
     },
 }
 
@@ -548,8 +574,23 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             profile,
             repeat,
             write_frames,
+            build,
+            copies,
+            keep,
+            pattern,
         } => match write_frames {
             Some(frames) => bench_write(&data, &profile, frames)?,
+            None if build => bench_build(
+                &BuildBench {
+                    data,
+                    profile,
+                    repeat,
+                    copies,
+                    keep,
+                    pattern,
+                },
+                ui,
+            )?,
             None => bench(&data, &profile, repeat.max(1))?,
         },
     }

@@ -250,7 +250,7 @@ pub fn read_holder(path: &Path) -> Option<Holder> {
     serde_json::from_str(text.trim()).ok()
 }
 
-/// Removes the temporary files (`.<name>.<pid>.tmp`, see [`super::temp_path`]) that process `pid`
+/// Removes the temporary files (`.<name>.<n>.<pid>.tmp`, see [`super::temp_path`]) that process `pid`
 /// left anywhere under `dir`; returns how many. Only called under the lock, after that process
 /// died, so none of them can still be in use.
 fn remove_temp_files(dir: &Path, pid: u32) -> usize {
@@ -270,7 +270,7 @@ fn remove_temp_files(dir: &Path, pid: u32) -> usize {
                 stack.push(entry.path());
             } else if kind.is_file()
                 && name.starts_with('.')
-                // PNG figures keep their extension after the marker (`.x.png.<pid>.tmp.png`).
+                // PNG figures keep their extension after the marker (`.x.png.<n>.<pid>.tmp.png`).
                 && (name.ends_with(&suffix) || name.contains(&format!("{suffix}.")))
                 && fs::remove_file(entry.path()).is_ok()
             {

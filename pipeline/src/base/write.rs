@@ -174,11 +174,51 @@ pub fn write_atomic_with(
     Ok(())
 }
 
-/// The temporary name used while writing `path`.
+/// A fresh temporary name for writing `path`: `.<name>.<n>.<pid>.tmp`, with `n` new at every
+/// call. Two threads may write the same path at once (content-named frame chunks of two identical
+/// captures): with one name per process, one thread's create would truncate the other's file and
+/// its rename would then find nothing to rename.
 pub fn temp_path(path: &Path) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+    path.with_file_name(format!(".{name}.{n}.{}.tmp", std::process::id()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn threads_writing_the_same_path_at_once_all_succeed() {
+        let dir = std::env::temp_dir().join(format!("mf-atomic-{}", std::process::id()));
+        let path = dir.join("chunk.bin");
+        let bytes = vec![7u8; 1 << 20];
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|_| {
+                    s.spawn(|| {
+                        (0..20)
+                            .map(|_| write_atomic(&path, &bytes))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            for h in handles {
+                for result in h.join().unwrap() {
+                    result.unwrap();
+                }
+            }
+        });
+        assert_eq!(fs::read(&path).unwrap(), bytes);
+        let names: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["chunk.bin"], "no temporary file is left");
+        fs::remove_dir_all(&dir).unwrap();
+    }
 }

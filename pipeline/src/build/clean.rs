@@ -93,7 +93,7 @@ pub fn clean(
     };
     let mut targets: Vec<String> = names.into_iter().map(String::from).collect();
     if !cache_only {
-        // Leftovers of interrupted atomic writes (`.<name>.<pid>.tmp`); none is in use under the
+        // Leftovers of interrupted atomic writes (`.<name>.<n>.<pid>.tmp`); none is in use under the
         // lock.
         targets.extend(entry_names(dataset_dir).into_iter().filter(|n| is_temp(n)));
     }

@@ -1,5 +1,6 @@
 //! The commands' implementations, grouped by concern; `main.rs` parses and dispatches.
 
+pub(crate) mod bench_build;
 pub(crate) mod labels;
 pub(crate) mod summary;
 pub(crate) mod tools;

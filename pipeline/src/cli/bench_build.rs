@@ -1,0 +1,1062 @@
+//! `motionforge bench --build`: a whole build timed stage by stage, beside a bare single-thread
+//! scan of the same bytes into f64 (issue 12's measuring instrument). The timing and reporting
+//! live here, on the binary side; the library only reports its stages through `ProgressSink`.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use motionforge::build::{BuildOptions, BuildReport, DATA_DIR, build, plan};
+use motionforge::progress::{Progress, ProgressSink};
+
+use crate::cli::tools::peak_rss_kb;
+use crate::{Ui, load_checked};
+
+/// What `bench --build` is asked to do.
+pub(crate) struct BuildBench {
+    /// Folder of the BVH captures (with their `.json` sidecars).
+    pub(crate) data: PathBuf,
+    /// Skeleton profile of the captures.
+    pub(crate) profile: String,
+    /// Repeats of the full build, the no-op rebuild, the plan and the scan.
+    pub(crate) repeat: usize,
+    /// The folder listed under this many source names.
+    pub(crate) copies: usize,
+    /// Keep the config and the dataset here instead of a temporary folder.
+    pub(crate) keep: Option<PathBuf>,
+    /// File-name pattern; default `<prefix>_{content}_{style}_{take}` from the first file name.
+    pub(crate) pattern: Option<String>,
+}
+
+/// The first line of the config the bench writes: marks a `--keep` folder as the bench's own.
+const CONFIG_MARKER: &str = "# written by `motionforge bench --build`";
+const CONFIG_FILE: &str = "bench.toml";
+const OUTPUT_DIR: &str = "out";
+
+/// Runs the benchmark and prints its table (or JSON with `--json`).
+pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
+    let copies = args.copies.max(1);
+    let repeat = args.repeat.max(1);
+    let input = Input::list(&args.data)?;
+    let pattern = match &args.pattern {
+        Some(p) => p.clone(),
+        None => input.default_pattern()?,
+    };
+    let work = WorkDir::new(args.keep.as_deref())?;
+    let config_path = work.path.join(CONFIG_FILE);
+    let config_text = config_text(&input.dir, &args.profile, &pattern, copies, &work.path);
+    std::fs::write(&config_path, config_text)
+        .with_context(|| format!("cannot write {}", config_path.display()))?;
+    let config = load_checked(&config_path, None)?;
+    let dataset = config.dataset_dir();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let start_load = load_average();
+
+    // The full builds come first, so the process peak read after them is theirs: nothing before
+    // has held more than one capture file.
+    let mut full = Vec::new();
+    let mut report = None;
+    for _ in 0..repeat {
+        if dataset.exists() {
+            std::fs::remove_dir_all(&dataset)
+                .with_context(|| format!("cannot remove {}", dataset.display()))?;
+        }
+        let (run, r) = timed_build(&config, ui)?;
+        if r.clips == 0 {
+            bail!(
+                "the build wrote 0 clips from {} captures ({} rejected: {}); does `--pattern {pattern}` match the file names?",
+                r.captures,
+                r.rejects.len(),
+                crate::cli::summary::counts(&r.rejects_by_reason)
+            );
+        }
+        if r.stages.iter().any(|s| s.reused > 0) {
+            bail!("the build from scratch reused cached work: {:?}", r.stages);
+        }
+        full.push(run);
+        report = Some(r);
+    }
+    let Some(report) = report else {
+        bail!("no build ran");
+    };
+    let cache = folder_sizes(&dataset.join(".motionforge").join("cache"))?;
+    let shards = shard_sizes(&dataset.join(DATA_DIR))?;
+
+    let mut noop = Vec::new();
+    let mut noop_ran = Vec::new();
+    for _ in 0..repeat {
+        let (run, r) = timed_build(&config, ui)?;
+        noop_ran.extend(
+            r.stages
+                .iter()
+                .filter(|s| s.ran > 0)
+                .map(|s| format!("{} ran {}", s.stage, s.ran)),
+        );
+        noop.push(run);
+    }
+
+    let mut plans = Vec::new();
+    let mut plan_stale = false;
+    for _ in 0..repeat {
+        reset_peak_rss();
+        let start_rss_kb = rss_kb();
+        let cpu = CpuSnapshot::now();
+        let t0 = Instant::now();
+        let p = plan(&config, &BuildOptions::default())?;
+        let seconds = t0.elapsed().as_secs_f64();
+        plan_stale |= !p.nothing_to_run();
+        plans.push(Timed {
+            seconds,
+            peak_rss_kb: peak_rss_kb(),
+            start_rss_kb,
+            cpu: cpu.since(),
+        });
+    }
+
+    let scan = scan(&input, copies, repeat)?;
+    let end_load = load_average();
+
+    let result = Results {
+        args,
+        input: &input,
+        copies,
+        repeat,
+        threads,
+        pattern: &pattern,
+        report: &report,
+        full,
+        noop,
+        noop_ran,
+        plans,
+        plan_stale,
+        scan,
+        cache,
+        shards,
+        load: (start_load, end_load),
+        kept: args.keep.as_ref().map(|_| dataset.clone()),
+    };
+    if ui.log.json {
+        writeln!(
+            std::io::stdout(),
+            "{}",
+            serde_json::to_string_pretty(&result.json())?
+        )?;
+    } else {
+        result.print()?;
+    }
+    Ok(())
+}
+
+// ---- input -----------------------------------------------------------------------------------
+
+/// The captures of the data folder: paths, bytes and frames (from each file's `Frames:` line).
+struct Input {
+    dir: PathBuf,
+    files: Vec<PathBuf>,
+    bytes: u64,
+    frames: u64,
+}
+
+impl Input {
+    /// Lists `dir/*.bvh` and reads each file once, one at a time: the counts, and a warm page
+    /// cache for the first build (which would otherwise also time the disk).
+    fn list(dir: &Path) -> Result<Input> {
+        // Canonical, so the config and the output name the folder without `..`.
+        let dir =
+            std::fs::canonicalize(dir).with_context(|| format!("cannot find {}", dir.display()))?;
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .with_context(|| format!("cannot list {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "bvh"))
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            bail!("no .bvh files in {}", dir.display());
+        }
+        let (mut bytes, mut frames) = (0u64, 0u64);
+        for file in &files {
+            let data =
+                std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?;
+            bytes += data.len() as u64;
+            frames += frames_of(&data);
+        }
+        Ok(Input {
+            dir,
+            files,
+            bytes,
+            frames,
+        })
+    }
+
+    /// `<prefix>_{content}_{style}_{take}`, the Bandai Namco form, with the prefix of the first
+    /// file name (`dataset-2` for dataset 2).
+    fn default_pattern(&self) -> Result<String> {
+        let stem = self
+            .files
+            .first()
+            .and_then(|f| f.file_stem())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match stem.split_once('_') {
+            Some((prefix, _)) if !prefix.is_empty() => {
+                Ok(format!("{prefix}_{{content}}_{{style}}_{{take}}"))
+            }
+            _ => bail!(
+                "cannot guess a file-name pattern from `{stem}`; pass --pattern (e.g. \"dataset-2_{{content}}_{{style}}_{{take}}\")"
+            ),
+        }
+    }
+}
+
+/// The frame count of a BVH file's `Frames:` line (0 when there is none: the build rejects it).
+fn frames_of(data: &[u8]) -> u64 {
+    data.split(|&b| b == b'\n')
+        .find_map(|line| {
+            let line = std::str::from_utf8(line).ok()?.trim();
+            line.strip_prefix("Frames:")?.trim().parse().ok()
+        })
+        .unwrap_or(0)
+}
+
+/// The build config: the folder under `copies` source names (`bn2-1`..), file-name labels with
+/// sidecars as in `fixtures/demo.toml`, and every other section at its default (mirror on,
+/// synthetic pairs on, default features, 30 fps).
+fn config_text(data: &Path, profile: &str, pattern: &str, copies: usize, work: &Path) -> String {
+    // TOML strings quoted by the TOML writer, so any path survives.
+    let quote = |s: &str| toml::Value::String(s.to_string()).to_string();
+    let glob = format!(
+        "{}/*.bvh",
+        glob::Pattern::escape(&data.display().to_string())
+    );
+    let mut text = format!(
+        "{CONFIG_MARKER}\n[dataset]\nname = \"bench\"\noutput = {}\nfps = 30\n\n[mirror]\nenabled = true\n",
+        quote(&work.join(OUTPUT_DIR).display().to_string())
+    );
+    for k in 1..=copies {
+        text.push_str(&format!(
+            "\n[[sources]]\nname = \"bn2-{k}\"\ncaptures = [{}]\nprofile = {}\n\n[sources.labels]\nkind = \"filename\"\npattern = {}\naction = \"{{content}}\"\ntext = \"{{content}}, {{style}} style\"\nsidecar = true\n",
+            quote(&glob),
+            quote(profile),
+            quote(pattern)
+        ));
+    }
+    text
+}
+
+/// The folder the bench builds in: `--keep`'s, or a temporary one removed at the end.
+struct WorkDir {
+    path: PathBuf,
+    remove: bool,
+}
+
+impl WorkDir {
+    fn new(keep: Option<&Path>) -> Result<WorkDir> {
+        let (path, remove) = match keep {
+            Some(dir) => (std::path::absolute(dir)?, false),
+            None => (
+                std::env::temp_dir()
+                    .join(format!("motionforge-bench-build-{}", std::process::id())),
+                true,
+            ),
+        };
+        // A kept folder is emptied of the bench's dataset before each build: refuse one that holds
+        // anything else.
+        if let Ok(mut entries) = std::fs::read_dir(&path) {
+            let ours = std::fs::read_to_string(path.join(CONFIG_FILE))
+                .is_ok_and(|t| t.starts_with(CONFIG_MARKER));
+            if !ours && entries.next().is_some() {
+                bail!(
+                    "{} is not empty and holds no earlier `bench --build` run; pass an empty or new folder to --keep",
+                    path.display()
+                );
+            }
+        }
+        std::fs::create_dir_all(&path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        Ok(WorkDir { path, remove })
+    }
+}
+
+impl Drop for WorkDir {
+    fn drop(&mut self) {
+        if self.remove {
+            let _ = std::fs::remove_dir_all(&self.path);
+        }
+    }
+}
+
+// ---- timing a build --------------------------------------------------------------------------
+
+/// A stage event as the build reports it.
+#[derive(Debug, Clone)]
+enum Event {
+    Started(String),
+    Finished {
+        stage: String,
+        ran: u64,
+        reused: u64,
+    },
+}
+
+/// A moment of a build: when, the process's CPU time then, and its peak memory since the
+/// previous mark.
+#[derive(Debug, Clone, Copy)]
+struct Mark {
+    at: Instant,
+    cpu_ticks: u64,
+    peak_kb: Option<u64>,
+}
+
+impl Mark {
+    /// Now; the peak memory is then reset, so the next mark's covers the stretch in between.
+    fn now() -> Mark {
+        let mark = Mark {
+            at: Instant::now(),
+            cpu_ticks: own_cpu_ticks(),
+            peak_kb: peak_rss_kb(),
+        };
+        reset_peak_rss();
+        mark
+    }
+}
+
+/// Records when each stage starts and finishes (with CPU time and peak memory), and passes every
+/// call on to the terminal's progress.
+struct StageClock {
+    inner: ProgressSink,
+    events: Mutex<Vec<(Mark, Event)>>,
+}
+
+impl StageClock {
+    fn record(&self, event: Event) {
+        let mark = Mark::now();
+        self.events
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push((mark, event));
+    }
+}
+
+impl Progress for StageClock {
+    fn stage_started(&self, stage: &str, total: u64) {
+        self.record(Event::Started(stage.to_string()));
+        self.inner.stage_started(stage, total);
+    }
+
+    fn advanced(&self, stage: &str, n: u64) {
+        self.inner.advanced(stage, n);
+    }
+
+    fn stage_finished(&self, stage: &str, ran: u64, reused: u64) {
+        self.record(Event::Finished {
+            stage: stage.to_string(),
+            ran,
+            reused,
+        });
+        self.inner.stage_finished(stage, ran, reused);
+    }
+
+    fn note(&self, message: &str) {
+        self.inner.note(message);
+    }
+}
+
+/// One stretch of a build's wall time: a stage (or stages reported as one), or the time between
+/// stages that no stage reports (`gap`).
+#[derive(Debug, Clone)]
+struct Phase {
+    name: String,
+    gap: bool,
+    seconds: f64,
+    /// Process CPU seconds over the stretch (all threads).
+    cpu_seconds: f64,
+    /// Peak resident memory of the process during the stretch.
+    peak_kb: Option<u64>,
+    ran: u64,
+    reused: u64,
+}
+
+/// A timed build: its stretches, total, peak memory and the machine's CPU use meanwhile.
+struct BuildRun {
+    phases: Vec<Phase>,
+    total: f64,
+    /// The highest of the stretches' peaks.
+    peak_rss_kb: Option<u64>,
+    /// Resident memory when the build started.
+    start_rss_kb: Option<u64>,
+    cpu: CpuUse,
+}
+
+/// A timed call that reports no stages (plan).
+struct Timed {
+    seconds: f64,
+    peak_rss_kb: Option<u64>,
+    start_rss_kb: Option<u64>,
+    cpu: CpuUse,
+}
+
+fn timed_build(config: &motionforge::config::Config, ui: &Ui) -> Result<(BuildRun, BuildReport)> {
+    let clock = Arc::new(StageClock {
+        inner: ui.progress(),
+        events: Mutex::new(Vec::new()),
+    });
+    let options = BuildOptions {
+        progress: ProgressSink::new(clock.clone()),
+        ..BuildOptions::default()
+    };
+    let start_rss_kb = rss_kb();
+    let cpu = CpuSnapshot::now();
+    let start = Mark::now();
+    let report = build(config, &options)?;
+    let end = Mark::now();
+    let cpu = cpu.since();
+    ui.clear_bars();
+    let events = std::mem::take(&mut *clock.events.lock().unwrap_or_else(|e| e.into_inner()));
+    let phases = phases(start, end, &events);
+    Ok((
+        BuildRun {
+            peak_rss_kb: phases.iter().filter_map(|p| p.peak_kb).max(),
+            phases,
+            total: end.at.duration_since(start.at).as_secs_f64(),
+            start_rss_kb,
+            cpu,
+        },
+        report,
+    ))
+}
+
+/// Cuts a build's wall time into stretches. A stage runs from its start event, or from the
+/// previous event when it reports none, to its finish event; time before a start event that no
+/// stage covers is a gap named after the stage it precedes. A stage finishing at the very moment
+/// the previous one did, without a start of its own, ran inside that one's pass (segment inside
+/// ingest's per-capture pass, paraphrase and plan inside the text pass): they share a row.
+fn phases(start: Mark, end: Mark, events: &[(Mark, Event)]) -> Vec<Phase> {
+    const SAME_MOMENT: f64 = 1e-3;
+    let ticks = clock_ticks_per_second();
+    // Stages do not overlap, so every stretch runs from the previous mark to its own.
+    let stretch = |name: String, gap: bool, from: &Mark, to: &Mark, ran: u64, reused: u64| Phase {
+        name,
+        gap,
+        seconds: to.at.duration_since(from.at).as_secs_f64(),
+        cpu_seconds: to.cpu_ticks.saturating_sub(from.cpu_ticks) as f64 / ticks,
+        peak_kb: to.peak_kb,
+        ran,
+        reused,
+    };
+    let mut phases: Vec<Phase> = Vec::new();
+    let mut cursor = start;
+    let mut last_was_finish = false;
+    for (mark, event) in events {
+        match event {
+            Event::Started(stage) => {
+                phases.push(stretch(
+                    format!("(before {stage})"),
+                    true,
+                    &cursor,
+                    mark,
+                    0,
+                    0,
+                ));
+                last_was_finish = false;
+            }
+            Event::Finished { stage, ran, reused } => {
+                let phase = stretch(stage.clone(), false, &cursor, mark, *ran, *reused);
+                match phases.last_mut() {
+                    Some(prev) if last_was_finish && !prev.gap && phase.seconds < SAME_MOMENT => {
+                        prev.name = format!("{} + {stage}", prev.name);
+                        prev.ran += phase.ran;
+                        prev.reused += phase.reused;
+                        prev.seconds += phase.seconds;
+                        prev.cpu_seconds += phase.cpu_seconds;
+                        prev.peak_kb = prev.peak_kb.max(phase.peak_kb);
+                    }
+                    _ => phases.push(phase),
+                }
+                last_was_finish = true;
+            }
+        }
+        cursor = *mark;
+    }
+    phases.push(stretch(
+        "(after the last stage)".into(),
+        true,
+        &cursor,
+        &end,
+        0,
+        0,
+    ));
+    phases
+}
+
+// ---- the bare scan ---------------------------------------------------------------------------
+
+/// The bare scan's best and range, and what it parsed.
+struct Scan {
+    seconds: Vec<f64>,
+    numbers: u64,
+    bytes: u64,
+    peak_rss_kb: Option<u64>,
+}
+
+/// Every file's text in memory (not timed), then on this thread: split on ASCII whitespace and
+/// parse every token that parses as f64, `copies` times over, `repeat` times.
+fn scan(input: &Input, copies: usize, repeat: usize) -> Result<Scan> {
+    reset_peak_rss();
+    let texts: Vec<String> = input
+        .files
+        .iter()
+        .map(|f| std::fs::read_to_string(f).with_context(|| format!("cannot read {}", f.display())))
+        .collect::<Result<_>>()?;
+    let mut seconds = Vec::new();
+    let mut numbers = 0u64;
+    for _ in 0..repeat {
+        let t0 = Instant::now();
+        let (mut sum, mut count) = (0.0f64, 0u64);
+        for _ in 0..copies {
+            for text in &texts {
+                for token in text.split_ascii_whitespace() {
+                    if let Ok(v) = token.parse::<f64>() {
+                        sum += v;
+                        count += 1;
+                    }
+                }
+            }
+        }
+        // The sum is used, so the parsing cannot be optimised away.
+        std::hint::black_box(sum);
+        seconds.push(t0.elapsed().as_secs_f64());
+        numbers = count;
+    }
+    Ok(Scan {
+        seconds,
+        numbers,
+        bytes: texts.iter().map(|t| t.len() as u64).sum::<u64>() * copies as u64,
+        peak_rss_kb: peak_rss_kb(),
+    })
+}
+
+// ---- machine readings ------------------------------------------------------------------------
+
+/// Resets the process's peak resident memory to its current size (Linux `5 > clear_refs`), so
+/// the next `VmHWM` reading covers what follows; silently does nothing where unsupported.
+fn reset_peak_rss() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+/// Resident memory of this process now in kB (Linux `VmRSS`), if readable.
+fn rss_kb() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+}
+
+/// The 1, 5 and 15 minute load averages (`/proc/loadavg`), as written.
+fn load_average() -> Option<String> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    Some(
+        text.split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" "),
+    )
+}
+
+/// This process's CPU time (user + system, all threads) in clock ticks; 0 where unreadable.
+fn own_cpu_ticks() -> u64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0;
+    };
+    // Fields after the command name (which may hold spaces): state is field 3, utime 14, stime 15.
+    let Some((_, rest)) = stat.rsplit_once(')') else {
+        return 0;
+    };
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let field = |n: usize| {
+        fields
+            .get(n - 3)
+            .and_then(|f| f.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    field(14) + field(15)
+}
+
+/// Clock ticks per second of `/proc` times.
+fn clock_ticks_per_second() -> f64 {
+    // SAFETY: sysconf reads a constant of the running system; no memory is passed.
+    let ticks = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if ticks > 0 { ticks as f64 } else { 100.0 }
+}
+
+/// The machine's busy and total CPU ticks (`/proc/stat`) and this process's own, at a moment.
+struct CpuSnapshot {
+    busy: u64,
+    total: u64,
+    own: u64,
+}
+
+/// CPU use over a stretch: this process's, and everything else's, as shares of all CPUs.
+#[derive(Debug, Clone, Copy, Default)]
+struct CpuUse {
+    own: f64,
+    others: f64,
+}
+
+impl CpuSnapshot {
+    fn now() -> CpuSnapshot {
+        let (busy, total) = std::fs::read_to_string("/proc/stat")
+            .ok()
+            .and_then(|text| {
+                let line = text.lines().next()?;
+                let values: Vec<u64> = line
+                    .split_whitespace()
+                    .skip(1)
+                    .filter_map(|v| v.parse().ok())
+                    .collect();
+                // user nice system idle iowait irq softirq steal (guest time is inside user).
+                let total: u64 = values.iter().take(8).sum();
+                let idle =
+                    values.get(3).copied().unwrap_or(0) + values.get(4).copied().unwrap_or(0);
+                Some((total.saturating_sub(idle), total))
+            })
+            .unwrap_or((0, 0));
+        CpuSnapshot {
+            busy,
+            total,
+            own: own_cpu_ticks(),
+        }
+    }
+
+    /// The CPU use from this snapshot to now.
+    fn since(&self) -> CpuUse {
+        let now = CpuSnapshot::now();
+        let total = now.total.saturating_sub(self.total);
+        if total == 0 {
+            return CpuUse::default();
+        }
+        let busy = now.busy.saturating_sub(self.busy);
+        let own = now.own.saturating_sub(self.own).min(busy);
+        CpuUse {
+            own: own as f64 / total as f64,
+            others: (busy - own) as f64 / total as f64,
+        }
+    }
+}
+
+/// Bytes of the files under each sub-folder of `dir` (a stage's cache folder), recursively.
+fn folder_sizes(dir: &Path) -> Result<BTreeMap<String, u64>> {
+    let mut sizes = BTreeMap::new();
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))?;
+    for entry in entries {
+        let entry = entry?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        sizes.insert(name, tree_bytes(&entry.path())?);
+    }
+    Ok(sizes)
+}
+
+fn tree_bytes(path: &Path) -> Result<u64> {
+    let meta = std::fs::symlink_metadata(path)?;
+    if !meta.is_dir() {
+        return Ok(meta.len());
+    }
+    let mut bytes = 0;
+    for entry in std::fs::read_dir(path)? {
+        bytes += tree_bytes(&entry?.path())?;
+    }
+    Ok(bytes)
+}
+
+/// Bytes of every `*.parquet` shard in the dataset's data folder.
+fn shard_sizes(dir: &Path) -> Result<Vec<u64>> {
+    let mut sizes = Vec::new();
+    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))? {
+        let path = entry?.path();
+        if path.extension().is_some_and(|x| x == "parquet") {
+            sizes.push(std::fs::metadata(&path)?.len());
+        }
+    }
+    Ok(sizes)
+}
+
+// ---- results ---------------------------------------------------------------------------------
+
+struct Results<'a> {
+    args: &'a BuildBench,
+    input: &'a Input,
+    copies: usize,
+    repeat: usize,
+    threads: usize,
+    pattern: &'a str,
+    report: &'a BuildReport,
+    full: Vec<BuildRun>,
+    noop: Vec<BuildRun>,
+    noop_ran: Vec<String>,
+    plans: Vec<Timed>,
+    plan_stale: bool,
+    scan: Scan,
+    cache: BTreeMap<String, u64>,
+    shards: Vec<u64>,
+    load: (Option<String>, Option<String>),
+    kept: Option<PathBuf>,
+}
+
+/// Smallest and largest of some timings.
+fn min_max(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    values
+        .into_iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        })
+}
+
+fn mb(bytes: u64) -> f64 {
+    bytes as f64 / 1e6
+}
+
+fn rss_mb(kb: Option<u64>) -> String {
+    kb.map_or_else(
+        || "n/a".to_string(),
+        |kb| format!("{:.0} MB", kb as f64 / 1024.0),
+    )
+}
+
+/// Thousands separated by commas, as the docs write counts.
+fn grouped(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+impl Results<'_> {
+    fn input_bytes(&self) -> u64 {
+        self.input.bytes * self.copies as u64
+    }
+
+    fn input_frames(&self) -> u64 {
+        self.input.frames * self.copies as u64
+    }
+
+    /// The fastest full build (its stretches are the table's).
+    fn best(&self) -> Option<&BuildRun> {
+        self.full.iter().min_by(|a, b| a.total.total_cmp(&b.total))
+    }
+
+    fn full_range(&self) -> (f64, f64) {
+        min_max(self.full.iter().map(|r| r.total))
+    }
+
+    fn scan_range(&self) -> (f64, f64) {
+        min_max(self.scan.seconds.iter().copied())
+    }
+
+    fn ratio(&self) -> f64 {
+        self.full_range().0 / self.scan_range().0
+    }
+
+    fn frames_per_core(&self) -> f64 {
+        self.input_frames() as f64 / self.full_range().0 / self.threads as f64
+    }
+
+    /// A stretch's range over runs, by name.
+    fn phase_range(runs: &[BuildRun], name: &str) -> Option<(f64, f64)> {
+        let values: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.phases.iter().filter(|p| p.name == name))
+            .map(|p| p.seconds)
+            .collect();
+        (!values.is_empty()).then(|| min_max(values))
+    }
+
+    fn print(&self) -> std::io::Result<()> {
+        let mut out = std::io::stdout().lock();
+        let r = self.report;
+        let synthetic = r
+            .kinds
+            .get(motionforge::clip::SourceKind::Synthetic.as_str())
+            .copied()
+            .unwrap_or(0);
+        let dropped: usize = r.drops_by_reason.values().sum();
+        writeln!(
+            out,
+            "bench --build: {} captures ({} x {}), {} frames, {:.1} MB of BVH, {} threads",
+            grouped(self.input.files.len() as u64 * self.copies as u64),
+            self.copies,
+            self.input.dir.display(),
+            grouped(self.input_frames()),
+            mb(self.input_bytes()),
+            self.threads
+        )?;
+        writeln!(
+            out,
+            "config: pattern `{}`, profile {}, mirror on, synthetic pairs on, 30 fps, default features",
+            self.pattern, self.args.profile
+        )?;
+        writeln!(
+            out,
+            "built: {} clips ({} mirrored, {synthetic} synthetic), {} rejects, {dropped} segments dropped",
+            grouped(r.clips as u64),
+            grouped(r.mirrored as u64),
+            r.rejects.len()
+        )?;
+        writeln!(out)?;
+        let (lo, hi) = self.full_range();
+        writeln!(
+            out,
+            "full build from scratch: fastest of {} (range over runs); no-op rebuild: fastest of {}",
+            self.repeat, self.repeat
+        )?;
+        writeln!(
+            out,
+            "{:<30} {:>8} {:>13} {:>6} {:>5} {:>8} {:>11} {:>7}",
+            "stage", "seconds", "range", "share", "cores", "peak MB", "ran/reused", "no-op"
+        )?;
+        if let Some(best) = self.best() {
+            for phase in &best.phases {
+                let noop_gap = Self::phase_range(&self.noop, &phase.name).map_or(0.0, |r| r.1);
+                // Gaps of a few milliseconds are noise; the JSON keeps them.
+                if phase.gap && phase.seconds.max(noop_gap) < 0.005 {
+                    continue;
+                }
+                let (plo, phi) = Self::phase_range(&self.full, &phase.name)
+                    .unwrap_or((phase.seconds, phase.seconds));
+                let noop = Self::phase_range(&self.noop, &phase.name)
+                    .map_or_else(|| "-".to_string(), |(n, _)| format!("{n:.2}"));
+                let counts = if phase.gap {
+                    String::new()
+                } else {
+                    format!("{}/{}", phase.ran, phase.reused)
+                };
+                let cores = if phase.seconds > 0.05 {
+                    format!("{:.1}", phase.cpu_seconds / phase.seconds)
+                } else {
+                    "-".to_string()
+                };
+                let peak = phase.peak_kb.map_or_else(
+                    || "-".to_string(),
+                    |kb| format!("{:.0}", kb as f64 / 1024.0),
+                );
+                writeln!(
+                    out,
+                    "{:<30} {:>8.2} {:>13} {:>5.1}% {:>5} {:>8} {:>11} {:>7}",
+                    phase.name,
+                    phase.seconds,
+                    format!("{plo:.2}-{phi:.2}"),
+                    100.0 * phase.seconds / best.total,
+                    cores,
+                    peak,
+                    counts,
+                    noop
+                )?;
+            }
+            let (nlo, nhi) = min_max(self.noop.iter().map(|r| r.total));
+            writeln!(
+                out,
+                "{:<30} {:>8.2} {:>13} {:>6} {:>5} {:>8} {:>11} {:>7.2}",
+                "total",
+                best.total,
+                format!("{lo:.2}-{hi:.2}"),
+                "100%",
+                format!("{:.1}", best.cpu.own * self.threads as f64),
+                best.peak_rss_kb.map_or_else(
+                    || "-".to_string(),
+                    |kb| format!("{:.0}", kb as f64 / 1024.0)
+                ),
+                "",
+                nlo
+            )?;
+            writeln!(out)?;
+            let (slo, shi) = self.scan_range();
+            writeln!(
+                out,
+                "bare scan: {slo:.3} s (range {slo:.3}-{shi:.3}, best of {}), one thread, {} numbers from {:.1} MB, {:.0} MB/s",
+                self.repeat,
+                grouped(self.scan.numbers),
+                mb(self.scan.bytes),
+                mb(self.scan.bytes) / slo
+            )?;
+            writeln!(
+                out,
+                "ratio: {:.1}x the bare scan (full build {lo:.2} s on {} threads / scan {slo:.3} s on one)",
+                self.ratio(),
+                self.threads
+            )?;
+            writeln!(
+                out,
+                "frames/s per core: {} ({} frames / {lo:.2} s / {} cores)",
+                grouped(self.frames_per_core().round() as u64),
+                grouped(self.input_frames()),
+                self.threads
+            )?;
+            writeln!(
+                out,
+                "no-op rebuild: {nlo:.2} s (range {nlo:.2}-{nhi:.2}){}",
+                if self.noop_ran.is_empty() {
+                    ", nothing ran".to_string()
+                } else {
+                    format!("; not a no-op: {}", self.noop_ran.join(", "))
+                }
+            )?;
+            let (plo, phi) = min_max(self.plans.iter().map(|p| p.seconds));
+            writeln!(
+                out,
+                "plan: {plo:.2} s (range {plo:.2}-{phi:.2}){}",
+                if self.plan_stale {
+                    "; the plan found stages to run"
+                } else {
+                    ", nothing to run"
+                }
+            )?;
+            let noop_peak = self.noop.iter().filter_map(|r| r.peak_rss_kb).max();
+            let noop_start = self.noop.iter().filter_map(|r| r.start_rss_kb).max();
+            let plan_peak = self.plans.iter().filter_map(|p| p.peak_rss_kb).max();
+            let plan_start = self.plans.iter().filter_map(|p| p.start_rss_kb).max();
+            writeln!(
+                out,
+                "peak RSS: full build {} (first run; highest of all runs {}); in this process after the builds, so above what they leave held: no-op rebuild {} (held {} at its start), plan {} (held {}), scan {}",
+                rss_mb(self.full.first().and_then(|r| r.peak_rss_kb)),
+                rss_mb(self.full.iter().filter_map(|r| r.peak_rss_kb).max()),
+                rss_mb(noop_peak),
+                rss_mb(noop_start),
+                rss_mb(plan_peak),
+                rss_mb(plan_start),
+                rss_mb(self.scan.peak_rss_kb)
+            )?;
+            let cache_total: u64 = self.cache.values().sum();
+            let per_stage: Vec<String> = self
+                .cache
+                .iter()
+                .map(|(k, v)| format!("{k} {:.1}", mb(*v)))
+                .collect();
+            writeln!(
+                out,
+                "stage cache: {:.1} MB ({:.2}x the {:.1} MB of input): {} (MB)",
+                mb(cache_total),
+                cache_total as f64 / self.input_bytes() as f64,
+                mb(self.input_bytes()),
+                per_stage.join(", ")
+            )?;
+            let shard_total: u64 = self.shards.iter().sum();
+            writeln!(
+                out,
+                "shards: {:.1} MB in {} files (data/*.parquet), {:.2}x the input",
+                mb(shard_total),
+                self.shards.len(),
+                shard_total as f64 / self.input_bytes() as f64
+            )?;
+            let others: Vec<String> = self
+                .full
+                .iter()
+                .map(|r| format!("{:.0}%", 100.0 * r.cpu.others))
+                .collect();
+            writeln!(
+                out,
+                "machine: load average {} at start, {} at end; other processes used {} of the CPUs during the full builds",
+                self.load.0.as_deref().unwrap_or("n/a"),
+                self.load.1.as_deref().unwrap_or("n/a"),
+                others.join(", ")
+            )?;
+            if let Some(dir) = &self.kept {
+                writeln!(out, "kept: {}", dir.display())?;
+            }
+        }
+        Ok(())
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let run_json = |run: &BuildRun| {
+            let phases: Vec<serde_json::Value> = run
+                .phases
+                .iter()
+                .map(|p| {
+                    serde_json::json!({
+                        "stage": p.name,
+                        "gap": p.gap,
+                        "seconds": p.seconds,
+                        "cpu_seconds": p.cpu_seconds,
+                        "peak_rss_kb": p.peak_kb,
+                        "ran": p.ran,
+                        "reused": p.reused,
+                    })
+                })
+                .collect();
+            serde_json::json!({
+                "seconds": run.total,
+                "stages": phases,
+                "peak_rss_kb": run.peak_rss_kb,
+                "start_rss_kb": run.start_rss_kb,
+                "cpu_share_own": run.cpu.own,
+                "cpu_share_others": run.cpu.others,
+            })
+        };
+        let (lo, hi) = self.full_range();
+        let (nlo, nhi) = min_max(self.noop.iter().map(|r| r.total));
+        let (plo, phi) = min_max(self.plans.iter().map(|p| p.seconds));
+        let (slo, shi) = self.scan_range();
+        serde_json::json!({
+            "data": self.input.dir,
+            "copies": self.copies,
+            "repeat": self.repeat,
+            "threads": self.threads,
+            "pattern": self.pattern,
+            "profile": self.args.profile,
+            "captures": self.input.files.len() * self.copies,
+            "input_bytes": self.input_bytes(),
+            "input_frames": self.input_frames(),
+            "clips": self.report.clips,
+            "mirrored": self.report.mirrored,
+            "kinds": self.report.kinds,
+            "rejects": self.report.rejects.len(),
+            "full_build": {
+                "seconds_min": lo,
+                "seconds_max": hi,
+                "runs": self.full.iter().map(run_json).collect::<Vec<_>>(),
+            },
+            "noop_rebuild": {
+                "seconds_min": nlo,
+                "seconds_max": nhi,
+                "nothing_ran": self.noop_ran.is_empty(),
+                "runs": self.noop.iter().map(run_json).collect::<Vec<_>>(),
+            },
+            "plan": {
+                "seconds_min": plo,
+                "seconds_max": phi,
+                "nothing_to_run": !self.plan_stale,
+                "peak_rss_kb": self.plans.iter().filter_map(|p| p.peak_rss_kb).max(),
+                "cpu_share_others": self.plans.iter().map(|p| p.cpu.others).collect::<Vec<_>>(),
+            },
+            "scan": {
+                "seconds_min": slo,
+                "seconds_max": shi,
+                "seconds": self.scan.seconds,
+                "numbers": self.scan.numbers,
+                "bytes": self.scan.bytes,
+                "peak_rss_kb": self.scan.peak_rss_kb,
+            },
+            "ratio": self.ratio(),
+            "frames_per_second_per_core": self.frames_per_core(),
+            "peak_rss_kb": {
+                "full_build_first": self.full.first().and_then(|r| r.peak_rss_kb),
+                "full_build_max": self.full.iter().filter_map(|r| r.peak_rss_kb).max(),
+                "noop_rebuild": self.noop.iter().filter_map(|r| r.peak_rss_kb).max(),
+            },
+            "cache_bytes": self.cache,
+            "cache_bytes_total": self.cache.values().sum::<u64>(),
+            "shard_bytes": self.shards.iter().sum::<u64>(),
+            "shards": self.shards.len(),
+            "load_average": { "start": self.load.0, "end": self.load.1 },
+            "kept": self.kept,
+        })
+    }
+}
