@@ -9,7 +9,7 @@ use super::motion::Motion;
 use super::profile::{BodyPart, Profile};
 
 /// The six parts as a bit set, local to composition (the dataset-level `PartSet` lives in
-/// `crate::parts`; motion knows nothing of labelling).
+/// the `parts` module; motion knows nothing of labelling).
 pub type PartMask = u8;
 
 /// The bit of a part in a [`PartMask`], in SINC's order.

@@ -1,5 +1,5 @@
 //! Stages: each a function from typed inputs to typed outputs, with a fingerprint of what it read.
-//! The build runner (`crate::build`) handles caching, atomic writes and reporting.
+//! The build runner (the `build` module) handles caching, atomic writes and reporting.
 
 pub mod augment;
 pub mod compose;
