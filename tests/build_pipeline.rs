@@ -390,3 +390,64 @@ fn the_same_captures_under_two_source_names_build() {
         assert_eq!(report.mirrored, 6, "{:?}", report.rejects);
     }
 }
+
+/// Bytes of every file under `dir`.
+fn folder_bytes(dir: &Path) -> u64 {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .map(|e| {
+            let path = e.path();
+            if path.is_dir() {
+                folder_bytes(&path)
+            } else {
+                e.metadata().map_or(0, |m| m.len())
+            }
+        })
+        .sum()
+}
+
+#[test]
+fn a_changed_annotation_resegments_from_the_ingest_record_and_matches_a_fresh_build() {
+    let s = Scratch::new(&THREE);
+    s.build();
+    // The cache keeps each segmented clip's frames once: no parsed captures, no mirrored or
+    // synthetic frames (made again when read), so it stays under the size of the captures.
+    let cache = s.out().join(".motionforge/cache");
+    for gone in ["mirror-motions", "synthetic"] {
+        assert!(!cache.join(gone).exists(), "{gone} should not be stored");
+    }
+    let input = folder_bytes(&s.captures());
+    let cached = folder_bytes(&cache);
+    assert!(
+        cached < input,
+        "stage cache {cached} bytes for {input} bytes of captures"
+    );
+
+    // A new sidecar value changes the capture's annotation: the capture is not ingested again,
+    // its segments are cut again from the file, and the table is what a fresh build writes.
+    let sidecar = s.captures().join("dataset-1_bye_happy_001.json");
+    fs::write(&sidecar, r#"{"content": 7, "style": 2}"#).unwrap();
+    let again = s.build();
+    assert_eq!(
+        (
+            ran(&again, "ingest"),
+            ran(&again, "segment"),
+            ran(&again, "write")
+        ),
+        (0, 1, 1)
+    );
+    let fresh = Scratch::new(&THREE);
+    fs::copy(
+        &sidecar,
+        fresh.captures().join("dataset-1_bye_happy_001.json"),
+    )
+    .unwrap();
+    fresh.build();
+    assert!(
+        table_bytes(&s.out()) == table_bytes(&fresh.out()),
+        "the incremental table differs from a fresh build's"
+    );
+}

@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use super::motions::{MIRROR_CHUNKS, MotionRef, MotionSource, MotionSpill, SEGMENT_CHUNKS};
+use super::motions::{MotionRef, MotionSpill};
 use super::{BuildError, Reject, Workspace, WorkspaceError, sha256_hex};
 use crate::annotate::filename::filename_annotation;
 use crate::annotate::taxonomy::TypeMap;
@@ -91,10 +91,18 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
     };
     let ingest_fp = ingest::fingerprint(&input);
+    // Parsed at most once per build: here on an ingest miss, or below if the segment stage must
+    // run again on a capture whose ingest record is cached.
+    let mut parsed: Option<ingest::IngestOutput> = None;
     let Some((ingested, ran)) =
         shared
             .workspace
-            .item(ingest::NAME, &item.key, &ingest_fp, || ingest::run(&input))?
+            .item(ingest::NAME, &item.key, &ingest_fp, || {
+                let out = ingest::run(&input);
+                let record = out.record();
+                parsed = Some(out);
+                record
+            })?
     else {
         item.pending = Some(ingest::NAME);
         return Ok(item);
@@ -103,10 +111,9 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
     item.ran[0] = ran;
     item.fingerprints.push((ingest::NAME, ingest_fp.clone()));
     item.rejects.extend(ingested.rejects);
-    let Some(capture) = ingested.capture else {
+    let Some(header) = ingested.capture else {
         return Ok(item);
     };
-    drop(bytes);
 
     let annotation = match &shared.annotations[file.source] {
         SourceAnnotations::Filename {
@@ -120,7 +127,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             } else {
                 None
             };
-            match filename_annotation(pattern, action, text, &capture.stem, side.as_deref()) {
+            match filename_annotation(pattern, action, text, &header.stem, side.as_deref()) {
                 Ok(a) => a,
                 Err(refusal) => {
                     item.rejects.push(ingest::reject(
@@ -135,12 +142,12 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
                 }
             }
         }
-        SourceAnnotations::Indexed { by_key, .. } => match by_key.get(&capture.stem) {
+        SourceAnnotations::Indexed { by_key, .. } => match by_key.get(&header.stem) {
             Some(a) => a.clone(),
             None => {
                 let message = format!(
                     "no annotation for capture `{}` in the source's {} files",
-                    capture.stem,
+                    header.stem,
                     source.labels.kind()
                 );
                 item.rejects.push(ingest::reject(
@@ -155,7 +162,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             }
         },
     };
-    let profile = match spec.bind(&capture.motion.skeleton) {
+    let profile = match spec.bind(&header.skeleton) {
         Ok(p) => p,
         Err(e) => {
             item.rejects.push(ingest::reject(
@@ -169,21 +176,38 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             return Ok(item);
         }
     };
-    let seg_input = segment::SegmentInput {
-        capture: &capture,
-        annotation: &annotation,
-        kind: source.labels.kind(),
-        config: &source.segment,
-        types: &shared.types,
-        profile: &profile,
-        fps: config.dataset.fps,
-    };
-    let seg_fp = segment::fingerprint(&ingest_fp, &seg_input, &shared.types_digest);
+    let seg_fp = segment::fingerprint(
+        &ingest_fp,
+        &annotation,
+        source.labels.kind(),
+        &source.segment,
+        config.dataset.fps,
+        &shared.types_digest,
+    );
     // The cached output is the clips without frames and where their frames went.
     let Some(((segmented, refs), ran)): Option<((SegmentOutput, Vec<MotionRef>), bool)> = shared
         .workspace
         .try_item(segment::NAME, &item.key, &seg_fp, || {
-            let mut spill = MotionSpill::new(&shared.workspace, SEGMENT_CHUNKS);
+            let capture = match parsed.take() {
+                Some(out) => out.capture,
+                None => ingest::run(&input).capture,
+            };
+            let Some(capture) = capture else {
+                return Err(BuildError::Motion(format!(
+                    "{}: the capture read before no longer reads; run the build again with --force",
+                    file.display
+                )));
+            };
+            let seg_input = segment::SegmentInput {
+                capture: &capture,
+                annotation: &annotation,
+                kind: source.labels.kind(),
+                config: &source.segment,
+                types: &shared.types,
+                profile: &profile,
+                fps: config.dataset.fps,
+            };
+            let mut spill = MotionSpill::new(&shared.workspace);
             let out = segment::run_with(&seg_input, |clip| spill.push(clip))?;
             Ok::<_, BuildError>((out, spill.finish()?))
         })?
@@ -201,11 +225,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
 }
 
 /// Mirrors a capture's labelled clips, reusing the cached copies when the clips are unchanged.
-pub(super) fn mirror_capture(
-    shared: &Shared<'_>,
-    motions: &MotionSource,
-    item: &mut Item,
-) -> Result<(), BuildError> {
+pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(), BuildError> {
     let Some(first) = item.clips.first() else {
         return Ok(());
     };
@@ -220,26 +240,22 @@ pub(super) fn mirror_capture(
             message: e.to_string(),
         })?;
     let fp = mirror::fingerprint(&sha256_hex(&encoded), spec, &shared.types_digest);
-    // One clip's frames at a time: read, mirrored, spilled.
+    // The copies' texts and labels are made here; their frames are made from the originals'
+    // when read (`MotionRef::Mirrored`), so the stage reads and stores no frames.
     let Some(((mirrored, refs), ran)): Option<((mirror::MirrorOutput, Vec<MotionRef>), bool)> =
-        shared
-            .workspace
-            .try_item(mirror::NAME, &item.key, &fp, || {
-                let mut spill = MotionSpill::new(&shared.workspace, MIRROR_CHUNKS);
-                let mut out = mirror::MirrorOutput::default();
-                for (clip, at) in item.clips.iter().zip(&item.refs) {
-                    let mut full = clip.clone();
-                    full.motion = motions.motion(at)?;
-                    let one =
-                        mirror::run(std::slice::from_ref(&full), spec, shared.types.taxonomy());
-                    for mut copy in one.clips {
-                        spill.push(&mut copy)?;
-                        out.clips.push(copy);
-                    }
-                    out.rejects.extend(one.rejects);
+        shared.workspace.item(mirror::NAME, &item.key, &fp, || {
+            let mut out = mirror::MirrorOutput::default();
+            let mut refs = Vec::new();
+            for (clip, at) in item.clips.iter().zip(&item.refs) {
+                let one = mirror::run(std::slice::from_ref(clip), spec, shared.types.taxonomy());
+                for copy in one.clips {
+                    refs.push(MotionRef::Mirrored(Box::new(at.clone())));
+                    out.clips.push(copy);
                 }
-                Ok::<_, BuildError>((out, spill.finish()?))
-            })?
+                out.rejects.extend(one.rejects);
+            }
+            (out, refs)
+        })?
     else {
         item.pending = Some(mirror::NAME);
         return Ok(());

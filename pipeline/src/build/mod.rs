@@ -314,7 +314,7 @@ fn run_stages<'a>(
         types,
         types_digest,
     };
-    let motions = MotionSource::new(&shared.workspace);
+    let motions = MotionSource::new(&shared.workspace, &shared.specs);
 
     progress.stage_started(ingest::NAME, files.len() as u64);
     let mut items: Vec<Item> = files
@@ -381,7 +381,7 @@ fn run_stages<'a>(
         items
             .par_iter_mut()
             .map(|item| {
-                let done = capture::mirror_capture(&shared, &motions, item);
+                let done = capture::mirror_capture(&shared, item);
                 progress.advanced(mirror::NAME, 1);
                 done
             })
@@ -405,16 +405,15 @@ fn run_stages<'a>(
     }
 
     // Frame chunks that no held clip points to belong to outputs that are gone.
-    for (folder, mirrored) in [
-        (motions::SEGMENT_CHUNKS, false),
-        (motions::MIRROR_CHUNKS, true),
-    ] {
-        let live: BTreeSet<String> = items
-            .iter()
-            .flat_map(|i| if mirrored { &i.mirrored_refs } else { &i.refs })
-            .map(|r| r.fingerprint.clone())
-            .collect();
-        shared.workspace.prune(folder, &live);
+    let live: BTreeSet<String> = items
+        .iter()
+        .flat_map(|i| i.refs.iter().chain(&i.mirrored_refs))
+        .flat_map(|r| r.chunks())
+        .map(|(_, fingerprint)| fingerprint.to_string())
+        .collect();
+    shared.workspace.prune(motions::SEGMENT_CHUNKS, &live);
+    for retired in motions::RETIRED_CHUNKS {
+        shared.workspace.prune(retired, &BTreeSet::new());
     }
 
     if run_mirror {
@@ -596,7 +595,7 @@ fn compose(
     let composed = shared
         .workspace
         .try_item(crate::stages::compose::NAME, "*", &stamp, || {
-            let mut spill = motions::MotionSpill::new(&shared.workspace, motions::SYNTHETIC_CHUNKS);
+            let mut refs: Vec<motions::MotionRef> = Vec::new();
             let out = crate::stages::compose::run(
                 &all,
                 &config.synthetic,
@@ -612,9 +611,31 @@ fn compose(
                     );
                     vetoed.0.contains(&key).then_some("llm_incompatible")
                 },
-                |clip| spill.push(clip),
+                |clip, recipe| {
+                    let source = |c: &Clip| {
+                        index.get(&motions::key(c)).cloned().ok_or_else(|| {
+                            BuildError::Motion(format!(
+                                "no motion recorded for clip `{}`",
+                                c.clip_id
+                            ))
+                        })
+                    };
+                    refs.push(motions::MotionRef::Composed {
+                        first: Box::new(source(recipe.first)?),
+                        first_parts: recipe.first_parts,
+                        second: Box::new(source(recipe.second)?),
+                        second_parts: recipe.second_parts,
+                        start: match recipe.trim {
+                            crate::motion::compose::Trim::Start => None,
+                            crate::motion::compose::Trim::At(s) => Some(s as u32),
+                        },
+                        frames: clip.motion.num_frames() as u32,
+                    });
+                    clip.motion = clip.motion.without_frames();
+                    Ok::<(), BuildError>(())
+                },
             )?;
-            Ok::<_, BuildError>((out, spill.finish()?))
+            Ok::<_, BuildError>((out, refs))
         })?;
     let Some(((composed, refs), ran)): Option<(
         (
@@ -629,10 +650,6 @@ fn compose(
     shared.workspace.prune(
         crate::stages::compose::NAME,
         &BTreeSet::from([stamp.fingerprint]),
-    );
-    shared.workspace.prune(
-        motions::SYNTHETIC_CHUNKS,
-        &refs.iter().map(|r| r.fingerprint.clone()).collect(),
     );
     let run = StageRun {
         stage: crate::stages::compose::NAME.into(),
@@ -680,7 +697,7 @@ struct Staged<'a> {
 /// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
 pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip>, BuildError> {
     let staged = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&staged.shared.workspace);
+    let motions = MotionSource::new(&staged.shared.workspace, &staged.shared.specs);
     staged
         .clips
         .iter()
@@ -697,7 +714,7 @@ pub fn find_clip(
     clip_id: &str,
 ) -> Result<(Option<Clip>, Vec<String>), BuildError> {
     let staged = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&staged.shared.workspace);
+    let motions = MotionSource::new(&staged.shared.workspace, &staged.shared.specs);
     let found = staged
         .clips
         .iter()
@@ -729,7 +746,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         blocked: _,
         index,
     } = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&shared.workspace);
+    let motions = MotionSource::new(&shared.workspace, &shared.specs);
     let workspace = &shared.workspace;
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();

@@ -1,6 +1,7 @@
 //! Motions stay on disk while the build holds the rest of every clip: a clip's frames are read back
-//! from the chunks the stage that made them spilled (segment, mirror, synthetic) only when a stage
-//! needs them, so memory grows with the number of clips, not with their frames.
+//! from the chunks the segment stage spilled only when a stage needs them, so memory grows with the
+//! number of clips, not with their frames. Mirrors and synthetic pairs are not stored: they are made
+//! again from their sources when read, which costs less than writing and reading them.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -9,30 +10,76 @@ use serde::{Deserialize, Serialize};
 
 use super::{BuildError, Workspace, WorkspaceError, sha256_hex};
 use crate::clip::Clip;
-use crate::motion::Motion;
+use crate::motion::compose::{Trim, compose};
+use crate::motion::{MirrorPlan, Motion, OffsetPolicy, ProfileSpec};
 
-/// Stage-cache folder of synthetic motions, in chunks.
-pub(super) const SYNTHETIC_CHUNKS: &str = "synthetic";
 /// Stage-cache folder of segmented clips' motions, in chunks.
 pub(super) const SEGMENT_CHUNKS: &str = "segment-motions";
-/// Stage-cache folder of mirrored clips' motions, in chunks.
-pub(super) const MIRROR_CHUNKS: &str = "mirror-motions";
-/// Synthetic motions per chunk file.
+/// Stage-cache folders where earlier versions stored mirrored and synthetic frames: emptied.
+pub(super) const RETIRED_CHUNKS: [&str; 2] = ["mirror-motions", "synthetic"];
+/// Motions per chunk file.
 pub(super) const CHUNK: usize = 32;
 /// Decoded entries kept: a capture's originals and mirrors, and the chunk being written.
 const RECENT: usize = 4;
 
-/// Where a clip's frames are: a stage-cache entry and the clip's place in it.
+/// Where a clip's frames are: stored in a stage-cache chunk, or made when read from frames that
+/// are (a mirror is a cheap function of its original, a synthetic pair of its two sources, so
+/// storing them would only multiply the cache).
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub(super) struct MotionRef {
-    /// Stage-cache folder of the chunk (`segment-motions`, `mirror-motions` or `synthetic`).
-    pub(super) stage: String,
-    /// The entry's fingerprint.
-    pub(super) fingerprint: String,
-    /// The clip's index among the entry's motions.
-    pub(super) index: u32,
-    /// Frames of the motion (the held clip has none).
-    pub(super) frames: u32,
+pub(super) enum MotionRef {
+    /// Frames stored in a chunk of the stage cache.
+    Stored {
+        /// Stage-cache folder of the chunk (`segment-motions`).
+        stage: String,
+        /// The entry's fingerprint.
+        fingerprint: String,
+        /// The clip's index among the entry's motions.
+        index: u32,
+        /// Frames of the motion (the held clip has none).
+        frames: u32,
+    },
+    /// The left/right mirror of another motion, on the same skeleton.
+    Mirrored(Box<MotionRef>),
+    /// Two motions stitched by body part (`motion::compose`).
+    Composed {
+        /// The first motion and the parts it does.
+        first: Box<MotionRef>,
+        /// Parts of `first` (`motion::compose::PartMask`).
+        first_parts: u8,
+        /// The second motion.
+        second: Box<MotionRef>,
+        /// Parts of `second`.
+        second_parts: u8,
+        /// Where the composite starts in the longer motion (`None`: at its start).
+        start: Option<u32>,
+        /// Frames of the composite.
+        frames: u32,
+    },
+}
+
+impl MotionRef {
+    /// Frames of the motion.
+    pub(super) fn frames(&self) -> u32 {
+        match self {
+            MotionRef::Stored { frames, .. } | MotionRef::Composed { frames, .. } => *frames,
+            MotionRef::Mirrored(of) => of.frames(),
+        }
+    }
+
+    /// The stored chunks (stage folder, fingerprint) the motion is made from.
+    pub(super) fn chunks(&self) -> Vec<(&str, &str)> {
+        match self {
+            MotionRef::Stored {
+                stage, fingerprint, ..
+            } => vec![(stage.as_str(), fingerprint.as_str())],
+            MotionRef::Mirrored(of) => of.chunks(),
+            MotionRef::Composed { first, second, .. } => {
+                let mut all = first.chunks();
+                all.extend(second.chunks());
+                all
+            }
+        }
+    }
 }
 
 /// Every held clip's motion location, by clip id and capture path.
@@ -43,24 +90,74 @@ pub(super) fn key(clip: &Clip) -> (String, String) {
     (clip.clip_id.clone(), clip.capture.path.clone())
 }
 
-/// Reads motions back from the stage cache, keeping the last few entries decoded.
+/// Reads motions back from the stage cache, keeping the last few entries decoded, and makes the
+/// mirrors and composites the cache does not store.
 pub(super) struct MotionSource {
     workspace: Workspace,
+    /// Skeleton profiles by name: mirrors and composites need the bound profile.
+    specs: Vec<ProfileSpec>,
     recent: Mutex<VecDeque<(String, Arc<Vec<Motion>>)>>,
 }
 
 impl MotionSource {
-    /// Motions of `workspace`'s cache.
-    pub(super) fn new(workspace: &Workspace) -> MotionSource {
+    /// Motions of `workspace`'s cache, on skeletons of the profiles `specs`.
+    pub(super) fn new(workspace: &Workspace, specs: &[ProfileSpec]) -> MotionSource {
         MotionSource {
             workspace: workspace.clone(),
+            specs: specs.to_vec(),
             recent: Mutex::new(VecDeque::new()),
         }
     }
 
-    /// The motion `at` points to.
-    pub(super) fn motion(&self, at: &MotionRef) -> Result<Motion, BuildError> {
-        let id = format!("{}/{}", at.stage, at.fingerprint);
+    /// The motion `at` points to, on a skeleton of profile `profile`.
+    pub(super) fn motion(&self, at: &MotionRef, profile: &str) -> Result<Motion, BuildError> {
+        match at {
+            MotionRef::Stored { .. } => self.stored(at),
+            MotionRef::Mirrored(of) => {
+                let original = self.motion(of, profile)?;
+                let bound = self.bind(&original, profile)?;
+                let plan = MirrorPlan::from_profile(&original.skeleton, &bound)
+                    .map_err(|e| BuildError::Motion(format!("cannot mirror a held motion: {e}")))?;
+                Ok(plan.mirror(&original, OffsetPolicy::Keep))
+            }
+            MotionRef::Composed {
+                first,
+                first_parts,
+                second,
+                second_parts,
+                start,
+                ..
+            } => {
+                let a = self.motion(first, profile)?;
+                let b = self.motion(second, profile)?;
+                let bound = self.bind(&a, profile)?;
+                let trim = start.map_or(Trim::Start, |s| Trim::At(s as usize));
+                Ok(compose(&a, *first_parts, &b, *second_parts, &bound, trim).motion)
+            }
+        }
+    }
+
+    fn bind(&self, motion: &Motion, profile: &str) -> Result<crate::motion::Profile, BuildError> {
+        let spec = self
+            .specs
+            .iter()
+            .find(|s| s.name == profile)
+            .ok_or_else(|| BuildError::Motion(format!("no skeleton profile `{profile}`")))?;
+        spec.bind(&motion.skeleton)
+            .map_err(|e| BuildError::Motion(format!("profile `{profile}`: {e}")))
+    }
+
+    fn stored(&self, at: &MotionRef) -> Result<Motion, BuildError> {
+        let MotionRef::Stored {
+            stage,
+            fingerprint,
+            index,
+            ..
+        } = at
+        else {
+            return Err(missing(at, "not a stored motion"));
+        };
+        let id = format!("{stage}/{fingerprint}");
         let found = self
             .recent
             .lock()
@@ -69,7 +166,7 @@ impl MotionSource {
         let entry = match found {
             Some(m) => m,
             None => {
-                let motions = Arc::new(self.read(at)?);
+                let motions = Arc::new(self.read(at, stage, fingerprint)?);
                 if let Ok(mut recent) = self.recent.lock() {
                     if recent.len() >= RECENT {
                         recent.pop_front();
@@ -80,7 +177,7 @@ impl MotionSource {
             }
         };
         entry
-            .get(at.index as usize)
+            .get(*index as usize)
             .cloned()
             .ok_or_else(|| missing(at, "the entry has fewer clips"))
     }
@@ -90,7 +187,7 @@ impl MotionSource {
         let at = index.get(&key(clip)).ok_or_else(|| {
             BuildError::Motion(format!("no motion recorded for clip `{}`", clip.clip_id))
         })?;
-        self.motion(at)
+        self.motion(at, &clip.profile)
     }
 
     /// `clip` with its frames read back.
@@ -100,20 +197,29 @@ impl MotionSource {
         Ok(full)
     }
 
-    fn read(&self, at: &MotionRef) -> Result<Vec<Motion>, BuildError> {
-        let motions = match at.stage.as_str() {
-            SEGMENT_CHUNKS | MIRROR_CHUNKS | SYNTHETIC_CHUNKS => self
-                .workspace
-                .load::<Vec<Motion>>(&at.stage, &at.fingerprint),
+    fn read(
+        &self,
+        at: &MotionRef,
+        stage: &str,
+        fingerprint: &str,
+    ) -> Result<Vec<Motion>, BuildError> {
+        let packed = match stage {
+            SEGMENT_CHUNKS => self.workspace.load::<Vec<PackedMotion>>(stage, fingerprint),
             _ => None,
         };
-        motions.ok_or_else(|| missing(at, "the cache entry is gone or unreadable"))
+        let packed = packed.ok_or_else(|| missing(at, "the cache entry is gone or unreadable"))?;
+        packed
+            .into_iter()
+            .map(PackedMotion::unpack)
+            .collect::<Option<Vec<Motion>>>()
+            .ok_or_else(|| missing(at, "the cache entry is inconsistent"))
     }
 }
 
 fn missing(at: &MotionRef, why: &str) -> BuildError {
+    let (stage, fingerprint) = at.chunks().first().copied().unwrap_or(("?", "?"));
     BuildError::Workspace(WorkspaceError::Io {
-        path: format!(".motionforge/cache/{}/{}.bin", at.stage, at.fingerprint).into(),
+        path: format!(".motionforge/cache/{stage}/{fingerprint}.bin").into(),
         source: std::io::Error::new(
             std::io::ErrorKind::NotFound,
             format!("{why}; run the build again with --force"),
@@ -121,22 +227,109 @@ fn missing(at: &MotionRef, why: &str) -> BuildError {
     })
 }
 
-/// Moves clips' frames to disk as they are made, in chunks of [`CHUNK`] named by their content,
-/// so a stage holds one chunk of frames however many clips it makes.
+/// A joint's local translation over a motion: most joints keep their offset in every frame, so
+/// it is stored once.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+enum Track {
+    /// The same translation in every frame.
+    Fixed([f64; 3]),
+    /// One translation per frame.
+    Moving(Vec<[f64; 3]>),
+}
+
+/// A motion as a cache chunk stores it: the same numbers as [`Motion`] (so outputs made from the
+/// cache are bit-identical to outputs made from the parse), without repeating constant
+/// translations in every frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct PackedMotion {
+    skeleton: Arc<crate::motion::Skeleton>,
+    fps: f64,
+    frames: u32,
+    /// Frame-major local rotations (x, y, z, w).
+    rotations: Vec<[f64; 4]>,
+    /// One track per joint.
+    tracks: Vec<Track>,
+}
+
+impl PackedMotion {
+    fn pack(motion: &Motion) -> PackedMotion {
+        let joints = motion.num_joints();
+        let frames = motion.num_frames();
+        let tracks = (0..joints)
+            .map(|j| {
+                let mut values = (0..frames).map(|f| motion.translations[f * joints + j]);
+                let first = values.next().unwrap_or_default();
+                if values.all(|t| t.to_array() == first.to_array()) {
+                    Track::Fixed(first.to_array())
+                } else {
+                    Track::Moving(
+                        (0..frames)
+                            .map(|f| motion.translations[f * joints + j].to_array())
+                            .collect(),
+                    )
+                }
+            })
+            .collect();
+        PackedMotion {
+            skeleton: Arc::clone(&motion.skeleton),
+            fps: motion.fps,
+            frames: frames as u32,
+            rotations: motion.rotations.iter().map(|q| q.to_array()).collect(),
+            tracks,
+        }
+    }
+
+    /// The motion, or `None` when the arrays do not fit together (a damaged entry).
+    fn unpack(self) -> Option<Motion> {
+        let joints = self.skeleton.joints.len();
+        let frames = self.frames as usize;
+        if self.tracks.len() != joints || self.rotations.len() != frames.checked_mul(joints)? {
+            return None;
+        }
+        let mut translations = vec![glam::DVec3::ZERO; frames * joints];
+        for (j, track) in self.tracks.iter().enumerate() {
+            match track {
+                Track::Fixed(t) => {
+                    for f in 0..frames {
+                        translations[f * joints + j] = glam::DVec3::from_array(*t);
+                    }
+                }
+                Track::Moving(ts) => {
+                    if ts.len() != frames {
+                        return None;
+                    }
+                    for (f, t) in ts.iter().enumerate() {
+                        translations[f * joints + j] = glam::DVec3::from_array(*t);
+                    }
+                }
+            }
+        }
+        Some(Motion {
+            skeleton: self.skeleton,
+            fps: self.fps,
+            rotations: self
+                .rotations
+                .into_iter()
+                .map(glam::DQuat::from_array)
+                .collect(),
+            translations,
+        })
+    }
+}
+
+/// Moves segmented clips' frames to disk as they are made, in chunks of at most [`CHUNK`] named by
+/// their content, so a stage holds one chunk of frames however many clips it makes.
 pub(super) struct MotionSpill<'w> {
     workspace: &'w Workspace,
-    /// Stage-cache folder of the chunks.
-    stage: &'static str,
-    pending: Vec<Motion>,
+    pending: Vec<PackedMotion>,
     refs: Vec<MotionRef>,
 }
 
 impl<'w> MotionSpill<'w> {
-    /// Spills into the `stage` folder of `workspace`'s cache.
-    pub(super) fn new(workspace: &'w Workspace, stage: &'static str) -> Self {
+    /// Spills into the `segment-motions` folder of `workspace`'s cache.
+    pub(super) fn new(workspace: &'w Workspace) -> Self {
         MotionSpill {
             workspace,
-            stage,
             pending: Vec::new(),
             refs: Vec::new(),
         }
@@ -144,20 +337,15 @@ impl<'w> MotionSpill<'w> {
 
     /// Takes `clip`'s frames; they are stored with the chunk.
     pub(super) fn push(&mut self, clip: &mut Clip) -> Result<(), BuildError> {
-        let held = Motion {
-            skeleton: Arc::clone(&clip.motion.skeleton),
-            fps: clip.motion.fps,
-            rotations: Vec::new(),
-            translations: Vec::new(),
-        };
+        let held = clip.motion.without_frames();
         let motion = std::mem::replace(&mut clip.motion, held);
-        self.refs.push(MotionRef {
-            stage: self.stage.to_string(),
+        self.refs.push(MotionRef::Stored {
+            stage: SEGMENT_CHUNKS.to_string(),
             fingerprint: String::new(),
             index: self.pending.len() as u32,
             frames: motion.num_frames() as u32,
         });
-        self.pending.push(motion);
+        self.pending.push(PackedMotion::pack(&motion));
         if self.pending.len() == CHUNK {
             self.flush()?;
         }
@@ -169,15 +357,16 @@ impl<'w> MotionSpill<'w> {
             return Ok(());
         }
         let bytes = postcard::to_stdvec(&self.pending).map_err(|e| WorkspaceError::Encode {
-            what: format!("{} chunk", self.stage),
+            what: format!("{SEGMENT_CHUNKS} chunk"),
             message: e.to_string(),
         })?;
-        let fingerprint = sha256_hex(&bytes);
-        self.workspace
-            .store_bytes(self.stage, &fingerprint, &bytes)?;
+        let name = sha256_hex(&bytes);
+        self.workspace.store_bytes(SEGMENT_CHUNKS, &name, &bytes)?;
         let start = self.refs.len() - self.pending.len();
         for r in &mut self.refs[start..] {
-            r.fingerprint.clone_from(&fingerprint);
+            if let MotionRef::Stored { fingerprint, .. } = r {
+                fingerprint.clone_from(&name);
+            }
         }
         self.pending.clear();
         Ok(())

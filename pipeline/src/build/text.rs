@@ -123,7 +123,7 @@ pub(super) fn run(
             let mut capture_agreement = (0.0, 0usize);
             for (clip, at) in item.clips.iter().zip(&item.refs) {
                 let mut full = clip.clone();
-                full.motion = motions.motion(at)?;
+                full.motion = motions.motion(at, &clip.profile)?;
                 let mut part = LabelReport::default();
                 let one = std::slice::from_mut(&mut full);
                 label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);

@@ -229,5 +229,9 @@ impl Workspace {
                 let _ = fs::remove_file(&path);
             }
         }
+        if keep.is_empty() {
+            // A stage with nothing to keep leaves no folder (only removed when empty).
+            let _ = fs::remove_dir(&dir);
+        }
     }
 }

@@ -18,7 +18,7 @@ use crate::quality::{Plausibility, plausibility};
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 pub use crate::config::SyntheticConfig;
 
@@ -171,11 +171,28 @@ pub fn sample<'c>(
     )
 }
 
+/// How a synthetic clip's frames were made, enough to make them again: the build keeps this
+/// instead of the frames.
+#[derive(Debug, Clone, Copy)]
+pub struct Recipe<'c> {
+    /// The first source clip.
+    pub first: &'c Clip,
+    /// The parts it does.
+    pub first_parts: crate::motion::compose::PartMask,
+    /// The second source clip.
+    pub second: &'c Clip,
+    /// The parts it does.
+    pub second_parts: crate::motion::compose::PartMask,
+    /// Where the composite starts in the longer motion.
+    pub trim: Trim,
+}
+
 /// Runs the stage: plausibility metrics for every clip, then the sampled pairs composed, checked
 /// and kept or dropped by reason. `veto` may refuse a pair before composition (the LLM check),
 /// naming the reason; `profile_of` binds a clip's skeleton profile; `motion_of` gives a clip's
 /// frames (the clips may be held without them, one motion is read at a time); `keep` sees each
-/// composed clip before it joins the output (the build moves its frames to disk there).
+/// composed clip, with how it was made, before it joins the output (the build drops its frames
+/// there and keeps the recipe).
 #[allow(clippy::too_many_arguments)]
 pub fn run<E, K: Ord>(
     clips: &[&Clip],
@@ -186,7 +203,7 @@ pub fn run<E, K: Ord>(
     motion_of: impl Fn(&Clip) -> Result<Motion, E>,
     read_key: impl Fn(&Clip) -> K,
     veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
-    mut keep: impl FnMut(&mut Clip) -> Result<(), E>,
+    mut keep: impl FnMut(&mut Clip, Recipe<'_>) -> Result<(), E>,
 ) -> Result<ComposeOutput, E> {
     let mut out = ComposeOutput::default();
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
@@ -286,7 +303,14 @@ pub fn run<E, K: Ord>(
             plausibility: Some(metrics),
             motion: composite.motion,
         };
-        keep(&mut clip)?;
+        let recipe = Recipe {
+            first: a,
+            first_parts: mask(pa),
+            second: b,
+            second_parts: mask(pb),
+            trim,
+        };
+        keep(&mut clip, recipe)?;
         out.clips.push(clip);
         out.report.composed += 1;
     }

@@ -11,7 +11,7 @@ use crate::source::CaptureFile;
 /// Stage name.
 pub const NAME: &str = "ingest";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 /// What the stage reads for one capture.
 #[derive(Debug)]
@@ -35,6 +35,48 @@ pub struct IngestOutput {
     pub capture: Option<Capture>,
     /// Why it was refused.
     pub rejects: Vec<Reject>,
+}
+
+/// What the stage keeps for one capture: the capture described without its frames. Parsing the
+/// file again costs less than storing its frames, so when a later stage must run again it re-reads
+/// the file, whose content the fingerprint pins.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct IngestRecord {
+    /// The capture's description, unless it was refused.
+    pub capture: Option<CaptureHeader>,
+    /// Why it was refused.
+    pub rejects: Vec<Reject>,
+}
+
+/// A read capture without its frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaptureHeader {
+    /// The file and its digest.
+    pub capture: CaptureRef,
+    /// File stem: the key annotations find the capture by.
+    pub stem: String,
+    /// Skeleton profile name.
+    pub profile: String,
+    /// The hierarchy.
+    pub skeleton: std::sync::Arc<crate::motion::Skeleton>,
+    /// Frames at the capture's rate.
+    pub frames: u64,
+}
+
+impl IngestOutput {
+    /// The record the stage cache keeps.
+    pub fn record(&self) -> IngestRecord {
+        IngestRecord {
+            capture: self.capture.as_ref().map(|c| CaptureHeader {
+                capture: c.capture.clone(),
+                stem: c.stem.clone(),
+                profile: c.profile.clone(),
+                skeleton: std::sync::Arc::clone(&c.motion.skeleton),
+                frames: c.motion.num_frames() as u64,
+            }),
+            rejects: self.rejects.clone(),
+        }
+    }
 }
 
 /// The fingerprint of one capture's ingest: everything the output depends on.

@@ -15,7 +15,7 @@ use crate::text::mirror_text;
 /// Stage name.
 pub const NAME: &str = "mirror";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 /// Fingerprint of mirroring one segmented capture.
 pub fn fingerprint(

@@ -21,7 +21,7 @@ use crate::motion::{BodyPart, Motion, Profile};
 /// Stage name.
 pub const NAME: &str = "segment";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 /// What the stage reads for one capture.
 pub struct SegmentInput<'a> {
@@ -57,14 +57,21 @@ pub struct SegmentOutput {
 }
 
 /// Fingerprint of segmenting one capture.
-pub fn fingerprint(ingest: &str, input: &SegmentInput<'_>, types_config: &impl Serialize) -> Stamp {
+pub fn fingerprint(
+    ingest: &str,
+    annotation: &CaptureAnnotation,
+    kind: &str,
+    config: &SegmentConfig,
+    fps: f64,
+    types_config: &impl Serialize,
+) -> Stamp {
     Fingerprint::new(NAME, VERSION)
         .text("ingest output", ingest)
-        .text("annotation format", input.kind)
-        .json("annotations", input.annotation)
-        .json("config sources.segment", input.config)
+        .text("annotation format", kind)
+        .json("annotations", annotation)
+        .json("config sources.segment", config)
         .json("motion types", types_config)
-        .json("config dataset.fps", &input.fps)
+        .json("config dataset.fps", &fps)
         .stamp()
 }
 
