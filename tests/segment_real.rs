@@ -24,9 +24,11 @@ fn capture(path: &Path, profile: &str) -> Capture {
         display: path.file_name().unwrap().to_string_lossy().into_owned(),
     };
     let spec = ProfileSpec::bundled(profile).unwrap();
+    let sha256 = motionforge::base::sha256_hex(&bytes);
     let out = ingest::run(&ingest::CaptureInput {
         file: &file,
         bytes: &bytes,
+        sha256: &sha256,
         source: "test",
         profile: &spec,
         fps_override: None,

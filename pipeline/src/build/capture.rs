@@ -83,9 +83,11 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             return Ok(item);
         }
     };
+    let sha256 = sha256_hex(&bytes);
     let input = ingest::CaptureInput {
         file,
         bytes: &bytes,
+        sha256: &sha256,
         source: &source.name,
         profile: spec,
         fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),

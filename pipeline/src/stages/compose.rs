@@ -171,6 +171,18 @@ pub fn sample<'c>(
     )
 }
 
+/// Pairs composed in parallel before they are kept in order.
+const PAIR_BATCH: usize = 64;
+
+/// A composed pair before it is checked and kept.
+struct Made {
+    /// The pair's generator, after the draw of the offset (the text draw continues it).
+    rng: Rng,
+    trim: Trim,
+    composite: crate::motion::compose::Composite,
+    metrics: Plausibility,
+}
+
 /// How a synthetic clip's frames were made, enough to make them again: the build keeps this
 /// instead of the frames.
 #[derive(Debug, Clone, Copy)]
@@ -194,125 +206,165 @@ pub struct Recipe<'c> {
 /// composed clip, with how it was made, before it joins the output (the build drops its frames
 /// there and keeps the recipe).
 #[allow(clippy::too_many_arguments)]
-pub fn run<E, K: Ord>(
+pub fn run<E: Send, K: Ord + Send>(
     clips: &[&Clip],
     config: &SyntheticConfig,
     seed: u64,
     split_of: impl Fn(&Clip) -> String,
     profile_of: impl Fn(&Clip) -> Option<Profile>,
-    motion_of: impl Fn(&Clip) -> Result<Motion, E>,
+    motion_of: impl Fn(&Clip) -> Result<Motion, E> + Sync,
     read_key: impl Fn(&Clip) -> K,
     veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
     mut keep: impl FnMut(&mut Clip, Recipe<'_>) -> Result<(), E>,
 ) -> Result<ComposeOutput, E> {
+    use rayon::prelude::*;
     let mut out = ComposeOutput::default();
-    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
-    let mut bound = |c: &Clip| -> Option<Profile> {
-        let key = crate::io::parquet::skeleton_id(c);
-        if let Some(p) = profiles.get(&key) {
-            return Some(p.clone());
-        }
-        let p = profile_of(c)?;
-        profiles.insert(key, p.clone());
-        Some(p)
+    // Bound once per skeleton, before the parallel work reads them.
+    let mut profiles: BTreeMap<String, Option<Profile>> = BTreeMap::new();
+    for c in clips {
+        profiles
+            .entry(crate::io::parquet::skeleton_id(c))
+            .or_insert_with(|| profile_of(c));
+    }
+    let bound = |c: &Clip| -> Option<&Profile> {
+        profiles
+            .get(&crate::io::parquet::skeleton_id(c))
+            .and_then(Option::as_ref)
     };
     // Frames are read in the order they are stored (`read_key`), so a clip's neighbours on disk
-    // are read together; the metrics do not depend on the order.
+    // are read together (rayon hands each thread a contiguous run); the metrics do not depend on
+    // the order.
     let mut by_storage: Vec<&Clip> = clips.to_vec();
     by_storage.sort_by_cached_key(|c| read_key(c));
-    for c in by_storage {
-        if let Some(p) = bound(c) {
+    let metrics: Vec<Option<(String, Plausibility)>> = by_storage
+        .par_iter()
+        .map(|c| {
+            let Some(p) = bound(c) else {
+                return Ok(None);
+            };
             let motion = motion_of(c)?;
-            let positions = dataset_positions(&motion, &p);
-            out.real_metrics.insert(
-                c.clip_id.clone(),
-                plausibility(&positions, motion.num_joints(), motion.fps, &p),
-            );
-        }
-    }
+            let positions = dataset_positions(&motion, p);
+            let metrics = plausibility(&positions, motion.num_joints(), motion.fps, p);
+            Ok(Some((c.clip_id.clone(), metrics)))
+        })
+        .collect::<Result<_, E>>()?;
+    out.real_metrics.extend(metrics.into_iter().flatten());
     let (pairs, report) = sample(clips, config, seed, split_of);
     out.report = report;
-    for (a, b) in pairs {
-        if let Some(reason) = veto(a, b) {
-            *out.report.dropped.entry(reason.to_string()).or_insert(0) += 1;
-            continue;
+    // Composed and measured in parallel a batch at a time (memory stays a batch of composites),
+    // then kept in sampling order.
+    for batch in pairs.chunks(PAIR_BATCH) {
+        let vetoes: Vec<Option<&'static str>> = batch.iter().map(|(a, b)| veto(a, b)).collect();
+        let made: Vec<Option<Made>> = batch
+            .par_iter()
+            .zip(&vetoes)
+            .map(|((a, b), vetoed)| {
+                if vetoed.is_some() {
+                    return Ok(None);
+                }
+                let Some(profile) = bound(a) else {
+                    return Ok(None);
+                };
+                let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
+                let (motion_a, motion_b) = (motion_of(a)?, motion_of(b)?);
+                let trim = if config.random_offset {
+                    let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
+                    Trim::At(rng.below(spare + 1))
+                } else {
+                    Trim::Start
+                };
+                let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
+                let composite = compose(&motion_a, mask(pa), &motion_b, mask(pb), profile, trim);
+                let positions = dataset_positions(&composite.motion, profile);
+                let metrics = plausibility(
+                    &positions,
+                    composite.motion.num_joints(),
+                    composite.motion.fps,
+                    profile,
+                );
+                Ok(Some(Made {
+                    rng,
+                    trim,
+                    composite,
+                    metrics,
+                }))
+            })
+            .collect::<Result<_, E>>()?;
+        for ((&(a, b), vetoed), made) in batch.iter().zip(vetoes).zip(made) {
+            if let Some(reason) = vetoed {
+                *out.report.dropped.entry(reason.to_string()).or_insert(0) += 1;
+                continue;
+            }
+            let Some(Made {
+                mut rng,
+                trim,
+                composite,
+                metrics,
+            }) = made
+            else {
+                continue;
+            };
+            let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
+            let failures = metrics.failures(&config.thresholds);
+            // Counted once, under the first check it fails, so composed + dropped = sampled.
+            if let Some(first) = failures.first() {
+                *out.report.dropped.entry(first.to_string()).or_insert(0) += 1;
+                continue;
+            }
+            let variants = compose_variants(&a.text, &b.text);
+            let chosen = variants
+                .get(rng.below(variants.len()))
+                .map(|v| v.text.clone())
+                .unwrap_or_default();
+            let legs_from_a = composite.parts_from_first
+                & crate::motion::compose::part_bit(BodyPart::Global)
+                != 0;
+            let base = if legs_from_a { a } else { b };
+            let mut clip = Clip {
+                clip_id: format!("synthetic/{}+{}", a.clip_id, b.clip_id),
+                kind: SourceKind::Synthetic,
+                capture: base.capture.clone(),
+                frame_range: base.frame_range,
+                mirrored: false,
+                split: a.split.clone(),
+                action: format!("{} + {}", a.action, b.action),
+                text: chosen,
+                texts: variants.into_iter().map(|v| v.text).collect(),
+                labels: a.labels.iter().chain(&b.labels).cloned().collect(),
+                annotation: "synthetic".into(),
+                annotation_origin: format!("{} + {}", a.annotation_origin, b.annotation_origin),
+                attributes: BTreeMap::from([
+                    ("start_a".to_string(), composite.starts[0].to_string()),
+                    ("start_b".to_string(), composite.starts[1].to_string()),
+                ]),
+                profile: a.profile.clone(),
+                motion_type: None,
+                hand: None,
+                object: None,
+                goal_pelvis: None,
+                goal_hand: None,
+                parts: Some(pa | pb),
+                label_source: Some("composed".into()),
+                paraphrases: Vec::new(),
+                composed_from: vec![a.clip_id.clone(), b.clip_id.clone()],
+                composed_parts: vec![
+                    part_set(composite.parts_from_first),
+                    part_set(composite.parts_from_second),
+                ],
+                plausibility: Some(metrics),
+                motion: composite.motion,
+            };
+            let recipe = Recipe {
+                first: a,
+                first_parts: mask(pa),
+                second: b,
+                second_parts: mask(pb),
+                trim,
+            };
+            keep(&mut clip, recipe)?;
+            out.clips.push(clip);
+            out.report.composed += 1;
         }
-        let Some(profile) = bound(a) else { continue };
-        let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
-        let (motion_a, motion_b) = (motion_of(a)?, motion_of(b)?);
-        let trim = if config.random_offset {
-            let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
-            Trim::At(rng.below(spare + 1))
-        } else {
-            Trim::Start
-        };
-        let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
-        let composite = compose(&motion_a, mask(pa), &motion_b, mask(pb), &profile, trim);
-        let positions = dataset_positions(&composite.motion, &profile);
-        let metrics = plausibility(
-            &positions,
-            composite.motion.num_joints(),
-            composite.motion.fps,
-            &profile,
-        );
-        let failures = metrics.failures(&config.thresholds);
-        // Counted once, under the first check it fails, so composed + dropped = sampled.
-        if let Some(first) = failures.first() {
-            *out.report.dropped.entry(first.to_string()).or_insert(0) += 1;
-            continue;
-        }
-        let variants = compose_variants(&a.text, &b.text);
-        let chosen = variants
-            .get(rng.below(variants.len()))
-            .map(|v| v.text.clone())
-            .unwrap_or_default();
-        let legs_from_a =
-            composite.parts_from_first & crate::motion::compose::part_bit(BodyPart::Global) != 0;
-        let base = if legs_from_a { a } else { b };
-        let mut clip = Clip {
-            clip_id: format!("synthetic/{}+{}", a.clip_id, b.clip_id),
-            kind: SourceKind::Synthetic,
-            capture: base.capture.clone(),
-            frame_range: base.frame_range,
-            mirrored: false,
-            split: a.split.clone(),
-            action: format!("{} + {}", a.action, b.action),
-            text: chosen,
-            texts: variants.into_iter().map(|v| v.text).collect(),
-            labels: a.labels.iter().chain(&b.labels).cloned().collect(),
-            annotation: "synthetic".into(),
-            annotation_origin: format!("{} + {}", a.annotation_origin, b.annotation_origin),
-            attributes: BTreeMap::from([
-                ("start_a".to_string(), composite.starts[0].to_string()),
-                ("start_b".to_string(), composite.starts[1].to_string()),
-            ]),
-            profile: a.profile.clone(),
-            motion_type: None,
-            hand: None,
-            object: None,
-            goal_pelvis: None,
-            goal_hand: None,
-            parts: Some(pa | pb),
-            label_source: Some("composed".into()),
-            paraphrases: Vec::new(),
-            composed_from: vec![a.clip_id.clone(), b.clip_id.clone()],
-            composed_parts: vec![
-                part_set(composite.parts_from_first),
-                part_set(composite.parts_from_second),
-            ],
-            plausibility: Some(metrics),
-            motion: composite.motion,
-        };
-        let recipe = Recipe {
-            first: a,
-            first_parts: mask(pa),
-            second: b,
-            second_parts: mask(pb),
-            trim,
-        };
-        keep(&mut clip, recipe)?;
-        out.clips.push(clip);
-        out.report.composed += 1;
     }
     Ok(out)
 }

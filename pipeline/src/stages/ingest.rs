@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::base::{Fingerprint, Reject, RejectReason, Stamp, sha256_hex};
+use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
 use crate::clip::{Capture, CaptureRef};
 use crate::motion::bvh::FPS_RANGE;
 use crate::motion::{ProfileSpec, read_bvh};
@@ -20,6 +20,9 @@ pub struct CaptureInput<'a> {
     pub file: &'a CaptureFile,
     /// Its bytes.
     pub bytes: &'a [u8],
+    /// SHA-256 of `bytes` (hex), computed once by the caller: hashing is a visible share of a
+    /// build's time.
+    pub sha256: &'a str,
     /// Source name.
     pub source: &'a str,
     /// Its source's profile.
@@ -84,7 +87,7 @@ pub fn fingerprint(input: &CaptureInput<'_>) -> Stamp {
     Fingerprint::new(NAME, VERSION)
         .text("source name", input.source)
         .text("file path", &input.file.display)
-        .text("file content", &sha256_hex(input.bytes))
+        .text("file content", input.sha256)
         .json("skeleton profile", input.profile)
         .json("fps override", &input.fps_override)
         .stamp()
@@ -187,7 +190,7 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
             capture: CaptureRef {
                 source: input.source.to_string(),
                 path: file.display.clone(),
-                sha256: sha256_hex(input.bytes),
+                sha256: input.sha256.to_string(),
                 fps,
             },
             stem: file.stem(),
