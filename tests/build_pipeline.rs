@@ -451,3 +451,51 @@ fn a_changed_annotation_resegments_from_the_ingest_record_and_matches_a_fresh_bu
         "the incremental table differs from a fresh build's"
     );
 }
+
+/// Sets `path`'s modification time `ago` in the past.
+fn age(path: &Path, ago: std::time::Duration) {
+    let file = fs::OpenOptions::new().append(true).open(path).unwrap();
+    file.set_modified(std::time::SystemTime::now() - ago)
+        .unwrap();
+}
+
+#[test]
+fn capture_digests_are_remembered_by_stat_data_and_a_modified_capture_is_still_noticed() {
+    let s = Scratch::new(&THREE);
+    let hour = std::time::Duration::from_secs(3600);
+    for name in THREE {
+        age(&s.captures().join(format!("{name}.bvh")), hour);
+    }
+    let first = s.build();
+    let digests = s.out().join(".motionforge/file-digests.json");
+    let remembered: serde_json::Value =
+        serde_json::from_slice(&fs::read(&digests).unwrap()).unwrap();
+    assert_eq!(remembered.as_object().map(|o| o.len()), Some(3));
+    assert!(s.build().nothing_ran());
+
+    // New content with a new modification time: read, hashed, ingested again.
+    let path = s.captures().join("dataset-1_walk_normal_001.bvh");
+    let text = fs::read_to_string(&path).unwrap();
+    fs::write(
+        &path,
+        text.replacen("Frame Time:\t0.0333333", "Frame Time:\t0.0333334", 1),
+    )
+    .unwrap();
+    age(&path, hour / 2);
+    let second = s.build();
+    assert_eq!((ran(&second, "ingest"), ran(&second, "write")), (1, 1));
+    assert_ne!(
+        first.table_fingerprint, second.table_fingerprint,
+        "the edited capture must change the table"
+    );
+
+    // A file modified moments ago is not remembered (its stat data could still change within
+    // the same clock tick), so the next build hashes it again.
+    fs::write(&path, &text).unwrap();
+    let third = s.build();
+    assert_eq!(ran(&third, "ingest"), 1);
+    assert_eq!(third.table_fingerprint, first.table_fingerprint);
+    let remembered: serde_json::Value =
+        serde_json::from_slice(&fs::read(&digests).unwrap()).unwrap();
+    assert_eq!(remembered.as_object().map(|o| o.len()), Some(2));
+}

@@ -47,6 +47,8 @@ pub(super) struct Shared<'a> {
     pub(super) types: TypeMap,
     /// Digest of the taxonomy's content and the mapping config: a taxonomy edit re-runs segments.
     pub(super) types_digest: String,
+    /// Digests of capture files, known from their stat data.
+    pub(super) digests: super::digests::FileDigests,
 }
 
 impl Shared<'_> {
@@ -69,41 +71,81 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         key: file.display.clone(),
         ..Item::default()
     };
-    let bytes = match std::fs::read(&file.path) {
-        Ok(b) => b,
+    let cannot_read = |e: std::io::Error| {
+        ingest::reject(
+            ingest::NAME,
+            file,
+            RejectReason::Io,
+            format!("cannot read: {e}"),
+            None,
+            None,
+        )
+    };
+    let meta = match std::fs::metadata(&file.path) {
+        Ok(m) => m,
         Err(e) => {
-            item.rejects.push(ingest::reject(
-                ingest::NAME,
-                file,
-                RejectReason::Io,
-                format!("cannot read: {e}"),
-                None,
-                None,
-            ));
+            item.rejects.push(cannot_read(e));
             return Ok(item);
         }
     };
-    let sha256 = sha256_hex(&bytes);
-    let input = ingest::CaptureInput {
+    // The bytes are read only when the digest is not known or a stage must run.
+    let path_key = file.path.to_string_lossy();
+    let mut bytes: Option<Vec<u8>> = None;
+    let sha256 = match shared.digests.known(&path_key, &meta) {
+        Some(sha) => sha,
+        None => match std::fs::read(&file.path) {
+            Ok(b) => {
+                let sha = sha256_hex(&b);
+                bytes = Some(b);
+                sha
+            }
+            Err(e) => {
+                item.rejects.push(cannot_read(e));
+                return Ok(item);
+            }
+        },
+    };
+    shared.digests.record(&path_key, &meta, &sha256);
+    let fps_override = source::fps_override(source, &shared.fps_tables[file.source], file);
+    // Reads (when not read yet) and parses the capture: at most once per build, here on an
+    // ingest miss or in the segment stage on a capture whose ingest record is cached.
+    let parse = |bytes: &mut Option<Vec<u8>>| -> Result<ingest::IngestOutput, BuildError> {
+        if bytes.is_none() {
+            let read = std::fs::read(&file.path).map_err(super::workspace::io_err(&file.path))?;
+            if sha256_hex(&read) != sha256 {
+                return Err(BuildError::Motion(format!(
+                    "{}: the file changed during the build; run the build again",
+                    file.display
+                )));
+            }
+            *bytes = Some(read);
+        }
+        Ok(ingest::run(&ingest::CaptureInput {
+            file,
+            bytes: bytes.as_deref().unwrap_or_default(),
+            sha256: &sha256,
+            source: &source.name,
+            profile: spec,
+            fps_override,
+        }))
+    };
+    let ingest_fp = ingest::fingerprint(&ingest::CaptureInput {
         file,
-        bytes: &bytes,
+        bytes: &[],
         sha256: &sha256,
         source: &source.name,
         profile: spec,
-        fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
-    };
-    let ingest_fp = ingest::fingerprint(&input);
-    // Parsed at most once per build: here on an ingest miss, or below if the segment stage must
-    // run again on a capture whose ingest record is cached.
+        fps_override,
+    });
     let mut parsed: Option<ingest::IngestOutput> = None;
     let Some((ingested, ran)) =
         shared
             .workspace
-            .item(ingest::NAME, &item.key, &ingest_fp, || {
-                let out = ingest::run(&input);
+            .try_item(ingest::NAME, &item.key, &ingest_fp, || {
+                let out = parse(&mut bytes)?;
                 let record = out.record();
                 parsed = Some(out);
-                record
+                Ok::<_, BuildError>(record)
             })?
     else {
         item.pending = Some(ingest::NAME);
@@ -192,7 +234,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         .try_item(segment::NAME, &item.key, &seg_fp, || {
             let capture = match parsed.take() {
                 Some(out) => out.capture,
-                None => ingest::run(&input).capture,
+                None => parse(&mut bytes)?.capture,
             };
             let Some(capture) = capture else {
                 return Err(BuildError::Motion(format!(

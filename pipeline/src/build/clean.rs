@@ -15,6 +15,8 @@ use super::{
 
 /// The stage cache, inside the dataset folder.
 const CACHE: &str = ".motionforge/cache";
+/// Remembered digests of capture files, inside the dataset folder.
+const DIGESTS: &str = ".motionforge/file-digests.json";
 /// What the write stage last wrote, inside the dataset folder.
 const STATE: &str = ".motionforge/state.json";
 /// The statistics report folder.
@@ -75,7 +77,7 @@ pub fn clean(
     }
     let _lock = WorkspaceLock::acquire(dataset_dir, wait)?;
     let names: Vec<&str> = if cache_only {
-        vec![CACHE]
+        vec![CACHE, DIGESTS]
     } else {
         vec![
             DATA_DIR,
@@ -88,6 +90,7 @@ pub fn clean(
             REPORT_FILE,
             PLANS_FILE,
             CACHE,
+            DIGESTS,
             STATE,
         ]
     };

@@ -3,6 +3,7 @@
 
 mod capture;
 pub mod clean;
+mod digests;
 mod motions;
 mod output;
 mod plan;
@@ -305,6 +306,7 @@ fn run_stages<'a>(
         .map(|s| source::load_fps_table(config, s))
         .collect::<Result<_, _>>()?;
     let (types, types_digest) = load_types(config)?;
+    let digests = digests::FileDigests::load(&workspace);
     let shared = Shared {
         config,
         workspace,
@@ -313,6 +315,7 @@ fn run_stages<'a>(
         fps_tables,
         types,
         types_digest,
+        digests,
     };
     let motions = MotionSource::new(&shared.workspace, &shared.specs);
 
@@ -325,6 +328,7 @@ fn run_stages<'a>(
             item
         })
         .collect::<Result<_, _>>()?;
+    shared.digests.save(&shared.workspace)?;
     // In probe mode, a capture whose ingest or segment output is not cached stops there: what
     // follows depends on outputs that do not exist yet.
     let upstream_pending = items.iter().any(|i| i.pending.is_some());
