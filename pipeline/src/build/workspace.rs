@@ -9,7 +9,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub(crate) use crate::base::io_err;
-use crate::base::{Stamp, WorkspaceError, write_atomic};
+use crate::base::{Stamp, WorkspaceError};
 
 /// The file recording, per stage and item, the fingerprint of the last run.
 pub const LEDGER_FILE: &str = "ledger.json";
@@ -179,7 +179,7 @@ impl Workspace {
     /// item is recomputed rather than trusted.
     pub fn load<T: DeserializeOwned>(&self, stage: &str, fingerprint: &str) -> Option<T> {
         let bytes = fs::read(self.entry(stage, fingerprint)).ok()?;
-        postcard::from_bytes(&bytes).ok()
+        postcard::from_bytes(entry_body(&bytes)?).ok()
     }
 
     /// Stores a stage output atomically.
@@ -193,7 +193,7 @@ impl Workspace {
             what: format!("{stage} output"),
             message: e.to_string(),
         })?;
-        write_atomic(&self.entry(stage, fingerprint), &bytes)
+        write_entry(&self.entry(stage, fingerprint), &bytes)
     }
 
     /// Stores already-encoded bytes under `fingerprint`, unless an entry is there.
@@ -207,7 +207,7 @@ impl Workspace {
         if path.is_file() {
             return Ok(());
         }
-        write_atomic(&path, bytes)
+        write_entry(&path, bytes)
     }
 
     /// Removes cache entries of `stage` not in `keep` (old fingerprints).
@@ -233,5 +233,58 @@ impl Workspace {
             // A stage with nothing to keep leaves no folder (only removed when empty).
             let _ = fs::remove_dir(&dir);
         }
+    }
+}
+
+/// Ends every cache entry: the body's length, then this mark. Entries are written without fsync
+/// (they can be made again), so after a crash an entry may be cut short or empty: the footer tells.
+const ENTRY_MARK: &[u8; 8] = b"mfentry1";
+
+fn write_entry(path: &Path, body: &[u8]) -> Result<(), WorkspaceError> {
+    crate::base::write_replaceable_with(path, |file| {
+        use std::io::Write;
+        file.write_all(body)?;
+        file.write_all(&(body.len() as u64).to_le_bytes())?;
+        file.write_all(ENTRY_MARK)
+    })
+}
+
+/// The body of a cache entry whose footer is whole and agrees with its length.
+fn entry_body(bytes: &[u8]) -> Option<&[u8]> {
+    let body_len = bytes.len().checked_sub(16)?;
+    let (body, footer) = bytes.split_at(body_len);
+    let (len, mark) = footer.split_at(8);
+    let len = u64::from_le_bytes(len.try_into().ok()?);
+    (mark == ENTRY_MARK && len == body_len as u64).then_some(body)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entries_cut_short_or_emptied_read_as_absent() {
+        let dir = tempfile::tempdir().unwrap();
+        let workspace = Workspace::new(dir.path());
+        workspace.store("stage", "fp", &vec![1u32, 2, 3]).unwrap();
+        assert_eq!(
+            workspace.load::<Vec<u32>>("stage", "fp"),
+            Some(vec![1, 2, 3])
+        );
+        let path = workspace.entry("stage", "fp");
+        let whole = fs::read(&path).unwrap();
+        for cut in [0, 1, whole.len() / 2, whole.len() - 1] {
+            fs::write(&path, &whole[..cut]).unwrap();
+            assert_eq!(
+                workspace.load::<Vec<u32>>("stage", "fp"),
+                None,
+                "cut at {cut}"
+            );
+        }
+        let mut zeroed = whole.clone();
+        let n = zeroed.len();
+        zeroed[n - 8..].fill(0);
+        fs::write(&path, &zeroed).unwrap();
+        assert_eq!(workspace.load::<Vec<u32>>("stage", "fp"), None);
     }
 }
