@@ -109,16 +109,30 @@ pub fn sample<'c>(
         .collect();
     candidates.sort_by(|a, b| a.clip_id.cmp(&b.clip_id));
     report.candidates = candidates.len();
-    let group = |c: &Clip| (c.profile.clone(), split_of(c));
+    // Pairs never cross a profile or split: each candidate is only checked against the others
+    // of its group (members in ascending order, so every partner list is ascending as well).
+    let mut group_ids: BTreeMap<(String, String), usize> = BTreeMap::new();
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    let mut group_of: Vec<usize> = Vec::with_capacity(candidates.len());
+    for (i, c) in candidates.iter().enumerate() {
+        let next = group_ids.len();
+        let g = *group_ids
+            .entry((c.profile.clone(), split_of(c)))
+            .or_insert(next);
+        if g == members.len() {
+            members.push(Vec::new());
+        }
+        members[g].push(i);
+        group_of.push(g);
+    }
     let compatible = |a: &Clip, b: &Clip| {
-        group(a) == group(b)
-            && a.capture.path != b.capture.path
+        a.capture.path != b.capture.path
             && a.parts.zip(b.parts).is_some_and(|(x, y)| x.is_disjoint(y))
     };
     let n = candidates.len();
     let mut partners: Vec<Vec<usize>> = vec![Vec::new(); n];
     for i in 0..n {
-        for j in i + 1..n {
+        for &j in members[group_of[i]].iter().filter(|&&j| j > i) {
             if compatible(candidates[i], candidates[j]) {
                 partners[i].push(j);
                 partners[j].push(i);
