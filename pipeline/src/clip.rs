@@ -99,7 +99,7 @@ pub struct Clip {
     pub parts: Option<PartSet>,
     /// Which labeller produced `parts` (`embedded:lexicon`, `embedded:velocity`, `llm:<model>`,
     /// `import:<file>`).
-    pub label_source: Option<String>,
+    pub label_source: Option<crate::parts::LabelSources>,
     /// Alternative descriptions of `text` (LLM, side words checked).
     pub paraphrases: Vec<String>,
     /// For a synthetic pair: the two source clips.

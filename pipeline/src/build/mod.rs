@@ -801,7 +801,10 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     }
     let mut label_sources = BTreeMap::new();
     for clip in &clips {
-        let key = clip.label_source.clone().unwrap_or_else(|| "(none)".into());
+        let key = clip
+            .label_source
+            .as_ref()
+            .map_or_else(|| "(none)".into(), ToString::to_string);
         *label_sources.entry(key).or_insert(0) += 1;
     }
     let mut sources: Vec<crate::io::manifest::Source> = clips

@@ -54,7 +54,7 @@ fn text_reject(stage: &str, text: &str, reason: RejectReason, message: String) -
 /// Per-clip labels as cached.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 struct ClipLabels {
-    by_clip: BTreeMap<String, (Option<PartSet>, Option<String>)>,
+    by_clip: BTreeMap<String, (Option<PartSet>, Option<crate::parts::LabelSources>)>,
     report: LabelReport,
 }
 

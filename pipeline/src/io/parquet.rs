@@ -401,7 +401,7 @@ pub fn clips_to_batch(
             Arc::new(StringArray::from(
                 clips
                     .iter()
-                    .map(|c| c.label_source.as_deref())
+                    .map(|c| c.label_source.as_ref().map(ToString::to_string))
                     .collect::<Vec<_>>(),
             )),
         ),

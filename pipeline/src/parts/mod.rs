@@ -35,6 +35,70 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::motion::BodyPart;
 
+/// Which labeller gave a clip its parts. Written in tables and reports as `embedded:lexicon`,
+/// `embedded:velocity`, `llm:<model>`, `import:<file>` or `composed`; ordered as those names sort,
+/// so a pair's joined sources read the same as when they were strings.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub enum LabelSource {
+    /// A synthetic pair: the union of its sources' parts.
+    Composed,
+    /// The embedded labeller's lexicon, from the text.
+    Lexicon,
+    /// The motion's part velocities (the text had no answer).
+    Velocity,
+    /// Answers imported from a file (`motionforge labels import`).
+    Import {
+        /// The file's name.
+        file: String,
+    },
+    /// An LLM answer.
+    Llm {
+        /// The model that answered.
+        model: String,
+    },
+}
+
+impl fmt::Display for LabelSource {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LabelSource::Lexicon => f.write_str("embedded:lexicon"),
+            LabelSource::Velocity => f.write_str("embedded:velocity"),
+            LabelSource::Llm { model } => write!(f, "llm:{model}"),
+            LabelSource::Import { file } => write!(f, "import:{file}"),
+            LabelSource::Composed => f.write_str("composed"),
+        }
+    }
+}
+
+/// The labellers of a clip's parts: one, or for a real pair of two texts, each text's (written
+/// joined by `+`).
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct LabelSources(pub std::collections::BTreeSet<LabelSource>);
+
+impl LabelSources {
+    /// A single source.
+    pub fn one(source: LabelSource) -> LabelSources {
+        LabelSources(std::collections::BTreeSet::from([source]))
+    }
+
+    /// True when `source` is the only one.
+    pub fn is_only(&self, source: &LabelSource) -> bool {
+        self.0.len() == 1 && self.0.contains(source)
+    }
+}
+
+impl fmt::Display for LabelSources {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, s) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str("+")?;
+            }
+            write!(f, "{s}")?;
+        }
+        Ok(())
+    }
+}
+
 /// A set of SINC's six body parts, stored as a bitmask (bit `i` is `BodyPart::ALL[i]`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, PartialOrd, Ord)]
 pub struct PartSet(u8);

@@ -358,7 +358,9 @@ pub fn run<E: Send, K: Ord + Send>(
                 goal_pelvis: None,
                 goal_hand: None,
                 parts: Some(pa | pb),
-                label_source: Some("composed".into()),
+                label_source: Some(crate::parts::LabelSources::one(
+                    crate::parts::LabelSource::Composed,
+                )),
                 paraphrases: Vec::new(),
                 composed_from: vec![a.clip_id.clone(), b.clip_id.clone()],
                 composed_parts: vec![

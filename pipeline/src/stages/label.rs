@@ -14,10 +14,10 @@ use crate::llm::cache::ResponseCache;
 use crate::llm::client::{LlmClient, LlmConfig};
 use crate::llm::prompt::{PromptError, Prompts};
 use crate::motion::Profile;
-use crate::parts::PartSet;
 use crate::parts::answer::parse_part_answer;
 use crate::parts::lexicon::label_text;
 use crate::parts::velocity::motion_parts;
+use crate::parts::{LabelSource, LabelSources, PartSet};
 
 /// Stage name.
 pub const NAME: &str = "label";
@@ -36,8 +36,8 @@ pub struct TextParts {
     /// Parts; `None` when the labeller had no answer (embedded: text unknown, the clip's motion
     /// decides; LLM: an answer with no part at all).
     pub parts: Option<PartSet>,
-    /// `embedded:lexicon`, `llm:<model>`, `import:<file>`, ...
-    pub source: String,
+    /// The labeller that answered.
+    pub source: LabelSource,
     /// Why the answer needs a look (off-list words, no part), if it does.
     pub flag: Option<String>,
 }
@@ -111,7 +111,7 @@ fn embedded(text: &str) -> TextParts {
     let l = label_text(text);
     TextParts {
         parts: l.known.then_some(l.parts),
-        source: "embedded:lexicon".into(),
+        source: LabelSource::Lexicon,
         flag: None,
     }
 }
@@ -152,7 +152,7 @@ pub fn label_texts(
         .map(|t| input.prompts.part_labels(t, input.config.variant))
         .collect::<Result<_, _>>()?;
     let offline = input.offline || input.config.offline;
-    let mut answers: Vec<Option<(String, String)>> = Vec::with_capacity(texts.len());
+    let mut answers: Vec<Option<(String, LabelSource)>> = Vec::with_capacity(texts.len());
     let mut missing: Vec<(String, Unanswered)> = Vec::new();
     if offline {
         for (t, p) in texts.iter().zip(&prompts) {
@@ -228,12 +228,20 @@ pub fn label_texts(
     Ok(out)
 }
 
-fn source_name(cache_source: &str, cfg: &LlmConfig) -> String {
-    match cache_source.strip_prefix("import:") {
-        Some(file) => format!("import:{file}"),
-        None => format!("llm:{}", cfg.model),
+/// The labeller of a response-cache entry, from the source the cache recorded with it.
+fn source_name(cache_source: &str, cfg: &LlmConfig) -> LabelSource {
+    match cache_source.strip_prefix(IMPORT_PREFIX) {
+        Some(file) => LabelSource::Import {
+            file: file.to_string(),
+        },
+        None => LabelSource::Llm {
+            model: cfg.model.clone(),
+        },
     }
 }
+
+/// How the response cache records answers imported from a file: `import:<file name>`.
+const IMPORT_PREFIX: &str = "import:";
 
 fn fallback_all(
     texts: &[String],
@@ -273,12 +281,14 @@ pub fn apply_labels(
                 .flatten()
                 .filter_map(|l| l.parts)
                 .fold(PartSet::default(), |a, b| a | b);
-            let sources: BTreeSet<&str> =
-                found.iter().flatten().map(|l| l.source.as_str()).collect();
+            let sources: BTreeSet<LabelSource> =
+                found.iter().flatten().map(|l| l.source.clone()).collect();
             clip.parts = Some(parts);
-            clip.label_source = Some(sources.into_iter().collect::<Vec<_>>().join("+"));
+            let sources = LabelSources(sources);
+            let lexicon_only = sources.is_only(&LabelSource::Lexicon);
+            clip.label_source = Some(sources);
             if clip.kind == SourceKind::RealSingle
-                && clip.label_source.as_deref() == Some("embedded:lexicon")
+                && lexicon_only
                 && let Some(p) = profile(clip)
             {
                 agreement.0 +=
@@ -290,12 +300,15 @@ pub fn apply_labels(
         {
             // No answer for the text: the motion itself says which parts move (SINC's baseline).
             clip.parts = Some(motion_parts(&clip.motion, &p));
-            clip.label_source = Some("embedded:velocity".into());
+            clip.label_source = Some(LabelSources::one(LabelSource::Velocity));
         } else {
             clip.parts = None;
             clip.label_source = None;
         }
-        let key = clip.label_source.clone().unwrap_or_else(|| "(none)".into());
+        let key = clip
+            .label_source
+            .as_ref()
+            .map_or_else(|| "(none)".into(), ToString::to_string);
         *report.sources.entry(key).or_insert(0) += 1;
     }
     if agreement.1 > 0 {
@@ -362,7 +375,10 @@ pub fn import_answers(
     let mut report = ImportReport::default();
     let mut batch: Vec<(crate::llm::cache::CacheKey, crate::llm::cache::CacheEntry)> = Vec::new();
     let mut batched: BTreeSet<String> = BTreeSet::new();
-    let source = format!("import:{}", file.rsplit(['/', '\\']).next().unwrap_or(file));
+    let source = format!(
+        "{IMPORT_PREFIX}{}",
+        file.rsplit(['/', '\\']).next().unwrap_or(file)
+    );
     for (text, answers) in map {
         let Some(a) = answers.get(answer) else {
             report.without_answer.push(text);
