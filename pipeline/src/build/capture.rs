@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 
 use super::motions::{MotionRef, MotionSpill};
-use super::{BuildError, Reject, Workspace, WorkspaceError, sha256_hex};
+use super::{BuildError, Reject, Stage, Workspace, WorkspaceError, sha256_hex};
 use crate::annotate::filename::filename_annotation;
 use crate::annotate::taxonomy::TypeMap;
 use crate::base::RejectReason;
@@ -17,12 +17,13 @@ use crate::stages::{ingest, mirror};
 /// What the per-capture stages produced for one capture.
 #[derive(Default)]
 pub(super) struct Item {
-    pub(super) ran: [bool; 3],
     /// In probe mode: the first stage whose output is not cached (nothing after it is known).
-    pub(super) pending: Option<&'static str>,
+    pub(super) pending: Option<Stage>,
     /// The item's key in the ledger: the capture path as found.
     pub(super) key: String,
-    pub(super) fingerprints: Vec<(&'static str, String)>,
+    /// The per-capture stages that reached this capture, in order: each one's fingerprint and
+    /// whether it ran (else it was reused).
+    pub(super) done: Vec<(Stage, String, bool)>,
     /// The capture's original clips (labelled by the text stages before mirroring), without
     /// their frames.
     pub(super) clips: Vec<Clip>,
@@ -35,6 +36,24 @@ pub(super) struct Item {
     pub(super) rejects: Vec<Reject>,
     /// Segmentation counts and notes (its clips moved to `clips`).
     pub(super) segment: SegmentOutput,
+}
+
+impl Item {
+    /// The fingerprint of `stage` for this capture, when the stage reached it.
+    pub(super) fn fingerprint(&self, stage: Stage) -> Option<&str> {
+        self.done
+            .iter()
+            .find(|(s, _, _)| *s == stage)
+            .map(|(_, f, _)| f.as_str())
+    }
+
+    /// Whether `stage` reached this capture, and if so whether it ran.
+    pub(super) fn ran(&self, stage: Stage) -> Option<bool> {
+        self.done
+            .iter()
+            .find(|(s, _, _)| *s == stage)
+            .map(|(_, _, ran)| *ran)
+    }
 }
 
 /// Everything the per-capture stages share.
@@ -148,12 +167,11 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
                 Ok::<_, BuildError>(record)
             })?
     else {
-        item.pending = Some(ingest::NAME);
+        item.pending = Some(Stage::Ingest);
         return Ok(item);
     };
     let ingest_fp = ingest_fp.fingerprint;
-    item.ran[0] = ran;
-    item.fingerprints.push((ingest::NAME, ingest_fp.clone()));
+    item.done.push((Stage::Ingest, ingest_fp.clone(), ran));
     item.rejects.extend(ingested.rejects);
     let Some(header) = ingested.capture else {
         return Ok(item);
@@ -256,14 +274,14 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             Ok::<_, BuildError>((out, spill.finish()?))
         })?
     else {
-        item.pending = Some(segment::NAME);
+        item.pending = Some(Stage::Segment);
         return Ok(item);
     };
-    item.ran[1] = ran;
+
     let mut segmented = segmented;
     item.clips = std::mem::take(&mut segmented.clips);
     item.refs = refs;
-    item.fingerprints.push((segment::NAME, seg_fp.fingerprint));
+    item.done.push((Stage::Segment, seg_fp.fingerprint, ran));
     item.segment = segmented;
     Ok(item)
 }
@@ -301,13 +319,13 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
             (out, refs)
         })?
     else {
-        item.pending = Some(mirror::NAME);
+        item.pending = Some(Stage::Mirror);
         return Ok(());
     };
-    item.ran[2] = ran;
+
     item.mirrored = mirrored.clips;
     item.mirrored_refs = refs;
-    item.fingerprints.push((mirror::NAME, fp.fingerprint));
+    item.done.push((Stage::Mirror, fp.fingerprint, ran));
     item.rejects.extend(mirrored.rejects);
     Ok(())
 }

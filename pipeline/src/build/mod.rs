@@ -356,9 +356,9 @@ fn run_stages<'a>(
             clip.split = splits.split_of(&clip.capture.path, &stem);
         }
     }
-    let mut stages = vec![capture_run(&items, 0, progress)];
+    let mut stages = vec![capture_run(&items, Stage::Ingest, progress)];
     if through >= Stage::Segment {
-        stages.push(capture_run(&items, 1, progress));
+        stages.push(capture_run(&items, Stage::Segment, progress));
     }
     let run_text = through >= Stage::Label && !upstream_pending;
     let text = if run_text {
@@ -391,21 +391,16 @@ fn run_stages<'a>(
             })
             .collect::<Result<Vec<()>, _>>()?;
     }
-    let mirror_pending = items.iter().any(|i| i.pending == Some(mirror::NAME));
+    let mirror_pending = items.iter().any(|i| i.pending == Some(Stage::Mirror));
     let first_pending = items_pending_stage(&items);
 
-    let names = [ingest::NAME, segment::NAME, mirror::NAME];
-    for name in names {
+    for stage in [Stage::Ingest, Stage::Segment, Stage::Mirror] {
         let live: BTreeSet<String> = items
             .iter()
-            .flat_map(|i| {
-                i.fingerprints
-                    .iter()
-                    .filter(|(s, _)| *s == name)
-                    .map(|(_, f)| f.clone())
-            })
+            .filter_map(|i| i.fingerprint(stage))
+            .map(str::to_string)
             .collect();
-        shared.workspace.prune(name, &live);
+        shared.workspace.prune(stage.name(), &live);
     }
 
     // Frame chunks that no held clip points to belong to outputs that are gone.
@@ -421,7 +416,7 @@ fn run_stages<'a>(
     }
 
     if run_mirror {
-        stages.push(capture_run(&items, 2, progress));
+        stages.push(capture_run(&items, Stage::Mirror, progress));
     }
 
     let mut clips: Vec<Clip> = Vec::new();
@@ -535,31 +530,22 @@ fn run_stages<'a>(
     })
 }
 
-/// What per-capture stage `k` (0 ingest, 1 segment, 2 mirror) did over `items`, reported as
-/// finished.
-fn capture_run(items: &[Item], k: usize, progress: &crate::progress::ProgressSink) -> StageRun {
-    let name = [ingest::NAME, segment::NAME, mirror::NAME][k];
-    let covered: Vec<&Item> = items
-        .iter()
-        .filter(|i| i.fingerprints.iter().any(|(s, _)| *s == name))
-        .collect();
+/// What the per-capture `stage` did over `items`, reported as finished.
+fn capture_run(items: &[Item], stage: Stage, progress: &crate::progress::ProgressSink) -> StageRun {
+    let ran: Vec<bool> = items.iter().filter_map(|i| i.ran(stage)).collect();
     let run = StageRun {
-        stage: name.into(),
-        items: covered.len(),
-        ran: covered.iter().filter(|i| i.ran[k]).count(),
-        reused: covered.iter().filter(|i| !i.ran[k]).count(),
+        stage: stage.name().into(),
+        items: ran.len(),
+        ran: ran.iter().filter(|r| **r).count(),
+        reused: ran.iter().filter(|r| !**r).count(),
     };
-    progress.stage_finished(name, run.ran as u64, run.reused as u64);
+    progress.stage_finished(stage.name(), run.ran as u64, run.reused as u64);
     run
 }
 
 /// The first stage a pending (probe-mode) capture stopped at.
 fn items_pending_stage(items: &[Item]) -> Option<Stage> {
-    items
-        .iter()
-        .filter_map(|i| i.pending)
-        .filter_map(|name| Stage::ALL.into_iter().find(|s| s.name() == name))
-        .min()
+    items.iter().filter_map(|i| i.pending).min()
 }
 
 /// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);

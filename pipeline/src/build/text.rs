@@ -101,12 +101,7 @@ pub(super) fn run(
         })?;
     let segment_fps: Vec<&str> = items
         .iter()
-        .flat_map(|i| {
-            i.fingerprints
-                .iter()
-                .filter(|(s, _)| *s == crate::stages::segment::NAME)
-                .map(|(_, f)| f.as_str())
-        })
+        .filter_map(|i| i.fingerprint(super::Stage::Segment))
         .collect();
     let stamp = Fingerprint::new(label::NAME, LABEL_VERSION)
         .json("part labels", &labels)
