@@ -306,7 +306,12 @@ fn run_stages<'a>(
         .map(|s| source::load_fps_table(config, s))
         .collect::<Result<_, _>>()?;
     let (types, types_digest) = load_types(config)?;
-    let digests = digests::FileDigests::load(&workspace);
+    // `--force` trusts nothing remembered: every capture is read and hashed again.
+    let digests = if options.force && !probe {
+        digests::FileDigests::default()
+    } else {
+        digests::FileDigests::load(&workspace)
+    };
     let shared = Shared {
         config,
         workspace,
