@@ -109,6 +109,11 @@ impl MotionSource {
         }
     }
 
+    /// A source over the same cache with its own memory of recent entries, for another thread.
+    pub(super) fn sibling(&self) -> MotionSource {
+        MotionSource::new(&self.workspace, &self.specs)
+    }
+
     /// The motion `at` points to, on a skeleton of profile `profile`.
     pub(super) fn motion(&self, at: &MotionRef, profile: &str) -> Result<Motion, BuildError> {
         match at {

@@ -11,17 +11,81 @@ use super::{
     BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE,
     Reject, SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
 };
+use crate::base::HashingWriter;
 use crate::clip::Clip;
-use crate::io::parquet::write_clips;
+use crate::io::normalization::NormalizationStats;
+use crate::io::parquet::{ROWS_PER_GROUP, Row, ShardWriter, TableError};
 use crate::motion::Profile;
+use rayon::prelude::*;
+use std::time::UNIX_EPOCH;
 
 /// What the last write recorded: its inputs' fingerprint, each shard's content fingerprint, and
-/// the outputs' checksums.
+/// the outputs' checksums with their stat data.
 #[derive(Debug, Default, Serialize, Deserialize)]
 struct State {
     table_fingerprint: String,
     shards: BTreeMap<String, String>,
     outputs: BTreeMap<String, String>,
+    /// Each output's length and modification time (ns) when recorded.
+    #[serde(default)]
+    stamps: BTreeMap<String, (u64, u128)>,
+}
+
+/// Inside the workspace: what the last write recorded.
+const STATE_FILE: &str = "state.json";
+
+/// A file's length and modification time in nanoseconds.
+fn stat_stamp(path: &Path) -> Option<(u64, u128)> {
+    let meta = std::fs::metadata(path).ok()?;
+    let modified = meta.modified().ok()?.duration_since(UNIX_EPOCH).ok()?;
+    Some((meta.len(), modified.as_nanos()))
+}
+
+/// The last write's record, and when it was written (the state file's modification time).
+struct Recorded {
+    state: State,
+    at: Option<u128>,
+}
+
+impl Recorded {
+    fn load(workspace: &Workspace) -> Option<Recorded> {
+        let path = workspace.root().join(STATE_FILE);
+        let state = std::fs::read(&path)
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok())?;
+        Some(Recorded {
+            state,
+            at: stat_stamp(&path).map(|(_, at)| at),
+        })
+    }
+
+    /// Whether the output `name` still holds the bytes recorded. Stat data is trusted as the
+    /// capture digests trust it (`docs/decisions.md`): unchanged length and modification time,
+    /// the file last modified before the record was written (git's rule for racily clean
+    /// files); otherwise the file is read and hashed.
+    fn unchanged(&self, output: &Path, name: &str) -> bool {
+        let Some(sha) = self.state.outputs.get(name) else {
+            return false;
+        };
+        let path = output.join(name);
+        let stamp = stat_stamp(&path);
+        if let (Some(now), Some(then), Some(at)) = (stamp, self.state.stamps.get(name), self.at)
+            && now == *then
+            && now.1 < at
+        {
+            return true;
+        }
+        std::fs::read(&path).is_ok_and(|b| &sha256_hex(&b) == sha)
+    }
+
+    fn outputs_match(&self, output: &Path) -> bool {
+        !self.state.outputs.is_empty()
+            && self
+                .state
+                .outputs
+                .keys()
+                .all(|name| self.unchanged(output, name))
+    }
 }
 
 pub(super) fn skeleton_json(
@@ -53,17 +117,6 @@ pub(super) fn skeleton_json(
     })
 }
 
-fn outputs_match(output: &Path, state: &State) -> bool {
-    !state.outputs.is_empty()
-        && state.outputs.iter().all(|(name, sha)| {
-            std::fs::read(output.join(name))
-                .map(|b| &sha256_hex(&b) == sha)
-                .unwrap_or(false)
-        })
-}
-
-/// Writes the table and its companions unless the last build wrote the same; returns whether it
-/// wrote.
 /// What the write stage writes.
 pub(super) struct Table<'a> {
     pub(super) plans: &'a BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
@@ -351,16 +404,13 @@ pub(super) fn written(
     workspace: &Workspace,
     fingerprint: &str,
 ) -> Result<(), String> {
-    let state: Option<State> = std::fs::read(workspace.root().join("state.json"))
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
-    let Some(state) = state else {
+    let Some(recorded) = Recorded::load(workspace) else {
         return Err("never written".to_string());
     };
-    if !outputs_match(output, &state) {
+    if !recorded.outputs_match(output) {
         return Err("output files changed or missing".to_string());
     }
-    if state.table_fingerprint != fingerprint {
+    if recorded.state.table_fingerprint != fingerprint {
         return Err("rows changed".to_string());
     }
     Ok(())
@@ -430,6 +480,206 @@ fn switch(
     Ok(())
 }
 
+/// What one shard needs to be written or checked.
+struct ShardJob<'a> {
+    table: &'a Table<'a>,
+    companions: &'a Companions,
+    skeletons_json: &'a str,
+    recorded: Option<&'a Recorded>,
+    force: bool,
+    output: &'a Path,
+    staging: &'a Path,
+    /// The split whose rows the normalisation statistics are gathered over.
+    stats_split: Option<&'a str>,
+}
+
+/// What writing (or keeping) one shard gave.
+struct ShardDone {
+    entry: crate::io::manifest::Shard,
+    fingerprint: String,
+    /// Statistics over the shard's rows, when its split is the statistics split.
+    stats: Option<NormalizationStats>,
+}
+
+impl ShardJob<'_> {
+    /// The shard's content fingerprint: its rows without frames, where the frames are, and what
+    /// the writer adds (skeletons, schema, features).
+    fn fingerprint(&self, plan: &ShardPlan) -> Result<String, BuildError> {
+        let held: Vec<&Clip> = plan.clips.iter().map(|&i| &self.table.clips[i]).collect();
+        let refs: Vec<Option<&super::motions::MotionRef>> =
+            held.iter().map(|c| self.table.index.get(&key(c))).collect();
+        let encoded =
+            postcard::to_stdvec(&(&held, &refs)).map_err(|e| super::WorkspaceError::Encode {
+                what: plan.file.clone(),
+                message: e.to_string(),
+            })?;
+        Ok(super::Fingerprint::new("shard", 1)
+            .text("rows", &sha256_hex(&encoded))
+            .text("skeletons", self.skeletons_json)
+            .json("schema version", &crate::io::schema::SCHEMA_VERSION)
+            .json("config features", &self.companions.features)
+            .finish())
+    }
+
+    /// Writes the shard into the staging folder, or keeps the one in place when the last build
+    /// wrote the same; gathers the normalisation statistics of its rows either way.
+    fn run(&self, plan: &ShardPlan) -> Result<ShardDone, BuildError> {
+        let fingerprint = self.fingerprint(plan)?;
+        let kept = match self.recorded {
+            Some(recorded)
+                if !self.force
+                    && recorded.state.shards.get(&plan.file) == Some(&fingerprint)
+                    && recorded.unchanged(self.output, &plan.file) =>
+            {
+                let sha256 = recorded.state.outputs.get(&plan.file).cloned();
+                let bytes = stat_stamp(&self.output.join(&plan.file)).map(|(len, _)| len);
+                sha256.zip(bytes)
+            }
+            _ => None,
+        };
+        let for_stats = self.stats_split == Some(plan.split.as_str());
+        let mut stats = for_stats.then(NormalizationStats::default);
+        let (sha256, bytes) = match kept {
+            Some(kept) => {
+                if let Some(stats) = &mut stats {
+                    self.each_row_group(plan, |rows| {
+                        rows.iter().for_each(|r| stats.add_row(r));
+                        Ok(())
+                    })
+                    .map_err(|e| e.into_build(self.output.join(&plan.file)))?;
+                }
+                kept
+            }
+            None => self.write(plan, stats.as_mut())?,
+        };
+        Ok(ShardDone {
+            entry: crate::io::manifest::Shard {
+                bytes: bytes as usize,
+                file: plan.file.clone(),
+                rows: plan.clips.len(),
+                sha256,
+            },
+            fingerprint,
+            stats,
+        })
+    }
+
+    /// Writes the shard to the staging folder; returns its checksum and size.
+    fn write(
+        &self,
+        plan: &ShardPlan,
+        mut stats: Option<&mut NormalizationStats>,
+    ) -> Result<(String, u64), BuildError> {
+        let path = self.staging.join(&plan.file);
+        let mut failure = None;
+        let mut written = None;
+        write_atomic_with(&path, |file| {
+            let file = file.try_clone()?;
+            let result = (|| {
+                let mut writer = ShardWriter::new(HashingWriter::new(file), self.skeletons_json)?;
+                self.each_row_group(plan, |rows| {
+                    if let Some(stats) = stats.as_deref_mut() {
+                        rows.iter().for_each(|r| stats.add_row(r));
+                    }
+                    Ok(writer.write(rows)?)
+                })?;
+                let (_, sha256, bytes) = writer.finish()?.finish();
+                Ok::<_, TableOrBuild>((sha256, bytes))
+            })();
+            match result {
+                Ok(done) => {
+                    written = Some(done);
+                    Ok(())
+                }
+                Err(e) => {
+                    failure = Some(e);
+                    Err(std::io::Error::other("table encoding failed"))
+                }
+            }
+        })
+        .map_err(|e| match failure.take() {
+            // Named by where it goes: the staging folder is an implementation detail.
+            Some(failure) => failure.into_build(self.output.join(&plan.file)),
+            None => BuildError::Workspace(e),
+        })?;
+        written.ok_or_else(|| BuildError::Motion(format!("{}: nothing written", plan.file)))
+    }
+
+    /// Calls `each` with the shard's rows, one row group at a time, in row order. A group's
+    /// frames are read in storage order (neighbours on disk together) and its rows prepared on
+    /// all cores.
+    fn each_row_group(
+        &self,
+        plan: &ShardPlan,
+        mut each: impl FnMut(&[Row<'_>]) -> Result<(), TableOrBuild>,
+    ) -> Result<(), TableOrBuild> {
+        let Table {
+            clips,
+            profiles,
+            index,
+            motions,
+            ..
+        } = *self.table;
+        // Each shard reads with its own recent-entry memory, so parallel shards do not evict
+        // each other's chunks.
+        let motions = motions.sibling();
+        for group in plan.clips.chunks(ROWS_PER_GROUP) {
+            let held: Vec<&Clip> = group.iter().map(|&i| &clips[i]).collect();
+            let mut order: Vec<usize> = (0..held.len()).collect();
+            order.sort_by_key(|&i| index.get(&key(held[i])));
+            let mut frames: Vec<Option<crate::motion::Motion>> = vec![None; held.len()];
+            for i in order {
+                frames[i] = Some(
+                    motions
+                        .motion_of(held[i], index)
+                        .map_err(TableOrBuild::Build)?,
+                );
+            }
+            let rows =
+                held.par_iter()
+                    .zip(frames.par_iter())
+                    .map(|(clip, motion)| {
+                        let profile = profiles.get(&clip.profile).ok_or_else(|| {
+                            TableError::MissingProfile {
+                                clip: clip.clip_id.clone(),
+                                profile: clip.profile.clone(),
+                            }
+                        })?;
+                        let motion = motion.as_ref().ok_or_else(|| {
+                            BuildError::Motion(format!("no frames read for `{}`", clip.clip_id))
+                        });
+                        let motion = motion.map_err(TableOrBuild::Build)?;
+                        Ok(Row::new(clip, motion, profile, &self.companions.features))
+                    })
+                    .collect::<Result<Vec<Row<'_>>, TableOrBuild>>()?;
+            each(&rows)?;
+        }
+        Ok(())
+    }
+}
+
+/// A shard failed in the table encoder or in the build around it.
+enum TableOrBuild {
+    Table(TableError),
+    Build(BuildError),
+}
+
+impl TableOrBuild {
+    /// The build error, a table error named by the file it was for.
+    fn into_build(self, path: std::path::PathBuf) -> BuildError {
+        match self {
+            TableOrBuild::Table(source) => BuildError::Table { path, source },
+            TableOrBuild::Build(e) => e,
+        }
+    }
+}
+
+impl From<TableError> for TableOrBuild {
+    fn from(e: TableError) -> Self {
+        TableOrBuild::Table(e)
+    }
+}
+
 pub(super) fn write_outputs(
     force: bool,
     output: &Path,
@@ -441,18 +691,18 @@ pub(super) fn write_outputs(
     let Table {
         plans,
         clips,
-        profiles,
         skeletons,
         rejects,
         index,
-        motions,
+        ..
     } = *table;
-    let state_path = workspace.root().join("state.json");
-    let state: State = std::fs::read(&state_path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .unwrap_or_default();
-    if !force && state.table_fingerprint == fingerprint && outputs_match(output, &state) {
+    let state_path = workspace.root().join(STATE_FILE);
+    let recorded = Recorded::load(workspace);
+    if !force
+        && let Some(recorded) = &recorded
+        && recorded.state.table_fingerprint == fingerprint
+        && recorded.outputs_match(output)
+    {
         return Ok(false);
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
@@ -464,7 +714,6 @@ pub(super) fn write_outputs(
     } else {
         plans_for_shards.first().map(|p| p.split.clone())
     };
-    let mut normalization = crate::io::normalization::NormalizationStats::default();
     // Everything new is written into a staging folder first; the dataset folder keeps the
     // previous dataset, complete and valid, until the new one is fully written (a full disk
     // fails here and leaves it untouched). Then `switch` moves the new files in, by renames only.
@@ -474,96 +723,44 @@ pub(super) fn write_outputs(
     }
     let staged_data = staging.join(DATA_DIR);
     std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
+    let job = ShardJob {
+        table,
+        companions,
+        skeletons_json: &skeletons_json,
+        recorded: recorded.as_ref(),
+        force,
+        output,
+        staging: &staging,
+        stats_split: stats_split.as_deref(),
+    };
+    // Shards are written on all cores; their results are taken in shard order, so the manifest,
+    // the merged statistics and the error reported (the first shard's that failed) are the same
+    // on every run.
+    let done: Vec<Result<ShardDone, BuildError>> = plans_for_shards
+        .par_iter()
+        .map(|plan| job.run(plan))
+        .collect();
+    let done = done
+        .into_iter()
+        .collect::<Result<Vec<ShardDone>, BuildError>>()?;
+    let mut normalization = NormalizationStats::default();
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<crate::io::manifest::Shard>> = BTreeMap::new();
     let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
     let mut split_bytes: BTreeMap<String, usize> = BTreeMap::new();
-    for plan in &plans_for_shards {
-        let held: Vec<&Clip> = plan.clips.iter().map(|&i| &clips[i]).collect();
-        let refs: Vec<Option<&super::motions::MotionRef>> =
-            held.iter().map(|c| index.get(&key(c))).collect();
-        // Rows without frames, and where the frames are: the shard's content.
-        let encoded =
-            postcard::to_stdvec(&(&held, &refs)).map_err(|e| super::WorkspaceError::Encode {
-                what: plan.file.clone(),
-                message: e.to_string(),
-            })?;
-        let fp = super::Fingerprint::new("shard", 1)
-            .text("rows", &sha256_hex(&encoded))
-            .text("skeletons", &skeletons_json)
-            .json("schema version", &crate::io::schema::SCHEMA_VERSION)
-            .json("config features", &companions.features)
-            .finish();
-        let in_place = output.join(&plan.file);
-        let fresh = !force
-            && state.shards.get(&plan.file) == Some(&fp)
-            && state
-                .outputs
-                .get(&plan.file)
-                .is_some_and(|sha| std::fs::read(&in_place).is_ok_and(|b| &sha256_hex(&b) == sha));
-        // Unchanged shards stay where they are; changed ones are written to the staging folder.
-        let path = if fresh {
-            in_place
-        } else {
-            staging.join(&plan.file)
-        };
-        let for_stats = stats_split.as_deref() == Some(plan.split.as_str());
-        // One shard's rows with their frames at a time.
-        let rows: Vec<Clip> = if !fresh || for_stats {
-            // Read in storage order (neighbours on disk together), kept in row order.
-            let mut order: Vec<usize> = (0..held.len()).collect();
-            order.sort_by_key(|&i| refs[i]);
-            let mut slots: Vec<Option<Clip>> = vec![None; held.len()];
-            for i in order {
-                slots[i] = Some(motions.hydrate(held[i], index)?);
-            }
-            slots.into_iter().flatten().collect()
-        } else {
-            Vec::new()
-        };
-        if for_stats {
-            for row in &rows {
-                normalization.add(row, profiles, &companions.features);
-            }
+    let mut outputs = BTreeMap::new();
+    for (plan, done) in plans_for_shards.iter().zip(done) {
+        if let Some(stats) = done.stats {
+            normalization.merge(stats);
         }
-        if !fresh {
-            let mut table_error = None;
-            write_atomic_with(&path, |file| {
-                write_clips(
-                    file.try_clone()?,
-                    &rows,
-                    profiles,
-                    &skeletons_json,
-                    &companions.features,
-                )
-                .map(|_| ())
-                .map_err(|e| {
-                    table_error = Some(e);
-                    std::io::Error::other("table encoding failed")
-                })
-            })
-            .map_err(|e| match table_error.take() {
-                // Named by where it goes: the staging folder is an implementation detail.
-                Some(source) => BuildError::Table {
-                    path: output.join(&plan.file),
-                    source,
-                },
-                None => BuildError::Workspace(e),
-            })?;
-        }
-        let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
+        *split_rows.entry(plan.split.clone()).or_insert(0) += done.entry.rows;
+        *split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
+        outputs.insert(plan.file.clone(), done.entry.sha256.clone());
         shard_entries
             .entry(plan.split.clone())
             .or_default()
-            .push(crate::io::manifest::Shard {
-                bytes: bytes.len(),
-                file: plan.file.clone(),
-                rows: held.len(),
-                sha256: sha256_hex(&bytes),
-            });
-        *split_rows.entry(plan.split.clone()).or_insert(0) += held.len();
-        *split_bytes.entry(plan.split.clone()).or_insert(0) += bytes.len();
-        shard_fingerprints.insert(plan.file.clone(), fp);
+            .push(done.entry);
+        shard_fingerprints.insert(plan.file.clone(), done.fingerprint);
     }
     let staged_path = |plan: &ShardPlan| {
         let staged = staging.join(&plan.file);
@@ -584,7 +781,6 @@ pub(super) fn write_outputs(
         lines.push('\n');
     }
     write_atomic(&staging.join(REJECTS_FILE), lines.as_bytes())?;
-    let mut outputs = BTreeMap::new();
     let plans_path = staging.join(PLANS_FILE);
     let mut plans_error = None;
     write_atomic_with(&plans_path, |file| {
@@ -619,29 +815,29 @@ pub(super) fn write_outputs(
         &staging.join(CARD_FILE),
         card(&name, &split_rows, &split_bytes, companions).as_bytes(),
     )?;
-    let mut names: Vec<String> = [
+    for name in [
         SKELETONS_FILE,
         REJECTS_FILE,
         PLANS_FILE,
         MANIFEST_FILE,
         CARD_FILE,
-    ]
-    .map(String::from)
-    .to_vec();
-    names.extend(plans_for_shards.iter().map(|p| p.file.clone()));
-    for name in &names {
-        let path = match plans_for_shards.iter().find(|p| &p.file == name) {
-            Some(plan) => staged_path(plan),
-            None => staging.join(name),
-        };
+    ] {
+        let path = staging.join(name);
         let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
-        outputs.insert(name.clone(), sha256_hex(&bytes));
+        outputs.insert(name.to_string(), sha256_hex(&bytes));
     }
     switch(output, &staging, &plans_for_shards, stats_split.is_some())?;
+    // Stat data of the files now in place, recorded before the state file is written, so each is
+    // older than the record that vouches for it.
+    let stamps = outputs
+        .keys()
+        .filter_map(|name| stat_stamp(&output.join(name)).map(|s| (name.clone(), s)))
+        .collect();
     let state = State {
         table_fingerprint: fingerprint.to_string(),
         shards: shard_fingerprints,
         outputs,
+        stamps,
     };
     write_atomic(
         &state_path,

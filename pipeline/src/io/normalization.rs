@@ -10,7 +10,7 @@ use arrow_array::{ArrayRef, Float32Array, Int32Array, RecordBatch, StringArray};
 use arrow_schema::{DataType, Field, Schema};
 use parquet::arrow::ArrowWriter;
 
-use super::parquet::{TableError, dataset_motion};
+use super::parquet::{Row, TableError};
 use crate::base::{WorkspaceError, write_atomic, write_atomic_with};
 
 /// Why normalisation statistics could not be written.
@@ -40,7 +40,7 @@ pub enum NormalizationError {
     },
 }
 use crate::clip::Clip;
-use crate::features::{FeatureConfig, features};
+use crate::features::FeatureConfig;
 use crate::motion::Profile;
 
 /// Running sums for one feature: per element (joint × dimension).
@@ -132,44 +132,63 @@ pub struct NormalizationStats {
 }
 
 impl NormalizationStats {
-    /// Adds every frame of `clip` (skipped when its profile is not in `profiles`).
+    /// Adds every frame of `clip`, which holds its own frames (skipped when its profile is not in
+    /// `profiles`).
     pub fn add(
         &mut self,
         clip: &Clip,
         profiles: &BTreeMap<String, Profile>,
         config: &FeatureConfig,
     ) {
-        let stats = &mut self.stats;
-        let Some(profile) = profiles.get(&clip.profile) else {
-            return;
-        };
-        let n = clip.motion.num_joints();
-        let m = dataset_motion(clip, profile);
-        let f = features(
-            &m.positions,
-            &m.rotations,
-            n,
-            clip.motion.fps,
-            profile,
-            config,
-        );
-        let mut groups: Vec<(&'static str, usize, Vec<f32>)> =
-            vec![("joint_positions", 3, m.positions)];
-        if let Some(v) = f.rotations_6d {
+        if let Ok(row) = Row::of_clip(clip, profiles, config) {
+            self.add_row(&row);
+        }
+    }
+
+    /// Adds every frame of a prepared row: the values its shard holds.
+    pub fn add_row(&mut self, row: &Row<'_>) {
+        let n = row.joints;
+        let mut groups: Vec<(&'static str, usize, &[f32])> =
+            vec![("joint_positions", 3, &row.motion.positions)];
+        if let Some(v) = &row.features.rotations_6d {
             groups.push(("rotations_6d", 6, v));
         }
-        if let Some(v) = f.velocities {
+        if let Some(v) = &row.features.velocities {
             groups.push(("joint_velocities", 3, v));
         }
         for (name, dims, values) in groups {
-            let entry = stats
-                .entry((clip.profile.clone(), name))
+            let entry = self
+                .stats
+                .entry((row.clip.profile.clone(), name))
                 .or_insert_with(|| Moments::new(n * dims, dims));
             if entry.sum.len() != n * dims {
                 continue;
             }
             for frame in values.chunks_exact(n * dims) {
                 entry.add(frame);
+            }
+        }
+    }
+
+    /// Adds the statistics gathered over other rows (a later shard's, so that shards can be
+    /// gathered in parallel and merged in shard order, the same result on every run).
+    pub fn merge(&mut self, other: NormalizationStats) {
+        for (key, moments) in other.stats {
+            match self.stats.get_mut(&key) {
+                None => {
+                    self.stats.insert(key, moments);
+                }
+                Some(mine) if mine.sum.len() == moments.sum.len() => {
+                    mine.count += moments.count;
+                    for (a, b) in mine.sum.iter_mut().zip(&moments.sum) {
+                        *a += b;
+                    }
+                    for (a, b) in mine.sq.iter_mut().zip(&moments.sq) {
+                        *a += b;
+                    }
+                }
+                // Another joint count under the same profile: skipped, as `add_row` skips it.
+                Some(_) => {}
             }
         }
     }

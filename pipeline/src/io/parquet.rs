@@ -5,6 +5,7 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
+use std::io::Write;
 use std::sync::Arc;
 
 use arrow_array::builder::{
@@ -25,8 +26,8 @@ use parquet::file::properties::WriterProperties;
 
 use super::schema::{SCHEMA_VERSION, clip_schema};
 use crate::clip::Clip;
-use crate::features::FeatureConfig;
-use crate::motion::Profile;
+use crate::features::{FeatureConfig, Features};
+use crate::motion::{Motion, Profile, Skeleton};
 
 /// Errors writing a table.
 #[derive(Debug, thiserror::Error)]
@@ -81,22 +82,27 @@ pub struct DatasetMotion {
 /// The clip's skeleton as the table names it: profile and a digest of the hierarchy and offsets,
 /// since captures of one profile can come from differently sized actors.
 pub fn skeleton_id(clip: &Clip) -> String {
-    format!("{}:{}", clip.profile, clip.motion.skeleton.digest())
+    skeleton_name(&clip.profile, &clip.motion.skeleton)
 }
 
-/// Converts a clip's motion from capture units and axes to the dataset frame.
-pub fn dataset_motion(clip: &Clip, profile: &Profile) -> DatasetMotion {
+/// The `skeleton` column's value for a skeleton of profile `profile`.
+pub fn skeleton_name(profile: &str, skeleton: &Skeleton) -> String {
+    format!("{profile}:{}", skeleton.digest())
+}
+
+/// Converts a motion from capture units and axes to the dataset frame.
+pub fn dataset_motion(motion: &Motion, profile: &Profile) -> DatasetMotion {
     let axes = profile.to_dataset_axes();
     let scale = profile.unit_scale;
-    let pose = clip.motion.forward_kinematics();
-    let n = clip.motion.num_joints();
+    let pose = motion.forward_kinematics();
+    let n = motion.num_joints();
     let mut positions = Vec::with_capacity(pose.positions.len() * 3);
     for p in &pose.positions {
         let q = axes * (*p * scale);
         positions.extend([q.x as f32, q.y as f32, q.z as f32]);
     }
-    let mut rotations = Vec::with_capacity(clip.motion.rotations.len() * 4);
-    for (i, r) in clip.motion.rotations.iter().enumerate() {
+    let mut rotations = Vec::with_capacity(motion.rotations.len() * 4);
+    for (i, r) in motion.rotations.iter().enumerate() {
         let r = if i % n == 0 { axes * *r } else { *r };
         let r: DQuat = if r.w < 0.0 { -r } else { r };
         rotations.extend([r.x as f32, r.y as f32, r.z as f32, r.w as f32]);
@@ -110,6 +116,72 @@ pub fn dataset_motion(clip: &Clip, profile: &Profile) -> DatasetMotion {
         positions,
         rotations,
         root,
+    }
+}
+
+/// One row of the clip table before encoding: the clip's metadata beside its motion in the
+/// dataset frame and its derived features. Both are computed once per row, and the shard and the
+/// normalisation statistics read the same values.
+#[derive(Debug, Clone)]
+pub struct Row<'a> {
+    /// The clip's metadata. Its `motion` is not read: the frames are in `motion` below.
+    pub clip: &'a Clip,
+    /// The `skeleton` column (profile and skeleton digest).
+    pub skeleton: String,
+    /// Frames per second of the motion.
+    pub fps: f64,
+    /// Joints per frame.
+    pub joints: usize,
+    /// Frames.
+    pub frames: usize,
+    /// Positions, rotations and root in the dataset frame.
+    pub motion: DatasetMotion,
+    /// The derived feature columns that are switched on.
+    pub features: Features,
+}
+
+impl<'a> Row<'a> {
+    /// The row of `clip` whose frames are `motion` (on a skeleton of `profile`).
+    pub fn new(
+        clip: &'a Clip,
+        motion: &Motion,
+        profile: &Profile,
+        config: &FeatureConfig,
+    ) -> Row<'a> {
+        let joints = motion.num_joints();
+        let dataset = dataset_motion(motion, profile);
+        let features = crate::features::features(
+            &dataset.positions,
+            &dataset.rotations,
+            joints,
+            motion.fps,
+            profile,
+            config,
+        );
+        Row {
+            clip,
+            skeleton: skeleton_name(&clip.profile, &motion.skeleton),
+            fps: motion.fps,
+            joints,
+            frames: motion.num_frames(),
+            motion: dataset,
+            features,
+        }
+    }
+
+    /// The row of a clip that holds its own frames, with its profile looked up in `profiles`.
+    pub fn of_clip(
+        clip: &'a Clip,
+        profiles: &BTreeMap<String, Profile>,
+        config: &FeatureConfig,
+    ) -> Result<Row<'a>, TableError> {
+        let profile = profiles
+            .get(&clip.profile)
+            .ok_or_else(|| TableError::MissingProfile {
+                clip: clip.clip_id.clone(),
+                profile: clip.profile.clone(),
+            })?;
+        Ok(Row::new(clip, &clip.motion, profile, config))
     }
 }
 
@@ -154,7 +226,7 @@ fn string_lists<'a>(rows: impl Iterator<Item = &'a [String]>) -> ArrayRef {
     Arc::new(b.finish())
 }
 
-fn optional_f32_lists(rows: impl Iterator<Item = Option<Vec<f64>>>) -> ArrayRef {
+fn optional_f32_lists<'a>(rows: impl Iterator<Item = Option<&'a [f32]>>) -> ArrayRef {
     let mut b = ListBuilder::new(Float32Builder::new()).with_field(Arc::new(Field::new(
         "item",
         DataType::Float32,
@@ -163,9 +235,7 @@ fn optional_f32_lists(rows: impl Iterator<Item = Option<Vec<f64>>>) -> ArrayRef 
     for row in rows {
         match row {
             Some(values) => {
-                for v in values {
-                    b.values().append_value(v as f32);
-                }
+                b.values().append_slice(values);
                 b.append(true);
             }
             None => b.append(false),
@@ -221,7 +291,7 @@ fn nested_part_lists<'a>(rows: impl Iterator<Item = &'a [crate::parts::PartSet]>
 }
 
 /// One plausibility metric per row, null when not computed.
-fn metric(clips: &[Clip], f: impl Fn(&crate::quality::Plausibility) -> f64) -> ArrayRef {
+fn metric(clips: &[&Clip], f: impl Fn(&crate::quality::Plausibility) -> f64) -> ArrayRef {
     Arc::new(Float32Array::from(
         clips
             .iter()
@@ -250,44 +320,29 @@ fn optional_bool_lists<'a>(rows: impl Iterator<Item = Option<&'a [bool]>>) -> Ar
     Arc::new(b.finish())
 }
 
-/// Builds one record batch from clips.
-pub fn clips_to_batch(
-    clips: &[Clip],
-    profiles: &BTreeMap<String, Profile>,
-    features: &FeatureConfig,
-) -> Result<RecordBatch, TableError> {
+/// Builds one record batch (a row group) from rows.
+pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
     let schema = Arc::new(clip_schema());
+    let clips: Vec<&Clip> = rows.iter().map(|r| r.clip).collect();
+    let clips = clips.as_slice();
     let strings = |f: &dyn Fn(&Clip) -> &str| -> ArrayRef {
-        Arc::new(StringArray::from_iter_values(clips.iter().map(f)))
+        Arc::new(StringArray::from_iter_values(clips.iter().map(|c| f(c))))
     };
-    let mut positions = Vec::new();
-    let mut rotations = Vec::new();
-    let mut roots = Vec::new();
-    let (mut pl, mut rl, mut tl) = (Vec::new(), Vec::new(), Vec::new());
-    let mut derived: Vec<crate::features::Features> = Vec::with_capacity(clips.len());
-    for clip in clips {
-        let profile = profiles
-            .get(&clip.profile)
-            .ok_or_else(|| TableError::MissingProfile {
-                clip: clip.clip_id.clone(),
-                profile: clip.profile.clone(),
-            })?;
-        let m = dataset_motion(clip, profile);
-        derived.push(crate::features::features(
-            &m.positions,
-            &m.rotations,
-            clip.motion.num_joints(),
-            clip.motion.fps,
-            profile,
-            features,
-        ));
-        pl.push(m.positions.len());
-        rl.push(m.rotations.len());
-        tl.push(m.root.len());
-        positions.extend(m.positions);
-        rotations.extend(m.rotations);
-        roots.extend(m.root);
-    }
+    let motion_list = |part: fn(&DatasetMotion) -> &[f32]| -> Result<ArrayRef, ArrowError> {
+        let lengths: Vec<usize> = rows.iter().map(|r| part(&r.motion).len()).collect();
+        let mut values = Vec::with_capacity(lengths.iter().sum());
+        for r in rows {
+            values.extend_from_slice(part(&r.motion));
+        }
+        list(values, lengths)
+    };
+    let derived = |part: fn(&Features) -> Option<&[f32]>| -> ArrayRef {
+        optional_f32_lists(rows.iter().map(|r| part(&r.features)))
+    };
+    let goals = |goal: fn(&Clip) -> Option<Vec<f32>>| -> ArrayRef {
+        let values: Vec<Option<Vec<f32>>> = clips.iter().map(|c| goal(c)).collect();
+        optional_f32_lists(values.iter().map(Option::as_deref))
+    };
     let frame_range = StructArray::try_new(
         Fields::from(vec![
             Field::new("start", DataType::Int64, false),
@@ -389,11 +444,11 @@ pub fn clips_to_batch(
         ),
         (
             "goal_pelvis",
-            optional_f32_lists(clips.iter().map(|c| c.goal_pelvis.map(|g| g.to_vec()))),
+            goals(|c| c.goal_pelvis.map(|g| g.map(|x| x as f32).to_vec())),
         ),
         (
             "goal_hand",
-            optional_f32_lists(clips.iter().map(|c| c.goal_hand.map(|g| g.to_vec()))),
+            goals(|c| c.goal_hand.map(|g| g.map(|x| x as f32).to_vec())),
         ),
         ("parts", part_lists(clips.iter().map(|c| c.parts))),
         (
@@ -427,57 +482,36 @@ pub fn clips_to_batch(
         ("attributes", Arc::new(attributes.finish())),
         (
             "skeleton",
-            Arc::new(StringArray::from_iter_values(clips.iter().map(skeleton_id))),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.skeleton.as_str()),
+            )),
         ),
         (
             "fps",
-            Arc::new(Float64Array::from_iter_values(
-                clips.iter().map(|c| c.motion.fps),
-            )),
+            Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.fps))),
         ),
         (
             "num_frames",
             Arc::new(Int32Array::from_iter_values(
-                clips.iter().map(|c| c.motion.num_frames() as i32),
+                rows.iter().map(|r| r.frames as i32),
             )),
         ),
         (
             "num_joints",
             Arc::new(Int32Array::from_iter_values(
-                clips.iter().map(|c| c.motion.num_joints() as i32),
+                rows.iter().map(|r| r.joints as i32),
             )),
         ),
-        ("joint_positions", list(positions, pl)?),
-        ("local_rotations", list(rotations, rl)?),
-        ("root_translation", list(roots, tl)?),
-        (
-            "rotations_6d",
-            optional_f32_lists(derived.iter().map(|d| {
-                d.rotations_6d
-                    .as_ref()
-                    .map(|v| v.iter().map(|x| *x as f64).collect())
-            })),
-        ),
-        (
-            "joint_velocities",
-            optional_f32_lists(derived.iter().map(|d| {
-                d.velocities
-                    .as_ref()
-                    .map(|v| v.iter().map(|x| *x as f64).collect())
-            })),
-        ),
+        ("joint_positions", motion_list(|m| &m.positions)?),
+        ("local_rotations", motion_list(|m| &m.rotations)?),
+        ("root_translation", motion_list(|m| &m.root)?),
+        ("rotations_6d", derived(|f| f.rotations_6d.as_deref())),
+        ("joint_velocities", derived(|f| f.velocities.as_deref())),
         (
             "foot_contacts",
-            optional_bool_lists(derived.iter().map(|d| d.foot_contacts.as_deref())),
+            optional_bool_lists(rows.iter().map(|r| r.features.foot_contacts.as_deref())),
         ),
-        (
-            "future_root",
-            optional_f32_lists(derived.iter().map(|d| {
-                d.future_root
-                    .as_ref()
-                    .map(|v| v.iter().map(|x| *x as f64).collect())
-            })),
-        ),
+        ("future_root", derived(|f| f.future_root.as_deref())),
     ];
     let columns = crate::io::schema::in_schema_order(&schema, named)?;
     let batch = RecordBatch::try_new(schema, columns)?;
@@ -555,8 +589,50 @@ fn float_encoding(
 /// stay a few tens of MB for long captures.
 pub const ROWS_PER_GROUP: usize = 64;
 
-/// Streams clips into a Parquet file, one row group at a time, with the schema version and the
-/// skeletons (`key_value_metadata`) so the file describes itself.
+/// A shard of the clip table being written: one row group per [`ShardWriter::write`], with the
+/// schema version and the skeletons in the file's `key_value_metadata`, so the file describes
+/// itself. Streams: only the row group being encoded is in memory.
+pub struct ShardWriter<W: Write + Send> {
+    writer: ArrowWriter<W>,
+}
+
+impl<W: Write + Send> ShardWriter<W> {
+    /// Starts a shard on `out`.
+    pub fn new(out: W, skeletons_json: &str) -> Result<ShardWriter<W>, TableError> {
+        let props = float_encoding(&clip_schema(), WriterProperties::builder())?
+            .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
+            .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(
+                    "motionforge.schema_version".to_string(),
+                    SCHEMA_VERSION.to_string(),
+                ),
+                KeyValue::new(
+                    "motionforge.skeletons".to_string(),
+                    skeletons_json.to_string(),
+                ),
+            ]))
+            .build();
+        Ok(ShardWriter {
+            writer: ArrowWriter::try_new(out, Arc::new(clip_schema()), Some(props))?,
+        })
+    }
+
+    /// Encodes `rows` (at most [`ROWS_PER_GROUP`]) as one row group.
+    pub fn write(&mut self, rows: &[Row<'_>]) -> Result<(), TableError> {
+        self.writer.write(&rows_to_batch(rows)?)?;
+        self.writer.flush()?;
+        Ok(())
+    }
+
+    /// Writes the footer and gives the output back.
+    pub fn finish(self) -> Result<W, TableError> {
+        Ok(self.writer.into_inner()?)
+    }
+}
+
+/// Streams clips that hold their frames into a Parquet file, one row group at a time (see
+/// [`ShardWriter`]).
 pub fn write_clips(
     file: File,
     clips: &[Clip],
@@ -564,26 +640,15 @@ pub fn write_clips(
     skeletons_json: &str,
     features: &FeatureConfig,
 ) -> Result<File, TableError> {
-    let props = float_encoding(&clip_schema(), WriterProperties::builder())?
-        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
-        .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
-        .set_key_value_metadata(Some(vec![
-            KeyValue::new(
-                "motionforge.schema_version".to_string(),
-                SCHEMA_VERSION.to_string(),
-            ),
-            KeyValue::new(
-                "motionforge.skeletons".to_string(),
-                skeletons_json.to_string(),
-            ),
-        ]))
-        .build();
-    let mut writer = ArrowWriter::try_new(file, Arc::new(clip_schema()), Some(props))?;
+    let mut writer = ShardWriter::new(file, skeletons_json)?;
     for chunk in clips.chunks(ROWS_PER_GROUP) {
-        writer.write(&clips_to_batch(chunk, profiles, features)?)?;
-        writer.flush()?;
+        let rows = chunk
+            .iter()
+            .map(|c| Row::of_clip(c, profiles, features))
+            .collect::<Result<Vec<_>, _>>()?;
+        writer.write(&rows)?;
     }
-    Ok(writer.into_inner()?)
+    writer.finish()
 }
 
 /// Writes task plans, one row per step: `text`, `step_id`, `step`, `category`.
