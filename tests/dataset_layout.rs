@@ -60,8 +60,8 @@ assert t.num_rows == total
 for i in range(t.num_rows):
     n, j = t['num_frames'][i].as_py(), t['num_joints'][i].as_py()
     np.asarray(t['joint_positions'][i].values).reshape(n, j, 3)
-    np.asarray(t['rotations_6d'][i].values).reshape(n, j, 6)
-    np.asarray(t['joint_velocities'][i].values).reshape(n, j, 3)
+    # Opt-in columns (`docs/decisions.md`, "Derived columns"): null unless switched on.
+    assert t['rotations_6d'][i].as_py() is None and t['joint_velocities'][i].as_py() is None
     np.asarray(t['foot_contacts'][i].values).reshape(n, 4)
     np.asarray(t['future_root'][i].values).reshape(n, 3, 3)
 mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positions_mean.npy'))
@@ -233,5 +233,57 @@ fn build_writes_the_report_and_the_report_command_redoes_it_from_the_shards_alon
         fs::read(elsewhere.path().join("stats.json")).unwrap()
             == fs::read(dataset.join("report/stats.json")).unwrap(),
         "same shards, same report"
+    );
+}
+
+#[test]
+fn opt_in_feature_columns_equal_what_a_reader_derives_from_the_stored_ones() {
+    let (dir, config) = scratch(
+        &["dataset-1_walk_normal_001", "dataset-1_bye_normal_001"],
+        None,
+    );
+    let mut text = fs::read_to_string(&config).unwrap();
+    text.push_str("\n[features]\nrotations_6d = true\nvelocities = true\n");
+    fs::write(&config, text).unwrap();
+    let run = build(&config);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let script = r#"
+import os, sys
+import numpy as np, pyarrow.parquet as pq
+root = sys.argv[1]
+t = pq.read_table(os.path.join(root, 'data'))
+assert t.num_rows >= 4
+for i in range(t.num_rows):
+    n, j, fps = t['num_frames'][i].as_py(), t['num_joints'][i].as_py(), t['fps'][i].as_py()
+    q = np.asarray(t['local_rotations'][i].values, dtype=np.float64).reshape(n, j, 4)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    # First two columns of each rotation matrix.
+    derived6 = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y),
+                         2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], -1)
+    r6 = np.asarray(t['rotations_6d'][i].values).reshape(n, j, 6)
+    assert np.abs(r6 - derived6).max() < 1e-5, np.abs(r6 - derived6).max()
+    p = np.asarray(t['joint_positions'][i].values, dtype=np.float64).reshape(n, j, 3)
+    v = np.diff(p, axis=0) * fps
+    v = np.concatenate([v, v[-1:]], 0)
+    vel = np.asarray(t['joint_velocities'][i].values).reshape(n, j, 3)
+    assert np.abs(vel - v).max() < 1e-3, np.abs(vel - v).max()
+for feature in ['joint_positions', 'rotations_6d', 'joint_velocities']:
+    mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', feature + '_mean.npy'))
+    assert mean.shape[0] == 22 and np.isfinite(mean).all(), feature
+print(t.num_rows)
+"#;
+    let out = Command::new("python3")
+        .args(["-c", script])
+        .arg(dir.path().join("out/ds"))
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
     );
 }

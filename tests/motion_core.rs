@@ -258,7 +258,11 @@ fn derived_features_on_a_real_walk_look_like_walking() {
         n,
         30.0,
         &profile,
-        &FeatureConfig::default(),
+        &FeatureConfig {
+            rotations_6d: true,
+            velocities: true,
+            ..FeatureConfig::default()
+        },
     );
     let future = f.future_root.unwrap();
     let frames = bvh.motion.num_frames();

@@ -318,11 +318,12 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
     assert!(first.status.success(), "{}", text(&first.stderr));
     let dataset = output.join("demo");
     let before = dataset_files(&dataset);
-    // One clip per shard, and a feature change so every row changes.
+    // One clip per shard, and a feature change so every row changes (the opt-in columns make
+    // the longest shard large enough to pass the limit below).
     let config = demo_config_in(
         dir.path(),
         "shard_bytes = 1024\n",
-        "[features]\ncontact_speed = 0.5\n",
+        "[features]\ncontact_speed = 0.5\nrotations_6d = true\nvelocities = true\n",
     );
     // About 400 kB: the first single-clip shards fit, a later, longer one (470 kB) does not.
     let run = with_size_limit(800, &build_args(&config, &output));

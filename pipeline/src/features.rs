@@ -28,8 +28,8 @@ pub struct FeatureConfig {
 impl Default for FeatureConfig {
     fn default() -> Self {
         FeatureConfig {
-            rotations_6d: true,
-            velocities: true,
+            rotations_6d: false,
+            velocities: false,
             foot_contacts: true,
             future_root: true,
             contact_speed: 0.002f64.sqrt() * 20.0,

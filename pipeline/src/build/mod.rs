@@ -849,6 +849,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         manifest,
         licences,
         shard_bytes: config.dataset.shard_bytes,
+        zstd_level: config.dataset.zstd_level,
         features: config.features,
     };
     let through = options.through.unwrap_or(Stage::Report);
@@ -977,6 +978,7 @@ fn table_stamp(
         .text("rows", &sha256_hex(&encoded))
         .json("config features", &config.features)
         .json("config dataset.shard_bytes", &config.dataset.shard_bytes)
+        .json("config dataset.zstd_level", &config.dataset.zstd_level)
         .json("task plans", plans)
         .json("schema version", &crate::io::schema::SCHEMA_VERSION)
         .stamp())

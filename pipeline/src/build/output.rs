@@ -238,6 +238,8 @@ pub(super) struct Companions {
     pub(super) licences: Vec<String>,
     /// Target shard size.
     pub(super) shard_bytes: u64,
+    /// zstd level of the shards.
+    pub(super) zstd_level: i32,
     /// Derived feature columns to write.
     pub(super) features: crate::features::FeatureConfig,
 }
@@ -518,6 +520,7 @@ impl ShardJob<'_> {
             .text("skeletons", self.skeletons_json)
             .json("schema version", &crate::io::schema::SCHEMA_VERSION)
             .json("config features", &self.companions.features)
+            .json("config dataset.zstd_level", &self.companions.zstd_level)
             .finish())
     }
 
@@ -576,7 +579,11 @@ impl ShardJob<'_> {
         write_atomic_with(&path, |file| {
             let file = file.try_clone()?;
             let result = (|| {
-                let mut writer = ShardWriter::new(HashingWriter::new(file), self.skeletons_json)?;
+                let mut writer = ShardWriter::new(
+                    HashingWriter::new(file),
+                    self.skeletons_json,
+                    self.companions.zstd_level,
+                )?;
                 self.each_row_group(plan, |rows| {
                     if let Some(stats) = stats.as_deref_mut() {
                         rows.iter().for_each(|r| stats.add_row(r));

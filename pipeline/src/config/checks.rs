@@ -68,6 +68,13 @@ impl Config {
                 "at least 1024 bytes",
             );
         }
+        if !(1..=22).contains(&d.zstd_level) {
+            c.push(
+                &[K("dataset"), K("zstd_level")],
+                d.zstd_level.to_string(),
+                "a zstd level from 1 (fastest) to 22 (smallest)",
+            );
+        }
         if self.paraphrases.n == 0 || self.paraphrases.n > 50 {
             c.push(
                 &[K("paraphrases"), K("n")],

@@ -184,11 +184,18 @@ pub struct DatasetConfig {
     /// Target size of a Parquet shard in bytes (uncompressed estimate; default 256 MiB).
     #[serde(default = "default_shard_bytes")]
     pub shard_bytes: u64,
+    /// zstd level of the shards, 1 (fastest) to 22 (smallest); default 1.
+    #[serde(default = "default_zstd_level")]
+    pub zstd_level: i32,
     /// When `motionforge serve` rebuilds the dataset: a five-field cron expression in UTC
     /// (`"0 3 * * *"`), checked when the service loads the config.
     // Not serialised: it says when to build, not what, so it must not change the config fingerprint.
     #[serde(default, skip_serializing)]
     pub schedule: Option<String>,
+}
+
+fn default_zstd_level() -> i32 {
+    crate::io::parquet::DEFAULT_ZSTD_LEVEL
 }
 
 fn default_shard_bytes() -> u64 {
