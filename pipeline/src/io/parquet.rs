@@ -328,6 +328,11 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
     let strings = |f: &dyn Fn(&Clip) -> &str| -> ArrayRef {
         Arc::new(StringArray::from_iter_values(clips.iter().map(|c| f(c))))
     };
+    let optional_strings = |f: &dyn Fn(&Clip) -> Option<&str>| -> ArrayRef {
+        Arc::new(StringArray::from(
+            clips.iter().map(|c| f(c)).collect::<Vec<_>>(),
+        ))
+    };
     let motion_list = |part: fn(&DatasetMotion) -> &[f32]| -> Result<ArrayRef, ArrowError> {
         let lengths: Vec<usize> = rows.iter().map(|r| part(&r.motion).len()).collect();
         let mut values = Vec::with_capacity(lengths.iter().sum());
@@ -417,31 +422,10 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
         ("annotation_origin", strings(&|c| &c.annotation_origin)),
         (
             "motion_type",
-            Arc::new(StringArray::from(
-                clips
-                    .iter()
-                    .map(|c| c.motion_type.as_deref())
-                    .collect::<Vec<_>>(),
-            )),
+            optional_strings(&|c| c.motion_type.as_deref()),
         ),
-        (
-            "hand",
-            Arc::new(StringArray::from(
-                clips
-                    .iter()
-                    .map(|c| c.hand.map(|h| h.as_str()))
-                    .collect::<Vec<_>>(),
-            )),
-        ),
-        (
-            "object",
-            Arc::new(StringArray::from(
-                clips
-                    .iter()
-                    .map(|c| c.object.as_deref())
-                    .collect::<Vec<_>>(),
-            )),
-        ),
+        ("hand", optional_strings(&|c| c.hand.map(|h| h.as_str()))),
+        ("object", optional_strings(&|c| c.object.as_deref())),
         (
             "goal_pelvis",
             goals(|c| c.goal_pelvis.map(|g| g.map(|x| x as f32).to_vec())),
