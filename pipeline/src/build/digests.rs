@@ -27,11 +27,10 @@ struct FileStamp {
     sha256: String,
 }
 
-impl FileStamp {
-    fn of(meta: &Metadata) -> Option<(u64, u128)> {
-        let modified = meta.modified().ok()?.duration_since(UNIX_EPOCH).ok()?;
-        Some((meta.len(), modified.as_nanos()))
-    }
+/// A file's stat data as the build compares it: length and modification time in nanoseconds.
+pub(super) fn stat_data(meta: &Metadata) -> Option<(u64, u128)> {
+    let modified = meta.modified().ok()?.duration_since(UNIX_EPOCH).ok()?;
+    Some((meta.len(), modified.as_nanos()))
 }
 
 /// Digests remembered by the last build, and those seen by this one.
@@ -58,14 +57,14 @@ impl FileDigests {
     /// those recorded with it.
     pub(super) fn known(&self, path: &str, meta: &Metadata) -> Option<String> {
         let stamp = self.known.get(path)?;
-        let (len, modified_ns) = FileStamp::of(meta)?;
+        let (len, modified_ns) = stat_data(meta)?;
         (stamp.len == len && stamp.modified_ns == modified_ns).then(|| stamp.sha256.clone())
     }
 
     /// Remembers `sha256` for the file at `path` with stat data `meta`, unless it was modified
     /// too recently to be trusted.
     pub(super) fn record(&self, path: &str, meta: &Metadata, sha256: &str) {
-        let Some((len, modified_ns)) = FileStamp::of(meta) else {
+        let Some((len, modified_ns)) = stat_data(meta) else {
             return;
         };
         let settled = SystemTime::now()

@@ -17,7 +17,6 @@ use crate::io::normalization::NormalizationStats;
 use crate::io::parquet::{ROWS_PER_GROUP, Row, ShardWriter, TableError};
 use crate::motion::Profile;
 use rayon::prelude::*;
-use std::time::UNIX_EPOCH;
 
 /// What the last write recorded: its inputs' fingerprint, each shard's content fingerprint, and
 /// the outputs' checksums with their stat data.
@@ -36,9 +35,7 @@ const STATE_FILE: &str = "state.json";
 
 /// A file's length and modification time in nanoseconds.
 fn stat_stamp(path: &Path) -> Option<(u64, u128)> {
-    let meta = std::fs::metadata(path).ok()?;
-    let modified = meta.modified().ok()?.duration_since(UNIX_EPOCH).ok()?;
-    Some((meta.len(), modified.as_nanos()))
+    super::digests::stat_data(&std::fs::metadata(path).ok()?)
 }
 
 /// The last write's record, and when it was written (the state file's modification time).

@@ -170,10 +170,7 @@ pub fn sample<'c>(
                 .iter()
                 .copied()
                 .filter(|&j| {
-                    j != i
-                        && compatible(i, j)
-                        && count[j] < cap
-                        && !(j < i && chose[j] == Some(i))
+                    j != i && compatible(i, j) && count[j] < cap && !(j < i && chose[j] == Some(i))
                 })
                 .collect();
             if open.is_empty() {
@@ -205,7 +202,10 @@ fn count_compatible(members: &[Vec<usize>], capture_of: &[usize], parts_of: &[u8
         let mut by_capture: BTreeMap<usize, Vec<u8>> = BTreeMap::new();
         for &i in group {
             by_parts[usize::from(parts_of[i] & 63)] += 1;
-            by_capture.entry(capture_of[i]).or_default().push(parts_of[i]);
+            by_capture
+                .entry(capture_of[i])
+                .or_default()
+                .push(parts_of[i]);
         }
         // Ordered pairs of disjoint part sets, halved (a set is disjoint from itself only when
         // empty, and candidates have parts).
