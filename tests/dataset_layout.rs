@@ -77,16 +77,7 @@ df = pl.read_parquet(os.path.join(root, 'data', '*.parquet'))
 assert df.height == total
 print(total)
 "#;
-    let out = Command::new("python3")
-        .args(["-c", script])
-        .arg(&dataset)
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_python(script, &[&dataset]);
 }
 
 fn scratch(captures: &[&str], split_file: Option<&str>) -> (tempfile::TempDir, std::path::PathBuf) {
@@ -276,14 +267,5 @@ for feature in ['joint_positions', 'rotations_6d', 'joint_velocities']:
     assert mean.shape[0] == 22 and np.isfinite(mean).all(), feature
 print(t.num_rows)
 "#;
-    let out = Command::new("python3")
-        .args(["-c", script])
-        .arg(dir.path().join("out/ds"))
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_python(script, &[&dir.path().join("out/ds")]);
 }

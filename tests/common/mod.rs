@@ -136,3 +136,19 @@ pub const WALK_KICK_BYE: [&str; 3] = [
     "dataset-1_kick_normal_001",
     "dataset-1_bye_normal_001",
 ];
+
+/// Runs a Python script (the readers `.ci/run` installs) with `args`, fails the test with its
+/// standard error unless it succeeds, and returns its standard output.
+pub fn run_python(script: &str, args: &[&Path]) -> String {
+    let out = std::process::Command::new("python3")
+        .args(["-c", script])
+        .args(args)
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
