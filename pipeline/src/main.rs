@@ -20,6 +20,13 @@ use cli::labels::{LabelsCommand, PromptCommand, labels_command, prompt_command};
 use cli::summary::{counts, print_plan, print_report, print_status};
 use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
 
+// A build makes and frees many small values on every core (clip texts, decoded cache entries,
+// Parquet pages); with mimalloc's per-thread heaps a full build of Bandai Namco 2 took about 5%
+// less time and CPU than with glibc's allocator, for about 40 MB more peak memory
+// (docs/performance.md).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Exit codes, shown after `--help` and documented in docs/user-guide.md.
 const EXIT_CODES: &str = "\
 Exit codes:

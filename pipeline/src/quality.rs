@@ -362,6 +362,9 @@ fn chains(profile: &Profile, joints: usize) -> Vec<Chain> {
     out
 }
 
+/// Two chains (by index) and the bones of theirs to compare (by index into the bone list).
+type ChainPair = (usize, usize, Vec<(usize, usize)>);
+
 /// Two bones to compare, as joint index pairs.
 type BonePair = ((usize, usize), (usize, usize));
 
@@ -401,29 +404,64 @@ fn padded_box(clip: &Clip, chain: &Chain, f: usize) -> (DVec3, DVec3) {
 
 fn self_distance(clip: &Clip, profile: &Profile, out: &mut Plausibility) {
     let chains = chains(profile, clip.joints);
-    let mut pairs: Vec<(usize, usize, Vec<BonePair>)> = Vec::new();
+    // Every bone once; pairs name bones by index, so each frame measures a bone once.
+    let mut bones: Vec<(usize, usize)> = Vec::new();
+    let mut bone_index = |bone: (usize, usize)| match bones.iter().position(|b| *b == bone) {
+        Some(i) => i,
+        None => {
+            bones.push(bone);
+            bones.len() - 1
+        }
+    };
+    // Chain pairs (by index) and their bone pairs (by bone index).
+    let mut pairs: Vec<ChainPair> = Vec::new();
     for a in 0..chains.len() {
         for b in a + 1..chains.len() {
-            let bones = bone_pairs(&chains[a], &chains[b]);
-            if !bones.is_empty() {
-                pairs.push((a, b, bones));
+            let indexed: Vec<(usize, usize)> = bone_pairs(&chains[a], &chains[b])
+                .into_iter()
+                .map(|(x, y)| (bone_index(x), bone_index(y)))
+                .collect();
+            if !indexed.is_empty() {
+                pairs.push((a, b, indexed));
             }
         }
     }
     let mut self_best: Option<(f64, usize, BodyPart)> = None;
     let mut limb_best: Option<(f64, usize, (BodyPart, BodyPart))> = None;
+    let mut spheres: Vec<(DVec3, f64)> = vec![(DVec3::ZERO, 0.0); bones.len()];
     for f in 0..clip.frames {
         let boxes: Vec<(DVec3, DVec3)> = chains.iter().map(|c| padded_box(clip, c, f)).collect();
-        for (a, b, bones) in &pairs {
+        for (sphere, &(j0, j1)) in spheres.iter_mut().zip(&bones) {
+            let (p0, p1) = (clip.at(f, j0), clip.at(f, j1));
+            *sphere = ((p0 + p1) * 0.5, (p1 - p0).length() * 0.5);
+        }
+        for (a, b, pair_bones) in pairs.iter() {
             let ((a_lo, a_hi), (b_lo, b_hi)) = (boxes[*a], boxes[*b]);
             // Broad phase (CODA): only chains whose padded boxes overlap get the bone test; boxes
             // apart are more than 2 * LIMB_RADIUS apart, the reported cap.
             if a_lo.cmpgt(b_hi).any() || b_lo.cmpgt(a_hi).any() {
                 continue;
             }
-            let d = bones
+            let (ca, cb) = (&chains[*a], &chains[*b]);
+            let spine = ca.is_spine() || cb.is_spine();
+            // Only a distance below the best so far changes the result, so a bone pair whose
+            // bounding spheres are further apart than that is not measured. The margin keeps
+            // rounding in the bound from skipping a pair the exact test would have taken.
+            let best = if spine {
+                self_best.map(|(d, _, _)| d)
+            } else {
+                limb_best.map(|(d, _, _)| d)
+            };
+            let d = pair_bones
                 .iter()
-                .map(|&((p0, p1), (q0, q1))| {
+                .filter(|&&(x, y)| {
+                    let Some(best) = best else { return true };
+                    let ((cx, rx), (cy, ry)) = (spheres[x], spheres[y]);
+                    let reach = best * (1.0 + 1e-9) + 1e-12 + rx + ry;
+                    cx.distance_squared(cy) <= reach * reach
+                })
+                .map(|&(x, y)| {
+                    let ((p0, p1), (q0, q1)) = (bones[x], bones[y]);
                     segment_distance(
                         clip.at(f, p0),
                         clip.at(f, p1),
@@ -432,8 +470,7 @@ fn self_distance(clip: &Clip, profile: &Profile, out: &mut Plausibility) {
                     )
                 })
                 .fold(f64::INFINITY, f64::min);
-            let (ca, cb) = (&chains[*a], &chains[*b]);
-            if ca.is_spine() || cb.is_spine() {
+            if spine {
                 let limb = if ca.is_spine() { cb.part } else { ca.part };
                 if self_best.is_none_or(|(best, _, _)| d < best) {
                     self_best = Some((d, f, limb));
@@ -567,5 +604,105 @@ fn lean(clip: &Clip, body: &[usize], fps: f64, out: &mut Plausibility) {
             out.lean = sum / n as f64;
             out.lean_frame = f;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use rayon::prelude::*;
+
+    use super::*;
+    use crate::motion::canonical::dataset_positions;
+    use crate::motion::{ProfileSpec, read_bvh};
+
+    /// The distances as measured before bone pairs were skipped by their bounding spheres: every
+    /// bone pair of every chain pair whose boxes overlap.
+    fn every_pair(clip: &Clip, profile: &Profile) -> [Option<(f64, usize)>; 2] {
+        let chains = chains(profile, clip.joints);
+        let [mut spine_best, mut limb_best]: [Option<(f64, usize)>; 2] = [None, None];
+        for f in 0..clip.frames {
+            for a in 0..chains.len() {
+                for b in a + 1..chains.len() {
+                    let bones = bone_pairs(&chains[a], &chains[b]);
+                    let ((a_lo, a_hi), (b_lo, b_hi)) = (
+                        padded_box(clip, &chains[a], f),
+                        padded_box(clip, &chains[b], f),
+                    );
+                    if bones.is_empty() || a_lo.cmpgt(b_hi).any() || b_lo.cmpgt(a_hi).any() {
+                        continue;
+                    }
+                    let d = bones
+                        .iter()
+                        .map(|&((p0, p1), (q0, q1))| {
+                            segment_distance(
+                                clip.at(f, p0),
+                                clip.at(f, p1),
+                                clip.at(f, q0),
+                                clip.at(f, q1),
+                            )
+                        })
+                        .fold(f64::INFINITY, f64::min);
+                    let best = if chains[a].is_spine() || chains[b].is_spine() {
+                        &mut spine_best
+                    } else {
+                        &mut limb_best
+                    };
+                    if best.is_none_or(|(x, _)| d < x) {
+                        *best = Some((d, f));
+                    }
+                }
+            }
+        }
+        [spine_best, limb_best]
+    }
+
+    #[test]
+    fn skipping_far_bone_pairs_measures_what_every_pair_measures_on_real_captures() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+        let mut files: Vec<(PathBuf, &str)> = vec![(root.join("fixtures/cmu/01_01.bvh"), "cmu")];
+        for dir in [
+            root.join("fixtures/bandai-namco-1/data"),
+            root.join("../shared/data/bandai-namco-2-subset/data"),
+        ] {
+            let listing = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{dir:?}: {e}"));
+            for entry in listing {
+                let path = entry.unwrap().path();
+                if path.extension().is_some_and(|e| e == "bvh") {
+                    files.push((path, "bandai-namco"));
+                }
+            }
+        }
+        assert!(files.len() > 60, "{} captures", files.len());
+        files.par_iter().for_each(|(path, profile)| {
+            let bvh = read_bvh(&std::fs::read_to_string(path).unwrap()).unwrap();
+            let motion = &bvh.motion;
+            let profile = ProfileSpec::bundled(profile)
+                .unwrap()
+                .bind(&motion.skeleton)
+                .unwrap();
+            let positions = dataset_positions(motion, &profile);
+            let joints = motion.num_joints();
+            let clip = Clip {
+                positions: &positions,
+                joints,
+                frames: positions.len() / joints,
+            };
+            let mut pruned = Plausibility::default();
+            self_distance(&clip, &profile, &mut pruned);
+            let [spine, limb] = every_pair(&clip, &profile);
+            let (spine, limb) = (spine.unwrap(), limb.unwrap());
+            assert_eq!(
+                (pruned.self_distance, pruned.self_distance_frame),
+                (spine.0.min(2.0 * LIMB_RADIUS), spine.1),
+                "{path:?}"
+            );
+            assert_eq!(
+                (pruned.limb_distance, pruned.limb_distance_frame),
+                (limb.0.min(2.0 * LIMB_RADIUS), limb.1),
+                "{path:?}"
+            );
+        });
     }
 }

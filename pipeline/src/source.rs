@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::annotate::event_log::{self, EventLogFormat};
+use crate::annotate::filename::{FilenamePattern, PatternError};
 use crate::annotate::span::{AnnotationError, CaptureAnnotation, Note, stem_of};
 use crate::annotate::{babel, frame_index};
 use crate::config::{Config, LabelConfig, SourceConfig};
@@ -190,8 +191,8 @@ pub fn load_fps_table(
 pub enum SourceAnnotations {
     /// Labels come from each capture's file name (and sidecar), made per capture.
     Filename {
-        /// File-stem pattern.
-        pattern: String,
+        /// File-stem pattern, compiled (or why it does not compile, reported per capture).
+        pattern: Result<FilenamePattern, PatternError>,
         /// Action template.
         action: String,
         /// Caption template.
@@ -275,7 +276,7 @@ pub fn load_annotations(
             sidecar,
         } => {
             return Ok(SourceAnnotations::Filename {
-                pattern: pattern.clone(),
+                pattern: FilenamePattern::new(pattern),
                 action: action.clone(),
                 text: text.clone(),
                 sidecar: *sidecar,

@@ -153,9 +153,23 @@ pub fn filename_annotation(
     stem: &str,
     sidecar: Option<&[u8]>,
 ) -> Result<CaptureAnnotation, LabelRefusal> {
+    let compiled = FilenamePattern::new(pattern).map_err(|e| LabelRefusal {
+        reason: RejectReason::LabelPattern,
+        message: e.to_string(),
+    })?;
+    compiled_filename_annotation(&compiled, action, text, stem, sidecar)
+}
+
+/// [`filename_annotation`] with the pattern compiled once for every capture of a source.
+pub fn compiled_filename_annotation(
+    compiled: &FilenamePattern,
+    action: &str,
+    text: &str,
+    stem: &str,
+    sidecar: Option<&[u8]>,
+) -> Result<CaptureAnnotation, LabelRefusal> {
     let refuse = |reason, message| LabelRefusal { reason, message };
-    let compiled = FilenamePattern::new(pattern)
-        .map_err(|e| refuse(RejectReason::LabelPattern, e.to_string()))?;
+    let pattern = compiled.as_str();
     let mut fields = compiled.captures(stem).ok_or_else(|| {
         refuse(
             RejectReason::LabelPattern,

@@ -4,12 +4,12 @@ use std::collections::BTreeMap;
 
 use super::motions::{MotionRef, MotionSpill};
 use super::{BuildError, Reject, Stage, Workspace, WorkspaceError, sha256_hex};
-use crate::annotate::filename::filename_annotation;
+use crate::annotate::filename::{LabelRefusal, compiled_filename_annotation};
 use crate::annotate::taxonomy::TypeMap;
 use crate::base::RejectReason;
 use crate::clip::Clip;
 use crate::config::Config;
-use crate::motion::ProfileSpec;
+use crate::motion::{BoundProfiles, ProfileSpec};
 use crate::source::{self, CaptureFile, SourceAnnotations};
 use crate::stages::segment::{self, SegmentOutput};
 use crate::stages::{ingest, mirror};
@@ -61,6 +61,8 @@ pub(super) struct Shared<'a> {
     pub(super) config: &'a Config,
     pub(super) workspace: Workspace,
     pub(super) specs: Vec<ProfileSpec>,
+    /// Profiles bound to the skeletons seen so far.
+    pub(super) bound: std::sync::Arc<BoundProfiles>,
     pub(super) annotations: Vec<SourceAnnotations>,
     pub(super) fps_tables: Vec<BTreeMap<String, f64>>,
     pub(super) types: TypeMap,
@@ -73,11 +75,8 @@ pub(super) struct Shared<'a> {
 impl Shared<'_> {
     /// The bound profile of a clip's skeleton.
     pub(super) fn profile_of(&self, clip: &Clip) -> Option<crate::motion::Profile> {
-        self.specs
-            .iter()
-            .find(|s| s.name == clip.profile)?
-            .bind(&clip.motion.skeleton)
-            .ok()
+        let spec = self.specs.iter().find(|s| s.name == clip.profile)?;
+        self.bound.bind(spec, &clip.motion.skeleton).ok()
     }
 }
 
@@ -189,7 +188,16 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             } else {
                 None
             };
-            match filename_annotation(pattern, action, text, &header.stem, side.as_deref()) {
+            let annotation = pattern
+                .as_ref()
+                .map_err(|e| LabelRefusal {
+                    reason: RejectReason::LabelPattern,
+                    message: e.to_string(),
+                })
+                .and_then(|p| {
+                    compiled_filename_annotation(p, action, text, &header.stem, side.as_deref())
+                });
+            match annotation {
                 Ok(a) => a,
                 Err(refusal) => {
                     item.rejects.push(ingest::reject(
@@ -224,7 +232,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             }
         },
     };
-    let profile = match spec.bind(&header.skeleton) {
+    let profile = match shared.bound.bind(spec, &header.skeleton) {
         Ok(p) => p,
         Err(e) => {
             item.rejects.push(ingest::reject(
@@ -309,7 +317,12 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
             let mut out = mirror::MirrorOutput::default();
             let mut refs = Vec::new();
             for (clip, at) in item.clips.iter().zip(&item.refs) {
-                let one = mirror::run(std::slice::from_ref(clip), spec, shared.types.taxonomy());
+                let one = mirror::run_with(
+                    std::slice::from_ref(clip),
+                    spec,
+                    &shared.bound,
+                    shared.types.taxonomy(),
+                );
                 for copy in one.clips {
                     refs.push(MotionRef::Mirrored(Box::new(at.clone())));
                     out.clips.push(copy);

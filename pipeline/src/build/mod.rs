@@ -6,6 +6,7 @@ pub mod clean;
 mod digests;
 mod motions;
 mod output;
+mod pack;
 mod plan;
 mod text;
 pub mod workspace;
@@ -316,13 +317,14 @@ fn run_stages<'a>(
         config,
         workspace,
         specs,
+        bound: Default::default(),
         annotations,
         fps_tables,
         types,
         types_digest,
         digests,
     };
-    let motions = MotionSource::new(&shared.workspace, &shared.specs);
+    let motions = MotionSource::new(&shared.workspace, &shared.specs, &shared.bound);
 
     progress.stage_started(ingest::NAME, files.len() as u64);
     let mut items: Vec<Item> = files
@@ -692,7 +694,11 @@ struct Staged<'a> {
 /// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
 pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip>, BuildError> {
     let staged = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&staged.shared.workspace, &staged.shared.specs);
+    let motions = MotionSource::new(
+        &staged.shared.workspace,
+        &staged.shared.specs,
+        &staged.shared.bound,
+    );
     staged
         .clips
         .iter()
@@ -709,7 +715,11 @@ pub fn find_clip(
     clip_id: &str,
 ) -> Result<(Option<Clip>, Vec<String>), BuildError> {
     let staged = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&staged.shared.workspace, &staged.shared.specs);
+    let motions = MotionSource::new(
+        &staged.shared.workspace,
+        &staged.shared.specs,
+        &staged.shared.bound,
+    );
     let found = staged
         .clips
         .iter()
@@ -741,7 +751,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         blocked: _,
         index,
     } = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&shared.workspace, &shared.specs);
+    let motions = MotionSource::new(&shared.workspace, &shared.specs, &shared.bound);
     let workspace = &shared.workspace;
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();

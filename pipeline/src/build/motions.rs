@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::{BuildError, Workspace, WorkspaceError, sha256_hex};
 use crate::clip::Clip;
 use crate::motion::compose::{Trim, compose};
-use crate::motion::{MirrorPlan, Motion, OffsetPolicy, ProfileSpec};
+use crate::motion::{BoundProfiles, MirrorPlan, Motion, OffsetPolicy, ProfileSpec};
 
 /// Stage-cache folder of segmented clips' motions, in chunks.
 pub(super) const SEGMENT_CHUNKS: &str = "segment-motions";
@@ -96,22 +96,28 @@ pub(super) struct MotionSource {
     workspace: Workspace,
     /// Skeleton profiles by name: mirrors and composites need the bound profile.
     specs: Vec<ProfileSpec>,
+    bound: Arc<BoundProfiles>,
     recent: Mutex<VecDeque<(String, Arc<Vec<Motion>>)>>,
 }
 
 impl MotionSource {
     /// Motions of `workspace`'s cache, on skeletons of the profiles `specs`.
-    pub(super) fn new(workspace: &Workspace, specs: &[ProfileSpec]) -> MotionSource {
+    pub(super) fn new(
+        workspace: &Workspace,
+        specs: &[ProfileSpec],
+        bound: &Arc<BoundProfiles>,
+    ) -> MotionSource {
         MotionSource {
             workspace: workspace.clone(),
             specs: specs.to_vec(),
+            bound: Arc::clone(bound),
             recent: Mutex::new(VecDeque::new()),
         }
     }
 
     /// A source over the same cache with its own memory of recent entries, for another thread.
     pub(super) fn sibling(&self) -> MotionSource {
-        MotionSource::new(&self.workspace, &self.specs)
+        MotionSource::new(&self.workspace, &self.specs, &self.bound)
     }
 
     /// The motion `at` points to, on a skeleton of profile `profile`.
@@ -148,7 +154,8 @@ impl MotionSource {
             .iter()
             .find(|s| s.name == profile)
             .ok_or_else(|| BuildError::Motion(format!("no skeleton profile `{profile}`")))?;
-        spec.bind(&motion.skeleton)
+        self.bound
+            .bind(spec, &motion.skeleton)
             .map_err(|e| BuildError::Motion(format!("profile `{profile}`: {e}")))
     }
 
@@ -224,7 +231,7 @@ impl MotionSource {
 fn missing(at: &MotionRef, why: &str) -> BuildError {
     let (stage, fingerprint) = at.chunks().first().copied().unwrap_or(("?", "?"));
     BuildError::Workspace(WorkspaceError::Io {
-        path: format!(".motionforge/cache/{stage}/{fingerprint}.bin").into(),
+        path: format!(".motionforge/cache/{stage} (entry {fingerprint})").into(),
         source: std::io::Error::new(
             std::io::ErrorKind::NotFound,
             format!("{why}; run the build again with --force"),
@@ -323,7 +330,8 @@ impl PackedMotion {
 }
 
 /// Moves segmented clips' frames to disk as they are made, in chunks of at most [`CHUNK`] named by
-/// their content, so a stage holds one chunk of frames however many clips it makes.
+/// their content, so a stage holds one chunk of frames however many clips it makes. (The names
+/// reach the table fingerprint in the manifest: they say what the frames are, not where.)
 pub(super) struct MotionSpill<'w> {
     workspace: &'w Workspace,
     pending: Vec<PackedMotion>,

@@ -83,13 +83,15 @@ pub struct Miss {
     pub stamp: Stamp,
 }
 
-/// The per-item stage cache under `<output>/.motionforge/cache/<stage>/<fingerprint>`. In probe
-/// mode (for `plan`) nothing is computed or stored: misses are collected instead.
+/// The per-item stage cache under `<output>/.motionforge/cache/<stage>/`, entries named by
+/// fingerprint and packed into a few files per stage ([`super::pack`]). In probe mode (for
+/// `plan`) nothing is computed or stored: misses are collected instead.
 #[derive(Debug, Clone)]
 pub struct Workspace {
     root: PathBuf,
     probe: bool,
     seen: std::sync::Arc<std::sync::Mutex<Vec<Miss>>>,
+    packs: std::sync::Arc<super::pack::Packs>,
 }
 
 impl Workspace {
@@ -99,6 +101,7 @@ impl Workspace {
             root: output.join(".motionforge"),
             probe: false,
             seen: Default::default(),
+            packs: Default::default(),
         }
     }
 
@@ -160,7 +163,7 @@ impl Workspace {
 
     /// True when `stage` has a cached output under `fingerprint`.
     pub fn has(&self, stage: &str, fingerprint: &str) -> bool {
-        self.entry(stage, fingerprint).is_file()
+        self.packs.has(&self.cache(), stage, fingerprint)
     }
 
     /// The workspace folder.
@@ -168,21 +171,18 @@ impl Workspace {
         &self.root
     }
 
-    fn entry(&self, stage: &str, fingerprint: &str) -> PathBuf {
-        self.root
-            .join("cache")
-            .join(stage)
-            .join(format!("{fingerprint}.bin"))
+    fn cache(&self) -> PathBuf {
+        self.root.join("cache")
     }
 
     /// A cached stage output, if present and readable. A damaged entry counts as absent, so the
     /// item is recomputed rather than trusted.
     pub fn load<T: DeserializeOwned>(&self, stage: &str, fingerprint: &str) -> Option<T> {
-        let bytes = fs::read(self.entry(stage, fingerprint)).ok()?;
-        postcard::from_bytes(entry_body(&bytes)?).ok()
+        let bytes = self.packs.read(&self.cache(), stage, fingerprint)?;
+        postcard::from_bytes(&bytes).ok()
     }
 
-    /// Stores a stage output atomically.
+    /// Stores a stage output; it replaces any entry under the same fingerprint.
     pub fn store<T: Serialize>(
         &self,
         stage: &str,
@@ -193,7 +193,7 @@ impl Workspace {
             what: format!("{stage} output"),
             message: e.to_string(),
         })?;
-        write_entry(&self.entry(stage, fingerprint), &bytes)
+        self.packs.write(&self.cache(), stage, fingerprint, &bytes)
     }
 
     /// Stores already-encoded bytes under `fingerprint`, unless an entry is there.
@@ -203,11 +203,11 @@ impl Workspace {
         fingerprint: &str,
         bytes: &[u8],
     ) -> Result<(), WorkspaceError> {
-        let path = self.entry(stage, fingerprint);
-        if path.is_file() {
+        let cache = self.cache();
+        if self.packs.has(&cache, stage, fingerprint) {
             return Ok(());
         }
-        write_entry(&path, bytes)
+        self.packs.write(&cache, stage, fingerprint, bytes)
     }
 
     /// Removes cache entries of `stage` not in `keep` (old fingerprints).
@@ -215,47 +215,8 @@ impl Workspace {
         if self.probe {
             return;
         }
-        let dir = self.root.join("cache").join(stage);
-        let Ok(entries) = fs::read_dir(&dir) else {
-            return;
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            let stem = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            if !keep.contains(&stem) {
-                let _ = fs::remove_file(&path);
-            }
-        }
-        if keep.is_empty() {
-            // A stage with nothing to keep leaves no folder (only removed when empty).
-            let _ = fs::remove_dir(&dir);
-        }
+        self.packs.prune(&self.cache(), stage, keep);
     }
-}
-
-/// Ends every cache entry: the body's length, then this mark. Entries are written without fsync
-/// (they can be made again), so after a crash an entry may be cut short or empty: the footer tells.
-const ENTRY_MARK: &[u8; 8] = b"mfentry1";
-
-fn write_entry(path: &Path, body: &[u8]) -> Result<(), WorkspaceError> {
-    crate::base::write_replaceable_with(path, |file| {
-        use std::io::Write;
-        file.write_all(body)?;
-        file.write_all(&(body.len() as u64).to_le_bytes())?;
-        file.write_all(ENTRY_MARK)
-    })
-}
-
-/// The body of a cache entry whose footer is whole and agrees with its length.
-fn entry_body(bytes: &[u8]) -> Option<&[u8]> {
-    let body_len = bytes.len().checked_sub(16)?;
-    let (body, footer) = bytes.split_at(body_len);
-    let (len, mark) = footer.split_at(8);
-    let len = u64::from_le_bytes(len.try_into().ok()?);
-    (mark == ENTRY_MARK && len == body_len as u64).then_some(body)
 }
 
 #[cfg(test)]
@@ -263,7 +224,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn entries_cut_short_or_emptied_read_as_absent() {
+    fn entries_are_found_again_by_a_new_workspace() {
         let dir = tempfile::tempdir().unwrap();
         let workspace = Workspace::new(dir.path());
         workspace.store("stage", "fp", &vec![1u32, 2, 3]).unwrap();
@@ -271,20 +232,8 @@ mod tests {
             workspace.load::<Vec<u32>>("stage", "fp"),
             Some(vec![1, 2, 3])
         );
-        let path = workspace.entry("stage", "fp");
-        let whole = fs::read(&path).unwrap();
-        for cut in [0, 1, whole.len() / 2, whole.len() - 1] {
-            fs::write(&path, &whole[..cut]).unwrap();
-            assert_eq!(
-                workspace.load::<Vec<u32>>("stage", "fp"),
-                None,
-                "cut at {cut}"
-            );
-        }
-        let mut zeroed = whole.clone();
-        let n = zeroed.len();
-        zeroed[n - 8..].fill(0);
-        fs::write(&path, &zeroed).unwrap();
-        assert_eq!(workspace.load::<Vec<u32>>("stage", "fp"), None);
+        let again = Workspace::new(dir.path());
+        assert!(again.has("stage", "fp"));
+        assert_eq!(again.load::<Vec<u32>>("stage", "fp"), Some(vec![1, 2, 3]));
     }
 }

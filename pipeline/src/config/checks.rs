@@ -7,7 +7,7 @@ use crate::motion::bvh::FPS_RANGE;
 /// Longest dataset name: a folder name, within the 255-byte file-name limit of common file
 /// systems with room for the prefixes and suffixes of temporary files.
 const MAX_NAME_BYTES: usize = 200;
-/// Longest `<output>/<name>`: the files under it (`.motionforge/cache/<stage>/<sha256>.bin`, up to
+/// Longest `<output>/<name>`: the files under it (`.motionforge/cache/<stage>/<pack name>`, up to
 /// about 120 bytes more) must stay within Linux's 4096-byte path limit.
 const MAX_DATASET_PATH_BYTES: usize = 3800;
 

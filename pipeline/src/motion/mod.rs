@@ -14,7 +14,7 @@ pub use bvh::{
 };
 pub use mirror::{MirrorPlan, OffsetPolicy, calibrate, mean_rotation};
 pub use motion::{Motion, WorldPose};
-pub use profile::{BodyPart, Profile, ProfileSpec, Reflection, Role, SignedAxis};
+pub use profile::{BodyPart, BoundProfiles, Profile, ProfileSpec, Reflection, Role, SignedAxis};
 pub use skeleton::{Channel, Joint, Skeleton};
 pub mod canonical;
 pub mod compose;

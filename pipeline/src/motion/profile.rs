@@ -416,6 +416,40 @@ impl ProfileSpec {
     }
 }
 
+/// Profiles already bound, by profile and skeleton. A dataset's captures share a few skeletons
+/// (three among Bandai Namco's 2,902), and binding (pair detection by joint name) costs far more
+/// than comparing two skeletons; the build binds once per stored motion it reads.
+#[derive(Debug, Default)]
+pub struct BoundProfiles {
+    seen: std::sync::Mutex<Vec<Bound>>,
+}
+
+/// A profile, a skeleton and what binding them gave.
+type Bound = (ProfileSpec, Skeleton, Result<Profile, ProfileError>);
+
+/// Skeletons remembered at most; past that, binding is done each time rather than memory grown.
+const BOUND_PROFILES_KEPT: usize = 64;
+
+impl BoundProfiles {
+    /// `spec.bind(skeleton)`, remembered.
+    pub fn bind(&self, spec: &ProfileSpec, skeleton: &Skeleton) -> Result<Profile, ProfileError> {
+        if let Ok(seen) = self.seen.lock()
+            && let Some((_, _, bound)) = seen
+                .iter()
+                .find(|(s, k, _)| s.name == spec.name && k == skeleton && s == spec)
+        {
+            return bound.clone();
+        }
+        let bound = spec.bind(skeleton);
+        if let Ok(mut seen) = self.seen.lock()
+            && seen.len() < BOUND_PROFILES_KEPT
+        {
+            seen.push((spec.clone(), skeleton.clone(), bound.clone()));
+        }
+        bound
+    }
+}
+
 /// A profile bound to one skeleton: everything by joint index.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Profile {

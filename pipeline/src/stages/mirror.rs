@@ -8,7 +8,7 @@ use crate::annotate::taxonomy::Taxonomy;
 use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
 use crate::clip::Clip;
 use crate::llm::plans::mirror_paraphrases;
-use crate::motion::{MirrorPlan, OffsetPolicy, ProfileSpec};
+use crate::motion::{BoundProfiles, MirrorPlan, OffsetPolicy, ProfileSpec};
 use crate::parts::PartSet;
 use crate::text::mirror_text;
 
@@ -41,12 +41,22 @@ pub struct MirrorOutput {
 
 /// Mirrored copies of `clips`; a clip whose skeleton the profile cannot mirror is rejected.
 pub fn run(clips: &[Clip], profile: &ProfileSpec, taxonomy: &Taxonomy) -> MirrorOutput {
+    run_with(clips, profile, &BoundProfiles::default(), taxonomy)
+}
+
+/// [`run`], binding the profile through `bound` (shared by the calls of one build).
+pub fn run_with(
+    clips: &[Clip],
+    profile: &ProfileSpec,
+    bound: &BoundProfiles,
+    taxonomy: &Taxonomy,
+) -> MirrorOutput {
     let mut out = Vec::with_capacity(clips.len());
     let mut rejects = Vec::new();
     for clip in clips {
         let skeleton = &clip.motion.skeleton;
-        let plan = profile
-            .bind(skeleton)
+        let plan = bound
+            .bind(profile, skeleton)
             .map_err(|e| e.to_string())
             .and_then(|bound| {
                 MirrorPlan::from_profile(skeleton, &bound).map_err(|e| e.to_string())
