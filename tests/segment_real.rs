@@ -58,11 +58,22 @@ fn segment_with(
     config: &SegmentConfig,
     types: &TypeMap,
 ) -> segment::SegmentOutput {
+    segment_loaded(capture, annotation, kind, config, types).0
+}
+
+/// [`segment_with`], with the frames of every clip.
+fn segment_loaded(
+    capture: &Capture,
+    annotation: &CaptureAnnotation,
+    kind: &str,
+    config: &SegmentConfig,
+    types: &TypeMap,
+) -> (segment::SegmentOutput, Vec<motionforge::motion::Motion>) {
     let profile = ProfileSpec::bundled(&capture.profile)
         .unwrap()
         .bind(&capture.motion.skeleton)
         .unwrap();
-    segment::run(&segment::SegmentInput {
+    segment::run_loaded(&segment::SegmentInput {
         capture,
         annotation,
         kind,
@@ -105,7 +116,7 @@ fn humanml3d_index_rows_cut_cmu_01_01_as_two_independent_clips() {
     );
     let annotation = &by_key["01_01"];
     let cmu = capture(&shared_data().join("cmu/01_01.bvh"), "cmu");
-    let out = segment_with(
+    let (out, motions) = segment_loaded(
         &cmu,
         annotation,
         "frame_index",
@@ -122,10 +133,11 @@ fn humanml3d_index_rows_cut_cmu_01_01_as_two_independent_clips() {
         ranges(&out.clips, SourceKind::RealPair).is_empty(),
         "index rows are independent crops"
     );
-    for clip in &out.clips {
-        assert_eq!(clip.motion.num_frames(), 300, "10 s at 30 fps");
+    assert_eq!(motions.len(), out.clips.len());
+    for (clip, motion) in out.clips.iter().zip(&motions) {
+        assert_eq!(motion.num_frames(), 300, "10 s at 30 fps");
         // The clip's first frame is the capture's frame `start`, resampled exactly (120 = 4 x 30).
-        let first = clip.motion.rotation(0, 3);
+        let first = motion.rotation(0, 3);
         assert!(first.abs_diff_eq(cmu.motion.rotation(clip.frame_range.0 as usize, 3), 1e-12));
     }
 }
@@ -447,14 +459,14 @@ fn hand_goals_sit_at_the_grasp_frame_and_mirror_with_the_hand() {
         ..CaptureAnnotation::default()
     };
     let types = demo_types();
-    let out = segment_with(
+    let (out, motions) = segment_loaded(
         &cap,
         &annotation,
         "event_log",
         &SegmentConfig::default(),
         &types,
     );
-    let clip = &out.clips[0];
+    let (clip, motion) = (&out.clips[0], &motions[0]);
     assert_eq!(clip.motion_type.as_deref(), Some("pick up"));
     assert!(clip.goal_pelvis.is_none(), "pick up is not locomotion");
     let goal = clip
@@ -465,8 +477,8 @@ fn hand_goals_sit_at_the_grasp_frame_and_mirror_with_the_hand() {
         .unwrap()
         .bind(&cap.motion.skeleton)
         .unwrap();
-    let positions = dataset_positions(&clip.motion, &profile);
-    let n = clip.motion.num_joints();
+    let positions = dataset_positions(motion, &profile);
+    let n = motion.num_joints();
     let frame = canonical_frame(&positions[..n], &profile).unwrap();
     let hand = cap.motion.skeleton.index_of("Hand_R").unwrap();
     let expected = frame.apply(positions[30 * n + hand]);

@@ -50,6 +50,7 @@ fn synthetic_ids(config: &Config) -> Vec<String> {
     collect_clips(config, &BuildOptions::default())
         .unwrap()
         .into_iter()
+        .map(|c| c.clip)
         .filter(|c| c.kind == SourceKind::Synthetic)
         .map(|c| c.clip_id)
         .collect()
@@ -89,7 +90,11 @@ fn incompatible_pairs_are_never_composed_and_counts_add_up() {
         "exhaustive mode composes every compatible pair"
     );
     assert_eq!(s.composed + s.dropped.values().sum::<usize>(), s.sampled);
-    let clips = collect_clips(&config, &BuildOptions::default()).unwrap();
+    let clips: Vec<_> = collect_clips(&config, &BuildOptions::default())
+        .unwrap()
+        .into_iter()
+        .map(|c| c.clip)
+        .collect();
     for c in clips.iter().filter(|c| c.kind == SourceKind::Synthetic) {
         let sources: Vec<&str> = c.composed_from.iter().map(String::as_str).collect();
         let has = |s: &str| sources.iter().any(|id| id.contains(s));
@@ -145,7 +150,7 @@ fn export_bvh_writes_a_synthetic_clip_that_reads_back_on_the_source_skeleton() {
     );
     let bvh = read_bvh(&fs::read_to_string(&out).unwrap()).unwrap();
     let clips = collect_clips(&config, &BuildOptions::default()).unwrap();
-    let clip = clips.iter().find(|c| &c.clip_id == id).unwrap();
+    let clip = clips.iter().find(|c| &c.clip.clip_id == id).unwrap();
     assert_eq!(
         bvh.skeleton.names().collect::<Vec<_>>(),
         clip.motion.skeleton.names().collect::<Vec<_>>()

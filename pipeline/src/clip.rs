@@ -1,11 +1,15 @@
-//! `Clip`: a labelled stretch of motion with its provenance, the unit every stage passes on.
+//! `Clip`: a labelled stretch of motion with its provenance, the unit every stage passes on. A
+//! clip is metadata only; its frames are a [`Motion`] of their own, held beside it
+//! ([`LoadedClip`]) by the work that needs them and otherwise kept in the stage cache, so a clip
+//! without frames cannot be mistaken for a clip of no frames.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
 use crate::annotate::span::Hand;
-use crate::motion::Motion;
+use crate::motion::{Motion, Skeleton};
 use crate::parts::PartSet;
 
 /// Where a clip came from.
@@ -57,7 +61,8 @@ pub struct Capture {
     pub motion: Motion,
 }
 
-/// A clip: motion at the dataset frame rate on its capture's skeleton, its texts and provenance.
+/// A clip: a stretch of motion at the dataset frame rate on its capture's skeleton, its texts and
+/// provenance. The frames are not part of it (see [`LoadedClip`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Clip {
     /// Stable identifier: `<source>/<capture stem>:<start>-<end>` (capture frames), `:pair` for a
@@ -112,6 +117,16 @@ pub struct Clip {
     pub attributes: BTreeMap<String, String>,
     /// Skeleton profile name.
     pub profile: String,
-    /// The motion, resampled to the dataset rate, in the capture's units and axes.
+    /// The skeleton the clip's motion is on (the capture's).
+    pub skeleton: Arc<Skeleton>,
+}
+
+/// A clip with its frames: its motion resampled to the dataset rate, in the capture's units and
+/// axes, on `clip.skeleton`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedClip {
+    /// The clip.
+    pub clip: Clip,
+    /// Its frames.
     pub motion: Motion,
 }

@@ -12,7 +12,10 @@
 //! * [`annotate::span::CaptureAnnotation`]: what an annotation format (file names, BABEL, event
 //!   logs, frame-range indexes) says about one capture, as labelled time spans.
 //! * [`clip::Capture`] and [`clip::Clip`]: a read capture, and one row of the dataset (its text,
-//!   labels, [`parts::PartSet`], provenance and motion).
+//!   labels, [`parts::PartSet`], provenance and skeleton). A clip holds no frames: the work that
+//!   needs them holds a [`clip::LoadedClip`] (the clip and its [`motion::Motion`]), and a build
+//!   otherwise keeps them in the stage cache, so a clip without frames cannot pass for an empty
+//!   one.
 //! * [`build::Stage`], [`build::Workspace`] and [`base::Fingerprint`]: the stages in order, the
 //!   per-item stage cache, and the content fingerprint that decides what re-runs.
 //! * [`base::Reject`] and [`base::Dropped`]: an input refused (file, line, frame, reason) and a
@@ -24,9 +27,9 @@
 //!    annotations are read once ([`annotate`]).
 //! 2. **ingest** ([`stages::ingest`]): the BVH is parsed into a [`clip::Capture`] at its own frame
 //!    rate, or refused with a [`base::Reject`].
-//! 3. **segment** ([`stages::segment`]): each labelled span becomes a [`clip::Clip`], resampled
-//!    to the dataset rate, typed by the motion-type taxonomy and given its goals; its frames go to
-//!    the stage cache at once, so a build holds clips without frames.
+//! 3. **segment** ([`stages::segment`]): each labelled span becomes a [`clip::Clip`] and its
+//!    motion resampled to the dataset rate, typed by the motion-type taxonomy and given its goals;
+//!    the motion goes to the stage cache at once, so a build holds clips, not frames.
 //! 4. **label, paraphrase, plan** ([`stages::label`], [`stages::augment`]): body parts from the
 //!    embedded labeller or an LLM through a cached client ([`llm`]).
 //! 5. **mirror** ([`stages::mirror`]): the left/right reflection of motion, texts and labels.

@@ -76,7 +76,7 @@ impl Shared<'_> {
     /// The bound profile of a clip's skeleton.
     pub(super) fn profile_of(&self, clip: &Clip) -> Option<crate::motion::Profile> {
         let spec = self.specs.iter().find(|s| s.name == clip.profile)?;
-        self.bound.bind(spec, &clip.motion.skeleton).ok()
+        self.bound.bind(spec, &clip.skeleton).ok()
     }
 }
 
@@ -278,7 +278,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
                 fps: config.dataset.fps,
             };
             let mut spill = MotionSpill::new(&shared.workspace);
-            let out = segment::run_with(&seg_input, |clip| spill.push(clip))?;
+            let out = segment::run_with(&seg_input, |_, motion| spill.push(motion))?;
             Ok::<_, BuildError>((out, spill.finish()?))
         })?
     else {

@@ -32,7 +32,7 @@ use output::{Table, skeleton_json, write_outputs};
 
 use crate::annotate::span::Note;
 use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
-use crate::clip::{Clip, SourceKind};
+use crate::clip::{Clip, LoadedClip, SourceKind};
 use crate::config::Config;
 use crate::io::parquet::TableError;
 use crate::motion::{Profile, ProfileSpec};
@@ -46,7 +46,7 @@ pub use crate::base::layout::{
 };
 
 /// Version of the table-writing stage.
-const WRITE_VERSION: u32 = 2;
+const WRITE_VERSION: u32 = 3;
 
 /// The stages of a build in dependency order: each needs every one before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -608,7 +608,7 @@ fn compose(
                     );
                     vetoed.0.contains(&key).then_some("llm_incompatible")
                 },
-                |clip, recipe| {
+                |_, recipe| {
                     let source = |c: &Clip| {
                         index.get(&motions::key(c)).cloned().ok_or_else(|| {
                             BuildError::Motion(format!(
@@ -626,9 +626,8 @@ fn compose(
                             crate::motion::compose::Trim::Start => None,
                             crate::motion::compose::Trim::At(s) => Some(s as u32),
                         },
-                        frames: clip.motion.num_frames() as u32,
+                        frames: recipe.frames as u32,
                     });
-                    clip.motion = clip.motion.without_frames();
                     Ok::<(), BuildError>(())
                 },
             )?;
@@ -692,7 +691,10 @@ struct Staged<'a> {
 
 /// Every clip a build would write (synthetic pairs included), from cached stage outputs where
 /// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
-pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip>, BuildError> {
+pub fn collect_clips(
+    config: &Config,
+    options: &BuildOptions,
+) -> Result<Vec<LoadedClip>, BuildError> {
     let staged = run_stages(config, options, false)?;
     let motions = MotionSource::new(
         &staged.shared.workspace,
@@ -702,7 +704,7 @@ pub fn collect_clips(config: &Config, options: &BuildOptions) -> Result<Vec<Clip
     staged
         .clips
         .iter()
-        .map(|c| motions.hydrate(c, &staged.index))
+        .map(|c| motions.load(c, &staged.index))
         .collect()
 }
 
@@ -713,7 +715,7 @@ pub fn find_clip(
     config: &Config,
     options: &BuildOptions,
     clip_id: &str,
-) -> Result<(Option<Clip>, Vec<String>), BuildError> {
+) -> Result<(Option<LoadedClip>, Vec<String>), BuildError> {
     let staged = run_stages(config, options, false)?;
     let motions = MotionSource::new(
         &staged.shared.workspace,
@@ -724,7 +726,7 @@ pub fn find_clip(
         .clips
         .iter()
         .find(|c| c.clip_id == clip_id)
-        .map(|c| motions.hydrate(c, &staged.index))
+        .map(|c| motions.load(c, &staged.index))
         .transpose()?;
     Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
 }
@@ -762,9 +764,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             continue;
         }
         if let Some(spec) = specs.iter().find(|s| s.name == clip.profile)
-            && let Ok(bound) = spec.bind(&clip.motion.skeleton)
+            && let Ok(bound) = shared.bound.bind(spec, &clip.skeleton)
         {
-            skeletons.insert(id, skeleton_json(&clip.motion.skeleton, &bound));
+            skeletons.insert(id, skeleton_json(&clip.skeleton, &bound));
             profiles.entry(clip.profile.clone()).or_insert(bound);
         }
     }

@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use serde::{Deserialize, Serialize};
 
 use super::{BuildError, Workspace, WorkspaceError, sha256_hex};
-use crate::clip::Clip;
+use crate::clip::{Clip, LoadedClip};
 use crate::motion::compose::{Trim, compose};
 use crate::motion::{BoundProfiles, MirrorPlan, Motion, OffsetPolicy, ProfileSpec};
 
@@ -203,10 +203,11 @@ impl MotionSource {
     }
 
     /// `clip` with its frames read back.
-    pub(super) fn hydrate(&self, clip: &Clip, index: &MotionIndex) -> Result<Clip, BuildError> {
-        let mut full = clip.clone();
-        full.motion = self.motion_of(clip, index)?;
-        Ok(full)
+    pub(super) fn load(&self, clip: &Clip, index: &MotionIndex) -> Result<LoadedClip, BuildError> {
+        Ok(LoadedClip {
+            clip: clip.clone(),
+            motion: self.motion_of(clip, index)?,
+        })
     }
 
     fn read(
@@ -348,10 +349,8 @@ impl<'w> MotionSpill<'w> {
         }
     }
 
-    /// Takes `clip`'s frames; they are stored with the chunk.
-    pub(super) fn push(&mut self, clip: &mut Clip) -> Result<(), BuildError> {
-        let held = clip.motion.without_frames();
-        let motion = std::mem::replace(&mut clip.motion, held);
+    /// Takes a clip's frames; they are stored with the chunk.
+    pub(super) fn push(&mut self, motion: Motion) -> Result<(), BuildError> {
         self.refs.push(MotionRef::Stored {
             stage: SEGMENT_CHUNKS.to_string(),
             fingerprint: String::new(),

@@ -139,7 +139,7 @@ struct ShardPlan {
 /// frame), whether or not every feature column is switched on.
 fn row_bytes(clip: &Clip, index: &MotionIndex) -> u64 {
     let frames = index.get(&key(clip)).map_or(0, |at| u64::from(at.frames()));
-    let joints = clip.motion.num_joints() as u64;
+    let joints = clip.skeleton.len() as u64;
     frames * joints * (3 + 4 + 6 + 3) * 4 + frames * (3 + 9) * 4 + frames * 4 + 2048
 }
 

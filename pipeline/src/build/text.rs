@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::capture::{Item, Shared};
 use super::motions::MotionSource;
 use super::{BuildError, Fingerprint, Reject, StageRun};
-use crate::clip::{Clip, SourceKind};
+use crate::clip::{Clip, LoadedClip, SourceKind};
 use crate::config::Labeller;
 use crate::llm::cache::ResponseCache;
 use crate::llm::plans::PlanStep;
@@ -117,11 +117,14 @@ pub(super) fn run(
             // Per capture, summed in clip order as one call over the capture would.
             let mut capture_agreement = (0.0, 0usize);
             for (clip, at) in item.clips.iter().zip(&item.refs) {
-                let mut full = clip.clone();
-                full.motion = motions.motion(at, &clip.profile)?;
+                let mut full = LoadedClip {
+                    clip: clip.clone(),
+                    motion: motions.motion(at, &clip.profile)?,
+                };
                 let mut part = LabelReport::default();
                 let one = std::slice::from_mut(&mut full);
                 label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);
+                let full = full.clip;
                 for (source, n) in part.sources {
                     *report.sources.entry(source).or_insert(0) += n;
                 }

@@ -207,7 +207,7 @@ pub(crate) fn export_bvh(
             path.display(),
             clip.motion.num_frames(),
             clip.motion.fps,
-            clip.profile
+            clip.clip.profile
         )?;
     }
     Ok(())
@@ -244,7 +244,7 @@ pub(crate) fn bench_write(data: &Path, profile: &str, target_frames: usize) -> R
     profiles.insert(spec.name.clone(), spec.bind(&base[0].motion.skeleton)?);
     let features = motionforge::features::FeatureConfig::default();
     // Shards of about 64 MB of rows each, as a build would cut them.
-    let mut shards: Vec<Vec<motionforge::clip::Clip>> = vec![Vec::new()];
+    let mut shards: Vec<Vec<motionforge::clip::LoadedClip>> = vec![Vec::new()];
     let mut size = 0u64;
     for k in 0..copies {
         for c in &base {
@@ -255,7 +255,7 @@ pub(crate) fn bench_write(data: &Path, profile: &str, target_frames: usize) -> R
             }
             size += bytes;
             let mut clip = c.clone();
-            clip.clip_id = format!("{}#{k}", c.clip_id);
+            clip.clip.clip_id = format!("{}#{k}", c.clip.clip_id);
             if let Some(s) = shards.last_mut() {
                 s.push(clip);
             }

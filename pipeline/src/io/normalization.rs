@@ -39,7 +39,7 @@ pub enum NormalizationError {
         feature: String,
     },
 }
-use crate::clip::Clip;
+use crate::clip::LoadedClip;
 use crate::features::FeatureConfig;
 use crate::motion::Profile;
 
@@ -113,13 +113,13 @@ pub fn npy_f32(values: &[f32], shape: &[usize]) -> Vec<u8> {
 /// clips of `split` (originals, mirrors and synthetic pairs alike, as training sees them).
 pub fn write_normalization(
     dir: &Path,
-    clips: &[Clip],
+    clips: &[LoadedClip],
     split: &str,
     profiles: &BTreeMap<String, Profile>,
     config: &FeatureConfig,
 ) -> Result<Vec<PathBuf>, NormalizationError> {
     let mut stats = NormalizationStats::default();
-    for clip in clips.iter().filter(|c| c.split == split) {
+    for clip in clips.iter().filter(|c| c.clip.split == split) {
         stats.add(clip, profiles, config);
     }
     stats.write(dir)
@@ -132,11 +132,10 @@ pub struct NormalizationStats {
 }
 
 impl NormalizationStats {
-    /// Adds every frame of `clip`, which holds its own frames (skipped when its profile is not in
-    /// `profiles`).
+    /// Adds every frame of `clip` (skipped when its profile is not in `profiles`).
     pub fn add(
         &mut self,
-        clip: &Clip,
+        clip: &LoadedClip,
         profiles: &BTreeMap<String, Profile>,
         config: &FeatureConfig,
     ) {

@@ -25,7 +25,7 @@ use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 
 use super::schema::{SCHEMA_VERSION, clip_schema};
-use crate::clip::Clip;
+use crate::clip::{Clip, LoadedClip};
 use crate::features::{FeatureConfig, Features};
 use crate::motion::{Motion, Profile, Skeleton};
 
@@ -82,7 +82,7 @@ pub struct DatasetMotion {
 /// The clip's skeleton as the table names it: profile and a digest of the hierarchy and offsets,
 /// since captures of one profile can come from differently sized actors.
 pub fn skeleton_id(clip: &Clip) -> String {
-    skeleton_name(&clip.profile, &clip.motion.skeleton)
+    skeleton_name(&clip.profile, &clip.skeleton)
 }
 
 /// The `skeleton` column's value for a skeleton of profile `profile`.
@@ -169,19 +169,20 @@ impl<'a> Row<'a> {
         }
     }
 
-    /// The row of a clip that holds its own frames, with its profile looked up in `profiles`.
+    /// The row of a clip with its frames, with its profile looked up in `profiles`.
     pub fn of_clip(
-        clip: &'a Clip,
+        loaded: &'a LoadedClip,
         profiles: &BTreeMap<String, Profile>,
         config: &FeatureConfig,
     ) -> Result<Row<'a>, TableError> {
+        let clip = &loaded.clip;
         let profile = profiles
             .get(&clip.profile)
             .ok_or_else(|| TableError::MissingProfile {
                 clip: clip.clip_id.clone(),
                 profile: clip.profile.clone(),
             })?;
-        Ok(Row::new(clip, &clip.motion, profile, config))
+        Ok(Row::new(clip, &loaded.motion, profile, config))
     }
 }
 
@@ -623,11 +624,11 @@ impl<W: Write + Send> ShardWriter<W> {
     }
 }
 
-/// Streams clips that hold their frames into a Parquet file, one row group at a time, at the
-/// default zstd level (see [`ShardWriter`]).
+/// Streams clips with their frames into a Parquet file, one row group at a time, at the default
+/// zstd level (see [`ShardWriter`]).
 pub fn write_clips(
     file: File,
-    clips: &[Clip],
+    clips: &[LoadedClip],
     profiles: &BTreeMap<String, Profile>,
     skeletons_json: &str,
     features: &FeatureConfig,

@@ -18,7 +18,7 @@ use crate::quality::{Plausibility, plausibility};
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 pub use crate::config::SyntheticConfig;
 
@@ -255,14 +255,16 @@ pub struct Recipe<'c> {
     pub second_parts: crate::motion::compose::PartMask,
     /// Where the composite starts in the longer motion.
     pub trim: Trim,
+    /// Frames of the composite.
+    pub frames: usize,
 }
 
 /// Runs the stage: plausibility metrics for every clip, then the sampled pairs composed, checked
 /// and kept or dropped by reason. `veto` may refuse a pair before composition (the LLM check),
 /// naming the reason; `profile_of` binds a clip's skeleton profile; `motion_of` gives a clip's
 /// frames (the clips may be held without them, one motion is read at a time); `keep` sees each
-/// composed clip, with how it was made, before it joins the output (the build drops its frames
-/// there and keeps the recipe).
+/// composed clip, with how its frames were made, before it joins the output (the build keeps the
+/// recipe instead of the frames).
 #[allow(clippy::too_many_arguments)]
 pub fn run<E: Send, K: Ord + Send>(
     clips: &[&Clip],
@@ -412,7 +414,7 @@ pub fn run<E: Send, K: Ord + Send>(
                     part_set(composite.parts_from_second),
                 ],
                 plausibility: Some(metrics),
-                motion: composite.motion,
+                skeleton: std::sync::Arc::clone(&composite.motion.skeleton),
             };
             let recipe = Recipe {
                 first: a,
@@ -420,6 +422,7 @@ pub fn run<E: Send, K: Ord + Send>(
                 second: b,
                 second_parts: mask(pb),
                 trim,
+                frames: composite.motion.num_frames(),
             };
             keep(&mut clip, recipe)?;
             out.clips.push(clip);

@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use serde::{Deserialize, Serialize};
 
-use crate::clip::{Clip, SourceKind};
+use crate::clip::{Clip, LoadedClip, SourceKind};
 use crate::config::{Labeller, OnMiss, PartLabelConfig};
 use crate::llm::Unanswered;
 use crate::llm::cache::ResponseCache;
@@ -262,13 +262,13 @@ fn fallback_all(
 /// Puts labels on clips: a single clip takes its text's label (or its motion's velocity evidence
 /// when the labeller had none); a real pair takes the union of its texts' labels.
 pub fn apply_labels(
-    clips: &mut [Clip],
+    clips: &mut [LoadedClip],
     labels: &BTreeMap<String, TextParts>,
     profile: impl Fn(&Clip) -> Option<Profile>,
     report: &mut LabelReport,
 ) {
     let mut agreement = (0.0, 0usize);
-    for clip in clips.iter_mut() {
+    for LoadedClip { clip, motion } in clips.iter_mut() {
         let found: Vec<Option<&TextParts>> = clip
             .texts
             .iter()
@@ -291,15 +291,14 @@ pub fn apply_labels(
                 && lexicon_only
                 && let Some(p) = profile(clip)
             {
-                agreement.0 +=
-                    crate::parts::velocity::agreement(parts, motion_parts(&clip.motion, &p));
+                agreement.0 += crate::parts::velocity::agreement(parts, motion_parts(motion, &p));
                 agreement.1 += 1;
             }
         } else if clip.kind == SourceKind::RealSingle
             && let Some(p) = profile(clip)
         {
             // No answer for the text: the motion itself says which parts move (SINC's baseline).
-            clip.parts = Some(motion_parts(&clip.motion, &p));
+            clip.parts = Some(motion_parts(motion, &p));
             clip.label_source = Some(LabelSources::one(LabelSource::Velocity));
         } else {
             clip.parts = None;

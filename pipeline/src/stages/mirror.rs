@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::Taxonomy;
 use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
-use crate::clip::Clip;
+use crate::clip::{Clip, LoadedClip};
 use crate::llm::plans::mirror_paraphrases;
 use crate::motion::{BoundProfiles, MirrorPlan, OffsetPolicy, ProfileSpec};
 use crate::parts::PartSet;
@@ -15,7 +15,7 @@ use crate::text::mirror_text;
 /// Stage name.
 pub const NAME: &str = "mirror";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 
 /// Fingerprint of mirroring one segmented capture.
 pub fn fingerprint(
@@ -54,7 +54,7 @@ pub fn run_with(
     let mut out = Vec::with_capacity(clips.len());
     let mut rejects = Vec::new();
     for clip in clips {
-        let skeleton = &clip.motion.skeleton;
+        let skeleton = &clip.skeleton;
         let plan = bound
             .bind(profile, skeleton)
             .map_err(|e| e.to_string())
@@ -62,7 +62,7 @@ pub fn run_with(
                 MirrorPlan::from_profile(skeleton, &bound).map_err(|e| e.to_string())
             });
         match plan {
-            Ok(plan) => out.push(mirror_clip(clip, &plan, taxonomy)),
+            Ok(_) => out.push(mirror_clip(clip, taxonomy)),
             Err(message) => rejects.push(Reject {
                 stage: NAME.to_string(),
                 file: clip.capture.path.clone(),
@@ -79,10 +79,11 @@ pub fn run_with(
     }
 }
 
-/// The mirrored copy of one clip: everything that carries a side swaps with the motion. The
-/// attributes are left as they are: they describe the source capture as annotated (file-name
-/// fields, sidecar ids), which a mirror does not change.
-pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> Clip {
+/// The mirrored copy of one clip: everything that carries a side swaps with the motion (whose
+/// frames are `plan.mirror` of the clip's, on the same skeleton). The attributes are left as they
+/// are: they describe the source capture as annotated (file-name fields, sidecar ids), which a
+/// mirror does not change.
+pub fn mirror_clip(clip: &Clip, taxonomy: &Taxonomy) -> Clip {
     Clip {
         clip_id: format!("{}:m", clip.clip_id),
         mirrored: !clip.mirrored,
@@ -99,7 +100,14 @@ pub fn mirror_clip(clip: &Clip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> Clip 
         goal_hand: clip.goal_hand.map(|[x, y, z]| [-x, y, z]),
         parts: clip.parts.map(PartSet::mirrored),
         paraphrases: mirror_paraphrases(&clip.paraphrases),
-        motion: plan.mirror(&clip.motion, OffsetPolicy::Keep),
         ..clip.clone()
+    }
+}
+
+/// The mirrored copy of a clip with its frames: [`mirror_clip`] and the reflected motion.
+pub fn mirror_loaded(loaded: &LoadedClip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> LoadedClip {
+    LoadedClip {
+        clip: mirror_clip(&loaded.clip, taxonomy),
+        motion: plan.mirror(&loaded.motion, OffsetPolicy::Keep),
     }
 }

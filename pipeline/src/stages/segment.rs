@@ -4,6 +4,7 @@
 //! segment is counted by reason.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -12,7 +13,7 @@ use crate::annotate::overlap::overlaps;
 use crate::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
 use crate::annotate::taxonomy::TypeMap;
 use crate::base::{DropReason, Dropped, Fingerprint, Stamp};
-use crate::clip::{Capture, Clip, SourceKind};
+use crate::clip::{Capture, Clip, LoadedClip, SourceKind};
 use crate::config::SegmentConfig;
 use crate::motion::bvh::excerpt;
 use crate::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
@@ -21,7 +22,7 @@ use crate::motion::{BodyPart, Motion, Profile};
 /// Stage name.
 pub const NAME: &str = "segment";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 
 /// What the stage reads for one capture.
 pub struct SegmentInput<'a> {
@@ -92,18 +93,28 @@ struct Kept<'a> {
 
 /// Runs the stage on one capture, the clips with their frames.
 pub fn run(input: &SegmentInput<'_>) -> SegmentOutput {
-    match run_with(input, |_| Ok::<(), std::convert::Infallible>(())) {
-        Ok(out) => out,
+    run_loaded(input).0
+}
+
+/// [`run`], keeping every clip's frames: the output and the motions of its clips, in order.
+pub fn run_loaded(input: &SegmentInput<'_>) -> (SegmentOutput, Vec<Motion>) {
+    let mut motions = Vec::new();
+    let out = run_with(input, |_, motion| {
+        motions.push(motion);
+        Ok::<(), std::convert::Infallible>(())
+    });
+    match out {
+        Ok(out) => (out, motions),
         Err(never) => match never {},
     }
 }
 
-/// Runs the stage on one capture, handing each clip to `take_frames` as soon as it is made (in
-/// the order of the output's clips), so a caller can move its frames to disk: however many clips a
-/// capture yields, only one holds frames at a time.
+/// Runs the stage on one capture, handing each clip's frames to `take_frames` as soon as the clip
+/// is made (in the order of the output's clips), so a caller can move them to disk: however many
+/// clips a capture yields, only one's frames are held at a time.
 pub fn run_with<E>(
     input: &SegmentInput<'_>,
-    mut take_frames: impl FnMut(&mut Clip) -> Result<(), E>,
+    mut take_frames: impl FnMut(&Clip, Motion) -> Result<(), E>,
 ) -> Result<SegmentOutput, E> {
     let mut out = SegmentOutput {
         notes: input.annotation.notes.clone(),
@@ -234,11 +245,11 @@ pub fn run_with<E>(
     let mut clips: Vec<Clip> = Vec::new();
     for k in &kept {
         match positions_cache.single(k) {
-            Ok(mut clip) => {
+            Ok(LoadedClip { clip, motion }) => {
                 if clip.motion_type.is_none() {
                     *out.unmapped.entry(clip.labels[0].clone()).or_insert(0) += 1;
                 }
-                take_frames(&mut clip)?;
+                take_frames(&clip, motion)?;
                 clips.push(clip);
             }
             Err(reason) => drop(reason, &k.span.raw_text, Some((k.start, k.end))),
@@ -280,8 +291,8 @@ pub fn run_with<E>(
                 continue;
             }
             match positions_cache.pair(&members, o.start, o.end) {
-                Ok(mut clip) => {
-                    take_frames(&mut clip)?;
+                Ok(LoadedClip { clip, motion }) => {
+                    take_frames(&clip, motion)?;
                     clips.push(clip);
                 }
                 Err(reason) => drop(reason, &texts(), Some((o.start, o.end))),
@@ -310,7 +321,7 @@ struct ClipMaker<'a, 'b> {
 }
 
 impl ClipMaker<'_, '_> {
-    fn base(&self, start: u64, end: u64) -> Result<Clip, DropReason> {
+    fn base(&self, start: u64, end: u64) -> Result<LoadedClip, DropReason> {
         let input = self.input;
         let capture = input.capture;
         // The length is known before any frame is made: a wrong rate must cost a drop, not an
@@ -328,7 +339,7 @@ impl ClipMaker<'_, '_> {
             .motion
             .slice(start as usize, end as usize)
             .resample(input.fps);
-        Ok(Clip {
+        let clip = Clip {
             clip_id: format!("{}/{}:{start}-{end}", capture.capture.source, capture.stem),
             kind: SourceKind::RealSingle,
             capture: capture.capture.clone(),
@@ -354,12 +365,13 @@ impl ClipMaker<'_, '_> {
             composed_from: Vec::new(),
             composed_parts: Vec::new(),
             plausibility: None,
-            motion,
-        })
+            skeleton: Arc::clone(&motion.skeleton),
+        };
+        Ok(LoadedClip { clip, motion })
     }
 
-    fn single(&self, k: &Kept<'_>) -> Result<Clip, DropReason> {
-        let mut clip = self.base(k.start, k.end)?;
+    fn single(&self, k: &Kept<'_>) -> Result<LoadedClip, DropReason> {
+        let LoadedClip { mut clip, motion } = self.base(k.start, k.end)?;
         let span = k.span;
         clip.annotation_origin = format!("{}#{}", clip.annotation_origin, span.id);
         clip.action = span.label.clone();
@@ -383,16 +395,17 @@ impl ClipMaker<'_, '_> {
             });
             self.goals(
                 &mut clip,
+                &motion,
                 locomotion,
                 hand_goal,
                 grasp.map(|g| g.clamp(k.start as i64, k.end as i64 - 1) as u64 - k.start),
             );
         }
-        Ok(clip)
+        Ok(LoadedClip { clip, motion })
     }
 
-    fn pair(&self, members: &[&Kept<'_>], start: u64, end: u64) -> Result<Clip, DropReason> {
-        let mut clip = self.base(start, end)?;
+    fn pair(&self, members: &[&Kept<'_>], start: u64, end: u64) -> Result<LoadedClip, DropReason> {
+        let LoadedClip { mut clip, motion } = self.base(start, end)?;
         clip.kind = SourceKind::RealPair;
         clip.clip_id = format!("{}:pair", clip.clip_id);
         let ids: Vec<&str> = members.iter().map(|m| m.span.id.as_str()).collect();
@@ -404,18 +417,25 @@ impl ClipMaker<'_, '_> {
             [a, b] => format!("{a} and {b} at the same time"),
             texts => format!("{} at the same time", texts.join(", ")),
         };
-        Ok(clip)
+        Ok(LoadedClip { clip, motion })
     }
 
     /// Pelvis and hand goals in the clip's first-frame canonical frame.
-    fn goals(&self, clip: &mut Clip, locomotion: bool, hand_goal: bool, grasp_frame: Option<u64>) {
+    fn goals(
+        &self,
+        clip: &mut Clip,
+        motion: &Motion,
+        locomotion: bool,
+        hand_goal: bool,
+        grasp_frame: Option<u64>,
+    ) {
         let profile = self.input.profile;
-        let n = clip.motion.num_joints();
-        let frames = clip.motion.num_frames();
+        let n = motion.num_joints();
+        let frames = motion.num_frames();
         if frames == 0 || !(locomotion || hand_goal) {
             return;
         }
-        let positions = dataset_positions(&clip.motion, profile);
+        let positions = dataset_positions(motion, profile);
         let Some(frame) = canonical_frame(&positions[..n], profile) else {
             return;
         };
