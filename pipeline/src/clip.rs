@@ -130,3 +130,16 @@ pub struct LoadedClip {
     /// Its frames.
     pub motion: Motion,
 }
+
+impl Clip {
+    /// The clip's skeleton as the table names it: profile and a digest of the hierarchy and
+    /// offsets, since captures of one profile can come from differently sized actors.
+    pub fn skeleton_id(&self) -> String {
+        skeleton_name(&self.profile, &self.skeleton)
+    }
+}
+
+/// The `skeleton` column's value for a skeleton of profile `profile`.
+pub fn skeleton_name(profile: &str, skeleton: &Skeleton) -> String {
+    format!("{profile}:{}", skeleton.digest())
+}

@@ -759,7 +759,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
     for clip in &clips {
-        let id = crate::io::parquet::skeleton_id(clip);
+        let id = clip.skeleton_id();
         if skeletons.contains_key(&id) {
             continue;
         }

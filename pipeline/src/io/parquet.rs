@@ -25,9 +25,10 @@ use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 
 use super::schema::{SCHEMA_VERSION, clip_schema};
+pub use crate::clip::skeleton_name;
 use crate::clip::{Clip, LoadedClip};
 use crate::features::{FeatureConfig, Features};
-use crate::motion::{Motion, Profile, Skeleton};
+use crate::motion::{Motion, Profile};
 
 /// Errors writing a table.
 #[derive(Debug, thiserror::Error)]
@@ -77,17 +78,6 @@ pub struct DatasetMotion {
     pub rotations: Vec<f32>,
     /// `frames × 3` world position of the root-motion joint in metres.
     pub root: Vec<f32>,
-}
-
-/// The clip's skeleton as the table names it: profile and a digest of the hierarchy and offsets,
-/// since captures of one profile can come from differently sized actors.
-pub fn skeleton_id(clip: &Clip) -> String {
-    skeleton_name(&clip.profile, &clip.skeleton)
-}
-
-/// The `skeleton` column's value for a skeleton of profile `profile`.
-pub fn skeleton_name(profile: &str, skeleton: &Skeleton) -> String {
-    format!("{profile}:{}", skeleton.digest())
 }
 
 /// Converts a motion from capture units and axes to the dataset frame.
@@ -570,9 +560,7 @@ fn float_encoding(
     Ok(props)
 }
 
-/// The zstd level of the shards unless `dataset.zstd_level` says otherwise: level 1 writes the
-/// motion columns 30% faster than level 3 for 5-7% more bytes (`docs/decisions.md`).
-pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+pub use crate::config::DEFAULT_ZSTD_LEVEL;
 
 /// Clips per row group: large enough for efficient scans, small enough that one group's buffers
 /// stay a few tens of MB for long captures.

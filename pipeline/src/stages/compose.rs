@@ -283,14 +283,11 @@ pub fn run<E: Send, K: Ord + Send>(
     let mut profiles: BTreeMap<String, Option<Profile>> = BTreeMap::new();
     for c in clips {
         profiles
-            .entry(crate::io::parquet::skeleton_id(c))
+            .entry(c.skeleton_id())
             .or_insert_with(|| profile_of(c));
     }
-    let bound = |c: &Clip| -> Option<&Profile> {
-        profiles
-            .get(&crate::io::parquet::skeleton_id(c))
-            .and_then(Option::as_ref)
-    };
+    let bound =
+        |c: &Clip| -> Option<&Profile> { profiles.get(&c.skeleton_id()).and_then(Option::as_ref) };
     // Frames are read in the order they are stored (`read_key`), so a clip's neighbours on disk
     // are read together (rayon hands each thread a contiguous run); the metrics do not depend on
     // the order.
