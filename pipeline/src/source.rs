@@ -4,9 +4,12 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::annotate::event_log::{self, EventLogFormat};
-use crate::annotate::filename::{FilenamePattern, PatternError};
+use crate::annotate::filename::{
+    FilenamePattern, LabelRefusal, PatternError, compiled_filename_annotation,
+};
 use crate::annotate::span::{AnnotationError, CaptureAnnotation, Note, stem_of};
 use crate::annotate::{babel, frame_index};
+use crate::base::RejectReason;
 use crate::config::{Config, LabelConfig, SourceConfig};
 use crate::motion::ProfileSpec;
 
@@ -207,6 +210,47 @@ pub enum SourceAnnotations {
         /// Quirks of the files that belong to no capture (unreadable records, ...).
         notes: Vec<Note>,
     },
+}
+
+impl SourceAnnotations {
+    /// The annotation of the capture with file stem `stem` at `path`: made from its file name
+    /// (and sidecar JSON beside it, when the source reads sidecars), or looked up by stem. A
+    /// capture the source cannot label is refused with the reason; `kind` names the source's
+    /// annotation format in the message.
+    pub fn for_capture(
+        &self,
+        stem: &str,
+        path: &Path,
+        kind: &str,
+    ) -> Result<CaptureAnnotation, LabelRefusal> {
+        match self {
+            SourceAnnotations::Filename {
+                pattern,
+                action,
+                text,
+                sidecar,
+            } => {
+                let side = if *sidecar {
+                    std::fs::read(path.with_extension("json")).ok()
+                } else {
+                    None
+                };
+                let pattern = pattern.as_ref().map_err(|e| LabelRefusal {
+                    reason: RejectReason::LabelPattern,
+                    message: e.to_string(),
+                })?;
+                compiled_filename_annotation(pattern, action, text, stem, side.as_deref())
+            }
+            SourceAnnotations::Indexed { by_key, .. } => {
+                by_key.get(stem).cloned().ok_or_else(|| LabelRefusal {
+                    reason: RejectReason::NoAnnotation,
+                    message: format!(
+                        "no annotation for capture `{stem}` in the source's {kind} files"
+                    ),
+                })
+            }
+        }
+    }
 }
 
 fn annotation_files(

@@ -4,7 +4,6 @@ use std::collections::BTreeMap;
 
 use super::motions::{MotionRef, MotionSpill};
 use super::{BuildError, Reject, Stage, Workspace, WorkspaceError, sha256_hex};
-use crate::annotate::filename::{LabelRefusal, compiled_filename_annotation};
 use crate::annotate::taxonomy::TypeMap;
 use crate::base::RejectReason;
 use crate::clip::Clip;
@@ -176,61 +175,23 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         return Ok(item);
     };
 
-    let annotation = match &shared.annotations[file.source] {
-        SourceAnnotations::Filename {
-            pattern,
-            action,
-            text,
-            sidecar,
-        } => {
-            let side = if *sidecar {
-                std::fs::read(file.path.with_extension("json")).ok()
-            } else {
-                None
-            };
-            let annotation = pattern
-                .as_ref()
-                .map_err(|e| LabelRefusal {
-                    reason: RejectReason::LabelPattern,
-                    message: e.to_string(),
-                })
-                .and_then(|p| {
-                    compiled_filename_annotation(p, action, text, &header.stem, side.as_deref())
-                });
-            match annotation {
-                Ok(a) => a,
-                Err(refusal) => {
-                    item.rejects.push(ingest::reject(
-                        segment::NAME,
-                        file,
-                        refusal.reason,
-                        refusal.message,
-                        None,
-                        None,
-                    ));
-                    return Ok(item);
-                }
-            }
+    let annotation = match shared.annotations[file.source].for_capture(
+        &header.stem,
+        &file.path,
+        source.labels.kind(),
+    ) {
+        Ok(a) => a,
+        Err(refusal) => {
+            item.rejects.push(ingest::reject(
+                segment::NAME,
+                file,
+                refusal.reason,
+                refusal.message,
+                None,
+                None,
+            ));
+            return Ok(item);
         }
-        SourceAnnotations::Indexed { by_key, .. } => match by_key.get(&header.stem) {
-            Some(a) => a.clone(),
-            None => {
-                let message = format!(
-                    "no annotation for capture `{}` in the source's {} files",
-                    header.stem,
-                    source.labels.kind()
-                );
-                item.rejects.push(ingest::reject(
-                    segment::NAME,
-                    file,
-                    RejectReason::NoAnnotation,
-                    message,
-                    None,
-                    None,
-                ));
-                return Ok(item);
-            }
-        },
     };
     let profile = match shared.bound.bind(spec, &header.skeleton) {
         Ok(p) => p,

@@ -32,7 +32,7 @@ use output::{Table, skeleton_json, write_outputs};
 
 use crate::annotate::span::Note;
 use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
-use crate::clip::{Clip, LoadedClip, SourceKind};
+use crate::clip::{Clip, LoadedClip};
 use crate::config::Config;
 use crate::io::parquet::TableError;
 use crate::motion::{Profile, ProfileSpec};
@@ -340,28 +340,9 @@ fn run_stages<'a>(
     // follows depends on outputs that do not exist yet.
     let upstream_pending = items.iter().any(|i| i.pending.is_some());
     // Splits by capture: set before labelling so every later copy (mirror, pair) inherits it.
-    let split_text = match &config.splits.file {
-        Some(f) => {
-            let path = config.resolve(std::path::Path::new(f));
-            Some((
-                f.clone(),
-                std::fs::read_to_string(&path).map_err(workspace::io_err(&path))?,
-            ))
-        }
-        None => None,
-    };
-    let splits = crate::stages::split::Splits::new(
-        &config.splits,
-        split_text.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
-    )?;
-    for item in &mut items {
-        for clip in &mut item.clips {
-            let stem = std::path::Path::new(&clip.capture.path)
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            clip.split = splits.split_of(&clip.capture.path, &stem);
-        }
+    let splits = crate::stages::split::Splits::from_config(config)?;
+    for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+        splits.assign(clip);
     }
     let mut stages = vec![capture_run(&items, Stage::Ingest, progress)];
     if through >= Stage::Segment {
@@ -781,75 +762,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         index: &index,
         motions: &motions,
     };
-    let mut actions = BTreeMap::new();
-    let mut motion_types = BTreeMap::new();
-    let mut kinds = BTreeMap::new();
-    for clip in &clips {
-        *kinds.entry(clip.kind.as_str().to_string()).or_insert(0) += 1;
-        if clip.mirrored {
-            continue;
-        }
-        *actions.entry(clip.action.clone()).or_insert(0) += 1;
-        if clip.kind == SourceKind::RealSingle {
-            let t = clip
-                .motion_type
-                .clone()
-                .unwrap_or_else(|| "(unmapped)".into());
-            *motion_types.entry(t).or_insert(0) += 1;
-        }
-    }
-    let mut rejects_by_reason = BTreeMap::new();
-    for r in &rejects {
-        *rejects_by_reason.entry(r.reason.to_string()).or_insert(0) += 1;
-    }
-    let mut label_sources = BTreeMap::new();
-    for clip in &clips {
-        let key = clip
-            .label_source
-            .as_ref()
-            .map_or_else(|| "(none)".into(), ToString::to_string);
-        *label_sources.entry(key).or_insert(0) += 1;
-    }
-    let mut sources: Vec<crate::io::manifest::Source> = clips
-        .iter()
-        .map(|c| crate::io::manifest::Source {
-            path: c.capture.path.clone(),
-            sha256: c.capture.sha256.clone(),
-            source: c.capture.source.clone(),
-        })
-        .collect();
-    sources.sort();
-    sources.dedup();
-    // Where the dataset is written is not part of what it is: the same config built into
-    // another folder gives the same bytes.
-    let mut content_config = config.clone();
-    content_config.dataset.output = PathBuf::new();
-    let config_fingerprint = Fingerprint::new("config", 1)
-        .json("config", &content_config)
-        .finish();
-    let manifest = crate::io::manifest::Manifest {
-        config_fingerprint,
-        counts: crate::io::manifest::Counts {
-            drop_reason: drops_by_reason.clone(),
-            label_source: label_sources,
-            motion_type: motion_types.clone(),
-            reject_reason: rejects_by_reason.clone(),
-            source_kind: kinds.clone(),
-        },
-        dataset: config.dataset.name.clone(),
-        files: crate::io::manifest::Files {
-            plans: PLANS_FILE.into(),
-            rejects: REJECTS_FILE.into(),
-            skeletons: SKELETONS_FILE.into(),
-        },
-        fps: config.dataset.fps,
-        pipeline: format!("motionforge {}", env!("CARGO_PKG_VERSION")),
-        schema_version: crate::io::schema::SCHEMA_VERSION,
-        seed: config.dataset.seed,
-        sources,
-        splits: BTreeMap::new(),
-        table_fingerprint: table_fingerprint.clone(),
-    };
+    let counts = crate::io::manifest::Counts::of(&clips, &rejects, drops_by_reason.clone());
+    let manifest =
+        crate::io::manifest::Manifest::new(config, &clips, counts.clone(), &table_fingerprint);
     let licences: Vec<String> = config
         .sources
         .iter()
@@ -857,7 +772,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         .map(|s| format!("{}: {}", s.name, s.licence))
         .collect();
     let companions = output::Companions {
-        card_body: output::card_body(config, &clips, &licences, &kinds),
+        card_body: output::card_body(config, &clips, &licences, &counts.source_kind),
         manifest,
         licences,
         shard_bytes: config.dataset.shard_bytes,
@@ -923,15 +838,15 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         captures: files,
         clips: clips.len(),
         mirrored: clips.iter().filter(|c| c.mirrored).count(),
-        kinds,
-        actions,
-        motion_types,
+        kinds: counts.source_kind,
+        actions: crate::io::manifest::action_counts(&clips),
+        motion_types: counts.motion_type,
         unmapped_labels,
         drops_by_reason,
         drops,
         notes_by_kind,
         notes,
-        rejects_by_reason,
+        rejects_by_reason: counts.reject_reason,
         rejects,
         labels: text.label,
         paraphrases: text.paraphrase,
@@ -1049,20 +964,8 @@ fn llm_vetoes(
     if !config.synthetic.enabled || !config.synthetic.llm_check {
         return Ok((BTreeSet::new(), report));
     }
-    let (pairs, _) =
-        crate::stages::compose::sample(clips, &config.synthetic, config.dataset.seed, |c| {
-            c.split.clone()
-        });
-    let texts: BTreeSet<(String, String)> = pairs
-        .iter()
-        .map(|(a, b)| {
-            (
-                label::normalize_text(&a.text),
-                label::normalize_text(&b.text),
-            )
-        })
-        .collect();
-    let texts: Vec<(String, String)> = texts.into_iter().collect();
+    let texts =
+        crate::stages::compose::texts_to_check(clips, &config.synthetic, config.dataset.seed);
     let prompts = config.prompts()?;
     let mut cache = text::open_cache(shared)?;
     let vetoed = crate::stages::augment::incompatible_pairs(

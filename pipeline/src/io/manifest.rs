@@ -6,6 +6,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::base::{Fingerprint, Reject};
+use crate::clip::{Clip, SourceKind};
+use crate::config::Config;
+
 // Fields are declared in alphabetical order: the file's keys have always been sorted, and a
 // struct serialises in declaration order.
 
@@ -147,5 +151,94 @@ impl Manifest {
     /// The manifest as written: pretty JSON.
     pub fn to_json(&self) -> Vec<u8> {
         serde_json::to_vec_pretty(self).unwrap_or_default()
+    }
+}
+
+/// Label of clips without a motion type, in `counts.motion_type`.
+pub const UNMAPPED: &str = "(unmapped)";
+/// Label of clips without parts, in `counts.label_source`.
+pub const NO_LABEL: &str = "(none)";
+
+impl Counts {
+    /// The counts of a dataset, made once here for the manifest, the card and the build report:
+    /// rows by source kind and by label source, original single clips by motion type (mirrors
+    /// are the same actions again), rejected inputs by reason, and the segments dropped by reason
+    /// as the segment stage counted them.
+    pub fn of(clips: &[Clip], rejects: &[Reject], drop_reason: BTreeMap<String, usize>) -> Counts {
+        let mut counts = Counts {
+            drop_reason,
+            ..Counts::default()
+        };
+        for clip in clips {
+            *counts
+                .source_kind
+                .entry(clip.kind.as_str().to_string())
+                .or_insert(0) += 1;
+            let label = clip
+                .label_source
+                .as_ref()
+                .map_or_else(|| NO_LABEL.into(), ToString::to_string);
+            *counts.label_source.entry(label).or_insert(0) += 1;
+            if !clip.mirrored && clip.kind == SourceKind::RealSingle {
+                let t = clip.motion_type.as_deref().unwrap_or(UNMAPPED);
+                *counts.motion_type.entry(t.to_string()).or_insert(0) += 1;
+            }
+        }
+        for r in rejects {
+            *counts
+                .reject_reason
+                .entry(r.reason.to_string())
+                .or_insert(0) += 1;
+        }
+        counts
+    }
+}
+
+/// Rows by action, mirrors left out (a mirror repeats its original's action).
+pub fn action_counts(clips: &[Clip]) -> BTreeMap<String, usize> {
+    let mut actions = BTreeMap::new();
+    for clip in clips.iter().filter(|c| !c.mirrored) {
+        *actions.entry(clip.action.clone()).or_insert(0) += 1;
+    }
+    actions
+}
+
+impl Manifest {
+    /// The manifest of a dataset built from `config` with rows `clips`, before its shards are
+    /// written (`splits` is filled in by the writer).
+    pub fn new(config: &Config, clips: &[Clip], counts: Counts, table_fingerprint: &str) -> Self {
+        let mut sources: Vec<Source> = clips
+            .iter()
+            .map(|c| Source {
+                path: c.capture.path.clone(),
+                sha256: c.capture.sha256.clone(),
+                source: c.capture.source.clone(),
+            })
+            .collect();
+        sources.sort();
+        sources.dedup();
+        // Where the dataset is written is not part of what it is: the same config built into
+        // another folder gives the same bytes.
+        let mut content_config = config.clone();
+        content_config.dataset.output = PathBuf::new();
+        Manifest {
+            config_fingerprint: Fingerprint::new("config", 1)
+                .json("config", &content_config)
+                .finish(),
+            counts,
+            dataset: config.dataset.name.clone(),
+            files: Files {
+                plans: crate::base::layout::PLANS_FILE.into(),
+                rejects: crate::base::layout::REJECTS_FILE.into(),
+                skeletons: crate::base::layout::SKELETONS_FILE.into(),
+            },
+            fps: config.dataset.fps,
+            pipeline: format!("motionforge {}", env!("CARGO_PKG_VERSION")),
+            schema_version: crate::io::schema::SCHEMA_VERSION,
+            seed: config.dataset.seed,
+            sources,
+            splits: BTreeMap::new(),
+            table_fingerprint: table_fingerprint.to_string(),
+        }
     }
 }

@@ -229,6 +229,22 @@ fn count_compatible(members: &[Vec<usize>], capture_of: &[usize], parts_of: &[u8
     total
 }
 
+/// The distinct text pairs (normalised, in draw order within a pair) of the pairs the sampler
+/// draws: what the optional LLM pair check asks about before anything is composed.
+pub fn texts_to_check(
+    clips: &[&Clip],
+    config: &SyntheticConfig,
+    seed: u64,
+) -> Vec<(String, String)> {
+    use crate::stages::label::normalize_text;
+    let (pairs, _) = sample(clips, config, seed, |c| c.split.clone());
+    let texts: std::collections::BTreeSet<(String, String)> = pairs
+        .iter()
+        .map(|(a, b)| (normalize_text(&a.text), normalize_text(&b.text)))
+        .collect();
+    texts.into_iter().collect()
+}
+
 /// Pairs composed in parallel before they are kept in order.
 const PAIR_BATCH: usize = 64;
 

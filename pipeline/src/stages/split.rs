@@ -5,6 +5,8 @@ use std::collections::BTreeMap;
 
 use sha2::{Digest, Sha256};
 
+use crate::clip::Clip;
+use crate::config::Config;
 pub use crate::config::SplitConfig;
 
 /// Why splits cannot be assigned.
@@ -37,6 +39,14 @@ pub enum SplitError {
         line: usize,
         /// The row.
         found: String,
+    },
+    /// The split file cannot be read.
+    #[error("{}: {message}", file.display())]
+    Read {
+        /// The split file.
+        file: std::path::PathBuf,
+        /// What went wrong.
+        message: String,
     },
     /// The split file names a split the ratios do not.
     #[error("{file}:{line}: split `{split}` is not one of the configured splits ({known})")]
@@ -75,6 +85,32 @@ pub fn split_order(names: impl IntoIterator<Item = String>) -> Vec<String> {
 }
 
 impl Splits {
+    /// The assignment a build uses: `[splits]` of `config`, with its split file read from disk
+    /// (relative to the config's folder).
+    pub fn from_config(config: &Config) -> Result<Splits, SplitError> {
+        let text = match &config.splits.file {
+            Some(name) => {
+                let path = config.resolve(std::path::Path::new(name));
+                let text = std::fs::read_to_string(&path).map_err(|e| SplitError::Read {
+                    file: path,
+                    message: e.to_string(),
+                })?;
+                Some((name.as_str(), text))
+            }
+            None => None,
+        };
+        Splits::new(&config.splits, text.as_ref().map(|(n, t)| (*n, t.as_str())))
+    }
+
+    /// Puts `clip` in the split of its capture (by the path shown in the table, or its stem).
+    pub fn assign(&self, clip: &mut Clip) {
+        let stem = std::path::Path::new(&clip.capture.path)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        clip.split = self.split_of(&clip.capture.path, &stem);
+    }
+
     /// Builds the assignment from the config and the split file's text (if any).
     pub fn new(config: &SplitConfig, file: Option<(&str, &str)>) -> Result<Splits, SplitError> {
         let total: f64 = config.ratios.values().filter(|r| **r > 0.0).sum();
