@@ -499,3 +499,62 @@ fn capture_digests_are_remembered_by_stat_data_and_a_modified_capture_is_still_n
         serde_json::from_slice(&fs::read(&digests).unwrap()).unwrap();
     assert_eq!(remembered.as_object().map(|o| o.len()), Some(2));
 }
+
+#[test]
+fn zstd_levels_from_the_fast_range_to_22_are_accepted_and_others_refused_by_name() {
+    let path = repo().join("fixtures/demo.toml");
+    let demo = fs::read_to_string(&path).unwrap();
+    let with = |level: i32| {
+        demo.replacen(
+            "seed = 42\n",
+            &format!("seed = 42\nzstd_level = {level}\n"),
+            1,
+        )
+    };
+    for level in [-7, -1, 1, 22] {
+        let config = Config::parse(&with(level), &path)
+            .unwrap_or_else(|e| panic!("level {level} refused: {e}"));
+        assert_eq!(config.dataset.zstd_level, level);
+    }
+    for level in [-8, 0, 23] {
+        let err = Config::parse(&with(level), &path).unwrap_err().to_string();
+        assert!(
+            err.contains("zstd_level") && err.contains(&level.to_string()),
+            "level {level}: {err}"
+        );
+    }
+}
+
+#[test]
+fn a_fast_zstd_level_writes_shards_with_the_same_rows() {
+    let path = repo().join("fixtures/demo.toml");
+    let demo = fs::read_to_string(&path).unwrap();
+    let fast = demo.replacen("seed = 42\n", "seed = 42\nzstd_level = -5\n", 1);
+    let dir = tempfile::tempdir().unwrap();
+    let built = |text: &str, name: &str| {
+        let mut config = Config::parse(text, &path).unwrap();
+        config.dataset.output = dir.path().join(name);
+        build(&config, &BuildOptions::default()).unwrap();
+        config.dataset.output.join("demo")
+    };
+    let a = built(&demo, "level1");
+    let b = built(&fast, "fast");
+    let (sa, sb) = (shards(&a), shards(&b));
+    assert_eq!(sa.len(), sb.len());
+    let read = |p: &Path| {
+        let file = fs::File::open(p).unwrap();
+        let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .unwrap()
+            .build()
+            .unwrap();
+        reader.map(|b| b.unwrap()).collect::<Vec<_>>()
+    };
+    for (x, y) in sa.iter().zip(&sb) {
+        assert_ne!(
+            fs::read(x).unwrap(),
+            fs::read(y).unwrap(),
+            "the level reached the file"
+        );
+        assert_eq!(read(x), read(y), "{}", x.display());
+    }
+}

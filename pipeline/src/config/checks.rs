@@ -68,11 +68,11 @@ impl Config {
                 "at least 1024 bytes",
             );
         }
-        if !(1..=22).contains(&d.zstd_level) {
+        if !(-7..=22).contains(&d.zstd_level) || d.zstd_level == 0 {
             c.push(
                 &[K("dataset"), K("zstd_level")],
                 d.zstd_level.to_string(),
-                "a zstd level from 1 (fastest) to 22 (smallest)",
+                "a zstd level from 1 to 22 (smallest), or -1 to -7 (zstd's fast levels: faster, larger)",
             );
         }
         if self.paraphrases.n == 0 || self.paraphrases.n > 50 {
