@@ -195,6 +195,16 @@ impl Clip<'_> {
     fn frame(&self, f: usize) -> &[DVec3] {
         &self.positions[f * self.joints..(f + 1) * self.joints]
     }
+
+    /// Distance between two bones (joint index pairs) in frame `f`.
+    fn bone_distance(&self, f: usize, (p0, p1): (usize, usize), (q0, q1): (usize, usize)) -> f64 {
+        segment_distance(
+            self.at(f, p0),
+            self.at(f, p1),
+            self.at(f, q0),
+            self.at(f, q1),
+        )
+    }
 }
 
 /// Joints that are part of the body: all but static auxiliary roots (Bandai's `joint_Root` stays
@@ -460,15 +470,7 @@ fn self_distance(clip: &Clip, profile: &Profile, out: &mut Plausibility) {
                     let reach = best * (1.0 + 1e-9) + 1e-12 + rx + ry;
                     cx.distance_squared(cy) <= reach * reach
                 })
-                .map(|&(x, y)| {
-                    let ((p0, p1), (q0, q1)) = (bones[x], bones[y]);
-                    segment_distance(
-                        clip.at(f, p0),
-                        clip.at(f, p1),
-                        clip.at(f, q0),
-                        clip.at(f, q1),
-                    )
-                })
+                .map(|&(x, y)| clip.bone_distance(f, bones[x], bones[y]))
                 .fold(f64::INFINITY, f64::min);
             if spine {
                 let limb = if ca.is_spine() { cb.part } else { ca.part };
@@ -635,14 +637,7 @@ mod tests {
                     }
                     let d = bones
                         .iter()
-                        .map(|&((p0, p1), (q0, q1))| {
-                            segment_distance(
-                                clip.at(f, p0),
-                                clip.at(f, p1),
-                                clip.at(f, q0),
-                                clip.at(f, q1),
-                            )
-                        })
+                        .map(|&(x, y)| clip.bone_distance(f, x, y))
                         .fold(f64::INFINITY, f64::min);
                     let best = if chains[a].is_spine() || chains[b].is_spine() {
                         &mut spine_best

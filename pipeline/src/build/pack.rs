@@ -175,9 +175,9 @@ impl Packs {
         Ok(())
     }
 
-    /// Keeps only the entries of `stage` in `keep`: packs with nothing live are removed, packs
-    /// with some dead records are rewritten with the live ones, and files that are not packs
-    /// (an earlier version's entries, a rewrite cut short) are removed.
+    /// Keeps the entries of `stage` in `keep`: packs with nothing live are removed, packs with a
+    /// quarter or more of their bytes dead are rewritten with the live records, and files that are
+    /// not packs (an earlier version's entries, a rewrite cut short) are removed.
     pub(super) fn prune(&self, cache: &Path, stage: &str, keep: &BTreeSet<String>) {
         let mut stages = self.lock();
         let packs = scanned(&mut stages, cache, stage);
@@ -197,7 +197,17 @@ impl Packs {
                 })
                 .cloned()
                 .collect();
-            if live.len() == packs.packs[p].records.len() {
+            let size = |records: &[(String, u64, u64, u64)]| -> u64 {
+                records
+                    .iter()
+                    .map(|(fp, _, _, len)| HEADER + fp.len() as u64 + len + FOOTER)
+                    .sum()
+            };
+            let (all, kept) = (size(&packs.packs[p].records), size(&live));
+            // A pack mostly alive is left as it is: rewriting 64 MB to drop one changed capture's
+            // old record would cost more than the space. Its dead records stay findable, which is
+            // harmless: an entry is named by what it was computed from.
+            if live.len() == packs.packs[p].records.len() || (kept > 0 && (all - kept) * 4 < all) {
                 continue;
             }
             let old = packs.packs[p].path.clone();
@@ -456,6 +466,33 @@ mod tests {
         record.extend_from_slice(&[0u8; 32]);
         fs::write(stage.join(format!("0.{PACK_EXT}")), &record).unwrap();
         assert!(!Packs::default().has(dir.path(), "s", "a"));
+    }
+
+    #[test]
+    fn a_pack_mostly_alive_is_not_rewritten_for_one_dead_record() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = dir.path();
+        let packs = Packs::default();
+        for fp in ["a", "b", "c", "d", "e"] {
+            packs.write(cache, "s", fp, &body(1, 100)).unwrap();
+        }
+        let path = packs.lock()["s"].packs[0].path.clone();
+        let keep: BTreeSet<String> = ["a", "b", "c", "d"].map(String::from).into();
+        packs.prune(cache, "s", &keep);
+        assert!(path.is_file(), "one dead record in five: the pack stays");
+        for fp in ["a", "b", "c", "d"] {
+            assert_eq!(packs.read(cache, "s", fp), Some(body(1, 100)));
+        }
+        let keep: BTreeSet<String> = ["a", "b"].map(String::from).into();
+        packs.prune(cache, "s", &keep);
+        assert!(
+            !path.is_file(),
+            "three dead in five: rewritten under a new name"
+        );
+        for p in [&packs, &Packs::default()] {
+            assert_eq!(p.read(cache, "s", "a"), Some(body(1, 100)));
+            assert_eq!(p.read(cache, "s", "c"), None);
+        }
     }
 
     #[test]
