@@ -9,8 +9,8 @@ mod write;
 
 pub use reject::{DropReason, Dropped, MAX_MESSAGE_CHARS, Reject, RejectReason};
 pub use write::{
-    Fingerprint, HashingWriter, Stamp, WorkspaceError, hex, io_err, io_hint, sha256_hex, temp_path,
-    write_atomic, write_atomic_with, write_replaceable_with,
+    Fingerprint, HashingWriter, Stamp, WorkspaceError, encoded_sha256, hex, io_err, io_hint,
+    sha256_hex, temp_path, write_atomic, write_atomic_with, write_replaceable_with,
 };
 
 /// `path` with `.` removed and `dir/..` folded lexically (no file system access), so paths print

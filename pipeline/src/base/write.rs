@@ -76,6 +76,22 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     hex(&Sha256::digest(bytes))
 }
 
+/// The hex SHA-256 of `value`'s postcard encoding, hashed as it is encoded: a fingerprint over a
+/// whole dataset's clips never holds their encoding in memory (at ten times Bandai Namco 2 that
+/// encoding was a few hundred MB). `what` names the value in errors.
+pub fn encoded_sha256<T: Serialize + ?Sized>(
+    value: &T,
+    what: &str,
+) -> Result<String, WorkspaceError> {
+    let hashing = postcard::to_io(value, HashingWriter::new(std::io::sink())).map_err(|e| {
+        WorkspaceError::Encode {
+            what: what.to_string(),
+            message: e.to_string(),
+        }
+    })?;
+    Ok(hashing.finish().1)
+}
+
 /// A writer that hashes (SHA-256) and counts what passes through it, so a file's checksum is known
 /// when it is written, without reading it back.
 #[derive(Debug)]

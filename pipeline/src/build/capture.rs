@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 
 use super::motions::{MotionRef, MotionSpill};
-use super::{BuildError, Reject, Stage, Workspace, WorkspaceError, sha256_hex};
+use super::{BuildError, Reject, Stage, Workspace, sha256_hex};
 use crate::annotate::taxonomy::TypeMap;
 use crate::base::RejectReason;
 use crate::clip::Clip;
@@ -265,12 +265,8 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
     };
     // The stage's input is exactly the clips, labels included, and their frames (named by where
     // they are): that encoding is the fingerprint.
-    let encoded =
-        postcard::to_stdvec(&(&item.clips, &item.refs)).map_err(|e| WorkspaceError::Encode {
-            what: "clips to mirror".into(),
-            message: e.to_string(),
-        })?;
-    let fp = mirror::fingerprint(&sha256_hex(&encoded), spec, &shared.types_digest);
+    let encoded = crate::base::encoded_sha256(&(&item.clips, &item.refs), "clips to mirror")?;
+    let fp = mirror::fingerprint(&encoded, spec, &shared.types_digest);
     // The copies' texts and labels are made here; their frames are made from the originals'
     // when read (`MotionRef::Mirrored`), so the stage reads and stores no frames.
     let Some(((mirrored, refs), ran)): Option<((mirror::MirrorOutput, Vec<MotionRef>), bool)> =

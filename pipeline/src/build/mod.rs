@@ -555,21 +555,17 @@ fn compose(
     let config = shared.config;
     let all: Vec<&Clip> = clips.iter().collect();
     // The clips without frames, and where their frames are: together, the stage's input.
-    let encoded = postcard::to_stdvec(&(&all, &*index)).map_err(|e| WorkspaceError::Encode {
-        what: "clips to compose".into(),
-        message: e.to_string(),
-    })?;
+    let encoded = crate::base::encoded_sha256(&(&all, &*index), "clips to compose")?;
     let vetoed = llm_vetoes(shared, &all, offline)?;
     let stamp = Fingerprint::new(
         crate::stages::compose::NAME,
         crate::stages::compose::VERSION,
     )
-    .text("clips", &sha256_hex(&encoded))
+    .text("clips", &encoded)
     .json("config synthetic", &config.synthetic)
     .json("config dataset.seed", &config.dataset.seed)
     .json("llm pair check", &vetoed.0)
     .stamp();
-    drop(encoded);
     let composed = shared
         .workspace
         .try_item(crate::stages::compose::NAME, "*", &stamp, || {
@@ -897,12 +893,9 @@ fn table_stamp(
     plans: &BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
 ) -> Result<Stamp, BuildError> {
     // The rows without frames, and where their frames are (stage outputs named by content).
-    let encoded = postcard::to_stdvec(&(clips, index)).map_err(|e| WorkspaceError::Encode {
-        what: "clip table".into(),
-        message: e.to_string(),
-    })?;
+    let encoded = crate::base::encoded_sha256(&(clips, index), "clip table")?;
     Ok(Fingerprint::new(Stage::Write.name(), WRITE_VERSION)
-        .text("rows", &sha256_hex(&encoded))
+        .text("rows", &encoded)
         .json("config features", &config.features)
         .json("config dataset.shard_bytes", &config.dataset.shard_bytes)
         .json("config dataset.zstd_level", &config.dataset.zstd_level)

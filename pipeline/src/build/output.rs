@@ -507,13 +507,9 @@ impl ShardJob<'_> {
         let held: Vec<&Clip> = plan.clips.iter().map(|&i| &self.table.clips[i]).collect();
         let refs: Vec<Option<&super::motions::MotionRef>> =
             held.iter().map(|c| self.table.index.get(&key(c))).collect();
-        let encoded =
-            postcard::to_stdvec(&(&held, &refs)).map_err(|e| super::WorkspaceError::Encode {
-                what: plan.file.clone(),
-                message: e.to_string(),
-            })?;
+        let encoded = crate::base::encoded_sha256(&(&held, &refs), &plan.file)?;
         Ok(super::Fingerprint::new("shard", 1)
-            .text("rows", &sha256_hex(&encoded))
+            .text("rows", &encoded)
             .text("skeletons", self.skeletons_json)
             .json("schema version", &crate::io::schema::SCHEMA_VERSION)
             .json("config features", &self.companions.features)
