@@ -8,7 +8,7 @@ use crate::annotate::taxonomy::TypeMap;
 use crate::base::RejectReason;
 use crate::clip::Clip;
 use crate::config::Config;
-use crate::motion::{BoundProfiles, ProfileSpec};
+use crate::motion::{BoundProfiles, ProfileSpec, SkeletonPool};
 use crate::source::{self, CaptureFile, SourceAnnotations};
 use crate::stages::segment::{self, SegmentOutput};
 use crate::stages::{ingest, mirror};
@@ -62,6 +62,8 @@ pub(super) struct Shared<'a> {
     pub(super) specs: Vec<ProfileSpec>,
     /// Profiles bound to the skeletons seen so far.
     pub(super) bound: std::sync::Arc<BoundProfiles>,
+    /// One copy of each skeleton for all the clips held.
+    pub(super) skeletons: SkeletonPool,
     pub(super) annotations: Vec<SourceAnnotations>,
     pub(super) fps_tables: Vec<BTreeMap<String, f64>>,
     pub(super) types: TypeMap,
@@ -249,6 +251,9 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
 
     let mut segmented = segmented;
     item.clips = std::mem::take(&mut segmented.clips);
+    for clip in &mut item.clips {
+        shared.skeletons.share(&mut clip.skeleton);
+    }
     item.refs = refs;
     item.done.push((Stage::Segment, seg_fp.fingerprint, ran));
     item.segment = segmented;
@@ -294,6 +299,9 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
     };
 
     item.mirrored = mirrored.clips;
+    for clip in &mut item.mirrored {
+        shared.skeletons.share(&mut clip.skeleton);
+    }
     item.mirrored_refs = refs;
     item.done.push((Stage::Mirror, fp.fingerprint, ran));
     item.rejects.extend(mirrored.rejects);

@@ -318,6 +318,7 @@ fn run_stages<'a>(
         workspace,
         specs,
         bound: Default::default(),
+        skeletons: Default::default(),
         annotations,
         fps_tables,
         types,
@@ -636,7 +637,11 @@ fn compose(
     for (clip, at) in composed.clips.iter().zip(refs) {
         index.insert(motions::key(clip), at);
     }
-    clips.extend(composed.clips);
+    let mut composed_clips = composed.clips;
+    for clip in &mut composed_clips {
+        shared.skeletons.share(&mut clip.skeleton);
+    }
+    clips.extend(composed_clips);
     clips.sort_by(|a, b| {
         a.clip_id
             .cmp(&b.clip_id)

@@ -15,6 +15,6 @@ pub use bvh::{
 pub use mirror::{MirrorPlan, OffsetPolicy, calibrate, mean_rotation};
 pub use motion::{Motion, WorldPose};
 pub use profile::{BodyPart, BoundProfiles, Profile, ProfileSpec, Reflection, Role, SignedAxis};
-pub use skeleton::{Channel, Joint, Skeleton};
+pub use skeleton::{Channel, Joint, Skeleton, SkeletonPool};
 pub mod canonical;
 pub mod compose;

@@ -180,3 +180,32 @@ impl Skeleton {
         hex(&hasher.finalize()[..8])
     }
 }
+
+/// One shared copy of each distinct skeleton. Clips read back from the stage cache each carry
+/// their own copy (about 3 KB for Bandai Namco's), while a dataset has a handful of skeletons
+/// (three in Bandai Namco 2's 2,902 captures); sharing them keeps held clips small.
+#[derive(Debug, Default)]
+pub struct SkeletonPool {
+    seen: std::sync::Mutex<Vec<std::sync::Arc<Skeleton>>>,
+}
+
+/// Distinct skeletons kept at most; past that, a skeleton is left unshared rather than compared
+/// with ever more.
+const POOL_KEPT: usize = 256;
+
+impl SkeletonPool {
+    /// Points `skeleton` at the pool's copy of an equal skeleton, adding it when it is new.
+    pub fn share(&self, skeleton: &mut std::sync::Arc<Skeleton>) {
+        let Ok(mut seen) = self.seen.lock() else {
+            return;
+        };
+        match seen
+            .iter()
+            .find(|s| std::sync::Arc::ptr_eq(s, skeleton) || ***s == **skeleton)
+        {
+            Some(shared) => *skeleton = std::sync::Arc::clone(shared),
+            None if seen.len() < POOL_KEPT => seen.push(std::sync::Arc::clone(skeleton)),
+            None => {}
+        }
+    }
+}
