@@ -64,16 +64,6 @@ impl Motion {
             .unwrap_or(0)
     }
 
-    /// The same skeleton and rate with no frames: what a clip holds while its frames are on disk.
-    pub fn without_frames(&self) -> Motion {
-        Motion {
-            skeleton: Arc::clone(&self.skeleton),
-            fps: self.fps,
-            rotations: Vec::new(),
-            translations: Vec::new(),
-        }
-    }
-
     /// Duration in seconds (frame count over rate).
     pub fn duration(&self) -> f64 {
         self.num_frames() as f64 / self.fps
