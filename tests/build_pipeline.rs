@@ -291,16 +291,12 @@ first = df['joint_positions'][0].to_numpy().reshape(df['num_frames'][0], df['num
 assert first.shape[2] == 3
 print('ok')
 "#;
-    let out = Command::new("python3")
-        .args(["-c", script])
-        .arg(s.out().join("data"))
-        .arg(report.clips.to_string())
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_python(
+        script,
+        &[
+            s.out().join("data").into_os_string(),
+            report.clips.to_string().into(),
+        ],
     );
 }
 

@@ -139,7 +139,7 @@ pub const WALK_KICK_BYE: [&str; 3] = [
 
 /// Runs a Python script (the readers `.ci/run` installs) with `args`, fails the test with its
 /// standard error unless it succeeds, and returns its standard output.
-pub fn run_python(script: &str, args: &[&Path]) -> String {
+pub fn run_python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> String {
     let out = std::process::Command::new("python3")
         .args(["-c", script])
         .args(args)
