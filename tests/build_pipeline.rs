@@ -3,7 +3,6 @@ mod common;
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use common::*;
 use motionforge::build::{BuildOptions, BuildReport, build};
