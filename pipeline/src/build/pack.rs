@@ -125,47 +125,46 @@ impl Packs {
     ) -> Result<(), WorkspaceError> {
         let mut stages = self.lock();
         let packs = scanned(&mut stages, cache, stage);
-        if packs.writer.as_ref().is_none_or(|w| w.len >= PACK_LIMIT) {
-            let dir = cache.join(stage);
-            fs::create_dir_all(&dir).map_err(io_err(&dir))?;
-            let n = self
-                .sequence
-                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let path = dir.join(pack_name(n));
-            let file = OpenOptions::new()
-                .create_new(true)
-                .append(true)
-                .open(&path)
-                .map_err(io_err(&path))?;
-            packs.packs.push(Pack {
-                path,
-                file: None,
-                records: Vec::new(),
-            });
-            packs.writer = Some(Writer {
-                pack: packs.packs.len() - 1,
-                file,
-                len: 0,
-            });
-        }
-        let Some(writer) = packs.writer.as_mut() else {
-            return Ok(());
+        // The writer is taken out while appending: after a failed append it is not put back
+        // (what was appended may be a torn record, and later records would sit behind it,
+        // unreachable by the scan), so the next entry starts a new pack.
+        let mut writer = match packs.writer.take().filter(|w| w.len < PACK_LIMIT) {
+            Some(w) => w,
+            None => {
+                let dir = cache.join(stage);
+                fs::create_dir_all(&dir).map_err(io_err(&dir))?;
+                let n = self
+                    .sequence
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let path = dir.join(pack_name(n));
+                let file = OpenOptions::new()
+                    .create_new(true)
+                    .append(true)
+                    .open(&path)
+                    .map_err(io_err(&path))?;
+                packs.packs.push(Pack {
+                    path,
+                    file: None,
+                    records: Vec::new(),
+                });
+                Writer {
+                    pack: packs.packs.len() - 1,
+                    file,
+                    len: 0,
+                }
+            }
         };
-        let start = writer.len;
-        let written = append_record(&mut writer.file, fingerprint, body);
-        let pack = writer.pack;
-        if let Err(source) = written {
-            // What was appended may be a torn record: later records would sit behind it,
-            // unreachable by the scan, so the next entry starts a new pack.
-            packs.writer = None;
-            return Err(WorkspaceError::Io {
+        let (start, pack) = (writer.len, writer.pack);
+        append_record(&mut writer.file, fingerprint, body).map_err(|source| {
+            WorkspaceError::Io {
                 path: packs.packs[pack].path.clone(),
                 source,
-            });
-        }
+            }
+        })?;
         let offset = start + HEADER + fingerprint.len() as u64;
         let len = body.len() as u64;
         writer.len = offset + len + FOOTER;
+        packs.writer = Some(writer);
         packs.packs[pack]
             .records
             .push((fingerprint.to_string(), start, offset, len));
