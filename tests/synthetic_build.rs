@@ -120,13 +120,22 @@ fn incompatible_pairs_are_never_composed_and_counts_add_up() {
         assert!(c.texts.contains(&c.text));
         assert!(c.plausibility.is_some());
     }
-    // Real clips carry plausibility metrics too.
-    assert!(
-        clips
-            .iter()
-            .filter(|c| c.kind == SourceKind::RealSingle)
-            .all(|c| c.plausibility.is_some())
-    );
+    // Real clips carry plausibility metrics too: measured when their rows are written.
+    let tables = motionforge::report::find_clip_tables(&config.dataset_dir()).unwrap();
+    let rows = motionforge::report::read_rows(&tables).unwrap();
+    let real: Vec<_> = rows
+        .iter()
+        .filter(|r| r.source_kind == SourceKind::RealSingle.as_str())
+        .collect();
+    assert_eq!(real.len(), 10, "5 captures and their mirrors");
+    for r in real {
+        let metrics = r.plausibility.expect("a real row has plausibility metrics");
+        assert!(
+            metrics.iter().all(|m| m.is_finite()),
+            "{}: {metrics:?}",
+            r.clip_id
+        );
+    }
 }
 
 #[test]

@@ -46,7 +46,7 @@ pub use crate::base::layout::{
 };
 
 /// Version of the table-writing stage.
-const WRITE_VERSION: u32 = 3;
+const WRITE_VERSION: u32 = 4;
 
 /// The stages of a build in dependency order: each needs every one before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -64,7 +64,7 @@ pub enum Stage {
     Plan,
     /// Left/right mirrored copies of every clip.
     Mirror,
-    /// Synthetic simultaneous-action pairs and plausibility metrics.
+    /// Synthetic simultaneous-action pairs, measured for plausibility.
     Compose,
     /// Parquet shards, manifest, card, normalisation statistics.
     Write,
@@ -470,7 +470,7 @@ fn run_stages<'a>(
     notes.sort();
     drops.sort();
 
-    // Synthetic pairs from the labelled originals and mirrors, and plausibility for every clip.
+    // Synthetic pairs from the labelled originals and mirrors.
     let mut compose_report = crate::stages::compose::ComposeReport::default();
     let mut pair_check = crate::stages::augment::AugmentReport::default();
     let mut blocked = if upstream_pending {
@@ -578,7 +578,6 @@ fn compose(
                 |c| c.split.clone(),
                 |c| shared.profile_of(c),
                 |c| motions.motion_of(c, index),
-                |c| index.get(&motions::key(c)).cloned(),
                 |a, b| {
                     let key = (
                         label::normalize_text(&a.text),
@@ -631,9 +630,6 @@ fn compose(
         ran: if ran { composed.report.sampled } else { 0 },
         reused: if ran { 0 } else { composed.report.sampled },
     };
-    for clip in clips.iter_mut() {
-        clip.plausibility = composed.real_metrics.get(&clip.clip_id).copied();
-    }
     for (clip, at) in composed.clips.iter().zip(refs) {
         index.insert(motions::key(clip), at);
     }

@@ -17,7 +17,7 @@ use arrow_array::{
 };
 use arrow_buffer::{OffsetBuffer, ScalarBuffer};
 use arrow_schema::{ArrowError, DataType, Field, Fields};
-use glam::DQuat;
+use glam::{DQuat, DVec3};
 use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::errors::ParquetError;
@@ -29,6 +29,7 @@ pub use crate::clip::skeleton_name;
 use crate::clip::{Clip, LoadedClip};
 use crate::features::{FeatureConfig, Features};
 use crate::motion::{Motion, Profile};
+use crate::quality::{Plausibility, plausibility};
 
 /// Errors writing a table.
 #[derive(Debug, thiserror::Error)]
@@ -82,13 +83,20 @@ pub struct DatasetMotion {
 
 /// Converts a motion from capture units and axes to the dataset frame.
 pub fn dataset_motion(motion: &Motion, profile: &Profile) -> DatasetMotion {
+    dataset_motion_at(
+        motion,
+        profile,
+        &crate::motion::canonical::dataset_positions(motion, profile),
+    )
+}
+
+/// [`dataset_motion`] from the motion's world positions in the dataset frame, already computed
+/// (`motion::canonical::dataset_positions`), in f64.
+fn dataset_motion_at(motion: &Motion, profile: &Profile, world: &[DVec3]) -> DatasetMotion {
     let axes = profile.to_dataset_axes();
-    let scale = profile.unit_scale;
-    let pose = motion.forward_kinematics();
     let n = motion.num_joints();
-    let mut positions = Vec::with_capacity(pose.positions.len() * 3);
-    for p in &pose.positions {
-        let q = axes * (*p * scale);
+    let mut positions = Vec::with_capacity(world.len() * 3);
+    for q in world {
         positions.extend([q.x as f32, q.y as f32, q.z as f32]);
     }
     let mut rotations = Vec::with_capacity(motion.rotations.len() * 4);
@@ -97,8 +105,9 @@ pub fn dataset_motion(motion: &Motion, profile: &Profile) -> DatasetMotion {
         let r: DQuat = if r.w < 0.0 { -r } else { r };
         rotations.extend([r.x as f32, r.y as f32, r.z as f32, r.w as f32]);
     }
-    let mut root = Vec::with_capacity(pose.num_frames() * 3);
-    for f in 0..pose.num_frames() {
+    let frames = world.len() / n.max(1);
+    let mut root = Vec::with_capacity(frames * 3);
+    for f in 0..frames {
         let at = (f * n + profile.root) * 3;
         root.extend_from_slice(&positions[at..at + 3]);
     }
@@ -128,6 +137,9 @@ pub struct Row<'a> {
     pub motion: DatasetMotion,
     /// The derived feature columns that are switched on.
     pub features: Features,
+    /// Plausibility metrics: the clip's own when it has them (a synthetic pair, measured when it
+    /// was composed), otherwise measured here from the same positions as the row's.
+    pub plausibility: Option<Plausibility>,
 }
 
 impl<'a> Row<'a> {
@@ -139,7 +151,11 @@ impl<'a> Row<'a> {
         config: &FeatureConfig,
     ) -> Row<'a> {
         let joints = motion.num_joints();
-        let dataset = dataset_motion(motion, profile);
+        let world = crate::motion::canonical::dataset_positions(motion, profile);
+        let plausibility = clip
+            .plausibility
+            .or_else(|| Some(plausibility(&world, joints, motion.fps, profile)));
+        let dataset = dataset_motion_at(motion, profile, &world);
         let features = crate::features::features(
             &dataset.positions,
             &dataset.rotations,
@@ -156,6 +172,7 @@ impl<'a> Row<'a> {
             frames: motion.num_frames(),
             motion: dataset,
             features,
+            plausibility,
         }
     }
 
@@ -282,11 +299,10 @@ fn nested_part_lists<'a>(rows: impl Iterator<Item = &'a [crate::parts::PartSet]>
 }
 
 /// One plausibility metric per row, null when not computed.
-fn metric(clips: &[&Clip], f: impl Fn(&crate::quality::Plausibility) -> f64) -> ArrayRef {
+fn metric(rows: &[Row<'_>], f: impl Fn(&Plausibility) -> f64) -> ArrayRef {
     Arc::new(Float32Array::from(
-        clips
-            .iter()
-            .map(|c| c.plausibility.as_ref().map(|p| f(p) as f32))
+        rows.iter()
+            .map(|r| r.plausibility.as_ref().map(|p| f(p) as f32))
             .collect::<Vec<_>>(),
     ))
 }
@@ -447,13 +463,10 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             "composed_parts",
             nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice())),
         ),
-        ("foot_skate", metric(clips, |p| p.foot_skate)),
-        (
-            "ground_penetration",
-            metric(clips, |p| p.ground_penetration),
-        ),
-        ("self_distance", metric(clips, |p| p.self_distance)),
-        ("lean", metric(clips, |p| p.lean)),
+        ("foot_skate", metric(rows, |p| p.foot_skate)),
+        ("ground_penetration", metric(rows, |p| p.ground_penetration)),
+        ("self_distance", metric(rows, |p| p.self_distance)),
+        ("lean", metric(rows, |p| p.lean)),
         ("attributes", Arc::new(attributes.finish())),
         (
             "skeleton",

@@ -1,7 +1,8 @@
 //! `compose`: synthetic simultaneous pairs (SINC 3.1, appendix C). Compatible labelled single
 //! clips (disjoint part sets, same skeleton profile, same split, different captures) are stitched by
-//! body part; every composite is checked for plausibility before it reaches the dataset, and the
-//! same metrics are computed for real clips so the two distributions can be compared.
+//! body part; every composite is checked for plausibility before it reaches the dataset. (Real
+//! clips get the same metrics when their rows are written, so the two distributions can be
+//! compared.)
 
 use std::collections::BTreeMap;
 
@@ -18,7 +19,7 @@ use crate::quality::{Plausibility, plausibility};
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 
 pub use crate::config::SyntheticConfig;
 
@@ -43,8 +44,6 @@ pub struct ComposeReport {
 pub struct ComposeOutput {
     /// The synthetic clips.
     pub clips: Vec<Clip>,
-    /// Plausibility metrics of every input clip, by clip id.
-    pub real_metrics: BTreeMap<String, Plausibility>,
     /// Counts.
     pub report: ComposeReport,
 }
@@ -275,21 +274,20 @@ pub struct Recipe<'c> {
     pub frames: usize,
 }
 
-/// Runs the stage: plausibility metrics for every clip, then the sampled pairs composed, checked
-/// and kept or dropped by reason. `veto` may refuse a pair before composition (the LLM check),
+/// Runs the stage: the sampled pairs composed, measured for plausibility, and kept or dropped by
+/// reason (real clips are measured when their rows are made, from the same positions). `veto` may refuse a pair before composition (the LLM check),
 /// naming the reason; `profile_of` binds a clip's skeleton profile; `motion_of` gives a clip's
 /// frames (the clips may be held without them, one motion is read at a time); `keep` sees each
 /// composed clip, with how its frames were made, before it joins the output (the build keeps the
 /// recipe instead of the frames).
 #[allow(clippy::too_many_arguments)]
-pub fn run<E: Send, K: Ord + Send>(
+pub fn run<E: Send>(
     clips: &[&Clip],
     config: &SyntheticConfig,
     seed: u64,
     split_of: impl Fn(&Clip) -> String,
     profile_of: impl Fn(&Clip) -> Option<Profile>,
     motion_of: impl Fn(&Clip) -> Result<Motion, E> + Sync,
-    read_key: impl Fn(&Clip) -> K,
     veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
     mut keep: impl FnMut(&mut Clip, Recipe<'_>) -> Result<(), E>,
 ) -> Result<ComposeOutput, E> {
@@ -304,24 +302,6 @@ pub fn run<E: Send, K: Ord + Send>(
     }
     let bound =
         |c: &Clip| -> Option<&Profile> { profiles.get(&c.skeleton_id()).and_then(Option::as_ref) };
-    // Frames are read in the order they are stored (`read_key`), so a clip's neighbours on disk
-    // are read together (rayon hands each thread a contiguous run); the metrics do not depend on
-    // the order.
-    let mut by_storage: Vec<&Clip> = clips.to_vec();
-    by_storage.sort_by_cached_key(|c| read_key(c));
-    let metrics: Vec<Option<(String, Plausibility)>> = by_storage
-        .par_iter()
-        .map(|c| {
-            let Some(p) = bound(c) else {
-                return Ok(None);
-            };
-            let motion = motion_of(c)?;
-            let positions = dataset_positions(&motion, p);
-            let metrics = plausibility(&positions, motion.num_joints(), motion.fps, p);
-            Ok(Some((c.clip_id.clone(), metrics)))
-        })
-        .collect::<Result<_, E>>()?;
-    out.real_metrics.extend(metrics.into_iter().flatten());
     let (pairs, report) = sample(clips, config, seed, split_of);
     out.report = report;
     // Composed and measured in parallel a batch at a time (memory stays a batch of composites),
