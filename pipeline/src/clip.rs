@@ -26,12 +26,99 @@ pub enum SourceKind {
 
 impl SourceKind {
     /// The name written in datasets and reports.
-    pub fn as_str(self) -> &'static str {
+    pub const fn as_str(self) -> &'static str {
         match self {
             SourceKind::RealSingle => "real_single",
             SourceKind::RealPair => "real_pair",
             SourceKind::Synthetic => "synthetic",
         }
+    }
+}
+
+impl SourceKind {
+    /// Every kind, in the order tables and reports list them.
+    pub const ALL: [SourceKind; 3] = [
+        SourceKind::RealSingle,
+        SourceKind::RealPair,
+        SourceKind::Synthetic,
+    ];
+
+    /// The kind a table's `source_kind` value names.
+    pub fn parse(name: &str) -> Option<SourceKind> {
+        SourceKind::ALL.into_iter().find(|k| k.as_str() == name)
+    }
+}
+
+/// The split a clip belongs to: `train`, `val`, `test` or any other name `[splits]` configures.
+/// Names are the user's, so this is a name with the rules that read it in one place: the order
+/// splits are listed and written in, and which one is the training split.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Split(String);
+
+impl Split {
+    /// The training split's name.
+    pub const TRAIN: &'static str = "train";
+
+    /// The split called `name`.
+    pub fn new(name: impl Into<String>) -> Split {
+        Split(name.into())
+    }
+
+    /// The training split.
+    pub fn train() -> Split {
+        Split(Split::TRAIN.into())
+    }
+
+    /// The name.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// True for the training split (the one normalisation statistics are taken over).
+    pub fn is_train(&self) -> bool {
+        self.0 == Split::TRAIN
+    }
+
+    /// Where a split named `name` comes in listings: train, then val (validation, dev), then
+    /// test, then any other name.
+    pub fn rank(name: &str) -> u8 {
+        match name {
+            Split::TRAIN => 0,
+            "val" | "validation" | "dev" => 1,
+            "test" => 2,
+            _ => 3,
+        }
+    }
+}
+
+impl Ord for Split {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        (Split::rank(&self.0), &self.0).cmp(&(Split::rank(&other.0), &other.0))
+    }
+}
+
+impl PartialOrd for Split {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl std::fmt::Display for Split {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl PartialEq<str> for Split {
+    fn eq(&self, other: &str) -> bool {
+        self.0 == other
+    }
+}
+
+impl PartialEq<&str> for Split {
+    fn eq(&self, other: &&str) -> bool {
+        self.0 == *other
     }
 }
 
@@ -77,7 +164,7 @@ pub struct Clip {
     /// True for the mirrored copy.
     pub mirrored: bool,
     /// The split of the source capture (`train`, `val`, `test`, ...).
-    pub split: String,
+    pub split: Split,
     /// Action label.
     pub action: String,
     /// Caption.

@@ -12,7 +12,7 @@ use super::{
     Reject, SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
 };
 use crate::base::HashingWriter;
-use crate::clip::Clip;
+use crate::clip::{Clip, Split};
 use crate::io::normalization::NormalizationStats;
 use crate::io::parquet::{ROWS_PER_GROUP, Row, ShardWriter, TableError};
 use crate::motion::Profile;
@@ -129,7 +129,7 @@ pub(super) struct Table<'a> {
 
 /// One planned shard: its file and the clips (indices into the sorted clip list) it holds.
 struct ShardPlan {
-    split: String,
+    split: Split,
     file: String,
     clips: Vec<usize>,
 }
@@ -360,8 +360,8 @@ fn scalar_dtype(data_type: &arrow_schema::DataType) -> Option<&'static str> {
 
 fn card(
     name: &str,
-    splits: &BTreeMap<String, usize>,
-    split_bytes: &BTreeMap<String, usize>,
+    splits: &BTreeMap<Split, usize>,
+    split_bytes: &BTreeMap<Split, usize>,
     companions: &Companions,
 ) -> String {
     let mut y = String::from("---\n");
@@ -371,8 +371,8 @@ fn card(
         y.push_str(&format!("  {}\n", companions.licences.join("; ")));
     }
     y.push_str("tags:\n- motion-capture\n- text-to-motion\n- motionforge\nconfigs:\n- config_name: default\n  data_files:\n");
-    // Split order (train, val, test, then others), as loaders list them.
-    let order = crate::stages::split::split_order(splits.keys().cloned());
+    // Split order (train, val, test, then others: the maps' own), as loaders list them.
+    let order: Vec<&Split> = splits.keys().collect();
     for split in &order {
         y.push_str(&format!(
             "  - split: {split}\n    path: {DATA_DIR}/{split}-*.parquet\n"
@@ -385,8 +385,8 @@ fn card(
     }
     y.push_str("  splits:\n");
     for split in &order {
-        let rows = splits.get(split).copied().unwrap_or(0);
-        let bytes = split_bytes.get(split).copied().unwrap_or(0);
+        let rows = splits.get(*split).copied().unwrap_or(0);
+        let bytes = split_bytes.get(*split).copied().unwrap_or(0);
         y.push_str(&format!(
             "  - name: {split}\n    num_bytes: {bytes}\n    num_examples: {rows}\n"
         ));
@@ -489,7 +489,7 @@ struct ShardJob<'a> {
     output: &'a Path,
     staging: &'a Path,
     /// The split whose rows the normalisation statistics are gathered over.
-    stats_split: Option<&'a str>,
+    stats_split: Option<&'a Split>,
 }
 
 /// What writing (or keeping) one shard gave.
@@ -533,7 +533,7 @@ impl ShardJob<'_> {
             }
             _ => None,
         };
-        let for_stats = self.stats_split == Some(plan.split.as_str());
+        let for_stats = self.stats_split == Some(&plan.split);
         let mut stats = for_stats.then(NormalizationStats::default);
         let (sha256, bytes) = match kept {
             Some(kept) => {
@@ -709,8 +709,8 @@ pub(super) fn write_outputs(
     let plans_for_shards = plan_shards(clips, index, companions.shard_bytes);
     // Normalisation statistics over the training split (the first split when there is no
     // `train`), gathered shard by shard as the rows pass.
-    let stats_split = if plans_for_shards.iter().any(|p| p.split == "train") {
-        Some("train".to_string())
+    let stats_split = if plans_for_shards.iter().any(|p| p.split.is_train()) {
+        Some(Split::train())
     } else {
         plans_for_shards.first().map(|p| p.split.clone())
     };
@@ -731,7 +731,7 @@ pub(super) fn write_outputs(
         force,
         output,
         staging: &staging,
-        stats_split: stats_split.as_deref(),
+        stats_split: stats_split.as_ref(),
     };
     // Shards are written on all cores; their results are taken in shard order, so the manifest,
     // the merged statistics and the error reported (the first shard's that failed) are the same
@@ -746,8 +746,8 @@ pub(super) fn write_outputs(
     let mut normalization = NormalizationStats::default();
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<crate::io::manifest::Shard>> = BTreeMap::new();
-    let mut split_rows: BTreeMap<String, usize> = BTreeMap::new();
-    let mut split_bytes: BTreeMap<String, usize> = BTreeMap::new();
+    let mut split_rows: BTreeMap<Split, usize> = BTreeMap::new();
+    let mut split_bytes: BTreeMap<Split, usize> = BTreeMap::new();
     let mut outputs = BTreeMap::new();
     for (plan, done) in plans_for_shards.iter().zip(done) {
         if let Some(stats) = done.stats {
@@ -757,7 +757,7 @@ pub(super) fn write_outputs(
         *split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
         outputs.insert(plan.file.clone(), done.entry.sha256.clone());
         shard_entries
-            .entry(plan.split.clone())
+            .entry(plan.split.to_string())
             .or_default()
             .push(done.entry);
         shard_fingerprints.insert(plan.file.clone(), done.fingerprint);
@@ -802,11 +802,14 @@ pub(super) fn write_outputs(
     manifest.splits = split_rows
         .iter()
         .map(|(split, rows)| {
-            let split_entry = crate::io::manifest::Split {
+            let split_entry = crate::io::manifest::SplitShards {
                 rows: *rows,
-                shards: shard_entries.get(split).cloned().unwrap_or_default(),
+                shards: shard_entries
+                    .get(split.as_str())
+                    .cloned()
+                    .unwrap_or_default(),
             };
-            (split.clone(), split_entry)
+            (split.to_string(), split_entry)
         })
         .collect();
     write_atomic(&staging.join(MANIFEST_FILE), &manifest.to_json())?;

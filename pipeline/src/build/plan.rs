@@ -226,18 +226,13 @@ pub fn status(config: &Config) -> Result<Status, BuildError> {
     let manifest = crate::io::manifest::Manifest::read(&plan.output)?;
     let splits = manifest
         .map(|m| {
-            let rows: BTreeMap<String, u64> = m
+            // Keyed by split, so listed in split order (train, val, test, then others).
+            let rows: BTreeMap<crate::clip::Split, u64> = m
                 .splits
                 .iter()
-                .map(|(k, v)| (k.clone(), v.rows as u64))
+                .map(|(k, v)| (crate::clip::Split::new(k.as_str()), v.rows as u64))
                 .collect();
-            crate::stages::split::split_order(rows.keys().cloned())
-                .into_iter()
-                .map(|k| {
-                    let n = rows.get(&k).copied().unwrap_or(0);
-                    (k, n)
-                })
-                .collect()
+            rows.into_iter().map(|(k, n)| (k.to_string(), n)).collect()
         })
         .unwrap_or_default();
     let stages = plan

@@ -37,7 +37,7 @@ pub struct Manifest {
     pub sources: Vec<Source>,
     /// Rows and shards per split.
     #[serde(default)]
-    pub splits: BTreeMap<String, Split>,
+    pub splits: BTreeMap<String, SplitShards>,
     /// Fingerprint of the write stage's input.
     pub table_fingerprint: String,
 }
@@ -85,7 +85,7 @@ pub struct Source {
 /// One split: its rows and shards.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Split {
+pub struct SplitShards {
     /// Rows in the split.
     pub rows: usize,
     /// Its shards, in order.

@@ -414,7 +414,7 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
                 clips.iter().map(|c| c.mirrored).collect::<Vec<_>>(),
             )),
         ),
-        ("split", strings(&|c| &c.split)),
+        ("split", strings(&|c| c.split.as_str())),
         ("action", strings(&|c| &c.action)),
         ("text", strings(&|c| &c.text)),
         (

@@ -17,6 +17,7 @@ use super::stats::{
 };
 use super::{ClipRow, ReportError};
 use crate::base::{temp_path, write_atomic};
+use crate::clip::SourceKind;
 
 /// A figure of the report: its file stem under `figures/`, caption and pixel size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -266,11 +267,11 @@ pub(crate) fn kind_label(kind: &str) -> String {
 }
 
 fn kind_color(kind: &str) -> RGBColor {
-    match kind {
-        "real_single" => BLUE,
-        "real_pair" => ORANGE,
-        "synthetic" => GREEN,
-        _ => PURPLE,
+    match SourceKind::parse(kind) {
+        Some(SourceKind::RealSingle) => BLUE,
+        Some(SourceKind::RealPair) => ORANGE,
+        Some(SourceKind::Synthetic) => GREEN,
+        None => PURPLE,
     }
 }
 

@@ -76,7 +76,7 @@ impl ClipRow {
 
     /// True for synthetic compositions (`source_kind == "synthetic"`).
     pub fn is_synthetic(&self) -> bool {
-        self.source_kind == "synthetic"
+        self.source_kind == crate::clip::SourceKind::Synthetic.as_str()
     }
 }
 

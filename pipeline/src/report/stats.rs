@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::Serialize;
 
 use super::{ClipRow, ReportInput};
+use crate::clip::{SourceKind, Split};
 
 /// Group name of clips whose label maps to no motion type (the build report's name too).
 pub const UNMAPPED: &str = "(unmapped)";
@@ -18,9 +19,11 @@ pub const NULL_SPLIT: &str = "(none)";
 pub const NO_LABEL: &str = "(none)";
 /// Source kinds always listed in the composition, in SINC's order, even when absent: a zero says
 /// as much as a count.
-pub const KNOWN_KINDS: [&str; 3] = ["real_single", "real_pair", "synthetic"];
-/// Splits in their conventional order; others follow alphabetically.
-const SPLIT_ORDER: [&str; 5] = ["train", "val", "validation", "test", NO_SPLIT];
+pub const KNOWN_KINDS: [&str; 3] = [
+    SourceKind::RealSingle.as_str(),
+    SourceKind::RealPair.as_str(),
+    SourceKind::Synthetic.as_str(),
+];
 
 /// A plausibility metric column and how to present it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -307,13 +310,11 @@ pub(crate) fn type_order(a: &str, b: &str) -> Ordering {
     (a == UNMAPPED, a).cmp(&(b == UNMAPPED, b))
 }
 
-/// Orders split names: train, val, validation, test, all, then the rest alphabetically.
+/// Orders split names as the build writes them ([`Split`]'s order: train, val, test), with
+/// [`NO_SPLIT`] after test and other names last, alphabetically.
 pub(crate) fn split_order(a: &str, b: &str) -> Ordering {
     let rank = |s: &str| {
-        SPLIT_ORDER
-            .iter()
-            .position(|k| *k == s)
-            .unwrap_or(usize::MAX)
+        if s == NO_SPLIT { 5 } else { 2 * Split::rank(s) }
     };
     (rank(a), a).cmp(&(rank(b), b))
 }
@@ -334,7 +335,7 @@ pub(crate) fn sorted_rows(rows: &[ClipRow]) -> Vec<ClipRow> {
 /// [`UNMAPPED`]; mirrored copies would double every count (the build report counts the same way).
 pub(crate) fn typed_rows(rows: &[ClipRow]) -> impl Iterator<Item = &ClipRow> {
     rows.iter()
-        .filter(|r| r.is_original() && r.source_kind == "real_single")
+        .filter(|r| r.is_original() && r.source_kind == SourceKind::RealSingle.as_str())
 }
 
 /// Lengths in seconds per motion type of [`typed_rows`], types sorted by [`type_order`].

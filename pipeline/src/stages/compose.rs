@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::clip::{Clip, SourceKind};
+use crate::clip::{Clip, SourceKind, Split};
 use crate::compose_text::compose_variants;
 use crate::motion::canonical::dataset_positions;
 use crate::motion::compose::{Trim, compose};
@@ -95,7 +95,7 @@ pub fn sample<'c>(
     clips: &[&'c Clip],
     config: &SyntheticConfig,
     seed: u64,
-    split_of: impl Fn(&Clip) -> String,
+    split_of: impl Fn(&Clip) -> Split,
 ) -> (Vec<(&'c Clip, &'c Clip)>, ComposeReport) {
     let mut report = ComposeReport::default();
     if !config.enabled {
@@ -110,7 +110,7 @@ pub fn sample<'c>(
     report.candidates = candidates.len();
     // Pairs never cross a profile or split: each candidate is only checked against the others
     // of its group (members in ascending order, so every partner list is ascending as well).
-    let mut group_ids: BTreeMap<(String, String), usize> = BTreeMap::new();
+    let mut group_ids: BTreeMap<(String, Split), usize> = BTreeMap::new();
     let mut members: Vec<Vec<usize>> = Vec::new();
     let mut group_of: Vec<usize> = Vec::with_capacity(candidates.len());
     for (i, c) in candidates.iter().enumerate() {
@@ -285,7 +285,7 @@ pub fn run<E: Send>(
     clips: &[&Clip],
     config: &SyntheticConfig,
     seed: u64,
-    split_of: impl Fn(&Clip) -> String,
+    split_of: impl Fn(&Clip) -> Split,
     profile_of: impl Fn(&Clip) -> Option<Profile>,
     motion_of: impl Fn(&Clip) -> Result<Motion, E> + Sync,
     veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,

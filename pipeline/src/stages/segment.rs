@@ -13,7 +13,7 @@ use crate::annotate::overlap::overlaps;
 use crate::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
 use crate::annotate::taxonomy::TypeMap;
 use crate::base::{DropReason, Dropped, Fingerprint, Stamp};
-use crate::clip::{Capture, Clip, LoadedClip, SourceKind};
+use crate::clip::{Capture, Clip, LoadedClip, SourceKind, Split};
 use crate::config::SegmentConfig;
 use crate::motion::bvh::excerpt;
 use crate::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
@@ -345,7 +345,7 @@ impl ClipMaker<'_, '_> {
             capture: capture.capture.clone(),
             frame_range: (start, end),
             mirrored: false,
-            split: String::new(),
+            split: Split::default(),
             action: String::new(),
             text: String::new(),
             texts: Vec::new(),

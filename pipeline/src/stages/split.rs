@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use sha2::{Digest, Sha256};
 
-use crate::clip::Clip;
+use crate::clip::{Clip, Split};
 use crate::config::Config;
 pub use crate::config::SplitConfig;
 
@@ -70,16 +70,11 @@ pub struct Splits {
     listed: BTreeMap<String, String>,
 }
 
-/// Split names in a stable order: train, val(idation), test, then the rest alphabetically.
-pub fn split_order(names: impl IntoIterator<Item = String>) -> Vec<String> {
-    let rank = |n: &str| match n {
-        "train" => 0,
-        "val" | "validation" | "dev" => 1,
-        "test" => 2,
-        _ => 3,
-    };
-    let mut v: Vec<String> = names.into_iter().collect();
-    v.sort_by(|a, b| (rank(a), a).cmp(&(rank(b), b)));
+/// Split names in a stable order ([`Split`]'s: train, val(idation), test, then the rest
+/// alphabetically), each once.
+pub fn split_order(names: impl IntoIterator<Item = Split>) -> Vec<Split> {
+    let mut v: Vec<Split> = names.into_iter().collect();
+    v.sort();
     v.dedup();
     v
 }
@@ -108,15 +103,16 @@ impl Splits {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
-        clip.split = self.split_of(&clip.capture.path, &stem);
+        clip.split = Split::new(self.split_of(&clip.capture.path, &stem));
     }
 
     /// Builds the assignment from the config and the split file's text (if any).
     pub fn new(config: &SplitConfig, file: Option<(&str, &str)>) -> Result<Splits, SplitError> {
         let total: f64 = config.ratios.values().filter(|r| **r > 0.0).sum();
-        let order: Vec<(String, f64)> = split_order(config.ratios.keys().cloned())
+        let order: Vec<(String, f64)> = split_order(config.ratios.keys().map(Split::new))
             .into_iter()
             .map(|n| {
+                let n = n.as_str().to_string();
                 let r = config.ratios.get(&n).copied().unwrap_or(0.0).max(0.0);
                 (n, if total > 0.0 { r / total } else { 0.0 })
             })
@@ -214,7 +210,7 @@ impl Splits {
         self.order
             .last()
             .map(|(n, _)| n.clone())
-            .unwrap_or_else(|| "train".into())
+            .unwrap_or_else(|| Split::TRAIN.into())
     }
 
     /// Configured split names, in order.
