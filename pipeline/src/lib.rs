@@ -33,10 +33,11 @@
 //! 4. **label, paraphrase, plan** ([`stages::label`], [`stages::augment`]): body parts from the
 //!    embedded labeller or an LLM through a cached client ([`llm`]).
 //! 5. **mirror** ([`stages::mirror`]): the left/right reflection of motion, texts and labels.
-//! 6. **compose** ([`stages::compose`]): plausibility of every clip and synthetic simultaneous
-//!    pairs stitched by body part.
-//! 7. **write** (the runner, with [`io`]): rows become Parquet shards per split, with the
-//!    manifest, the card and normalisation statistics, staged and switched in atomically;
+//! 6. **compose** ([`stages::compose`]): synthetic simultaneous pairs stitched by body part,
+//!    each checked for plausibility.
+//! 7. **write** (the runner, with [`io`]): each row is made once (positions in the dataset frame,
+//!    derived features, plausibility of real clips) and rows become Parquet shards per split, with
+//!    the manifest, the card and normalisation statistics, staged and switched in atomically;
 //!    **report** ([`report`]) then reads the shards back for the statistics report.
 //!
 //! [`build::build`] runs it all, reusing every cached output whose fingerprint is unchanged.
@@ -70,6 +71,7 @@ pub mod clip;
 pub mod compose_text;
 pub mod config;
 pub mod features;
+pub mod humanml3d;
 pub mod io;
 pub mod llm;
 pub mod motion;

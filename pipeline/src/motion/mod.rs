@@ -6,6 +6,7 @@ pub mod bvh;
 pub mod mirror;
 #[allow(clippy::module_inception)]
 mod motion;
+pub mod npy;
 pub mod profile;
 pub mod skeleton;
 

@@ -1,0 +1,113 @@
+//! Joint-position arrays in NumPy's `.npy` format, the form most of the field's motion lives in
+//! (HumanML3D's `joints`, `pose_data` and `new_joints`): `frames × joints × 3` (or
+//! `frames × joints·3`) of float32 or float64, C order. Parsing the header is left to `npyz`;
+//! this module checks what the header claims against the bytes before it reads any value.
+
+use glam::DVec3;
+
+/// A `frames × joints` array of positions, frame-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointArray {
+    /// Frames.
+    pub frames: usize,
+    /// Joints per frame.
+    pub joints: usize,
+    /// `frames × joints` positions.
+    pub positions: Vec<DVec3>,
+}
+
+/// Why a `.npy` file is not a joint-position array.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NpyError {
+    /// The header cannot be read.
+    #[error("not a NumPy .npy file: {0}")]
+    Header(String),
+    /// The values are not float32 or float64.
+    #[error("values are `{0}`; expected float32 (`<f4`) or float64 (`<f8`)")]
+    DType(String),
+    /// The array is stored in Fortran order.
+    #[error("the array is in Fortran order; expected C order (numpy's default)")]
+    FortranOrder,
+    /// The shape is not `frames × joints × 3` (or `frames × joints·3`).
+    #[error("shape {shape:?}; expected (frames, joints, 3) or (frames, joints*3)")]
+    Shape {
+        /// The shape the header gives.
+        shape: Vec<u64>,
+    },
+    /// The header promises more values than the file holds.
+    #[error("the header promises {expected} bytes of values but the file holds {found}")]
+    Truncated {
+        /// Bytes the shape needs.
+        expected: u64,
+        /// Bytes after the header.
+        found: u64,
+    },
+    /// A value is NaN or infinite.
+    #[error("frame {frame}, joint {joint}: position is not finite")]
+    NotFinite {
+        /// The frame.
+        frame: usize,
+        /// The joint.
+        joint: usize,
+    },
+}
+
+/// Reads a joint-position array from the bytes of a `.npy` file.
+pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
+    let file = npyz::NpyFile::new(bytes).map_err(|e| NpyError::Header(e.to_string()))?;
+    if file.order() == npyz::Order::Fortran {
+        return Err(NpyError::FortranOrder);
+    }
+    let shape = file.shape().to_vec();
+    let (frames, joints) = match shape.as_slice() {
+        [f, j, 3] => (*f, *j),
+        [f, n] if n % 3 == 0 => (*f, n / 3),
+        _ => return Err(NpyError::Shape { shape }),
+    };
+    let dtype = file.dtype();
+    let width: u64 = match dtype.num_bytes() {
+        Some(4) | Some(8) => dtype.num_bytes().map_or(0, |w| w as u64),
+        _ => return Err(NpyError::DType(dtype.descr())),
+    };
+    // What the header claims is checked against what the file holds before anything is
+    // allocated for it.
+    let values = frames
+        .checked_mul(joints)
+        .and_then(|n| n.checked_mul(3))
+        .ok_or_else(|| NpyError::Shape {
+            shape: shape.clone(),
+        })?;
+    let expected = values.saturating_mul(width);
+    let found = file.into_inner().len() as u64;
+    if expected > found {
+        return Err(NpyError::Truncated { expected, found });
+    }
+    let file = npyz::NpyFile::new(bytes).map_err(|e| NpyError::Header(e.to_string()))?;
+    let flat: Vec<f64> = match width {
+        8 => file
+            .into_vec::<f64>()
+            .map_err(|_| NpyError::DType(dtype.descr()))?,
+        _ => file
+            .into_vec::<f32>()
+            .map_err(|_| NpyError::DType(dtype.descr()))?
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+    };
+    let joints = joints as usize;
+    let positions: Vec<DVec3> = flat
+        .chunks_exact(3)
+        .map(|v| DVec3::new(v[0], v[1], v[2]))
+        .collect();
+    if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+        return Err(NpyError::NotFinite {
+            frame: i / joints.max(1),
+            joint: i % joints.max(1),
+        });
+    }
+    Ok(JointArray {
+        frames: frames as usize,
+        joints,
+        positions,
+    })
+}
