@@ -23,6 +23,7 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
+pub mod caption;
 mod recover;
 
 pub use recover::{positions_from_vectors, recover_from_ric};
