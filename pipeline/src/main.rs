@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 
 use motionforge::build::{BuildOptions, Stage, build};
 use motionforge::config::{Config, DEFAULT_CONFIG};
+use motionforge::motion::ProfileSpec;
 use motionforge::progress::ProgressSink;
 use motionforge::terminal::{BarProgress, LogOptions, LogProgress};
 
@@ -218,6 +219,11 @@ enum Command {
         #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
         wait: Option<Duration>,
     },
+    /// Export a built dataset in another layout, from its shards alone (no rebuild).
+    Export {
+        #[command(subcommand)]
+        command: ExportCommand,
+    },
     /// Write the statistics report of a built dataset: tables (LaTeX, Markdown), figures (SVG,
     /// PNG) and stats.json, from its shards and manifest alone.
     Report {
@@ -305,6 +311,31 @@ enum Command {
         /// Namco: `dataset-2_{content}_{style}_{take}`).
         #[arg(long, requires = "build")]
         pattern: Option<String>,
+    },
+}
+
+#[derive(Subcommand)]
+enum ExportCommand {
+    /// A HumanML3D folder (new_joint_vecs, new_joints, joints, texts, Mean/Std, split lists)
+    /// that text-to-motion, T2M-GPT, MoMask and their evaluators load as they load HumanML3D.
+    ///
+    /// Every row becomes SMPL's 22 body joints (by its skeleton profile's [smpl22] table), y up,
+    /// 20 fps, and HumanML3D's 263 numbers per frame computed as HumanML3D computes them
+    /// (docs/humanml3d.md). Mirrored rows are named M<name>, in their original's split.
+    #[command(after_help = EXIT_CODES)]
+    Humanml3d {
+        /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
+        #[arg(long, short)]
+        dataset: PathBuf,
+        /// The folder to write; default `<dataset>/humanml3d`.
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+        /// Replace the output folder if it exists.
+        #[arg(long)]
+        force: bool,
+        /// A skeleton profile TOML for a skeleton that is not bundled; repeatable.
+        #[arg(long, value_name = "TOML")]
+        profile: Vec<PathBuf>,
     },
 }
 
@@ -552,6 +583,46 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
                     files.len(),
                     output.unwrap_or_else(|| dataset.join("report")).display()
                 )?;
+            }
+        }
+        Command::Export {
+            command:
+                ExportCommand::Humanml3d {
+                    dataset,
+                    out,
+                    force,
+                    profile,
+                },
+        } => {
+            let mut profiles = Vec::new();
+            for path in profile {
+                let text = std::fs::read_to_string(&path)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+                profiles.push(ProfileSpec::from_toml(&path.display().to_string(), &text)?);
+            }
+            let out = out.unwrap_or_else(|| dataset.join("humanml3d"));
+            let options = motionforge::export::ExportOptions { force, profiles };
+            let summary = motionforge::export::export_humanml3d(&dataset, &out, &options)?;
+            if ui.status() {
+                let mut stdout = std::io::stdout();
+                writeln!(
+                    stdout,
+                    "exported {} of {} clips ({} rows of 263) to {}",
+                    summary.exported,
+                    summary.clips,
+                    summary.rows,
+                    out.display()
+                )?;
+                for s in &summary.skipped {
+                    writeln!(stdout, "  skipped {}: {}", s.clip_id, s.reason)?;
+                }
+                if !summary.filtered_by_loaders.is_empty() {
+                    writeln!(
+                        stdout,
+                        "  {} clips are outside 40 to 199 rows: HumanML3D's loaders drop them (listed in export.json)",
+                        summary.filtered_by_loaders.len()
+                    )?;
+                }
             }
         }
         Command::Prompt { command } => prompt_command(command)?,

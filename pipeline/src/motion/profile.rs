@@ -234,6 +234,38 @@ pub struct ProfileSpec {
     /// Per-joint reflection `B_j` for mirroring local rotations (calibrated; see `docs/mirroring.md`).
     #[serde(default)]
     pub reflections: BTreeMap<String, Reflection>,
+    /// Where SMPL's 22 body joints are on this skeleton, by SMPL joint name (`pelvis`,
+    /// `left_hip`, ...): what the HumanML3D export places them by (`docs/humanml3d.md`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub smpl22: BTreeMap<String, SmplJoint>,
+}
+
+/// Where one SMPL body joint is on another skeleton.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum SmplJoint {
+    /// At a joint of the skeleton.
+    Joint(String),
+    /// On the line between two joints, `at` of the way from the first (for rigs with fewer
+    /// spine joints than SMPL).
+    Between {
+        /// The two joints.
+        between: [String; 2],
+        /// 0 at the first, 1 at the second.
+        at: f64,
+    },
+}
+
+/// SMPL's 22 body joints placed on a skeleton: for each, two joint indices and the weight of the
+/// second (0 for a joint of the skeleton itself).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmplPlacement(pub [(usize, usize, f64); 22]);
+
+impl SmplPlacement {
+    /// SMPL's body joints of one frame of `frame` (positions of the skeleton's joints).
+    pub fn place(&self, frame: &[DVec3]) -> [DVec3; 22] {
+        self.0.map(|(a, b, t)| frame[a].lerp(frame[b], t))
+    }
 }
 
 /// Errors binding a profile to a skeleton.
@@ -273,6 +305,26 @@ pub enum ProfileError {
     /// Up and forward are the same axis.
     #[error("profile `{0}`: up and forward axes must differ")]
     Axes(String),
+    /// The profile does not say where SMPL's body joints are.
+    #[error(
+        "profile `{profile}` has no `[smpl22]` entry for SMPL joint `{joint}`; add one naming a joint of the skeleton or `{{ between = [a, b], at = t }}` (docs/humanml3d.md)"
+    )]
+    NoSmplJoint {
+        /// Profile name.
+        profile: String,
+        /// The SMPL joint.
+        joint: String,
+    },
+    /// An `[smpl22]` entry is not usable.
+    #[error("profile `{profile}`: `[smpl22]` entry `{joint}`: {message}")]
+    BadSmplJoint {
+        /// Profile name.
+        profile: String,
+        /// The SMPL joint (or the unknown key).
+        joint: String,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 const BUNDLED: [(&str, &str); 3] = [
@@ -294,6 +346,55 @@ impl ProfileSpec {
             name: name.to_string(),
             message: e.to_string(),
         })
+    }
+
+    /// Where SMPL's 22 body joints (in SMPL order, `smpl_names`) are on a skeleton whose joints
+    /// are `joint_names`.
+    pub fn smpl_placement(
+        &self,
+        smpl_names: &[&str; 22],
+        joint_names: &[&str],
+    ) -> Result<SmplPlacement, ProfileError> {
+        let bad = |joint: &str, message: String| ProfileError::BadSmplJoint {
+            profile: self.name.clone(),
+            joint: joint.to_string(),
+            message,
+        };
+        if let Some(unknown) = self
+            .smpl22
+            .keys()
+            .find(|k| !smpl_names.contains(&k.as_str()))
+        {
+            return Err(bad(unknown, "not one of SMPL's 22 body joints".into()));
+        }
+        let index = |smpl: &str, name: &str| {
+            joint_names
+                .iter()
+                .position(|j| *j == name)
+                .ok_or_else(|| bad(smpl, format!("the skeleton has no joint `{name}`")))
+        };
+        let mut out = [(0usize, 0usize, 0.0f64); 22];
+        for (slot, smpl) in out.iter_mut().zip(smpl_names) {
+            *slot = match self.smpl22.get(*smpl) {
+                None => {
+                    return Err(ProfileError::NoSmplJoint {
+                        profile: self.name.clone(),
+                        joint: smpl.to_string(),
+                    });
+                }
+                Some(SmplJoint::Joint(name)) => {
+                    let i = index(smpl, name)?;
+                    (i, i, 0.0)
+                }
+                Some(SmplJoint::Between { between, at }) => {
+                    if !(0.0..=1.0).contains(at) {
+                        return Err(bad(smpl, format!("`at` is {at}; expected 0 to 1")));
+                    }
+                    (index(smpl, &between[0])?, index(smpl, &between[1])?, *at)
+                }
+            };
+        }
+        Ok(SmplPlacement(out))
     }
 
     /// One of the bundled profiles by name.

@@ -1,0 +1,705 @@
+//! `motionforge export humanml3d`: a built dataset as a HumanML3D folder, the layout that
+//! text-to-motion, T2M-GPT, MoMask, MDM and their evaluators read:
+//!
+//! ```text
+//! new_joint_vecs/<name>.npy   (T-1, 263) float32: humanml3d::vectors
+//! new_joints/<name>.npy       (T-1, 22, 3) float32: positions recovered from the vectors
+//! joints/<name>.npy           (T, 22, 3) float32: the 20 fps, y-up positions the vectors came from
+//! texts/<name>.txt            caption#word/POS ...#start#end, one line per caption
+//! Mean.npy, Std.npy           (263,) float32, HumanML3D's per-group averaged std
+//! train.txt val.txt test.txt all.txt   names per split (mirrored clips `M<name>`)
+//! names.csv                   name, clip_id, split, source_kind, mirrored
+//! export.json                 what was exported, skipped and why, and what the loaders filter
+//! ```
+//!
+//! Each clip's skeleton is mapped to SMPL's 22 body joints by its profile's `[smpl22]` table,
+//! turned to HumanML3D's axes (y up), resampled to 20 fps and converted as HumanML3D does.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use arrow_array::RecordBatch;
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Float32Type, Float64Type, Int32Type};
+use glam::DVec3;
+use parquet::arrow::ProjectionMask;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::clip::Split;
+use crate::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
+use crate::motion::profile::SmplPlacement;
+use crate::motion::{Motion, ProfileSpec};
+
+/// Rows the HumanML3D loaders keep: `Text2MotionDatasetV2` drops motions shorter than 40 rows or
+/// 200 rows and longer.
+pub const LOADER_ROWS: std::ops::Range<usize> = 40..200;
+
+/// How to export.
+#[derive(Debug, Clone, Default)]
+pub struct ExportOptions {
+    /// Replace an existing output folder.
+    pub force: bool,
+    /// Profiles of skeletons that are not bundled (a dataset built with a profile file).
+    pub profiles: Vec<ProfileSpec>,
+}
+
+/// A clip that was not exported, and why.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Skipped {
+    /// The clip.
+    pub clip_id: String,
+    /// Why.
+    pub reason: String,
+}
+
+/// What an export wrote.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct ExportSummary {
+    /// Rows of the dataset.
+    pub clips: usize,
+    /// Clips written.
+    pub exported: usize,
+    /// Rows of 263 numbers written over all clips.
+    pub rows: usize,
+    /// Exported clips per split.
+    pub splits: BTreeMap<String, usize>,
+    /// Clips not exported, with the reason.
+    pub skipped: Vec<Skipped>,
+    /// Exported clips the HumanML3D loaders will drop for their length (outside 40 to 199 rows):
+    /// names.
+    pub filtered_by_loaders: Vec<String>,
+}
+
+/// Why an export stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// A file cannot be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A shard cannot be read.
+    #[error("{}: {message}", path.display())]
+    Table {
+        /// The shard.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// The folder is not a built dataset.
+    #[error("{}: {message}", path.display())]
+    NotADataset {
+        /// The folder.
+        path: PathBuf,
+        /// What is missing.
+        message: String,
+    },
+    /// The output folder exists.
+    #[error("{} exists; pass --force to replace it", path.display())]
+    Exists {
+        /// The folder.
+        path: PathBuf,
+    },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> ExportError + '_ {
+    move |source| ExportError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// One row of the table, without its frames.
+#[derive(Debug, Clone)]
+struct Entry {
+    clip_id: String,
+    split: Split,
+    mirrored: bool,
+    source_kind: String,
+    /// The shard and the row in it.
+    shard: usize,
+    row: usize,
+}
+
+/// Exports the dataset in `dataset` (a build's `<output>/<name>` folder) into `out`.
+pub fn export_humanml3d(
+    dataset: &Path,
+    out: &Path,
+    options: &ExportOptions,
+) -> Result<ExportSummary, ExportError> {
+    if out.exists() && !options.force {
+        return Err(ExportError::Exists {
+            path: out.to_path_buf(),
+        });
+    }
+    let shards =
+        crate::report::find_clip_tables(dataset).map_err(|e| ExportError::NotADataset {
+            path: dataset.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    if shards.is_empty() {
+        return Err(ExportError::NotADataset {
+            path: dataset.to_path_buf(),
+            message: "no clip table (data/*.parquet); build the dataset first".into(),
+        });
+    }
+    let placements = placements(dataset, options)?;
+    let mut entries = Vec::new();
+    for (i, shard) in shards.iter().enumerate() {
+        read_entries(shard, i, &mut entries)?;
+    }
+    let names = assign_names(&entries);
+
+    // Everything goes to a staging folder beside `out`, renamed into place at the end: an
+    // interrupted export leaves no folder that looks complete.
+    let staging = staging_path(out);
+    if staging.exists() {
+        fs::remove_dir_all(&staging).map_err(io_err(&staging))?;
+    }
+    for dir in ["new_joint_vecs", "new_joints", "joints"] {
+        let path = staging.join(dir);
+        fs::create_dir_all(&path).map_err(io_err(&path))?;
+    }
+
+    let mut summary = ExportSummary {
+        clips: entries.len(),
+        ..ExportSummary::default()
+    };
+    let mut moments = Moments::default();
+    let mut exported: Vec<(String, &Entry)> = Vec::new();
+    for (i, shard) in shards.iter().enumerate() {
+        let rows: Vec<&Entry> = entries.iter().filter(|e| e.shard == i).collect();
+        let frames = read_frames(shard)?;
+        let done: Vec<Result<Converted, Skipped>> = rows
+            .par_iter()
+            .map(|entry| {
+                let frames = frames.get(entry.row).ok_or_else(|| Skipped {
+                    clip_id: entry.clip_id.clone(),
+                    reason: "row missing in the second read of its shard".into(),
+                })?;
+                convert(entry, frames, &placements)
+            })
+            .collect();
+        for (entry, done) in rows.into_iter().zip(done) {
+            let converted = match done {
+                Ok(c) => c,
+                Err(skipped) => {
+                    summary.skipped.push(skipped);
+                    continue;
+                }
+            };
+            let name = names.get(&entry.clip_id).cloned().unwrap_or_default();
+            write_clip(&staging, &name, &converted)?;
+            moments.add(&converted.vectors);
+            let rows = converted.vectors.len() / DIM;
+            summary.rows += rows;
+            if !LOADER_ROWS.contains(&rows) {
+                summary.filtered_by_loaders.push(name.clone());
+            }
+            exported.push((name, entry));
+        }
+    }
+    exported.sort_by(|a, b| name_order(&a.0).cmp(&name_order(&b.0)));
+    summary.exported = exported.len();
+    summary
+        .filtered_by_loaders
+        .sort_by(|a, b| name_order(a).cmp(&name_order(b)));
+    write_lists(&staging, &exported, &mut summary)?;
+    if let Some((mean, std)) = moments.mean_std() {
+        write_npy(&staging.join("Mean.npy"), &[DIM], &mean)?;
+        write_npy(&staging.join("Std.npy"), &[DIM], &std)?;
+    }
+    let json = serde_json::to_vec_pretty(&summary).unwrap_or_default();
+    let path = staging.join("export.json");
+    fs::write(&path, json).map_err(io_err(&path))?;
+    if out.exists() {
+        fs::remove_dir_all(out).map_err(io_err(out))?;
+    }
+    fs::rename(&staging, out).map_err(io_err(out))?;
+    Ok(summary)
+}
+
+fn staging_path(out: &Path) -> PathBuf {
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "humanml3d".into());
+    out.with_file_name(format!(".{name}.partial"))
+}
+
+/// HumanML3D's order of names: originals by number, then mirrors by number.
+fn name_order(name: &str) -> (bool, &str) {
+    (name.starts_with('M'), name)
+}
+
+/// Six-digit names: originals (and synthetic pairs) by clip id, each mirror `M` + its
+/// original's name (a mirror whose original is not in the table gets a number of its own).
+fn assign_names(entries: &[Entry]) -> BTreeMap<String, String> {
+    let mut originals: Vec<&str> = entries
+        .iter()
+        .filter(|e| !e.mirrored)
+        .map(|e| e.clip_id.as_str())
+        .collect();
+    originals.sort_unstable();
+    let width = 6.max(originals.len().to_string().len());
+    let mut names: BTreeMap<String, String> = originals
+        .iter()
+        .enumerate()
+        .map(|(i, id)| (id.to_string(), format!("{i:0width$}")))
+        .collect();
+    let mut next = originals.len();
+    let mut mirrors: Vec<&str> = entries
+        .iter()
+        .filter(|e| e.mirrored)
+        .map(|e| e.clip_id.as_str())
+        .collect();
+    mirrors.sort_unstable();
+    for id in mirrors {
+        let of = id.strip_suffix(":m").and_then(|o| names.get(o)).cloned();
+        let name = match of {
+            Some(n) => format!("M{n}"),
+            None => {
+                next += 1;
+                format!("M{:0width$}", next - 1)
+            }
+        };
+        names.insert(id.to_string(), name);
+    }
+    names
+}
+
+/// Every skeleton id of `skeletons.json` with where SMPL's joints are on it, or why not.
+fn placements(
+    dataset: &Path,
+    options: &ExportOptions,
+) -> Result<BTreeMap<String, Result<SmplPlacement, String>>, ExportError> {
+    let path = dataset.join(crate::base::layout::SKELETONS_FILE);
+    let text = fs::read_to_string(&path).map_err(io_err(&path))?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| ExportError::NotADataset {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+    let mut out = BTreeMap::new();
+    let Some(skeletons) = json.as_object() else {
+        return Err(ExportError::NotADataset {
+            path,
+            message: "expected an object of skeletons".into(),
+        });
+    };
+    for (id, skeleton) in skeletons {
+        let profile = id.split(':').next().unwrap_or_default();
+        let names: Vec<&str> = skeleton["joints"]
+            .as_array()
+            .map(|joints| joints.iter().filter_map(|j| j["name"].as_str()).collect())
+            .unwrap_or_default();
+        let spec = options
+            .profiles
+            .iter()
+            .find(|p| p.name == profile)
+            .cloned()
+            .map(Ok)
+            .unwrap_or_else(|| ProfileSpec::bundled(profile));
+        let placement = spec
+            .and_then(|spec| spec.smpl_placement(&hml3d::JOINTS, &names))
+            .map_err(|e| e.to_string());
+        out.insert(id.clone(), placement);
+    }
+    Ok(out)
+}
+
+fn table_err(path: &Path, e: impl std::fmt::Display) -> ExportError {
+    ExportError::Table {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+fn batches(path: &Path, columns: &[&str]) -> Result<Vec<RecordBatch>, ExportError> {
+    let file = fs::File::open(path).map_err(io_err(path))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
+    let schema = builder.schema().clone();
+    let mut indices = Vec::new();
+    for c in columns {
+        let i = schema
+            .index_of(c)
+            .map_err(|_| table_err(path, format!("no `{c}` column")))?;
+        indices.push(i);
+    }
+    let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
+    let reader = builder
+        .with_projection(mask)
+        .build()
+        .map_err(|e| table_err(path, e))?;
+    reader.map(|b| b.map_err(|e| table_err(path, e))).collect()
+}
+
+fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), ExportError> {
+    let mut row = 0;
+    for batch in batches(path, &["clip_id", "split", "mirrored", "source_kind"])? {
+        let strings = |name: &str| {
+            batch
+                .column_by_name(name)
+                .and_then(|c| c.as_string_opt::<i32>())
+                .ok_or_else(|| table_err(path, format!("`{name}` is not a string column")))
+        };
+        let (ids, splits, kinds) = (
+            strings("clip_id")?,
+            strings("split")?,
+            strings("source_kind")?,
+        );
+        let mirrored = batch
+            .column_by_name("mirrored")
+            .and_then(|c| c.as_boolean_opt())
+            .ok_or_else(|| table_err(path, "`mirrored` is not a boolean column"))?;
+        for i in 0..batch.num_rows() {
+            out.push(Entry {
+                clip_id: ids.value(i).to_string(),
+                split: Split::new(splits.value(i)),
+                mirrored: mirrored.value(i),
+                source_kind: kinds.value(i).to_string(),
+                shard,
+                row,
+            });
+            row += 1;
+        }
+    }
+    Ok(())
+}
+
+/// One row's frames as the shard holds them.
+struct Frames {
+    skeleton: String,
+    fps: f64,
+    frames: usize,
+    joints: usize,
+    positions: Vec<f32>,
+}
+
+fn read_frames(path: &Path) -> Result<Vec<Frames>, ExportError> {
+    let mut out = Vec::new();
+    let columns = [
+        "skeleton",
+        "fps",
+        "num_frames",
+        "num_joints",
+        "joint_positions",
+    ];
+    for batch in batches(path, &columns)? {
+        let missing = |name: &str| table_err(path, format!("`{name}` has an unexpected type"));
+        let skeleton = batch
+            .column_by_name("skeleton")
+            .and_then(|c| c.as_string_opt::<i32>())
+            .ok_or_else(|| missing("skeleton"))?;
+        let fps = batch
+            .column_by_name("fps")
+            .and_then(|c| c.as_primitive_opt::<Float64Type>())
+            .ok_or_else(|| missing("fps"))?;
+        let ints = |name: &str| {
+            batch
+                .column_by_name(name)
+                .and_then(|c| c.as_primitive_opt::<Int32Type>())
+                .ok_or_else(|| missing(name))
+        };
+        let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
+        let positions = batch
+            .column_by_name("joint_positions")
+            .and_then(|c| c.as_list_opt::<i32>())
+            .ok_or_else(|| missing("joint_positions"))?;
+        for i in 0..batch.num_rows() {
+            let values = positions.value(i);
+            let values = values
+                .as_primitive_opt::<Float32Type>()
+                .ok_or_else(|| missing("joint_positions"))?;
+            out.push(Frames {
+                skeleton: skeleton.value(i).to_string(),
+                fps: fps.value(i),
+                frames: usize::try_from(frames.value(i)).unwrap_or(0),
+                joints: usize::try_from(joints.value(i)).unwrap_or(0),
+                positions: values.values().to_vec(),
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// One clip in HumanML3D's form.
+struct Converted {
+    /// `T × 22` positions: 20 fps, y up, metres, SMPL order.
+    joints: Vec<DVec3>,
+    /// `(T - 1) × 263`.
+    vectors: Vec<f32>,
+}
+
+fn convert(
+    entry: &Entry,
+    frames: &Frames,
+    placements: &BTreeMap<String, Result<SmplPlacement, String>>,
+) -> Result<Converted, Skipped> {
+    let skip = |reason: String| Skipped {
+        clip_id: entry.clip_id.clone(),
+        reason,
+    };
+    let placement = match placements.get(&frames.skeleton) {
+        Some(Ok(p)) => p,
+        Some(Err(why)) => return Err(skip(why.clone())),
+        None => {
+            return Err(skip(format!(
+                "skeleton `{}` is not in skeletons.json",
+                frames.skeleton
+            )));
+        }
+    };
+    if frames.joints == 0
+        || frames.frames.checked_mul(frames.joints * 3) != Some(frames.positions.len())
+    {
+        return Err(skip(format!(
+            "joint_positions holds {} values, not num_frames × num_joints × 3 = {} × {} × 3",
+            frames.positions.len(),
+            frames.frames,
+            frames.joints
+        )));
+    }
+    // Dataset frame (x right, y forward, z up) to HumanML3D's (y up; x = -right, z = forward):
+    // a rotation, so left stays left.
+    let smpl: Vec<DVec3> = frames
+        .positions
+        .chunks_exact(frames.joints * 3)
+        .flat_map(|frame| {
+            let frame: Vec<DVec3> = frame
+                .chunks_exact(3)
+                .map(|p| DVec3::new(-f64::from(p[0]), f64::from(p[2]), f64::from(p[1])))
+                .collect();
+            placement.place(&frame)
+        })
+        .collect();
+    let joints = resample(&smpl, frames.fps);
+    let vectors = hml3d::vectors(&joints).map_err(|e| skip(e.to_string()))?;
+    Ok(Converted { joints, vectors })
+}
+
+/// Positions at 20 fps by linear interpolation between the frames around each time (the frame
+/// count as `Motion::resample` gives it). Bones are set to the reference lengths afterwards, so
+/// interpolating positions loses nothing the representation keeps.
+fn resample(positions: &[DVec3], fps: f64) -> Vec<DVec3> {
+    let frames = positions.len() / NUM_JOINTS;
+    if frames == 0 || !(fps.is_finite() && fps > 0.0) || (fps - hml3d::FPS).abs() < 1e-9 {
+        return positions.to_vec();
+    }
+    let out = Motion::resampled_frames(frames, fps, hml3d::FPS);
+    let mut v = Vec::with_capacity(out.min(frames.saturating_mul(4)) * NUM_JOINTS);
+    for i in 0..out {
+        let src = i as f64 * fps / hml3d::FPS;
+        let lo = (src.floor() as usize).min(frames - 1);
+        let hi = (lo + 1).min(frames - 1);
+        let t = (src - lo as f64).clamp(0.0, 1.0);
+        for j in 0..NUM_JOINTS {
+            v.push(positions[lo * NUM_JOINTS + j].lerp(positions[hi * NUM_JOINTS + j], t));
+        }
+    }
+    v
+}
+
+fn write_npy(path: &Path, shape: &[usize], values: &[f32]) -> Result<(), ExportError> {
+    use npyz::WriterBuilder;
+    let mut bytes = Vec::with_capacity(values.len() * 4 + 128);
+    let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
+    let io = |e: std::io::Error| ExportError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let mut writer = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&shape)
+        .writer(&mut bytes)
+        .begin_nd()
+        .map_err(io)?;
+    writer.extend(values.iter().copied()).map_err(io)?;
+    writer.finish().map_err(io)?;
+    fs::write(path, bytes).map_err(io_err(path))
+}
+
+fn flat(positions: &[DVec3]) -> Vec<f32> {
+    positions
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
+}
+
+fn write_clip(dir: &Path, name: &str, clip: &Converted) -> Result<(), ExportError> {
+    let rows = clip.vectors.len() / DIM;
+    let file = format!("{name}.npy");
+    write_npy(
+        &dir.join("new_joint_vecs").join(&file),
+        &[rows, DIM],
+        &clip.vectors,
+    )?;
+    let recovered = hml3d::recover_from_ric(&clip.vectors);
+    write_npy(
+        &dir.join("new_joints").join(&file),
+        &[rows, NUM_JOINTS, 3],
+        &flat(&recovered),
+    )?;
+    write_npy(
+        &dir.join("joints").join(&file),
+        &[clip.joints.len() / NUM_JOINTS, NUM_JOINTS, 3],
+        &flat(&clip.joints),
+    )
+}
+
+/// Split lists, `all.txt` and `names.csv`.
+fn write_lists(
+    dir: &Path,
+    exported: &[(String, &Entry)],
+    summary: &mut ExportSummary,
+) -> Result<(), ExportError> {
+    let mut by_split: BTreeMap<&Split, String> = BTreeMap::new();
+    let mut all = String::new();
+    let mut csv = String::from("name,clip_id,split,source_kind,mirrored\n");
+    for (name, entry) in exported {
+        let list = by_split.entry(&entry.split).or_default();
+        list.push_str(name);
+        list.push('\n');
+        all.push_str(name);
+        all.push('\n');
+        csv.push_str(&format!(
+            "{name},{},{},{},{}\n",
+            csv_field(&entry.clip_id),
+            csv_field(entry.split.as_str()),
+            entry.source_kind,
+            entry.mirrored
+        ));
+        *summary.splits.entry(entry.split.to_string()).or_insert(0) += 1;
+    }
+    for (split, names) in by_split {
+        let path = dir.join(format!("{split}.txt"));
+        fs::write(&path, names).map_err(io_err(&path))?;
+    }
+    for (file, text) in [("all.txt", all), ("names.csv", csv)] {
+        let path = dir.join(file);
+        fs::write(&path, text).map_err(io_err(&path))?;
+    }
+    Ok(())
+}
+
+fn csv_field(value: &str) -> String {
+    if value.contains([',', '"', '\n']) {
+        format!("\"{}\"", value.replace('"', "\"\""))
+    } else {
+        value.to_string()
+    }
+}
+
+/// Column sums for `Mean.npy` and `Std.npy`, over every exported row as HumanML3D does.
+#[derive(Default)]
+struct Moments {
+    rows: usize,
+    sum: Vec<f64>,
+    squares: Vec<f64>,
+}
+
+impl Moments {
+    fn add(&mut self, vectors: &[f32]) {
+        if self.sum.is_empty() {
+            self.sum = vec![0.0; DIM];
+            self.squares = vec![0.0; DIM];
+        }
+        for row in vectors.chunks_exact(DIM) {
+            for (k, v) in row.iter().enumerate() {
+                let v = f64::from(*v);
+                self.sum[k] += v;
+                self.squares[k] += v * v;
+            }
+            self.rows += 1;
+        }
+    }
+
+    /// The mean of every column and HumanML3D's std: each group's (rotation velocity, linear
+    /// velocity, height, positions, rotations, velocities, contacts) standard deviations
+    /// averaged and that average used for every column of the group.
+    fn mean_std(&self) -> Option<(Vec<f32>, Vec<f32>)> {
+        if self.rows == 0 {
+            return None;
+        }
+        let n = self.rows as f64;
+        let mean: Vec<f64> = self.sum.iter().map(|s| s / n).collect();
+        let std: Vec<f64> = self
+            .squares
+            .iter()
+            .zip(&mean)
+            .map(|(q, m)| (q / n - m * m).max(0.0).sqrt())
+            .collect();
+        let j = NUM_JOINTS;
+        let groups = [
+            0..1,
+            1..3,
+            3..4,
+            4..4 + (j - 1) * 3,
+            4 + (j - 1) * 3..4 + (j - 1) * 9,
+            4 + (j - 1) * 9..4 + (j - 1) * 9 + j * 3,
+            4 + (j - 1) * 9 + j * 3..DIM,
+        ];
+        let mut averaged = std.clone();
+        for g in groups {
+            let avg = std[g.clone()].iter().sum::<f64>() / g.len() as f64;
+            averaged[g].fill(avg);
+        }
+        Some((
+            mean.iter().map(|v| *v as f32).collect(),
+            averaged.iter().map(|v| *v as f32).collect(),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(id: &str, mirrored: bool) -> Entry {
+        Entry {
+            clip_id: id.into(),
+            split: Split::train(),
+            mirrored,
+            source_kind: "real_single".into(),
+            shard: 0,
+            row: 0,
+        }
+    }
+
+    #[test]
+    fn mirrors_take_their_originals_names() {
+        let names = assign_names(&[
+            entry("b", false),
+            entry("a:m", true),
+            entry("a", false),
+            entry("c:m", true),
+        ]);
+        assert_eq!(names["a"], "000000");
+        assert_eq!(names["b"], "000001");
+        assert_eq!(names["a:m"], "M000000");
+        // No original `c` in the table: a number of its own.
+        assert_eq!(names["c:m"], "M000002");
+    }
+
+    #[test]
+    fn std_is_averaged_per_group() {
+        let mut m = Moments::default();
+        let mut a = vec![0.0f32; DIM];
+        let mut b = vec![0.0f32; DIM];
+        // Column 1 varies by 2 and column 2 by 0: their group's std is the average, 0.5.
+        a[1] = 1.0;
+        b[1] = -1.0;
+        m.add(&a);
+        m.add(&b);
+        let (mean, std) = m.mean_std().unwrap();
+        assert_eq!(mean[1], 0.0);
+        assert_eq!((std[1], std[2]), (0.5, 0.5));
+        assert_eq!(std[0], 0.0);
+    }
+}

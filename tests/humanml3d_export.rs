@@ -1,0 +1,199 @@
+//! `motionforge export humanml3d` on the demo dataset: the folder HumanML3D's consumers load.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+
+use glam::DVec3;
+use motionforge::export::{ExportError, ExportOptions, export_humanml3d};
+use motionforge::humanml3d::{DIM, NUM_JOINTS, recover_from_ric, vectors};
+use motionforge::motion::ProfileSpec;
+
+/// A `.npy` file's shape and values (as f64).
+fn npy(path: &Path) -> (Vec<u64>, Vec<f64>) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let file = npyz::NpyFile::new(&bytes[..]).unwrap();
+    let shape = file.shape().to_vec();
+    assert_eq!(
+        file.dtype().num_bytes(),
+        Some(4),
+        "{}: float32",
+        path.display()
+    );
+    let values = file.into_vec::<f32>().unwrap();
+    (shape, values.into_iter().map(f64::from).collect())
+}
+
+fn lines(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+fn export(dataset: &Path, out: &Path) -> std::process::Output {
+    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["export", "humanml3d", "--dataset"])
+        .arg(dataset)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    run
+}
+
+#[test]
+fn the_demo_exports_as_a_humanml3d_folder_whose_files_agree_with_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let dataset = dir.path().join("demo");
+    let out = dir.path().join("hml3d");
+    let run = export(&dataset, &out);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("exported 25 of 25 clips"), "{stdout}");
+
+    // Names: one per row, mirrors `M` + their original's name, in their original's split.
+    let table: Vec<Vec<String>> = lines(&out.join("names.csv"))
+        .into_iter()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(table.len(), 25);
+    let by_id: BTreeMap<&str, &Vec<String>> = table.iter().map(|r| (r[1].as_str(), r)).collect();
+    let all = lines(&out.join("all.txt"));
+    assert_eq!(all.len(), 25);
+    let mut split_of: BTreeMap<String, String> = BTreeMap::new();
+    for split in ["train", "val", "test"] {
+        for name in lines(&out.join(format!("{split}.txt"))) {
+            assert!(split_of.insert(name, split.to_string()).is_none());
+        }
+    }
+    assert_eq!(split_of.len(), 25, "every name in exactly one split list");
+    for row in &table {
+        let (name, id, split, mirrored) = (&row[0], &row[1], &row[2], &row[4]);
+        assert_eq!(&split_of[name], split);
+        if mirrored == "true" {
+            let original = by_id[id.strip_suffix(":m").unwrap()];
+            assert_eq!(name, &format!("M{}", original[0]));
+            assert_eq!(&original[2], split, "a mirror is in its original's split");
+        }
+    }
+    // Originals first, then mirrors, each in order: HumanML3D's list order.
+    let mut sorted = all.clone();
+    sorted.sort_by_key(|n| (n.starts_with('M'), n.clone()));
+    assert_eq!(all, sorted);
+
+    // The three arrays of every clip agree: the vectors are those of `joints/`, and `new_joints`
+    // are the positions recovered from the vectors.
+    let (mut rows, mut sum) = (0usize, vec![0.0f64; DIM]);
+    for name in &all {
+        let (vshape, vecs) = npy(&out.join("new_joint_vecs").join(format!("{name}.npy")));
+        let (jshape, joints) = npy(&out.join("joints").join(format!("{name}.npy")));
+        let (nshape, new_joints) = npy(&out.join("new_joints").join(format!("{name}.npy")));
+        let t = jshape[0];
+        assert_eq!(jshape, [t, NUM_JOINTS as u64, 3], "{name}");
+        assert_eq!(vshape, [t - 1, DIM as u64], "{name}");
+        assert_eq!(nshape, [t - 1, NUM_JOINTS as u64, 3], "{name}");
+        let positions: Vec<DVec3> = joints
+            .chunks_exact(3)
+            .map(|p| DVec3::new(p[0], p[1], p[2]))
+            .collect();
+        let again = vectors(&positions).unwrap();
+        let worst = again
+            .iter()
+            .zip(&vecs)
+            .map(|(a, b)| (f64::from(*a) - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 1e-4,
+            "{name}: vectors differ from joints/ by {worst}"
+        );
+        let vecs32: Vec<f32> = vecs.iter().map(|v| *v as f32).collect();
+        let recovered = recover_from_ric(&vecs32);
+        let worst = recovered
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .zip(&new_joints)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{name}: new_joints differ by {worst}");
+        // Standing on the floor, facing +z at the start, left hip on +x (HumanML3D's frame).
+        let floor = new_joints
+            .chunks_exact(3)
+            .map(|p| p[1])
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            (-1e-4..0.05).contains(&floor),
+            "{name}: lowest joint at {floor}"
+        );
+        assert!(
+            vecs[4] > 0.0 && vecs[7] < 0.0,
+            "{name}: left hip +x, right hip -x"
+        );
+        for row in vecs.chunks_exact(DIM) {
+            for (s, v) in sum.iter_mut().zip(row) {
+                *s += v;
+            }
+            rows += 1;
+        }
+    }
+    // Mean over every row; Std averaged within each of HumanML3D's seven groups.
+    let (_, mean) = npy(&out.join("Mean.npy"));
+    let (_, std) = npy(&out.join("Std.npy"));
+    for (k, (m, s)) in mean.iter().zip(&sum).enumerate() {
+        assert!((m - s / rows as f64).abs() < 1e-5, "mean column {k}");
+    }
+    let groups = [0..1, 1..3, 3..4, 4..67, 67..193, 193..259, 259..263];
+    for g in groups {
+        assert!(
+            std[g.clone()]
+                .iter()
+                .all(|s| *s == std[g.start] && *s > 0.0),
+            "{g:?}"
+        );
+    }
+}
+
+#[test]
+fn an_existing_folder_is_kept_without_force_and_a_skeleton_without_a_map_is_skipped_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let dataset = dir.path().join("demo");
+    let out = dir.path().join("hml3d");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("keep.txt"), "mine").unwrap();
+    let err = export_humanml3d(&dataset, &out, &ExportOptions::default()).unwrap_err();
+    assert!(matches!(err, ExportError::Exists { .. }), "{err}");
+    assert!(err.to_string().contains("--force"));
+    assert!(out.join("keep.txt").exists());
+
+    // The CMU profile without its [smpl22] table: its clips are skipped, naming what is missing,
+    // and the rest is exported.
+    let mut cmu = ProfileSpec::bundled("cmu").unwrap();
+    cmu.smpl22.clear();
+    let options = ExportOptions {
+        force: true,
+        profiles: vec![cmu],
+    };
+    let summary = export_humanml3d(&dataset, &out, &options).unwrap();
+    assert!(!out.join("keep.txt").exists());
+    assert_eq!(summary.skipped.len(), 4, "{summary:?}");
+    assert!(summary.skipped.iter().all(|s| {
+        s.clip_id.starts_with("cmu/")
+            && s.reason
+                .contains("no `[smpl22]` entry for SMPL joint `pelvis`")
+    }));
+    assert_eq!(summary.exported, 21);
+    assert_eq!(lines(&out.join("all.txt")).len(), 21);
+
+    let missing = export_humanml3d(&dir.path().join("nothing"), &out, &options).unwrap_err();
+    assert!(missing.to_string().contains("nothing"), "{missing}");
+}
