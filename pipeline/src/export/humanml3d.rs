@@ -37,6 +37,9 @@ use crate::motion::{Motion, ProfileSpec};
 /// 200 rows and longer.
 pub const LOADER_ROWS: std::ops::Range<usize> = 40..200;
 
+/// Rows decoded at once: the frames of this many clips are held while they are converted.
+const BATCH_ROWS: usize = 64;
+
 /// How to export.
 #[derive(Debug, Clone, Default)]
 pub struct ExportOptions {
@@ -122,9 +125,8 @@ struct Entry {
     split: Split,
     mirrored: bool,
     source_kind: String,
-    /// The shard and the row in it.
+    /// The shard it is in.
     shard: usize,
-    row: usize,
 }
 
 /// Exports the dataset in `dataset` (a build's `<output>/<name>` folder) into `out`.
@@ -175,34 +177,46 @@ pub fn export_humanml3d(
     let mut exported: Vec<(String, &Entry)> = Vec::new();
     for (i, shard) in shards.iter().enumerate() {
         let rows: Vec<&Entry> = entries.iter().filter(|e| e.shard == i).collect();
-        let frames = read_frames(shard)?;
-        let done: Vec<Result<Converted, Skipped>> = rows
-            .par_iter()
-            .map(|entry| {
-                let frames = frames.get(entry.row).ok_or_else(|| Skipped {
-                    clip_id: entry.clip_id.clone(),
-                    reason: "row missing in the second read of its shard".into(),
-                })?;
-                convert(entry, frames, &placements)
-            })
-            .collect();
-        for (entry, done) in rows.into_iter().zip(done) {
-            let converted = match done {
-                Ok(c) => c,
-                Err(skipped) => {
-                    summary.skipped.push(skipped);
-                    continue;
+        // A row group at a time: converted and written on all cores, then counted in row order
+        // (so Mean and Std do not depend on scheduling).
+        let mut next = 0;
+        for frames in read_frames(shard)? {
+            let frames = frames?;
+            let group = rows.get(next..next + frames.len()).ok_or_else(|| {
+                table_err(shard, "more rows on the second read than on the first")
+            })?;
+            next += frames.len();
+            let done: Vec<Result<Result<Done, Skipped>, ExportError>> = group
+                .par_iter()
+                .zip(&frames)
+                .map(|(entry, frames)| {
+                    let converted = match convert(entry, frames, &placements) {
+                        Ok(c) => c,
+                        Err(skipped) => return Ok(Err(skipped)),
+                    };
+                    let name = names.get(&entry.clip_id).cloned().unwrap_or_default();
+                    write_clip(&staging, &name, &converted)?;
+                    Ok(Ok(Done {
+                        name,
+                        moments: Moments::of(&converted.vectors),
+                    }))
+                })
+                .collect();
+            for (entry, done) in group.iter().zip(done) {
+                let done = match done? {
+                    Ok(d) => d,
+                    Err(skipped) => {
+                        summary.skipped.push(skipped);
+                        continue;
+                    }
+                };
+                summary.rows += done.moments.rows;
+                if !LOADER_ROWS.contains(&done.moments.rows) {
+                    summary.filtered_by_loaders.push(done.name.clone());
                 }
-            };
-            let name = names.get(&entry.clip_id).cloned().unwrap_or_default();
-            write_clip(&staging, &name, &converted)?;
-            moments.add(&converted.vectors);
-            let rows = converted.vectors.len() / DIM;
-            summary.rows += rows;
-            if !LOADER_ROWS.contains(&rows) {
-                summary.filtered_by_loaders.push(name.clone());
+                moments.merge(&done.moments);
+                exported.push((done.name, entry));
             }
-            exported.push((name, entry));
         }
     }
     exported.sort_by(|a, b| name_order(&a.0).cmp(&name_order(&b.0)));
@@ -321,7 +335,11 @@ fn table_err(path: &Path, e: impl std::fmt::Display) -> ExportError {
     }
 }
 
-fn batches(path: &Path, columns: &[&str]) -> Result<Vec<RecordBatch>, ExportError> {
+/// The shard's rows with only `columns` decoded, [`BATCH_ROWS`] at a time.
+fn batches<'p>(
+    path: &'p Path,
+    columns: &[&str],
+) -> Result<impl Iterator<Item = Result<RecordBatch, ExportError>> + use<'p>, ExportError> {
     let file = fs::File::open(path).map_err(io_err(path))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
     let schema = builder.schema().clone();
@@ -335,14 +353,15 @@ fn batches(path: &Path, columns: &[&str]) -> Result<Vec<RecordBatch>, ExportErro
     let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
     let reader = builder
         .with_projection(mask)
+        .with_batch_size(BATCH_ROWS)
         .build()
         .map_err(|e| table_err(path, e))?;
-    reader.map(|b| b.map_err(|e| table_err(path, e))).collect()
+    Ok(reader.map(move |b| b.map_err(|e| table_err(path, e))))
 }
 
 fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), ExportError> {
-    let mut row = 0;
     for batch in batches(path, &["clip_id", "split", "mirrored", "source_kind"])? {
+        let batch = batch?;
         let strings = |name: &str| {
             batch
                 .column_by_name(name)
@@ -365,12 +384,16 @@ fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), E
                 mirrored: mirrored.value(i),
                 source_kind: kinds.value(i).to_string(),
                 shard,
-                row,
             });
-            row += 1;
         }
     }
     Ok(())
+}
+
+/// A clip written: its name and its column sums.
+struct Done {
+    name: String,
+    moments: Moments,
 }
 
 /// One row's frames as the shard holds them.
@@ -382,8 +405,10 @@ struct Frames {
     positions: Vec<f32>,
 }
 
-fn read_frames(path: &Path) -> Result<Vec<Frames>, ExportError> {
-    let mut out = Vec::new();
+/// The frames of every row of a shard, a batch of rows at a time.
+fn read_frames(
+    path: &Path,
+) -> Result<impl Iterator<Item = Result<Vec<Frames>, ExportError>> + '_, ExportError> {
     let columns = [
         "skeleton",
         "fps",
@@ -391,40 +416,43 @@ fn read_frames(path: &Path) -> Result<Vec<Frames>, ExportError> {
         "num_joints",
         "joint_positions",
     ];
-    for batch in batches(path, &columns)? {
-        let missing = |name: &str| table_err(path, format!("`{name}` has an unexpected type"));
-        let skeleton = batch
-            .column_by_name("skeleton")
-            .and_then(|c| c.as_string_opt::<i32>())
-            .ok_or_else(|| missing("skeleton"))?;
-        let fps = batch
-            .column_by_name("fps")
-            .and_then(|c| c.as_primitive_opt::<Float64Type>())
-            .ok_or_else(|| missing("fps"))?;
-        let ints = |name: &str| {
-            batch
-                .column_by_name(name)
-                .and_then(|c| c.as_primitive_opt::<Int32Type>())
-                .ok_or_else(|| missing(name))
-        };
-        let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
-        let positions = batch
-            .column_by_name("joint_positions")
-            .and_then(|c| c.as_list_opt::<i32>())
+    Ok(batches(path, &columns)?.map(move |batch| frames_of(path, &batch?)))
+}
+
+fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportError> {
+    let missing = |name: &str| table_err(path, format!("`{name}` has an unexpected type"));
+    let skeleton = batch
+        .column_by_name("skeleton")
+        .and_then(|c| c.as_string_opt::<i32>())
+        .ok_or_else(|| missing("skeleton"))?;
+    let fps = batch
+        .column_by_name("fps")
+        .and_then(|c| c.as_primitive_opt::<Float64Type>())
+        .ok_or_else(|| missing("fps"))?;
+    let ints = |name: &str| {
+        batch
+            .column_by_name(name)
+            .and_then(|c| c.as_primitive_opt::<Int32Type>())
+            .ok_or_else(|| missing(name))
+    };
+    let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
+    let positions = batch
+        .column_by_name("joint_positions")
+        .and_then(|c| c.as_list_opt::<i32>())
+        .ok_or_else(|| missing("joint_positions"))?;
+    let mut out = Vec::with_capacity(batch.num_rows());
+    for i in 0..batch.num_rows() {
+        let values = positions.value(i);
+        let values = values
+            .as_primitive_opt::<Float32Type>()
             .ok_or_else(|| missing("joint_positions"))?;
-        for i in 0..batch.num_rows() {
-            let values = positions.value(i);
-            let values = values
-                .as_primitive_opt::<Float32Type>()
-                .ok_or_else(|| missing("joint_positions"))?;
-            out.push(Frames {
-                skeleton: skeleton.value(i).to_string(),
-                fps: fps.value(i),
-                frames: usize::try_from(frames.value(i)).unwrap_or(0),
-                joints: usize::try_from(joints.value(i)).unwrap_or(0),
-                positions: values.values().to_vec(),
-            });
-        }
+        out.push(Frames {
+            skeleton: skeleton.value(i).to_string(),
+            fps: fps.value(i),
+            frames: usize::try_from(frames.value(i)).unwrap_or(0),
+            joints: usize::try_from(joints.value(i)).unwrap_or(0),
+            positions: values.values().to_vec(),
+        });
     }
     Ok(out)
 }
@@ -605,19 +633,36 @@ struct Moments {
 }
 
 impl Moments {
-    fn add(&mut self, vectors: &[f32]) {
+    /// The sums of one clip's rows.
+    fn of(vectors: &[f32]) -> Moments {
+        let mut m = Moments {
+            rows: 0,
+            sum: vec![0.0; DIM],
+            squares: vec![0.0; DIM],
+        };
+        for row in vectors.chunks_exact(DIM) {
+            for (k, v) in row.iter().enumerate() {
+                let v = f64::from(*v);
+                m.sum[k] += v;
+                m.squares[k] += v * v;
+            }
+            m.rows += 1;
+        }
+        m
+    }
+
+    fn merge(&mut self, other: &Moments) {
         if self.sum.is_empty() {
             self.sum = vec![0.0; DIM];
             self.squares = vec![0.0; DIM];
         }
-        for row in vectors.chunks_exact(DIM) {
-            for (k, v) in row.iter().enumerate() {
-                let v = f64::from(*v);
-                self.sum[k] += v;
-                self.squares[k] += v * v;
-            }
-            self.rows += 1;
+        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
+            *a += b;
         }
+        for (a, b) in self.squares.iter_mut().zip(&other.squares) {
+            *a += b;
+        }
+        self.rows += other.rows;
     }
 
     /// The mean of every column and HumanML3D's std: each group's (rotation velocity, linear
@@ -668,7 +713,6 @@ mod tests {
             mirrored,
             source_kind: "real_single".into(),
             shard: 0,
-            row: 0,
         }
     }
 
@@ -695,8 +739,8 @@ mod tests {
         // Column 1 varies by 2 and column 2 by 0: their group's std is the average, 0.5.
         a[1] = 1.0;
         b[1] = -1.0;
-        m.add(&a);
-        m.add(&b);
+        m.merge(&Moments::of(&a));
+        m.merge(&Moments::of(&b));
         let (mean, std) = m.mean_std().unwrap();
         assert_eq!(mean[1], 0.0);
         assert_eq!((std[1], std[2]), (0.5, 0.5));
