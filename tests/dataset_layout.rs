@@ -9,18 +9,7 @@ use common::*;
 /// Builds the demo into a temp folder and returns (temp dir, dataset folder).
 fn demo() -> (tempfile::TempDir, std::path::PathBuf) {
     let out = tempfile::tempdir().unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(out.path())
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    build_demo(out.path());
     let dataset = out.path().join("demo");
     (out, dataset)
 }

@@ -35,19 +35,13 @@ fn lines(path: &Path) -> Vec<String> {
 }
 
 fn export(dataset: &Path, out: &Path) -> std::process::Output {
-    let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["export", "humanml3d", "--dataset"])
-        .arg(dataset)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    run
+    common::run_ok(
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .args(["export", "humanml3d", "--dataset"])
+            .arg(dataset)
+            .arg("--out")
+            .arg(out),
+    )
 }
 
 #[test]

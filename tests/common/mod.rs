@@ -100,21 +100,26 @@ pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
         .collect()
 }
 
-/// Builds the demo config into `output` with the binary; its dataset folder is `output/demo`.
-pub fn build_demo(output: &Path) -> std::process::Output {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(output)
-        .output()
-        .unwrap();
+/// Runs `command`, failing the test with its standard error unless it succeeds.
+pub fn run_ok(command: &mut std::process::Command) -> std::process::Output {
+    let out = command.output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// Builds the demo config into `output` with the binary; its dataset folder is `output/demo`.
+pub fn build_demo(output: &Path) -> std::process::Output {
+    run_ok(
+        std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .args(["build", "--config"])
+            .arg(repo().join("fixtures/demo.toml"))
+            .arg("--output")
+            .arg(output),
+    )
 }
 
 /// A fresh folder with the named Bandai Namco dataset-1 captures (stems) copied into `captures/`.

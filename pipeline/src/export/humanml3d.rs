@@ -522,11 +522,7 @@ fn resample(positions: &[DVec3], fps: f64) -> Vec<DVec3> {
     }
     let out = Motion::resampled_frames(frames, fps, hml3d::FPS);
     let mut v = Vec::with_capacity(out.min(frames.saturating_mul(4)) * NUM_JOINTS);
-    for i in 0..out {
-        let src = i as f64 * fps / hml3d::FPS;
-        let lo = (src.floor() as usize).min(frames - 1);
-        let hi = (lo + 1).min(frames - 1);
-        let t = (src - lo as f64).clamp(0.0, 1.0);
+    for (lo, hi, t) in Motion::resample_points(frames, fps, hml3d::FPS) {
         for j in 0..NUM_JOINTS {
             v.push(positions[lo * NUM_JOINTS + j].lerp(positions[hi * NUM_JOINTS + j], t));
         }

@@ -136,6 +136,22 @@ impl Motion {
         ((last_time * to + 1e-9).floor() as usize).saturating_add(1)
     }
 
+    /// For each frame of a motion of `frames` frames at `from` fps resampled to `to` fps: the two
+    /// source frames around its time and the weight of the second.
+    pub fn resample_points(
+        frames: usize,
+        from: f64,
+        to: f64,
+    ) -> impl Iterator<Item = (usize, usize, f64)> {
+        let last = frames.saturating_sub(1);
+        (0..Motion::resampled_frames(frames, from, to)).map(move |i| {
+            let src = i as f64 * from / to;
+            let lo = (src.floor() as usize).min(last);
+            let hi = (lo + 1).min(last);
+            (lo, hi, (src - lo as f64).clamp(0.0, 1.0))
+        })
+    }
+
     /// The motion resampled to `fps`: rotations by slerp, translations by linear interpolation,
     /// between the two source frames around each target time. The last target frame is the last one
     /// whose time falls inside the source, so no frame is invented past the end.
@@ -155,11 +171,7 @@ impl Motion {
         let hint = out_frames.min(frames.saturating_mul(16)).saturating_mul(n);
         let mut rotations = Vec::with_capacity(hint);
         let mut translations = Vec::with_capacity(hint);
-        for i in 0..out_frames {
-            let src = i as f64 * self.fps / fps;
-            let lo = (src.floor() as usize).min(frames - 1);
-            let hi = (lo + 1).min(frames - 1);
-            let t = (src - lo as f64).clamp(0.0, 1.0);
+        for (lo, hi, t) in Motion::resample_points(frames, self.fps, fps) {
             for j in 0..n {
                 let (a, b) = (self.rotations[lo * n + j], self.rotations[hi * n + j]);
                 let (ta, tb) = (self.translations[lo * n + j], self.translations[hi * n + j]);
