@@ -3,6 +3,7 @@
 //! Knows nothing of files on disk, stages or LLMs.
 
 pub mod bvh;
+pub mod ik;
 pub mod mirror;
 #[allow(clippy::module_inception)]
 mod motion;
