@@ -1,1 +1,874 @@
 //! Captions in HumanML3D's text-file form (`caption#word/POS ...#start#end`).
+//!
+//! HumanML3D's `text_process.py` runs spaCy 2.3.4's `en_core_web_sm` over each caption (hyphens
+//! removed first), keeps the alphabetic tokens, replaces nouns and verbs by their lemma (except
+//! the word `left`) and writes `word/UPOS` pairs. The evaluators of text-to-motion, T2M-GPT and
+//! MoMask read those pairs back (GloVe vector of the word, one-hot class of the tag), so a
+//! caption line made here has to carry the words and tags spaCy would have given.
+//!
+//! This module does it without spaCy: a rule-based tagger over data files compiled into the
+//! crate (`schemas/caption-tagger.toml` for closed-class words and rules, WordNet 3.0 for
+//! open-class words and irregular forms). `docs/humanml3d-captions.md` describes the rules, the
+//! data's provenance and how often the result agrees with spaCy on real captions.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt;
+use std::str::FromStr;
+use std::sync::OnceLock;
+
+use serde::Deserialize;
+
+const RULES_TOML: &str = include_str!("../../../schemas/caption-tagger.toml");
+const LEXICON_TSV: &str = include_str!("../../../schemas/pos-lexicon.tsv");
+const EXCEPTIONS_TSV: &str = include_str!("../../../schemas/pos-exceptions.tsv");
+
+/// A Universal POS tag as spaCy assigns them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Upos {
+    /// Adjective.
+    Adj,
+    /// Adposition (preposition, verb particle).
+    Adp,
+    /// Adverb.
+    Adv,
+    /// Auxiliary verb.
+    Aux,
+    /// Coordinating conjunction.
+    Cconj,
+    /// Determiner (possessive determiners included, as in spaCy 2.3.4).
+    Det,
+    /// Interjection.
+    Intj,
+    /// Noun.
+    Noun,
+    /// Numeral.
+    Num,
+    /// Particle (infinitival `to`, `not`).
+    Part,
+    /// Pronoun.
+    Pron,
+    /// Proper noun.
+    Propn,
+    /// Punctuation.
+    Punct,
+    /// Subordinating conjunction.
+    Sconj,
+    /// Symbol.
+    Sym,
+    /// Verb (modals included, as in spaCy 2.3.4).
+    Verb,
+    /// Other.
+    X,
+    /// Whitespace.
+    Space,
+}
+
+const ALL_UPOS: [Upos; 18] = [
+    Upos::Adj,
+    Upos::Adp,
+    Upos::Adv,
+    Upos::Aux,
+    Upos::Cconj,
+    Upos::Det,
+    Upos::Intj,
+    Upos::Noun,
+    Upos::Num,
+    Upos::Part,
+    Upos::Pron,
+    Upos::Propn,
+    Upos::Punct,
+    Upos::Sconj,
+    Upos::Sym,
+    Upos::Verb,
+    Upos::X,
+    Upos::Space,
+];
+
+impl Upos {
+    /// The tag as spaCy spells it (`NOUN`, `VERB`, ...).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Upos::Adj => "ADJ",
+            Upos::Adp => "ADP",
+            Upos::Adv => "ADV",
+            Upos::Aux => "AUX",
+            Upos::Cconj => "CCONJ",
+            Upos::Det => "DET",
+            Upos::Intj => "INTJ",
+            Upos::Noun => "NOUN",
+            Upos::Num => "NUM",
+            Upos::Part => "PART",
+            Upos::Pron => "PRON",
+            Upos::Propn => "PROPN",
+            Upos::Punct => "PUNCT",
+            Upos::Sconj => "SCONJ",
+            Upos::Sym => "SYM",
+            Upos::Verb => "VERB",
+            Upos::X => "X",
+            Upos::Space => "SPACE",
+        }
+    }
+}
+
+impl fmt::Display for Upos {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Upos {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        ALL_UPOS
+            .into_iter()
+            .find(|t| t.as_str() == s)
+            .ok_or_else(|| format!("`{s}` is not a Universal POS tag"))
+    }
+}
+
+/// One word of a caption as HumanML3D writes it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Token {
+    /// The word, already lemmatised where HumanML3D lemmatises (nouns and verbs but `left`).
+    pub word: String,
+    /// Its part of speech.
+    pub tag: Upos,
+}
+
+/// Why a caption cannot become a HumanML3D caption line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CaptionError {
+    /// `#` separates the line's four fields; readers would drop the clip.
+    #[error(
+        "caption {caption:?} contains '#', which separates the fields of a HumanML3D caption line"
+    )]
+    Hash {
+        /// The caption.
+        caption: String,
+    },
+    /// A caption file holds one caption per line.
+    #[error(
+        "caption {caption:?} contains a line break; a HumanML3D caption file has one caption per line"
+    )]
+    LineBreak {
+        /// The caption.
+        caption: String,
+    },
+    /// Nothing would be left between the first two `#`.
+    #[error(
+        "caption {caption:?} has no alphabetic word, so its HumanML3D token list would be empty"
+    )]
+    NoWords {
+        /// The caption.
+        caption: String,
+    },
+    /// Start and end are seconds into the motion: finite, non-negative, end not before start.
+    #[error(
+        "caption {caption:?}: times {start}..{end} are not finite non-negative seconds with start <= end"
+    )]
+    Times {
+        /// The caption.
+        caption: String,
+        /// Start, seconds.
+        start: f64,
+        /// End, seconds.
+        end: f64,
+    },
+    /// The bundled tagger data did not load (a build with broken `schemas/` files).
+    #[error("caption tagger data: {0}")]
+    Data(String),
+}
+
+/// The caption's words and tags as HumanML3D's `process_text` gives them.
+pub fn tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
+    let tagger = tagger()?;
+    let words = split_words(&caption.replace('-', ""));
+    let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
+    let tags = tagger.tag(&analysed);
+    let out: Vec<Token> = analysed
+        .iter()
+        .zip(tags)
+        .filter(|(w, _)| w.alpha)
+        .map(|(w, tag)| Token {
+            word: w.output(tag, tagger),
+            tag,
+        })
+        .collect();
+    if out.is_empty() {
+        return Err(CaptionError::NoWords {
+            caption: caption.to_string(),
+        });
+    }
+    Ok(out)
+}
+
+/// `caption#w/TAG w/TAG ...#start#end` (no newline), with `start` and `end` in seconds written as
+/// Python's `'%s' % float` writes them.
+pub fn caption_line(caption: &str, start: f64, end: f64) -> Result<String, CaptionError> {
+    if caption.contains('#') {
+        return Err(CaptionError::Hash {
+            caption: caption.to_string(),
+        });
+    }
+    // Python's text files split lines on all of these, so any would break the one-line record.
+    if caption.contains([
+        '\n', '\r', '\u{b}', '\u{c}', '\u{1c}', '\u{1d}', '\u{1e}', '\u{85}', '\u{2028}',
+        '\u{2029}',
+    ]) {
+        return Err(CaptionError::LineBreak {
+            caption: caption.to_string(),
+        });
+    }
+    if !(start.is_finite() && end.is_finite() && start >= 0.0 && end >= start) {
+        return Err(CaptionError::Times {
+            caption: caption.to_string(),
+            start,
+            end,
+        });
+    }
+    let pairs: Vec<String> = tokens(caption)?
+        .iter()
+        .map(|t| format!("{}/{}", t.word, t.tag))
+        .collect();
+    Ok(format!(
+        "{caption}#{}#{}#{}",
+        pairs.join(" "),
+        python_float(start),
+        python_float(end)
+    ))
+}
+
+/// A float as Python's `repr` writes it: the shortest digits that round-trip, positional from
+/// 1e-4 up to 1e16 (always with a fractional part), scientific with a two-digit exponent outside.
+pub fn python_float(x: f64) -> String {
+    if !x.is_finite() {
+        return if x.is_nan() {
+            "nan".into()
+        } else if x > 0.0 {
+            "inf".into()
+        } else {
+            "-inf".into()
+        };
+    }
+    if x == 0.0 {
+        return if x.is_sign_negative() {
+            "-0.0".into()
+        } else {
+            "0.0".into()
+        };
+    }
+    // `{:e}` gives Rust's shortest round-trip digits, the same digits Python's repr chooses.
+    let sci = format!("{x:e}");
+    let (mantissa, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let (sign, mantissa) = mantissa
+        .strip_prefix('-')
+        .map_or(("", mantissa), |m| ("-", m));
+    let digits: String = mantissa.chars().filter(char::is_ascii_digit).collect();
+    if (-4..16).contains(&exp) {
+        let point = exp + 1;
+        let body = if point <= 0 {
+            format!("0.{}{digits}", "0".repeat((-point) as usize))
+        } else if point as usize >= digits.len() {
+            format!("{digits}{}.0", "0".repeat(point as usize - digits.len()))
+        } else {
+            format!(
+                "{}.{}",
+                &digits[..point as usize],
+                &digits[point as usize..]
+            )
+        };
+        format!("{sign}{body}")
+    } else {
+        let sign_e = if exp < 0 { '-' } else { '+' };
+        format!("{sign}{mantissa}e{sign_e}{:02}", exp.abs())
+    }
+}
+
+/// spaCy's English tokenizer as far as it matters for alphabetic tokens: whitespace splits,
+/// punctuation comes off both ends, `,` `/` `:` `<` `>` `=` between letters split, and clitics
+/// ("n't", "'s", "'re", ...) come off the end.
+fn split_words(sentence: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for chunk in sentence.split_whitespace() {
+        let core = chunk.trim_matches(|c: char| !c.is_alphanumeric() && c != '\'');
+        let lead = &chunk[..chunk.find(core).unwrap_or(0)];
+        // A single letter keeps its period ("t.") as one token, as spaCy's exceptions do.
+        let tail_start = lead.len() + core.len();
+        let keeps_period = core.chars().count() == 1
+            && chunk[tail_start..].starts_with('.')
+            && core.chars().all(char::is_alphabetic);
+        if !lead.is_empty() {
+            out.push(lead.to_string());
+        }
+        for piece in core.split([',', '/', ':', '<', '>', '=']) {
+            let piece = piece.trim_matches('\'');
+            if piece.is_empty() {
+                continue;
+            }
+            let (base, clitic) = split_clitic(piece);
+            if keeps_period {
+                out.push(format!("{base}."));
+            } else if !base.is_empty() {
+                out.push(base.to_string());
+            }
+            if let Some(c) = clitic {
+                out.push(c.to_string());
+            }
+        }
+        if tail_start < chunk.len() && !keeps_period {
+            out.push(chunk[tail_start..].to_string());
+        }
+    }
+    out
+}
+
+/// Splits a trailing clitic off: "doesn't" -> ("does", "n't"), "person's" -> ("person", "'s").
+fn split_clitic(word: &str) -> (&str, Option<&str>) {
+    let lower = word.to_lowercase();
+    if lower.len() == word.len() {
+        if lower.ends_with("n't") && word.len() > 3 {
+            let cut = word.len() - 3;
+            return (&word[..cut], Some(&word[cut..]));
+        }
+        for clitic in ["'s", "'re", "'ve", "'ll", "'d", "'m"] {
+            if lower.ends_with(clitic) && word.len() > clitic.len() {
+                let cut = word.len() - clitic.len();
+                return (&word[..cut], Some(&word[cut..]));
+            }
+        }
+    }
+    (word, None)
+}
+
+/// The open-class parts of speech, in the lexicon's column order.
+const OPEN: [Upos; 4] = [Upos::Noun, Upos::Verb, Upos::Adj, Upos::Adv];
+
+/// How a verb or noun reading is inflected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Form {
+    /// The lemma itself.
+    Base,
+    /// A plural noun or third-person verb in -s.
+    S,
+    /// A past form (-ed or irregular).
+    Past,
+    /// A present participle (-ing).
+    Ing,
+}
+
+/// One way to read a word as an open-class part of speech.
+#[derive(Debug, Clone)]
+struct Reading {
+    lemma: String,
+    form: Form,
+    /// SemCor count of the lemma for this part of speech, plus one so a known lemma weighs more
+    /// than none.
+    weight: f64,
+}
+
+/// A caption token and what the lexicon says it can be.
+#[derive(Debug, Clone)]
+struct Word {
+    text: String,
+    lower: String,
+    alpha: bool,
+    /// Closed-class tags, default first; empty for open-class words.
+    closed: Vec<Upos>,
+    /// Readings as noun, verb, adjective, adverb.
+    open: [Option<Reading>; 4],
+}
+
+impl Word {
+    fn reading(&self, tag: Upos) -> Option<&Reading> {
+        OPEN.iter()
+            .position(|&t| t == tag)
+            .and_then(|i| self.open[i].as_ref())
+    }
+
+    fn can(&self, tag: Upos) -> bool {
+        self.closed.contains(&tag) || self.reading(tag).is_some()
+    }
+
+    fn weight(&self, tag: Upos) -> f64 {
+        self.reading(tag).map_or(0.0, |r| r.weight)
+    }
+
+    fn form(&self, tag: Upos) -> Option<Form> {
+        self.reading(tag).map(|r| r.form)
+    }
+
+    /// The open reading the lexicon favours, as a fallback.
+    fn likeliest(&self) -> Option<Upos> {
+        OPEN.into_iter()
+            .filter(|&t| self.reading(t).is_some())
+            .max_by(|&a, &b| self.weight(a).total_cmp(&self.weight(b)))
+    }
+
+    /// Starts a noun phrase: a determiner, number, pronoun or an open-class noun or adjective.
+    fn starts_noun_phrase(&self) -> bool {
+        if self.closed.is_empty() {
+            self.can(Upos::Noun) || self.can(Upos::Adj)
+        } else {
+            matches!(self.closed[0], Upos::Det | Upos::Num | Upos::Pron)
+        }
+    }
+
+    /// Can head a noun phrase after an adjective: an open-class word with a noun reading.
+    fn nominal(&self) -> bool {
+        self.closed.is_empty() && self.can(Upos::Noun)
+    }
+
+    /// The word as HumanML3D writes it for this tag: nouns and verbs by their lemma, but `left`.
+    fn output(&self, tag: Upos, tagger: &Tagger) -> String {
+        if !matches!(tag, Upos::Noun | Upos::Verb) || self.text == "left" {
+            return self.text.clone();
+        }
+        if let Some(lemma) = tagger.lemma_exceptions.get(&self.lower) {
+            return lemma.clone();
+        }
+        match self.reading(tag) {
+            Some(r) => r.lemma.clone(),
+            None => tagger.oov_lemma(&self.lower, tag),
+        }
+    }
+}
+
+/// The rules file's layout.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RulesFile {
+    closed: BTreeMap<String, String>,
+    lemma: LemmaRules,
+    guess: BTreeMap<String, String>,
+    context: Context,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LemmaRules {
+    exceptions: BTreeMap<String, String>,
+    rules: BTreeMap<String, Vec<[String; 2]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Context {
+    noun_over_verb_at_start: f64,
+    sides: Vec<String>,
+}
+
+/// The loaded, checked tagger data.
+struct Tagger {
+    closed: HashMap<String, Vec<Upos>>,
+    /// SemCor count (or None: not a lemma) per open-class part of speech.
+    lexicon: HashMap<String, [Option<u32>; 4]>,
+    /// Irregular form -> (part of speech, lemma).
+    irregular: HashMap<String, Vec<(Upos, String)>>,
+    lemma_exceptions: HashMap<String, String>,
+    /// Suffix rules per open-class part of speech (adverbs have none).
+    suffixes: [Vec<(String, String)>; 4],
+    /// Ending -> tag for unknown words, longest ending first.
+    guess: Vec<(String, Upos)>,
+    context: Context,
+}
+
+fn tagger() -> Result<&'static Tagger, CaptionError> {
+    static TAGGER: OnceLock<Result<Tagger, String>> = OnceLock::new();
+    TAGGER
+        .get_or_init(|| Tagger::load(RULES_TOML, LEXICON_TSV, EXCEPTIONS_TSV))
+        .as_ref()
+        .map_err(|e| CaptionError::Data(e.clone()))
+}
+
+fn open_index(tag: Upos) -> Option<usize> {
+    OPEN.iter().position(|&t| t == tag)
+}
+
+impl Tagger {
+    fn load(rules: &str, lexicon: &str, exceptions: &str) -> Result<Tagger, String> {
+        let file: RulesFile =
+            toml::from_str(rules).map_err(|e| format!("schemas/caption-tagger.toml: {e}"))?;
+        let tags = |s: &str, what: &str| -> Result<Vec<Upos>, String> {
+            let v: Vec<Upos> = s
+                .split_whitespace()
+                .map(Upos::from_str)
+                .collect::<Result<_, _>>()
+                .map_err(|e| format!("schemas/caption-tagger.toml {what}: {e}"))?;
+            if v.is_empty() {
+                return Err(format!("schemas/caption-tagger.toml {what}: no tag"));
+            }
+            Ok(v)
+        };
+        let mut closed = HashMap::new();
+        for (word, spec) in &file.closed {
+            closed.insert(word.clone(), tags(spec, &format!("[closed] {word}"))?);
+        }
+        let mut suffixes: [Vec<(String, String)>; 4] = Default::default();
+        for (pos, list) in &file.lemma.rules {
+            let tag = tags(pos, "[lemma.rules]")?[0];
+            let i = open_index(tag).ok_or_else(|| {
+                format!("schemas/caption-tagger.toml [lemma.rules]: {pos} is not open-class")
+            })?;
+            suffixes[i] = list.iter().map(|[a, b]| (a.clone(), b.clone())).collect();
+        }
+        let mut guess = Vec::new();
+        for (ending, tag) in &file.guess {
+            guess.push((ending.clone(), tags(tag, &format!("[guess] {ending}"))?[0]));
+        }
+        guess.sort_by_key(|(ending, _)| std::cmp::Reverse(ending.len()));
+        let lexicon = parse_lexicon(lexicon)?;
+        let irregular = parse_exceptions(exceptions)?;
+        Ok(Tagger {
+            closed,
+            lexicon,
+            irregular,
+            lemma_exceptions: file.lemma.exceptions.into_iter().collect(),
+            suffixes,
+            guess,
+            context: file.context,
+        })
+    }
+
+    /// The readings WordNet allows a word: as a lemma itself, as an irregular form, or through a
+    /// suffix rule whose result is a lemma of that part of speech (WordNet's morphy).
+    fn analyse(&self, text: &str) -> Word {
+        let lower = text.to_lowercase();
+        let alpha = !text.is_empty() && text.chars().all(char::is_alphabetic);
+        let closed = self.closed.get(&lower).cloned().unwrap_or_default();
+        let mut open: [Option<Reading>; 4] = Default::default();
+        if alpha
+            && closed
+                .iter()
+                .all(|t| !matches!(t, Upos::Det | Upos::Pron | Upos::Aux))
+        {
+            for (i, &tag) in OPEN.iter().enumerate() {
+                open[i] = self.reading(&lower, i, tag);
+            }
+        }
+        if alpha && closed.is_empty() && open.iter().all(Option::is_none) {
+            let tag = self
+                .guess
+                .iter()
+                .find(|(ending, _)| lower.len() > ending.len() && lower.ends_with(ending.as_str()))
+                .map_or(Upos::Noun, |(_, t)| *t);
+            if let Some(i) = open_index(tag) {
+                let form = inflection(&lower, tag);
+                let lemma = if form == Form::Base {
+                    lower.clone()
+                } else {
+                    self.oov_lemma(&lower, tag)
+                };
+                open[i] = Some(Reading {
+                    lemma,
+                    form,
+                    weight: 0.5,
+                });
+            }
+        }
+        Word {
+            text: text.to_string(),
+            lower,
+            alpha,
+            closed,
+            open,
+        }
+    }
+
+    fn count(&self, word: &str, i: usize) -> Option<u32> {
+        self.lexicon.get(word).and_then(|c| c[i])
+    }
+
+    fn reading(&self, word: &str, i: usize, tag: Upos) -> Option<Reading> {
+        let base = self.count(word, i);
+        let irregular = self
+            .irregular
+            .get(word)
+            .and_then(|v| v.iter().find(|(t, _)| *t == tag))
+            .map(|(_, lemma)| lemma.clone());
+        let derived = irregular.or_else(|| {
+            self.suffixes[i]
+                .iter()
+                .filter(|(end, _)| word.ends_with(end.as_str()))
+                .map(|(end, new)| format!("{}{new}", &word[..word.len() - end.len()]))
+                .find(|form| !form.is_empty() && self.count(form, i).is_some())
+        });
+        match (derived, base) {
+            (Some(lemma), _) => {
+                let weight = f64::from(self.count(&lemma, i).unwrap_or(0)) + 1.0;
+                Some(Reading {
+                    form: inflection(word, tag),
+                    lemma,
+                    weight,
+                })
+            }
+            (None, Some(n)) => Some(Reading {
+                lemma: word.to_string(),
+                form: Form::Base,
+                weight: f64::from(n) + 1.0,
+            }),
+            (None, None) => None,
+        }
+    }
+
+    /// spaCy's lemma for a word its tables do not know: the first suffix rule that applies.
+    fn oov_lemma(&self, word: &str, tag: Upos) -> String {
+        open_index(tag)
+            .and_then(|i| {
+                self.suffixes[i]
+                    .iter()
+                    .filter(|(end, _)| word.ends_with(end.as_str()))
+                    .map(|(end, new)| format!("{}{new}", &word[..word.len() - end.len()]))
+                    .find(|f| !f.is_empty())
+            })
+            .unwrap_or_else(|| word.to_string())
+    }
+
+    /// Tags a caption's tokens left to right; each decision sees the tags already given and the
+    /// readings of the next word.
+    fn tag(&self, words: &[Word]) -> Vec<Upos> {
+        let mut tags: Vec<Upos> = Vec::with_capacity(words.len());
+        for (i, w) in words.iter().enumerate() {
+            let prev = i.checked_sub(1).map(|j| tags[j]);
+            let before_conj = i
+                .checked_sub(2)
+                .filter(|_| prev == Some(Upos::Cconj))
+                .map(|j| tags[j]);
+            let plural_before = i.checked_sub(1).is_some_and(|j| {
+                prev == Some(Upos::Noun) && words[j].form(Upos::Noun) == Some(Form::S)
+            });
+            tags.push(self.decide(w, prev, plural_before, before_conj, words.get(i + 1)));
+        }
+        tags
+    }
+
+    /// One token's tag: the rules docs/humanml3d-captions.md lists, first match wins.
+    fn decide(
+        &self,
+        w: &Word,
+        prev: Option<Upos>,
+        plural_before: bool,
+        before_conj: Option<Upos>,
+        next: Option<&Word>,
+    ) -> Upos {
+        use Upos::{Adj, Adp, Adv, Det, Noun, Num, Part, Verb};
+        if !w.alpha {
+            return if w
+                .text
+                .chars()
+                .all(|c| c.is_ascii_digit() || c == '.' || c == ',')
+            {
+                Num
+            } else {
+                Upos::Punct
+            };
+        }
+        let next_np = next.is_some_and(Word::starts_noun_phrase);
+        let next_nominal = next.is_some_and(Word::nominal);
+        let clause_start = matches!(prev, None | Some(Upos::Cconj | Upos::Sconj | Upos::Punct));
+        let after_function_word = matches!(prev, Some(Adp | Det | Adj | Num));
+        if self.context.sides.contains(&w.lower) {
+            if w.form(Verb) == Some(Form::Past) {
+                let ends_after_verb = prev == Some(Verb) && next.is_none();
+                return if after_function_word || ends_after_verb {
+                    Adj
+                } else {
+                    Verb
+                };
+            }
+            return if next_nominal {
+                Adj
+            } else if matches!(prev, Some(Det | Adp)) {
+                Noun
+            } else {
+                Adv
+            };
+        }
+        match w.lower.as_str() {
+            "to" => {
+                // spaCy reads a bare word that can be a verb after "to" as an infinitive.
+                let verb_next = next.is_some_and(|n| {
+                    n.closed.is_empty()
+                        && n.form(Verb) == Some(Form::Base)
+                        && !self.context.sides.contains(&n.lower)
+                });
+                return if verb_next { Part } else { Adp };
+            }
+            "her" | "his" => return if next_np { Det } else { Upos::Pron },
+            _ => {}
+        }
+        if let Some(&first) = w.closed.first() {
+            return if w.closed.contains(&Adp) && next_np {
+                Adp
+            } else {
+                first
+            };
+        }
+        let candidates: Vec<Upos> = OPEN.into_iter().filter(|&t| w.can(t)).collect();
+        if let [only] = candidates[..] {
+            return only;
+        }
+        // Coordination: "walk and turn", "arms and legs".
+        if let Some(t) = before_conj.filter(|&t| w.can(t) && matches!(t, Noun | Verb | Adj)) {
+            return t;
+        }
+        let (noun, verb, adj) = (w.weight(Noun), w.weight(Verb), w.weight(Adj));
+        let verb_form = w.form(Verb);
+        // An adjective before its noun, when the adjective is the word's usual reading.
+        let attributive = w.can(Adj) && next_nominal && adj >= noun.max(verb).max(w.weight(Adv));
+        // Adverbs of direction and manner ("forward", "back", "straight") outside noun phrases.
+        if w.likeliest() == Some(Adv) && !matches!(prev, Some(Det | Adj | Num)) {
+            return Adv;
+        }
+        // An imperative action label or clause starts with its verb: "kick ball", "then walk".
+        if clause_start && matches!(verb_form, Some(Form::Base | Form::Ing)) && !attributive {
+            let ratio = self.context.noun_over_verb_at_start;
+            if noun <= ratio * verb || next_np && !next_nominal {
+                return Verb;
+            }
+        }
+        match prev {
+            // Inside a noun phrase: an adjective before its noun, else the noun.
+            Some(Det | Num | Adj | Adp) => {
+                if attributive || (w.can(Adj) && next_nominal && !w.can(Noun)) {
+                    return Adj;
+                }
+                if prev == Some(Adp) && verb_form == Some(Form::Ing) {
+                    return Verb;
+                }
+                if w.can(Noun) {
+                    return Noun;
+                }
+            }
+            // After a verb: its object, or an adverb of manner or direction.
+            Some(Verb | Upos::Aux) => {
+                if prev == Some(Upos::Aux) && verb_form.is_some() {
+                    return Verb;
+                }
+                if attributive {
+                    return Adj;
+                }
+                // The object noun, unless the word is rather an adjective or adverb ("hold still").
+                let best = [Noun, Adj, Adv].into_iter().filter(|&t| w.can(t));
+                if let Some(t) = best.max_by(|&a, &b| w.weight(a).total_cmp(&w.weight(b))) {
+                    return t;
+                }
+            }
+            // After a noun or pronoun: its finite verb ("a man kicks", "he walks"), or the head
+            // of a compound ("arm swing").
+            Some(Noun | Upos::Pron | Upos::Propn) => match verb_form {
+                Some(Form::S) if verb >= noun || prev == Some(Upos::Pron) => return Verb,
+                Some(Form::Base) if plural_before || prev == Some(Upos::Pron) => return Verb,
+                Some(Form::Past | Form::Ing) => return Verb,
+                _ if w.can(Noun) => return Noun,
+                _ => {}
+            },
+            Some(Part) if verb_form.is_some() => return Verb,
+            _ => {}
+        }
+        if attributive {
+            return Adj;
+        }
+        w.likeliest().unwrap_or(Noun)
+    }
+}
+
+/// The inflection a word's ending shows for a part of speech.
+fn inflection(word: &str, tag: Upos) -> Form {
+    match tag {
+        Upos::Verb if word.ends_with("ing") => Form::Ing,
+        Upos::Verb if word.ends_with("ed") => Form::Past,
+        Upos::Verb | Upos::Noun if word.ends_with('s') && !word.ends_with("ss") => Form::S,
+        Upos::Verb => Form::Past,
+        _ => Form::Base,
+    }
+}
+
+fn parse_lexicon(text: &str) -> Result<HashMap<String, [Option<u32>; 4]>, String> {
+    let mut map = HashMap::with_capacity(80_000);
+    for (n, line) in text.lines().enumerate() {
+        if line.starts_with('#') || line.is_empty() {
+            continue;
+        }
+        let bad = |why: &str| format!("schemas/pos-lexicon.tsv line {}: {why}: {line:?}", n + 1);
+        let mut cells = line.split('\t');
+        let word = cells
+            .next()
+            .filter(|w| !w.is_empty())
+            .ok_or_else(|| bad("no word"))?;
+        let mut counts = [None; 4];
+        for c in &mut counts {
+            let cell = cells.next().ok_or_else(|| bad("fewer than five columns"))?;
+            *c = match cell {
+                "-" => None,
+                n => Some(
+                    n.parse::<u32>()
+                        .map_err(|_| bad("a count is not a number or '-'"))?,
+                ),
+            };
+        }
+        if cells.next().is_some() || counts.iter().all(Option::is_none) {
+            return Err(bad("not a word with four counts, one at least given"));
+        }
+        map.insert(word.to_string(), counts);
+    }
+    Ok(map)
+}
+
+fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<(Upos, String)>>, String> {
+    let mut map: HashMap<String, Vec<(Upos, String)>> = HashMap::new();
+    for (n, line) in text.lines().enumerate() {
+        if line.starts_with('#') || line.is_empty() {
+            continue;
+        }
+        let bad = || {
+            format!(
+                "schemas/pos-exceptions.tsv line {}: not `form<TAB>NOUN|VERB|ADJ<TAB>lemma`: {line:?}",
+                n + 1
+            )
+        };
+        let [form, tag, lemma] = line.split('\t').collect::<Vec<_>>()[..] else {
+            return Err(bad());
+        };
+        let tag = Upos::from_str(tag)
+            .ok()
+            .filter(|t| open_index(*t).is_some())
+            .ok_or_else(bad)?;
+        map.entry(form.to_string())
+            .or_default()
+            .push((tag, lemma.to_string()));
+    }
+    Ok(map)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bundled_data_loads() {
+        let t = tagger().map_err(|e| e.to_string()).unwrap();
+        assert!(t.lexicon.len() > 50_000);
+        assert!(t.irregular.contains_key("feet"));
+    }
+
+    #[test]
+    fn invalid_data_is_refused_with_its_line() {
+        let err = Tagger::load(RULES_TOML, "walk\t1\tx\t-\t-\n", EXCEPTIONS_TSV)
+            .err()
+            .unwrap();
+        assert!(err.contains("pos-lexicon.tsv line 1"), "{err}");
+        let err = Tagger::load(RULES_TOML, LEXICON_TSV, "feet\tNOUN\n")
+            .err()
+            .unwrap();
+        assert!(err.contains("pos-exceptions.tsv line 1"), "{err}");
+        let err = Tagger::load(
+            "[closed]\nthe = \"DETERMINER\"\n",
+            LEXICON_TSV,
+            EXCEPTIONS_TSV,
+        )
+        .err()
+        .unwrap();
+        assert!(err.contains("caption-tagger.toml"), "{err}");
+    }
+}
