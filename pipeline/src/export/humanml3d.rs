@@ -71,6 +71,8 @@ pub struct ExportSummary {
     pub splits: BTreeMap<String, usize>,
     /// Clips not exported, with the reason.
     pub skipped: Vec<Skipped>,
+    /// Captions not written (a malformed line makes the loaders drop the whole clip), by clip.
+    pub captions_refused: Vec<Skipped>,
     /// Exported clips the HumanML3D loaders will drop for their length (outside 40 to 199 rows):
     /// names.
     pub filtered_by_loaders: Vec<String>,
@@ -125,6 +127,8 @@ struct Entry {
     split: Split,
     mirrored: bool,
     source_kind: String,
+    /// Caption, every text and the paraphrases, each once, in that order.
+    captions: Vec<String>,
     /// The shard it is in.
     shard: usize,
 }
@@ -164,7 +168,7 @@ pub fn export_humanml3d(
     if staging.exists() {
         fs::remove_dir_all(&staging).map_err(io_err(&staging))?;
     }
-    for dir in ["new_joint_vecs", "new_joints", "joints"] {
+    for dir in ["new_joint_vecs", "new_joints", "joints", "texts"] {
         let path = staging.join(dir);
         fs::create_dir_all(&path).map_err(io_err(&path))?;
     }
@@ -196,7 +200,9 @@ pub fn export_humanml3d(
                     };
                     let name = names.get(&entry.clip_id).cloned().unwrap_or_default();
                     write_clip(&staging, &name, &converted)?;
+                    let refused = write_captions(&staging, &name, entry)?;
                     Ok(Ok(Done {
+                        refused,
                         name,
                         moments: Moments::of(&converted.vectors),
                     }))
@@ -211,6 +217,7 @@ pub fn export_humanml3d(
                     }
                 };
                 summary.rows += done.moments.rows;
+                summary.captions_refused.extend(done.refused);
                 if !LOADER_ROWS.contains(&done.moments.rows) {
                     summary.filtered_by_loaders.push(done.name.clone());
                 }
@@ -360,8 +367,24 @@ fn batches<'p>(
 }
 
 fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), ExportError> {
-    for batch in batches(path, &["clip_id", "split", "mirrored", "source_kind"])? {
+    let columns = [
+        "clip_id",
+        "split",
+        "mirrored",
+        "source_kind",
+        "text",
+        "texts",
+        "paraphrases",
+    ];
+    for batch in batches(path, &columns)? {
         let batch = batch?;
+        let lists = |name: &str| {
+            batch
+                .column_by_name(name)
+                .and_then(|c| c.as_list_opt::<i32>())
+                .ok_or_else(|| table_err(path, format!("`{name}` is not a list column")))
+        };
+        let (texts, paraphrases) = (lists("texts")?, lists("paraphrases")?);
         let strings = |name: &str| {
             batch
                 .column_by_name(name)
@@ -373,12 +396,25 @@ fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), E
             strings("split")?,
             strings("source_kind")?,
         );
+        let text = strings("text")?;
         let mirrored = batch
             .column_by_name("mirrored")
             .and_then(|c| c.as_boolean_opt())
             .ok_or_else(|| table_err(path, "`mirrored` is not a boolean column"))?;
         for i in 0..batch.num_rows() {
+            let mut captions = vec![text.value(i).to_string()];
+            for list in [&texts, &paraphrases] {
+                let values = list.value(i);
+                if let Some(values) = values.as_string_opt::<i32>() {
+                    for v in values.iter().flatten() {
+                        if !captions.iter().any(|c| c == v) {
+                            captions.push(v.to_string());
+                        }
+                    }
+                }
+            }
             out.push(Entry {
+                captions,
                 clip_id: ids.value(i).to_string(),
                 split: Split::new(splits.value(i)),
                 mirrored: mirrored.value(i),
@@ -390,8 +426,9 @@ fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), E
     Ok(())
 }
 
-/// A clip written: its name and its column sums.
+/// A clip written: its name, its column sums and the captions that could not be written.
 struct Done {
+    refused: Vec<Skipped>,
     name: String,
     moments: Moments,
 }
@@ -577,6 +614,28 @@ fn write_clip(dir: &Path, name: &str, clip: &Converted) -> Result<(), ExportErro
     )
 }
 
+/// `texts/<name>.txt`: one HumanML3D caption line per caption of the clip (the whole clip:
+/// `0.0#0.0`); the captions that cannot be tagged, with why.
+fn write_captions(dir: &Path, name: &str, entry: &Entry) -> Result<Vec<Skipped>, ExportError> {
+    let mut text = String::new();
+    let mut refused = Vec::new();
+    for caption in &entry.captions {
+        match hml3d::caption::caption_line(caption, 0.0, 0.0) {
+            Ok(line) => {
+                text.push_str(&line);
+                text.push('\n');
+            }
+            Err(e) => refused.push(Skipped {
+                clip_id: entry.clip_id.clone(),
+                reason: e.to_string(),
+            }),
+        }
+    }
+    let path = dir.join("texts").join(format!("{name}.txt"));
+    fs::write(&path, text).map_err(io_err(&path))?;
+    Ok(refused)
+}
+
 /// Split lists, `all.txt` and `names.csv`.
 fn write_lists(
     dir: &Path,
@@ -708,6 +767,7 @@ mod tests {
             split: Split::train(),
             mirrored,
             source_kind: "real_single".into(),
+            captions: Vec::new(),
             shard: 0,
         }
     }
