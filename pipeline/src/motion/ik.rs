@@ -277,16 +277,7 @@ pub fn motion_from_positions(
             let c = *c;
             // Rest direction: the mean direction in the parent's frame, made a mirror image of
             // the partner's so mirrored motions stay on the skeleton; the swing is exact for any.
-            let direction = |joint: usize| -> DVec3 {
-                let p = layout.parents[joint].unwrap_or(0);
-                let mut sum = DVec3::ZERO;
-                for t in 0..frames {
-                    let frame = layout.parents[p].map_or(DQuat::IDENTITY, |g| world[t * n + g]);
-                    sum += frame.inverse() * bone(t, joint).normalize();
-                }
-                sum.try_normalize().unwrap_or(layout.up)
-            };
-            let own = direction(c);
+            let own = mean_direction(layout, positions, &world, c, frames);
             let d = match layout.left[c] {
                 None => {
                     let flat = mirror(own, lateral) + own;
@@ -297,7 +288,7 @@ pub fn motion_from_positions(
                     // same kind of frame: average the two, mirrored.
                     let other = layout.partners[c];
                     if layout.parents[other].is_some_and(|op| children[op].len() == 1) {
-                        let theirs = mirrored_direction(layout, positions, &world, other, frames);
+                        let theirs = mean_direction(layout, positions, &world, other, frames);
                         (own + mirror(theirs, lateral))
                             .try_normalize()
                             .unwrap_or(own)
@@ -381,9 +372,9 @@ fn world_of(world: &[DQuat], n: usize, joint: Option<usize>, t: usize) -> DQuat 
     joint.map_or(DQuat::IDENTITY, |p| world[t * n + p])
 }
 
-/// The mean direction of bone `joint` in its grandparent's frame, as [`motion_from_positions`]
-/// computes the rest direction of a single child, for a joint processed later.
-fn mirrored_direction(
+/// The mean direction of bone `joint` in the world frame of its grandparent (the frame its
+/// parent's swing starts from): the rest direction of a single child.
+fn mean_direction(
     layout: &PositionLayout,
     positions: &[DVec3],
     world: &[DQuat],
