@@ -77,6 +77,7 @@ pub mod io;
 pub mod llm;
 pub mod motion;
 pub mod parts;
+pub mod planner;
 pub mod progress;
 pub mod quality;
 pub mod report;

@@ -18,6 +18,7 @@ use motionforge::terminal::{BarProgress, LogOptions, LogProgress};
 mod cli;
 use cli::bench_build::{BuildBench, bench_build};
 use cli::labels::{LabelsCommand, PromptCommand, labels_command, prompt_command};
+use cli::session::{PlanSessionArgs, plan_session};
 use cli::summary::{counts, print_plan, print_report, print_status};
 use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
 
@@ -42,6 +43,20 @@ Exit codes:
 
 Logging: progress and log lines go to standard error (bars on a terminal, plain lines
 otherwise, JSON lines with --json); results go to standard output.";
+
+/// Examples and exit codes of `plan-session`.
+const PLAN_SESSION_HELP: &str = "\
+Examples:
+  # a session for the living room, balanced only within itself
+  motionforge plan-session --scene schemas/scenes/living-room.toml --seed 7 -o sessions
+  # steered toward what the built dataset lacks, under a name of your choice
+  motionforge plan-session --scene schemas/scenes/living-room.toml --seed 8 \\
+      --dataset out/demo --capture living-room-0008 -o sessions
+
+Exit codes:
+  0  success
+  1  a file that cannot be read or written (the dataset's shards, the output folder)
+  2  a scene that does not parse, fails its checks, or has no valid session";
 
 /// Build text-to-motion training sets from mocap captures: segment, mirror, label, compose,
 /// and write sharded Parquet with statistics for papers.
@@ -232,6 +247,32 @@ enum Command {
         /// Where to write; default `<dataset>/report`.
         #[arg(long, short)]
         output: Option<PathBuf>,
+    },
+    /// Plan the next capture session for a scene: the instructions an actor performs, as an
+    /// event log to time during the capture and a sheet for the operator.
+    ///
+    /// A Markov chain over the scene's interactions (LINGO's Motion Planner) emits only
+    /// instructions whose requirements hold (posture, place, free or holding hands) and ends in
+    /// the scene's end state. With --dataset, it favours the motion types the built dataset has
+    /// fewest clips of, toward the scene's target (docs/planner.md). The same scene, dataset and
+    /// seed give the same session.
+    #[command(after_help = PLAN_SESSION_HELP)]
+    PlanSession {
+        /// The scene file (TOML; schemas/scene.md, schemas/scenes/living-room.toml).
+        #[arg(long)]
+        scene: PathBuf,
+        /// A built dataset folder (`<output>/<name>`) whose clips per motion type to balance.
+        #[arg(long)]
+        dataset: Option<PathBuf>,
+        /// Seed of the chain.
+        #[arg(long)]
+        seed: u64,
+        /// Folder to write `<capture>.csv` (the event log) and `<capture>.md` (the sheet) into.
+        #[arg(long, short, default_value = ".")]
+        output: PathBuf,
+        /// The capture's name, and so the files' stem; default `<scene name>-<seed>`.
+        #[arg(long)]
+        capture: Option<String>,
     },
     /// Print the clip table schema (columns, types, version) as JSON.
     Schema,
@@ -465,6 +506,10 @@ fn exit_code(err: &anyhow::Error) -> u8 {
                 .is_some()
             || e.downcast_ref::<motionforge::llm::prompt::PromptError>()
                 .is_some()
+            || e.downcast_ref::<motionforge::planner::SceneError>()
+                .is_some()
+            || e.downcast_ref::<motionforge::planner::PlanError>()
+                .is_some()
             || matches!(
                 e.downcast_ref::<motionforge::build::clean::CleanError>(),
                 Some(motionforge::build::clean::CleanError::NotADataset { .. })
@@ -642,6 +687,23 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
         })?,
         Command::ServeBuild { job } => return Ok(motionforge::serve::worker::main(&job)),
         Command::Labels { command } => labels_command(command, ui.log.json)?,
+        Command::PlanSession {
+            scene,
+            dataset,
+            seed,
+            output,
+            capture,
+        } => plan_session(
+            PlanSessionArgs {
+                scene,
+                dataset,
+                seed,
+                output,
+                capture,
+            },
+            ui.log.json,
+            ui.status(),
+        )?,
         Command::Schema => writeln!(
             std::io::stdout(),
             "{}",

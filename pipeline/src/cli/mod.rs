@@ -2,5 +2,6 @@
 
 pub(crate) mod bench_build;
 pub(crate) mod labels;
+pub(crate) mod session;
 pub(crate) mod summary;
 pub(crate) mod tools;

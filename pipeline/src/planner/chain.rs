@@ -1,0 +1,301 @@
+//! The Markov chain: every state reachable from the start, the cheapest way from each back to a
+//! valid end state, and the walk that only takes instructions from which the end stays within
+//! the remaining budget.
+
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap, HashMap};
+
+use super::balance::{DatasetCounts, factors};
+use super::scene::{Limit, Scene};
+use super::state::{Requirement, State};
+use super::{PlanError, Session, Step};
+
+/// The most states a scene may reach; beyond it the scene is refused as too large to plan.
+pub const MAX_STATES: usize = 200_000;
+
+/// The reachable state graph of a scene.
+pub(super) struct Graph {
+    /// States, the start first.
+    pub states: Vec<State>,
+    /// Per state: (candidate, next state) for every candidate whose requirements hold.
+    pub edges: Vec<Vec<(usize, usize)>>,
+}
+
+impl Graph {
+    /// Every state reachable from the scene's start (breadth first, candidates in file order).
+    pub fn explore(scene: &Scene) -> Result<Graph, PlanError> {
+        let mut states = vec![scene.start.clone()];
+        let mut index: HashMap<State, usize> = HashMap::from([(scene.start.clone(), 0)]);
+        let mut edges: Vec<Vec<(usize, usize)>> = Vec::new();
+        let mut i = 0;
+        while i < states.len() {
+            let mut out = Vec::new();
+            for (c, cand) in scene.candidates.iter().enumerate() {
+                if !cand.requires.iter().all(|r| r.holds(&states[i])) {
+                    continue;
+                }
+                let next = cand.effect.apply(&states[i]);
+                let j = match index.get(&next) {
+                    Some(&j) => j,
+                    None => {
+                        if states.len() >= MAX_STATES {
+                            return Err(PlanError::TooLarge { states: MAX_STATES });
+                        }
+                        states.push(next.clone());
+                        index.insert(next, states.len() - 1);
+                        states.len() - 1
+                    }
+                };
+                out.push((c, j));
+            }
+            edges.push(out);
+            i += 1;
+        }
+        Ok(Graph { states, edges })
+    }
+
+    /// The least cost from each state to a valid end state (`None`: unreachable), by Dijkstra on
+    /// the reversed graph from every end state.
+    pub fn cost_to_end(&self, scene: &Scene, cost: &[u64]) -> Vec<Option<u64>> {
+        let n = self.states.len();
+        let mut reverse: Vec<Vec<(usize, u64)>> = vec![Vec::new(); n];
+        for (from, out) in self.edges.iter().enumerate() {
+            for &(c, to) in out {
+                reverse[to].push((from, cost[c]));
+            }
+        }
+        let mut dist: Vec<Option<u64>> = vec![None; n];
+        let mut heap = BinaryHeap::new();
+        for (s, state) in self.states.iter().enumerate() {
+            if is_end(scene, state) {
+                dist[s] = Some(0);
+                heap.push(Reverse((0u64, s)));
+            }
+        }
+        while let Some(Reverse((d, s))) = heap.pop() {
+            if dist[s].is_some_and(|best| d > best) {
+                continue;
+            }
+            for &(from, c) in &reverse[s] {
+                let nd = d.saturating_add(c);
+                if dist[from].is_none_or(|best| nd < best) {
+                    dist[from] = Some(nd);
+                    heap.push(Reverse((nd, from)));
+                }
+            }
+        }
+        dist
+    }
+}
+
+/// Whether a state meets every end requirement.
+pub(super) fn is_end(scene: &Scene, state: &State) -> bool {
+    scene.end.iter().all(|r| r.holds(state))
+}
+
+/// The first of `requirements` that no state of `states` meets, else `None` (each is met
+/// somewhere, though maybe never all together).
+pub(super) fn never_met<'r>(
+    requirements: &'r [Requirement],
+    states: &[State],
+) -> Option<&'r Requirement> {
+    requirements
+        .iter()
+        .find(|r| !states.iter().any(|s| r.holds(s)))
+}
+
+/// Estimated seconds of each motion type: the dataset's median, else the scene's
+/// `limits.seconds`, else `limits.default_seconds`.
+pub(super) fn seconds_of(scene: &Scene, counts: &DatasetCounts, motion_type: &str) -> f64 {
+    counts
+        .median_seconds
+        .get(motion_type)
+        .or_else(|| scene.seconds.get(motion_type))
+        .copied()
+        .unwrap_or(scene.default_seconds)
+}
+
+/// Walks the chain: at each step, the candidates whose requirements hold and from whose result
+/// the end is reachable within what remains of the budget, drawn with probability proportional
+/// to scene weight times balance factor (the previous instruction again only when nothing else
+/// is allowed).
+pub(super) fn walk(
+    scene: &Scene,
+    graph: &Graph,
+    counts: &DatasetCounts,
+    seed: u64,
+) -> Result<Session, PlanError> {
+    let millis: Vec<u64> = scene
+        .candidates
+        .iter()
+        .map(|c| (seconds_of(scene, counts, &c.motion_type) * 1000.0).round() as u64)
+        .collect();
+    let (cost, budget): (Vec<u64>, u64) = match scene.limit {
+        Limit::Instructions(n) => (vec![1; scene.candidates.len()], u64::from(n)),
+        Limit::Millis(ms) => (millis.clone(), ms),
+    };
+    let to_end = graph.cost_to_end(scene, &cost);
+    match to_end[0] {
+        None => return Err(unreachable_end(scene, graph)),
+        Some(needed) if needed > budget => {
+            return Err(PlanError::OverBudget {
+                needed,
+                budget,
+                limit: scene.limit,
+            });
+        }
+        Some(_) => {}
+    }
+
+    let mut rng = fastrand::Rng::with_seed(seed);
+    let mut session_counts: BTreeMap<String, u64> = BTreeMap::new();
+    let mut running = counts.clips.clone();
+    let mut state = 0usize;
+    let mut used = 0u64;
+    let mut previous: Option<usize> = None;
+    let mut steps = Vec::new();
+    loop {
+        let allowed: Vec<(usize, usize)> = graph.edges[state]
+            .iter()
+            .copied()
+            .filter(|&(c, next)| to_end[next].is_some_and(|d| used + cost[c] + d <= budget))
+            .collect();
+        if allowed.is_empty() {
+            break;
+        }
+        let fresh: Vec<(usize, usize)> = allowed
+            .iter()
+            .copied()
+            .filter(|&(c, _)| Some(c) != previous)
+            .collect();
+        let pool = if fresh.is_empty() { allowed } else { fresh };
+        let balance = factors(&scene.target, &running, scene.strength);
+        let weights: Vec<f64> = pool
+            .iter()
+            .map(|&(c, _)| {
+                let cand = &scene.candidates[c];
+                cand.weight * balance.get(&cand.motion_type).copied().unwrap_or(1.0)
+            })
+            .collect();
+        let total: f64 = weights.iter().sum();
+        let mut x = rng.f64() * total;
+        let mut pick = pool.len() - 1;
+        for (k, w) in weights.iter().enumerate() {
+            if x < *w {
+                pick = k;
+                break;
+            }
+            x -= w;
+        }
+        let (c, next) = pool[pick];
+        let cand = &scene.candidates[c];
+        *session_counts.entry(cand.motion_type.clone()).or_default() += 1;
+        *running.entry(cand.motion_type.clone()).or_default() += 1;
+        used += cost[c];
+        steps.push(Step {
+            candidate: c,
+            text: cand.text(scene),
+            motion_type: cand.motion_type.clone(),
+            hand: cand.hand,
+            object: cand.object_name(scene).map(str::to_string),
+            hold: cand.hold,
+            seconds: millis[c] as f64 / 1000.0,
+            before: graph.states[state].clone(),
+            after: graph.states[next].clone(),
+        });
+        previous = Some(c);
+        state = next;
+    }
+    if steps.is_empty() {
+        return Err(no_first_step(scene, graph));
+    }
+    Ok(Session {
+        scene: scene.name.clone(),
+        seed,
+        steps,
+        session_counts,
+        dataset_counts: counts.clips.clone(),
+        target: scene.target.clone(),
+        unreachable: never_possible(scene, graph),
+    })
+}
+
+/// The error for a scene whose end no reachable state meets, naming the requirement.
+fn unreachable_end(scene: &Scene, graph: &Graph) -> PlanError {
+    let requirement = match never_met(&scene.end, &graph.states) {
+        Some(r) => format!(
+            "the end state needs {}, which no sequence from the start ({}) reaches",
+            r.text(scene),
+            scene.start.text(scene)
+        ),
+        None => format!(
+            "the end state needs {} together, which no sequence from the start ({}) reaches",
+            scene
+                .end
+                .iter()
+                .map(|r| r.text(scene))
+                .collect::<Vec<_>>()
+                .join(" and "),
+            scene.start.text(scene)
+        ),
+    };
+    PlanError::Unplannable { requirement }
+}
+
+/// The error for a scene where no first instruction fits: each interaction's first unmet
+/// requirement at the start.
+fn no_first_step(scene: &Scene, graph: &Graph) -> PlanError {
+    let start = &graph.states[0];
+    let mut reasons: Vec<String> = Vec::new();
+    for cand in &scene.candidates {
+        let why = match cand.requires.iter().find(|r| !r.holds(start)) {
+            Some(r) => format!("needs {}", r.text(scene)),
+            None => "leaves a state from which the end is out of budget".to_string(),
+        };
+        let line = format!(
+            "interactions[{}] `{}` {why}",
+            cand.interaction,
+            cand.text(scene)
+        );
+        if !reasons.contains(&line) {
+            reasons.push(line);
+        }
+    }
+    PlanError::Unplannable {
+        requirement: format!(
+            "no instruction can start from {}: {}",
+            start.text(scene),
+            reasons.join("; ")
+        ),
+    }
+}
+
+/// Interactions that no reachable state allows, with the requirement never met.
+fn never_possible(scene: &Scene, graph: &Graph) -> Vec<String> {
+    let mut used = vec![false; scene.candidates.len()];
+    for out in &graph.edges {
+        for &(c, _) in out {
+            used[c] = true;
+        }
+    }
+    let mut notes: Vec<String> = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for (c, cand) in scene.candidates.iter().enumerate() {
+        if used[c] {
+            continue;
+        }
+        let why = match never_met(&cand.requires, &graph.states) {
+            Some(r) => format!("needs {}, which no reachable state has", r.text(scene)),
+            None => "its requirements never hold together".to_string(),
+        };
+        let text = format!(
+            "interactions[{}] `{}` is never possible: {why}",
+            cand.interaction,
+            cand.text(scene)
+        );
+        if seen.insert(text.clone()) {
+            notes.push(text);
+        }
+    }
+    notes
+}

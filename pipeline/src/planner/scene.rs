@@ -1,0 +1,962 @@
+//! The scene file (TOML): the places the actor can be at, the hand-held objects and where they
+//! start, the actor's start and end states, the interactions with their requirements and effects,
+//! the session's limit and the balance target. `schemas/scene.md` documents every key.
+//!
+//! Reading expands each interaction into candidates (one per place, object and hand it names), so
+//! the chain works on concrete instructions. Every problem is reported at once with its key.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::state::{Effect, Loc, Posture, Requirement, State};
+use crate::annotate::span::Hand;
+use crate::annotate::taxonomy::{Taxonomy, normalize_label};
+
+/// The most candidates a scene may expand into: the chain enumerates states times candidates.
+const MAX_CANDIDATES: usize = 2_000;
+
+/// Why a scene file cannot be used. Every variant names the file; problems name their key.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file cannot be read.
+    #[error("scene {path}: cannot read: {source}")]
+    Read {
+        /// The scene file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not TOML of the scene's shape.
+    #[error("scene {}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Parse {
+        /// The scene file.
+        path: PathBuf,
+        /// 1-based line, where known.
+        line: Option<usize>,
+        /// The key and what the parser expected.
+        message: String,
+    },
+    /// Values parse but are not acceptable: every problem found.
+    #[error("{}", invalid_message(path, problems))]
+    Invalid {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong, in file order where lines are known.
+        problems: Vec<SceneProblem>,
+    },
+    /// The bundled motion-type taxonomy did not load (a build defect, not the scene's).
+    #[error(transparent)]
+    Taxonomy(#[from] crate::annotate::taxonomy::TaxonomyError),
+}
+
+/// One problem of a scene: its dotted key, its line and what is wrong.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SceneProblem {
+    /// Dotted key with array positions: `interactions[2].type`.
+    pub key: String,
+    /// 1-based line of the key (or of its table), where known.
+    pub line: Option<usize>,
+    /// What is wrong and what is expected.
+    pub message: String,
+}
+
+fn invalid_message(path: &Path, problems: &[SceneProblem]) -> String {
+    let at = |p: &SceneProblem| match p.line {
+        Some(line) => format!("{}:{line}: {}: {}", path.display(), p.key, p.message),
+        None => format!("{}: {}: {}", path.display(), p.key, p.message),
+    };
+    match problems {
+        [one] => format!("scene {}", at(one)),
+        many => {
+            let mut text = format!("scene {} has {} problems:", path.display(), many.len());
+            for p in many {
+                text.push_str("\n  ");
+                text.push_str(&at(p));
+            }
+            text
+        }
+    }
+}
+
+/// A value or a list of values (`posture = "standing"` or `posture = ["standing", "sitting"]`).
+#[derive(Deserialize, Debug, Clone)]
+#[serde(untagged)]
+enum OneOrMany<T> {
+    One(T),
+    Many(Vec<T>),
+}
+
+impl<T: Clone> OneOrMany<T> {
+    fn to_vec(&self) -> Vec<T> {
+        match self {
+            OneOrMany::One(x) => vec![x.clone()],
+            OneOrMany::Many(v) => v.clone(),
+        }
+    }
+}
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+struct StartFile {
+    #[serde(default)]
+    posture: Option<Posture>,
+    #[serde(default)]
+    at: Option<String>,
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+enum EndHands {
+    #[default]
+    Empty,
+    Any,
+}
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+struct EndFile {
+    #[serde(default)]
+    posture: Option<OneOrMany<Posture>>,
+    #[serde(default)]
+    at: Option<OneOrMany<String>>,
+    #[serde(default)]
+    hands: EndHands,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct LimitsFile {
+    #[serde(default)]
+    instructions: Option<u32>,
+    #[serde(default)]
+    minutes: Option<f64>,
+    #[serde(default = "default_seconds")]
+    default_seconds: f64,
+    #[serde(default)]
+    seconds: BTreeMap<String, f64>,
+}
+
+fn default_seconds() -> f64 {
+    4.0
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct BalanceFile {
+    #[serde(default = "default_strength")]
+    strength: f64,
+    #[serde(default)]
+    target: BTreeMap<String, f64>,
+}
+
+impl Default for BalanceFile {
+    fn default() -> Self {
+        BalanceFile {
+            strength: default_strength(),
+            target: BTreeMap::new(),
+        }
+    }
+}
+
+fn default_strength() -> f64 {
+    1.0
+}
+
+/// Which hands an interaction uses.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+enum HandsFile {
+    #[default]
+    None,
+    Left,
+    Right,
+    One,
+    Both,
+}
+
+/// What an interaction does with its object.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Hold {
+    /// Picks the object up from the actor's place into the hand(s).
+    Take,
+    /// Uses an object already in the hand(s); it stays there.
+    Keep,
+    /// Puts the object down at the actor's place.
+    Release,
+}
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+struct RequiresFile {
+    #[serde(default)]
+    posture: Option<OneOrMany<Posture>>,
+    #[serde(default)]
+    at: Option<OneOrMany<String>>,
+    #[serde(default)]
+    not_at: Option<OneOrMany<String>>,
+    #[serde(default)]
+    empty_hands: bool,
+}
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+struct LeavesFile {
+    #[serde(default)]
+    posture: Option<Posture>,
+    #[serde(default)]
+    at: Option<String>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct InteractionFile {
+    #[serde(rename = "type")]
+    motion_type: String,
+    text: String,
+    #[serde(default)]
+    places: Vec<String>,
+    #[serde(default)]
+    objects: Vec<String>,
+    #[serde(default)]
+    hands: HandsFile,
+    #[serde(default)]
+    hold: Option<Hold>,
+    #[serde(default)]
+    requires: RequiresFile,
+    #[serde(default)]
+    leaves: LeavesFile,
+    #[serde(default = "default_weight")]
+    weight: f64,
+}
+
+fn default_weight() -> f64 {
+    1.0
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    #[serde(default)]
+    name: Option<String>,
+    #[serde(default)]
+    places: Vec<String>,
+    #[serde(default)]
+    objects: BTreeMap<String, String>,
+    #[serde(default)]
+    start: StartFile,
+    #[serde(default)]
+    end: Option<EndFile>,
+    limits: LimitsFile,
+    #[serde(default)]
+    balance: BalanceFile,
+    interactions: Vec<InteractionFile>,
+}
+
+/// How long a session may be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Limit {
+    /// At most this many instructions.
+    Instructions(u32),
+    /// At most this many milliseconds of estimated motion.
+    Millis(u64),
+}
+
+/// One concrete instruction the chain can emit: an interaction with its place, object and hand
+/// bound.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    /// Position of its interaction in the file (`interactions[i]`).
+    pub interaction: usize,
+    /// Its motion type (a name of `schemas/motion_types.toml`).
+    pub motion_type: String,
+    /// The text template as written.
+    pub template: String,
+    /// The bound `{place}`, an index into [`Scene::places`].
+    pub place: Option<usize>,
+    /// The bound `{object}`, an index into [`Scene::objects`].
+    pub object: Option<usize>,
+    /// The hand or hands it uses.
+    pub hand: Option<Hand>,
+    /// What it does with its object.
+    pub hold: Option<Hold>,
+    /// Everything that must hold before it, in the order they are checked.
+    pub requires: Vec<Requirement>,
+    /// What it changes.
+    pub effect: Effect,
+    /// The scene's weight for it.
+    pub weight: f64,
+}
+
+impl Candidate {
+    /// The instruction text: the template with `{place}`, `{object}` and `{hand}` filled in.
+    pub fn text(&self, scene: &Scene) -> String {
+        let mut text = self.template.clone();
+        if let Some(p) = self.place {
+            text = text.replace("{place}", &scene.places[p]);
+        }
+        if let Some(o) = self.object {
+            text = text.replace("{object}", &scene.objects[o]);
+        }
+        if let Some(h) = self.hand {
+            text = text.replace("{hand}", h.as_str());
+        }
+        text
+    }
+
+    /// The object named in the event log: the held object, else the bound place.
+    pub fn object_name<'s>(&self, scene: &'s Scene) -> Option<&'s str> {
+        self.object
+            .map(|o| scene.objects[o].as_str())
+            .or_else(|| self.place.map(|p| scene.places[p].as_str()))
+    }
+}
+
+/// A validated scene with its interactions expanded into candidates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// The scene's name (its `name`, else the file stem).
+    pub name: String,
+    /// Places the actor can be at (static scene objects), in file order.
+    pub places: Vec<String>,
+    /// Hand-held objects, sorted by name.
+    pub objects: Vec<String>,
+    /// The actor's state when the session starts.
+    pub start: State,
+    /// What a valid final state must meet.
+    pub end: Vec<Requirement>,
+    /// The session's length limit.
+    pub limit: Limit,
+    /// Estimated seconds per motion type, from the scene (`limits.seconds`).
+    pub seconds: BTreeMap<String, f64>,
+    /// Estimated seconds of a type the dataset and `limits.seconds` do not know.
+    pub default_seconds: f64,
+    /// The balance exponent (`balance.strength`).
+    pub strength: f64,
+    /// Target share per motion type, summing to 1: `balance.target` normalised, else uniform
+    /// over the scene's types.
+    pub target: BTreeMap<String, f64>,
+    /// Every concrete instruction, in file order of interactions, then place, object, hand.
+    pub candidates: Vec<Candidate>,
+}
+
+impl Scene {
+    /// Reads and validates a scene file against the bundled motion types.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Scene::parse(&text, path)
+    }
+
+    /// Parses and validates a scene; `path` names it in errors and gives the default name.
+    pub fn parse(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        let taxonomy = Taxonomy::bundled()?;
+        let tree = toml::de::DeTable::parse(text).map_err(|e| SceneError::Parse {
+            path: path.to_path_buf(),
+            line: e.span().map(|s| line_of(text, s.start)),
+            message: e.message().trim_end().to_string(),
+        })?;
+        let parsed: Result<SceneFile, _> =
+            serde_path_to_error::deserialize(toml::Deserializer::from(tree.clone()));
+        let lines = Lines {
+            text,
+            root: toml::de::DeValue::Table(tree.into_inner()),
+        };
+        let file = parsed.map_err(|e| {
+            let keys = segments(e.path());
+            let line = e
+                .inner()
+                .span()
+                .map(|s| line_of(text, s.start))
+                .or_else(|| lines.line(&keys));
+            let key = e.path().to_string();
+            let key = if key == "." {
+                String::new()
+            } else {
+                format!("{key}: ")
+            };
+            SceneError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message: format!("{key}{}", e.inner().message().trim_end()),
+            }
+        })?;
+        let mut problems = Problems {
+            lines: &lines,
+            found: Vec::new(),
+        };
+        let scene = resolve(file, path, &taxonomy, &mut problems);
+        if problems.found.is_empty() {
+            Ok(scene)
+        } else {
+            let mut found = problems.found;
+            found.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
+            Err(SceneError::Invalid {
+                path: path.to_path_buf(),
+                problems: found,
+            })
+        }
+    }
+
+    /// The motion types the scene's interactions have, sorted.
+    pub fn types(&self) -> BTreeSet<&str> {
+        self.candidates
+            .iter()
+            .map(|c| c.motion_type.as_str())
+            .collect()
+    }
+
+    /// A place's name, or `none` for the open room.
+    pub fn place_name(&self, place: Option<usize>) -> &str {
+        place.map_or("none", |p| self.places[p].as_str())
+    }
+}
+
+/// 1-based line of a byte offset.
+fn line_of(text: &str, offset: usize) -> usize {
+    text.as_bytes()[..offset.min(text.len())]
+        .iter()
+        .filter(|b| **b == b'\n')
+        .count()
+        + 1
+}
+
+#[derive(Debug, Clone)]
+enum Seg {
+    K(String),
+    I(usize),
+}
+
+fn segments(path: &serde_path_to_error::Path) -> Vec<Seg> {
+    use serde_path_to_error::Segment;
+    path.iter()
+        .filter_map(|s| match s {
+            Segment::Seq { index } => Some(Seg::I(*index)),
+            Segment::Map { key } => Some(Seg::K(key.clone())),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The spanned TOML tree, to find a key's line.
+struct Lines<'i> {
+    text: &'i str,
+    root: toml::de::DeValue<'i>,
+}
+
+impl Lines<'_> {
+    /// The line of the deepest part of `path` the file spells out.
+    fn line(&self, path: &[Seg]) -> Option<usize> {
+        let mut value = &self.root;
+        let mut span = None;
+        for seg in path {
+            let next = match seg {
+                Seg::K(k) => value.get(k.as_str()),
+                Seg::I(i) => value.get(*i),
+            };
+            let Some(next) = next else { break };
+            span = Some(next.span());
+            value = next.get_ref();
+        }
+        span.map(|s| line_of(self.text, s.start))
+    }
+}
+
+struct Problems<'a, 'i> {
+    lines: &'a Lines<'i>,
+    found: Vec<SceneProblem>,
+}
+
+impl Problems<'_, '_> {
+    fn push(&mut self, path: &[Seg], message: String) {
+        let mut key = String::new();
+        for seg in path {
+            match seg {
+                Seg::K(k) => {
+                    if !key.is_empty() {
+                        key.push('.');
+                    }
+                    if !k.is_empty()
+                        && k.chars()
+                            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+                    {
+                        key.push_str(k);
+                    } else {
+                        key.push_str(&format!("{k:?}"));
+                    }
+                }
+                Seg::I(i) => key.push_str(&format!("[{i}]")),
+            }
+        }
+        self.found.push(SceneProblem {
+            key,
+            line: self.lines.line(path),
+            message,
+        });
+    }
+}
+
+fn k(s: &str) -> Seg {
+    Seg::K(s.to_string())
+}
+
+/// The reserved `at` value for "at no place" (the open room).
+pub const NO_PLACE: &str = "none";
+
+/// A type name of the taxonomy, or the problem with a suggestion.
+fn check_type(taxonomy: &Taxonomy, name: &str) -> Result<(), String> {
+    if taxonomy.get(name).is_some() {
+        return Ok(());
+    }
+    let normal = normalize_label(name);
+    let hint = if taxonomy.get(&normal).is_some() {
+        format!(" (write it as `{normal}`)")
+    } else {
+        let close: Vec<&str> = taxonomy
+            .types()
+            .map(|t| t.name.as_str())
+            .filter(|t| {
+                let first = normal.split(' ').next().unwrap_or_default();
+                !first.is_empty() && t.split(' ').any(|w| w == first)
+            })
+            .collect();
+        if close.is_empty() {
+            String::new()
+        } else {
+            format!(" (similar: {})", close.join(", "))
+        }
+    };
+    Err(format!(
+        "`{name}` is not a motion type of schemas/motion_types.toml{hint}"
+    ))
+}
+
+fn finite_positive(x: f64) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+/// Turns the parsed file into a scene, recording every problem; the scene returned is only
+/// used when there are none.
+fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Problems) -> Scene {
+    let name = file.name.clone().unwrap_or_else(|| {
+        path.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into())
+    });
+
+    // Places and objects: distinct, non-empty, not the reserved word.
+    let mut places: Vec<String> = Vec::new();
+    for (i, p) in file.places.iter().enumerate() {
+        let p = p.trim();
+        if p.is_empty() || p == NO_PLACE || p.contains(['{', '}', '\n']) {
+            problems.push(
+                &[k("places"), Seg::I(i)],
+                format!("`{p}`: expected a place name (not empty, not `{NO_PLACE}`, no braces)"),
+            );
+        } else if places.iter().any(|q| q == p) {
+            problems.push(&[k("places"), Seg::I(i)], format!("`{p}` is listed twice"));
+        } else {
+            places.push(p.to_string());
+        }
+    }
+    let place_index = |name: &str| places.iter().position(|p| p == name);
+    // `none` is the open room; anything else must be a listed place.
+    let at_value = |name: &str| -> Result<Option<usize>, String> {
+        if name == NO_PLACE {
+            return Ok(None);
+        }
+        place_index(name).map(Some).ok_or_else(|| {
+            format!(
+                "`{name}` is not a place of the scene (places: {}; or `{NO_PLACE}`)",
+                places.join(", ")
+            )
+        })
+    };
+
+    let mut objects: Vec<String> = Vec::new();
+    let mut object_start: Vec<usize> = Vec::new();
+    for (object, at) in &file.objects {
+        let key = [k("objects"), k(object)];
+        if object.trim().is_empty() || object.contains(['{', '}', '\n']) || places.contains(object)
+        {
+            problems.push(
+                &key,
+                format!("`{object}`: expected an object name (not empty, no braces, not a place)"),
+            );
+            continue;
+        }
+        match place_index(at) {
+            Some(p) => {
+                objects.push(object.clone());
+                object_start.push(p);
+            }
+            None => problems.push(
+                &key,
+                format!(
+                    "`{at}`: an object starts at one of the places ({})",
+                    places.join(", ")
+                ),
+            ),
+        }
+    }
+    let object_index = |name: &str| objects.iter().position(|o| o == name);
+
+    // Start and end.
+    let start_at = match file.start.at.as_deref() {
+        None => None,
+        Some(a) => match at_value(a) {
+            Ok(p) => p,
+            Err(e) => {
+                problems.push(&[k("start"), k("at")], e);
+                None
+            }
+        },
+    };
+    let start_posture = file.start.posture.unwrap_or(Posture::Standing);
+    let start = State {
+        posture: start_posture,
+        at: start_at,
+        objects: object_start.iter().map(|p| Loc::Place(*p)).collect(),
+    };
+    let end_file = file.end.unwrap_or_default();
+    let mut end = Vec::new();
+    end.push(Requirement::Posture(
+        end_file
+            .posture
+            .as_ref()
+            .map(OneOrMany::to_vec)
+            .unwrap_or_else(|| vec![start_posture]),
+    ));
+    if let Some(at) = &end_file.at {
+        let mut list = Vec::new();
+        for (i, a) in at.to_vec().iter().enumerate() {
+            match at_value(a) {
+                Ok(p) => list.push(p),
+                Err(e) => problems.push(&[k("end"), k("at"), Seg::I(i)], e),
+            }
+        }
+        end.push(Requirement::At(list));
+    }
+    if end_file.hands == EndHands::Empty {
+        end.push(Requirement::EmptyHands);
+    }
+
+    // Limits.
+    let limit = match (file.limits.instructions, file.limits.minutes) {
+        (Some(n), None) if (1..=10_000).contains(&n) => Limit::Instructions(n),
+        (Some(n), None) => {
+            problems.push(
+                &[k("limits"), k("instructions")],
+                format!("{n}: expected 1 to 10000 instructions"),
+            );
+            Limit::Instructions(1)
+        }
+        (None, Some(m)) if finite_positive(m) && m <= 24.0 * 60.0 => {
+            Limit::Millis((m * 60_000.0).round() as u64)
+        }
+        (None, Some(m)) => {
+            problems.push(
+                &[k("limits"), k("minutes")],
+                format!("{m}: expected a number of minutes above 0, at most 1440"),
+            );
+            Limit::Instructions(1)
+        }
+        (Some(_), Some(_)) => {
+            problems.push(
+                &[k("limits")],
+                "both `instructions` and `minutes`: give one of them".into(),
+            );
+            Limit::Instructions(1)
+        }
+        (None, None) => {
+            problems.push(
+                &[k("limits")],
+                "neither `instructions` nor `minutes`: give one of them".into(),
+            );
+            Limit::Instructions(1)
+        }
+    };
+    let default_secs = file.limits.default_seconds;
+    if !(finite_positive(default_secs) && default_secs <= 3600.0) {
+        problems.push(
+            &[k("limits"), k("default_seconds")],
+            format!("{default_secs}: expected seconds above 0, at most 3600"),
+        );
+    }
+    for (t, s) in &file.limits.seconds {
+        let key = [k("limits"), k("seconds"), k(t)];
+        if let Err(e) = check_type(taxonomy, t) {
+            problems.push(&key, e);
+        }
+        if !(finite_positive(*s) && *s <= 3600.0) {
+            problems.push(&key, format!("{s}: expected seconds above 0, at most 3600"));
+        }
+    }
+
+    // Interactions, expanded.
+    let mut candidates = Vec::new();
+    if file.interactions.is_empty() {
+        problems.push(
+            &[k("interactions")],
+            "empty: expected at least one interaction".into(),
+        );
+    }
+    for (i, inter) in file.interactions.iter().enumerate() {
+        let key = |field: &str| vec![k("interactions"), Seg::I(i), k(field)];
+        let before = problems.found.len();
+        if let Err(e) = check_type(taxonomy, &inter.motion_type) {
+            problems.push(&key("type"), e);
+        }
+        if !finite_positive(inter.weight) {
+            problems.push(
+                &key("weight"),
+                format!("{}: expected a number above 0", inter.weight),
+            );
+        }
+        let text = inter.text.trim();
+        if text.is_empty() || text.contains(['\n', '\r']) {
+            problems.push(&key("text"), "expected one line of instruction text".into());
+        }
+        // Placeholders: each must have something to fill it.
+        let mut rest = text;
+        while let Some(open) = rest.find('{') {
+            let after = &rest[open + 1..];
+            let Some(close) = after.find('}') else {
+                problems.push(&key("text"), format!("`{text}`: a `{{` is never closed"));
+                break;
+            };
+            let name = &after[..close];
+            let filled = match name {
+                "place" => !inter.places.is_empty(),
+                "object" => !inter.objects.is_empty(),
+                "hand" => inter.hands != HandsFile::None,
+                _ => {
+                    problems.push(
+                        &key("text"),
+                        format!("`{{{name}}}`: expected `{{place}}`, `{{object}}` or `{{hand}}`"),
+                    );
+                    true
+                }
+            };
+            if !filled {
+                let needs = match name {
+                    "place" => "a `places` list",
+                    "object" => "an `objects` list",
+                    _ => "`hands` other than `none`",
+                };
+                problems.push(
+                    &key("text"),
+                    format!("`{{{name}}}` needs {needs} on the interaction"),
+                );
+            }
+            rest = &after[close + 1..];
+        }
+        let mut bound_places: Vec<Option<usize>> = Vec::new();
+        for (j, p) in inter.places.iter().enumerate() {
+            match place_index(p) {
+                Some(x) => bound_places.push(Some(x)),
+                None => problems.push(
+                    &[k("interactions"), Seg::I(i), k("places"), Seg::I(j)],
+                    format!(
+                        "`{p}` is not a place of the scene (places: {})",
+                        places.join(", ")
+                    ),
+                ),
+            }
+        }
+        let mut bound_objects: Vec<Option<usize>> = Vec::new();
+        for (j, o) in inter.objects.iter().enumerate() {
+            match object_index(o) {
+                Some(x) => bound_objects.push(Some(x)),
+                None => problems.push(
+                    &[k("interactions"), Seg::I(i), k("objects"), Seg::I(j)],
+                    format!(
+                        "`{o}` is not an object of the scene (objects: {})",
+                        objects.join(", ")
+                    ),
+                ),
+            }
+        }
+        let hold = match (inter.hold, inter.objects.is_empty()) {
+            (Some(_), true) => {
+                problems.push(
+                    &key("hold"),
+                    "`hold` needs an `objects` list on the interaction".into(),
+                );
+                None
+            }
+            (None, true) => None,
+            (h, false) => Some(h.unwrap_or(Hold::Keep)),
+        };
+        if matches!(hold, Some(Hold::Take | Hold::Release)) && inter.hands == HandsFile::None {
+            problems.push(
+                &key("hands"),
+                "`none`: taking or putting down an object needs `left`, `right`, `one` or `both`"
+                    .into(),
+            );
+        }
+        if bound_places.is_empty() {
+            bound_places.push(None);
+        }
+        if bound_objects.is_empty() {
+            bound_objects.push(None);
+        }
+        let hands: Vec<Option<Hand>> = match inter.hands {
+            HandsFile::None => vec![None],
+            HandsFile::Left => vec![Some(Hand::Left)],
+            HandsFile::Right => vec![Some(Hand::Right)],
+            HandsFile::One => vec![Some(Hand::Left), Some(Hand::Right)],
+            HandsFile::Both => vec![Some(Hand::Both)],
+        };
+        // `{place}` in requires/leaves names the bound place.
+        let resolve_at = |name: &str, place: Option<usize>, field: &[Seg]| {
+            if name == "{place}" {
+                return match place {
+                    Some(p) => Ok(Some(p)),
+                    None => Err((
+                        field.to_vec(),
+                        "`{place}` needs a `places` list".to_string(),
+                    )),
+                };
+            }
+            at_value(name).map_err(|e| (field.to_vec(), e))
+        };
+        if problems.found.len() > before {
+            continue;
+        }
+        for &place in &bound_places {
+            for &object in &bound_objects {
+                for &hand in &hands {
+                    let mut requires = Vec::new();
+                    let mut errs: Vec<(Vec<Seg>, String)> = Vec::new();
+                    if let Some(p) = &inter.requires.posture {
+                        requires.push(Requirement::Posture(p.to_vec()));
+                    }
+                    if let Some(at) = &inter.requires.at {
+                        let mut list = Vec::new();
+                        for a in at.to_vec() {
+                            match resolve_at(&a, place, &key("requires")) {
+                                Ok(p) => list.push(p),
+                                Err(e) => errs.push(e),
+                            }
+                        }
+                        requires.push(Requirement::At(list));
+                    }
+                    if let Some(not_at) = &inter.requires.not_at {
+                        let mut list = Vec::new();
+                        for a in not_at.to_vec() {
+                            match resolve_at(&a, place, &key("requires")) {
+                                Ok(p) => list.push(p),
+                                Err(e) => errs.push(e),
+                            }
+                        }
+                        requires.push(Requirement::NotAt(list));
+                    }
+                    if inter.requires.empty_hands {
+                        requires.push(Requirement::EmptyHands);
+                    }
+                    requires.extend(Requirement::for_hands(hand, hold, object));
+                    let leaves_at = match inter.leaves.at.as_deref() {
+                        None => None,
+                        Some(a) => match resolve_at(a, place, &key("leaves")) {
+                            Ok(p) => Some(p),
+                            Err(e) => {
+                                errs.push(e);
+                                None
+                            }
+                        },
+                    };
+                    if let Some((field, message)) = errs.into_iter().next() {
+                        problems.push(&field, message);
+                        continue;
+                    }
+                    candidates.push(Candidate {
+                        interaction: i,
+                        motion_type: inter.motion_type.clone(),
+                        template: text.to_string(),
+                        place,
+                        object,
+                        hand,
+                        hold,
+                        requires,
+                        effect: Effect {
+                            posture: inter.leaves.posture,
+                            at: leaves_at,
+                            hold: hold
+                                .zip(object)
+                                .zip(hand)
+                                .map(|((h, o), hand)| (h, o, hand)),
+                        },
+                        weight: inter.weight,
+                    });
+                }
+            }
+        }
+    }
+    if candidates.len() > MAX_CANDIDATES {
+        problems.push(
+            &[k("interactions")],
+            format!(
+                "expand into {} instructions (places x objects x hands); at most \
+                 {MAX_CANDIDATES} are planned",
+                candidates.len()
+            ),
+        );
+    }
+
+    // Balance.
+    let strength = file.balance.strength;
+    if !(strength.is_finite() && (0.0..=10.0).contains(&strength)) {
+        problems.push(
+            &[k("balance"), k("strength")],
+            format!("{strength}: expected a number from 0 to 10"),
+        );
+    }
+    let scene_types: BTreeSet<&str> = candidates.iter().map(|c| c.motion_type.as_str()).collect();
+    let mut target = BTreeMap::new();
+    if file.balance.target.is_empty() {
+        for t in &scene_types {
+            target.insert(t.to_string(), 1.0);
+        }
+    } else {
+        for (t, w) in &file.balance.target {
+            let key = [k("balance"), k("target"), k(t)];
+            if let Err(e) = check_type(taxonomy, t) {
+                problems.push(&key, e);
+            } else if !scene_types.contains(t.as_str()) {
+                problems.push(
+                    &key,
+                    format!("no interaction of the scene has type `{t}`: a session cannot add it"),
+                );
+            }
+            if !finite_positive(*w) {
+                problems.push(&key, format!("{w}: expected a share above 0"));
+            }
+            target.insert(t.clone(), *w);
+        }
+    }
+    let total: f64 = target.values().sum();
+    if total > 0.0 && total.is_finite() {
+        for v in target.values_mut() {
+            *v /= total;
+        }
+    }
+
+    Scene {
+        name,
+        places,
+        objects,
+        start,
+        end,
+        limit,
+        seconds: file.limits.seconds,
+        default_seconds: default_secs,
+        strength,
+        target,
+        candidates,
+    }
+}
