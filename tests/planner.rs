@@ -623,3 +623,76 @@ fn a_scene_without_a_valid_session_names_the_requirement() {
         "{stderr}"
     );
 }
+
+#[test]
+fn the_loop_build_plan_capture_read_back_rebuild_adds_the_session_to_the_counts() {
+    // Build (the demo), plan the next session from it, "capture" it (CMU 01_01 stands in for the
+    // recording, its log timed as an operator would), add it as a source and rebuild: the
+    // rebuilt dataset holds the demo's clips plus one per instruction, by motion type.
+    let work = tempfile::tempdir().unwrap();
+    let demo_dataset = demo().join("demo");
+    let sessions = work.path().join("sessions");
+    run_ok(
+        motionforge()
+            .args([
+                "plan-session",
+                "--seed",
+                "42",
+                "--capture",
+                "lr-0042",
+                "--scene",
+            ])
+            .arg(scene_path())
+            .arg("--dataset")
+            .arg(&demo_dataset)
+            .arg("-o")
+            .arg(&sessions),
+    );
+    let counts = DatasetCounts::read(&demo_dataset).unwrap();
+    let session = plan(living_room(), &counts, 42).unwrap();
+    let log = std::fs::read_to_string(sessions.join("lr-0042.csv")).unwrap();
+    assert_eq!(
+        log,
+        event_log_csv(&session),
+        "the binary wrote the library's session"
+    );
+    let cap = cmu();
+    let seconds = cap.motion.num_frames() as f64 / cap.motion.fps - 0.5;
+    let estimates: Vec<f64> = session.steps.iter().map(|s| s.seconds).collect();
+    let (filled, _) = fill_times(&log, &estimates, seconds);
+    std::fs::write(sessions.join("lr-0042.csv"), filled).unwrap();
+    std::fs::copy(
+        shared_data().join("cmu/01_01.bvh"),
+        sessions.join("lr-0042.bvh"),
+    )
+    .unwrap();
+
+    let fixtures = repo().join("fixtures");
+    let fixtures = fixtures.display();
+    let config = std::fs::read_to_string(repo().join("fixtures/demo.toml"))
+        .unwrap()
+        .replace("output = \"../out\"", "output = \"out\"")
+        .replace(
+            "\"bandai-namco-1/",
+            &format!("\"{fixtures}/bandai-namco-1/"),
+        )
+        .replace("\"cmu/", &format!("\"{fixtures}/cmu/"))
+        .replace("\"humanml3d/", &format!("\"{fixtures}/humanml3d/"))
+        + "\n[[sources]]\nname = \"sessions\"\ncaptures = [\"sessions/*.bvh\"]\nprofile = \"cmu\"\n\
+           [sources.labels]\nkind = \"event_log\"\npath = \"sessions/*.csv\"\n";
+    std::fs::write(work.path().join("motionforge.toml"), config).unwrap();
+    run_ok(
+        motionforge()
+            .args(["build", "--config"])
+            .arg(work.path().join("motionforge.toml")),
+    );
+    let rebuilt = DatasetCounts::read(&work.path().join("out/demo")).unwrap();
+    let mut expected = counts.clips.clone();
+    for (t, n) in &session.session_counts {
+        *expected.entry(t.clone()).or_default() += n;
+    }
+    assert_eq!(rebuilt.clips, expected);
+    let before = kl_to_target(&counts.clips, &living_room().target).unwrap();
+    let after = kl_to_target(&rebuilt.clips, &living_room().target).unwrap();
+    assert!(after < before, "{after} vs {before}");
+}

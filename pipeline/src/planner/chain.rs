@@ -115,10 +115,11 @@ pub(super) fn seconds_of(scene: &Scene, counts: &DatasetCounts, motion_type: &st
         .unwrap_or(scene.default_seconds)
 }
 
-/// Walks the chain: at each step, the candidates whose requirements hold and from whose result
-/// the end is reachable within what remains of the budget, drawn with probability proportional
-/// to scene weight times balance factor (the previous instruction again only when nothing else
-/// is allowed).
+/// Walks the chain. At each step the allowed instructions are those whose requirements hold and
+/// from whose result the end is reachable within what remains of the budget (the previous
+/// instruction again only when nothing else is allowed). A motion type among theirs is drawn
+/// with probability proportional to its balance factor times the mean scene weight of its
+/// allowed instructions, then one of them in proportion to its weight.
 pub(super) fn walk(
     scene: &Scene,
     graph: &Graph,
@@ -169,24 +170,38 @@ pub(super) fn walk(
             .filter(|&(c, _)| Some(c) != previous)
             .collect();
         let pool = if fresh.is_empty() { allowed } else { fresh };
+        // First the motion type, then the instruction of that type: a type does not gain
+        // weight by expanding into many instructions (four `pick up`s: two objects, two hands).
         let balance = factors(&scene.target, &running, scene.strength);
-        let weights: Vec<f64> = pool
+        let mut by_type: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
+        for (k, &(c, _)) in pool.iter().enumerate() {
+            by_type
+                .entry(scene.candidates[c].motion_type.as_str())
+                .or_default()
+                .push(k);
+        }
+        let type_weights: Vec<f64> = by_type
             .iter()
-            .map(|&(c, _)| {
-                let cand = &scene.candidates[c];
-                cand.weight * balance.get(&cand.motion_type).copied().unwrap_or(1.0)
+            .map(|(t, ks)| {
+                let mean = ks
+                    .iter()
+                    .map(|&k| scene.candidates[pool[k].0].weight)
+                    .sum::<f64>()
+                    / ks.len() as f64;
+                mean * balance.get(*t).copied().unwrap_or(1.0)
             })
             .collect();
-        let total: f64 = weights.iter().sum();
-        let mut x = rng.f64() * total;
-        let mut pick = pool.len() - 1;
-        for (k, w) in weights.iter().enumerate() {
-            if x < *w {
-                pick = k;
-                break;
-            }
-            x -= w;
-        }
+        let members = by_type
+            .into_values()
+            .nth(draw(&mut rng, &type_weights))
+            .unwrap_or_default();
+        let member_weights: Vec<f64> = members
+            .iter()
+            .map(|&k| scene.candidates[pool[k].0].weight)
+            .collect();
+        let Some(&pick) = members.get(draw(&mut rng, &member_weights)) else {
+            break;
+        };
         let (c, next) = pool[pick];
         let cand = &scene.candidates[c];
         *session_counts.entry(cand.motion_type.clone()).or_default() += 1;
@@ -218,6 +233,19 @@ pub(super) fn walk(
         target: scene.target.clone(),
         unreachable: never_possible(scene, graph),
     })
+}
+
+/// An index drawn with probability proportional to `weights` (all finite and positive).
+fn draw(rng: &mut fastrand::Rng, weights: &[f64]) -> usize {
+    let total: f64 = weights.iter().sum();
+    let mut x = rng.f64() * total;
+    for (k, w) in weights.iter().enumerate() {
+        if x < *w {
+            return k;
+        }
+        x -= w;
+    }
+    weights.len().saturating_sub(1)
 }
 
 /// The error for a scene whose end no reachable state meets, naming the requirement.

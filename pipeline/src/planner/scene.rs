@@ -161,7 +161,7 @@ impl Default for BalanceFile {
 }
 
 /// Measured on the living room from the demo's counts (docs/planner.md): greedier strengths
-/// balance more (mean KL after a session 0.65 at 1, 0.56 at 2, 0.48 at 4), but leave the scene's
+/// balance more (mean KL after a session 0.67 at 1, 0.58 at 2, 0.50 at 4), but leave the scene's
 /// weights and the seed less say; 2 is the middle.
 fn default_strength() -> f64 {
     2.0
