@@ -608,6 +608,56 @@ fn a_scene_without_a_valid_session_names_the_requirement() {
         "the end's posture cannot be reached from lying: {err}"
     );
 
+    // Reachable, but not within the limit: getting up and walking to the table take two.
+    let (_d2, over) = scene_with(|t| {
+        t.replacen(
+            "posture = \"standing\"\n\n# What",
+            "posture = \"lying\"\nat = \"sofa\"\n\n# What",
+            1,
+        )
+        .replacen("instructions = 16", "instructions = 1", 1)
+        .replacen(
+            "[end]\nposture = \"standing\"",
+            "[end]\nposture = \"standing\"\nat = \"table\"",
+            1,
+        )
+    });
+    let err = plan(&Scene::load(&over).unwrap(), &DatasetCounts::default(), 1).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PlanError::OverBudget {
+                needed: 2,
+                budget: 1,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("limits.instructions = 1"), "{err}");
+
+    // Start and end kneeling, and nothing can be done kneeling: each interaction's first unmet
+    // requirement is named.
+    let (_d3, stuck) = scene_with(|t| {
+        t.replacen(
+            "[start]\nposture = \"standing\"",
+            "[start]\nposture = \"kneeling\"",
+            1,
+        )
+        .replacen(
+            "[end]\nposture = \"standing\"",
+            "[end]\nposture = \"kneeling\"",
+            1,
+        )
+    });
+    let err = plan(&Scene::load(&stuck).unwrap(), &DatasetCounts::default(), 1).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("no instruction can start from kneeling")
+            && text.contains("interactions[10] `stand up from the sofa` needs posture sitting"),
+        "{text}"
+    );
+
     // Through the binary: exit code 2 and the requirement on standard error.
     let out = motionforge()
         .args(["plan-session", "--seed", "1", "--scene"])

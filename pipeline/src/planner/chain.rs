@@ -282,8 +282,7 @@ fn no_first_step(scene: &Scene, graph: &Graph) -> PlanError {
         };
         let line = format!(
             "interactions[{}] `{}` {why}",
-            cand.interaction,
-            cand.text(scene)
+            cand.interaction, cand.template
         );
         if !reasons.contains(&line) {
             reasons.push(line);
