@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use common::*;
 use motionforge::motion::{BodyPart, ProfileSpec};
 use motionforge::parts::answer::parse_part_answer;
-use motionforge::parts::eval::{Evaluation, Gold, evaluate, format_table, read_gold};
+use motionforge::parts::eval::{Evaluation, Gold, GoldLabel, evaluate, format_table, read_gold};
 use motionforge::parts::lexicon::label_text;
 use motionforge::parts::velocity::{agreement, part_scores};
 use motionforge::parts::{PartSet, part_name};
@@ -205,6 +205,54 @@ fn embedded_labeller_on_the_gold_texts_and_against_gpt3() {
     }
     assert!(embedded.missing.is_empty());
 
+    // The fixed development split (FNV-1a parity of the text): the lexicon's failure classes were
+    // found on the tuning half and on BABEL's texts; the held-out half was only scored.
+    let (tuning, held_out) = gold.split();
+    assert_eq!((tuning.len(), held_out.len()), (28, 24));
+    let tuned = evaluate(&tuning, |t| Some(label_text(t).parts));
+    let held = evaluate(&held_out, |t| Some(label_text(t).parts));
+    let gpt_tuned = evaluate(&tuning, |t| {
+        answers.get(t).map(|a| parse_part_answer(third(a)).parts)
+    });
+    let gpt_held = evaluate(&held_out, |t| {
+        answers.get(t).map(|a| parse_part_answer(third(a)).parts)
+    });
+    println!(
+        "{}",
+        format_table(&[
+            ("Embedded, tuning half", &tuned),
+            ("Embedded, held-out half", &held),
+            ("GPT-3, tuning half", &gpt_tuned),
+            ("GPT-3, held-out half", &gpt_held),
+        ])
+    );
+    for entry in &held_out.entries {
+        let l = label_text(&entry.text);
+        let wrong: Vec<&str> = BodyPart::ALL
+            .into_iter()
+            .zip(entry.labels)
+            .filter(|(part, g)| match g {
+                GoldLabel::Yes => !l.parts.contains(*part),
+                GoldLabel::No => l.parts.contains(*part),
+                GoldLabel::Sometimes => false,
+            })
+            .map(|(part, _)| part_name(part))
+            .collect();
+        if !wrong.is_empty() {
+            println!(
+                "  held-out miss: {:?} -> [{}] wrong on {wrong:?}",
+                entry.text, l.parts
+            );
+        }
+    }
+    assert_eq!(tuned.correct, TUNING_CORRECT);
+    assert_eq!(held.correct, HELD_OUT_CORRECT);
+    assert!(
+        embedded.mean >= 0.92,
+        "the goal of issue 16: mean {:.4} on the development gold",
+        embedded.mean
+    );
+
     // Held-out-style check: agreement with GPT-3's parsed answers on the BABEL texts that are not
     // gold texts (the ones the lexicon's defaults were checked against), and on all of them.
     let gold_texts: Vec<&str> = gold.texts().collect();
@@ -248,12 +296,22 @@ fn embedded_labeller_on_the_gold_texts_and_against_gpt3() {
     assert_eq!(unknown, UNKNOWN_TEXTS);
 }
 
-const EMBEDDED_CORRECT: [usize; 6] = [45, 41, 47, 48, 48, 47];
-/// (45/50 + 41/51 + 47/51 + 48/51 + 48/50 + 47/50) / 6.
-const EMBEDDED_MEAN: f64 = 0.911111;
-/// Texts (of 6,466) on which the lexicon agrees with GPT-3, per part.
-const AGREE_COUNTS: [usize; 6] = [5520, 4160, 5886, 5926, 5952, 5941];
-const UNKNOWN_TEXTS: usize = 175;
+/// Before the failure classes of issue 16 were fixed: [45, 41, 47, 48, 48, 47], mean 0.911111;
+/// tuning half [22, 20, 24, 24, 24, 24] (mean 0.8685), held-out half [23, 21, 23, 24, 24, 23]
+/// (mean 0.9583).
+const EMBEDDED_CORRECT: [usize; 6] = [45, 47, 47, 48, 48, 47];
+/// (45/50 + 47/51 + 47/51 + 48/51 + 48/50 + 47/50) / 6.
+const EMBEDDED_MEAN: f64 = 0.930719;
+/// Of 26, 27, 27, 27, 26, 26 counted.
+const TUNING_CORRECT: [usize; 6] = [22, 25, 24, 24, 24, 24];
+/// Of 24 counted on every part.
+const HELD_OUT_CORRECT: [usize; 6] = [23, 22, 23, 24, 24, 23];
+/// Texts (of 6,466) on which the lexicon agrees with GPT-3, per part (before issue 16: [5520,
+/// 4160, 5886, 5926, 5952, 5941]).
+const AGREE_COUNTS: [usize; 6] = [5528, 4383, 5899, 5941, 5966, 5956];
+/// 175 before issue 16: `curve 90 degrees to the right` became known (a turn), `untangle self from
+/// jump rope` and `pretend to be a mime on a trap on a box` unknown (nouns after `from`, `on`).
+const UNKNOWN_TEXTS: usize = 176;
 
 /// Content label of a Bandai file name `dataset-1_{content}_{style}_{take}.bvh`.
 fn bandai_content(path: &std::path::Path) -> String {

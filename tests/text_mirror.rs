@@ -536,3 +536,147 @@ fn hand_fields_mirror() {
         assert_eq!(mirror_side_word(keep).unwrap_or(keep), keep);
     }
 }
+
+/// Issue 16: the two misspellings found in real KIT-ML captions. The captions themselves are not
+/// in `../shared/data` (KIT-ML is not bundled), so the words are checked alone and in a caption's
+/// usual frame.
+#[test]
+fn kit_ml_typos_are_mirrored() {
+    assert_eq!(mirror_text("conterclockwise"), "clockwise");
+    assert_eq!(mirror_text("degreeleftwards"), "degreerightwards");
+    assert_eq!(
+        mirror_text("a person walks in a conterclockwise circle"),
+        "a person walks in a clockwise circle"
+    );
+    assert_eq!(
+        mirror_text("a person turns 90 degreeleftwards"),
+        "a person turns 90 degreerightwards"
+    );
+    assert_eq!(
+        rotation_words("conterclockwise"),
+        [Rotation::Counterclockwise]
+    );
+    assert_eq!(side_words("turns 90 degreeleftwards"), [Side::Left]);
+}
+
+/// The real texts outside [`Corpus`]: SINC's spatial pairs, BABEL's raw and processed labels, and
+/// the Bandai Namco content labels (file-name captions such as `wave-left-hand`).
+fn other_real_texts() -> Vec<String> {
+    let data = common::shared_data();
+    let mut texts = Vec::new();
+    for split in ["train", "val"] {
+        let path = data.join(format!("sinc/labels_{split}_spatial.json"));
+        let pairs = read_json(&path);
+        let pairs = pairs
+            .as_object()
+            .unwrap_or_else(|| panic!("{}: not an object", path.display()));
+        for pair in pairs.values() {
+            for text in pair.as_array().into_iter().flatten().take(2) {
+                texts.extend(text.as_str().map(str::to_owned));
+            }
+        }
+    }
+    fn labels(value: &Value, out: &mut Vec<String>) {
+        match value {
+            Value::Object(map) => {
+                for (key, v) in map {
+                    match v {
+                        Value::String(s) if key == "raw_label" || key == "proc_label" => {
+                            out.push(s.clone())
+                        }
+                        _ => labels(v, out),
+                    }
+                }
+            }
+            Value::Array(items) => items.iter().for_each(|v| labels(v, out)),
+            _ => {}
+        }
+    }
+    let babel = read_json(&data.join("babel/babel_records_from_notebook_outputs.json"));
+    let before = texts.len();
+    labels(&babel, &mut texts);
+    assert!(texts.len() > before, "BABEL records have labels");
+    for folder in ["bandai-namco-1", "bandai-namco-2-subset"] {
+        let list = read(&data.join(folder).join("cfg/content_label.txt"));
+        texts.extend(list.lines().map(str::to_owned));
+    }
+    texts
+}
+
+/// Issue 16: no false positive on a word that merely contains a side word. Every word of every
+/// real caption, and every word of WordNet 3.0 (`schemas/pos-lexicon.tsv`), is mirrored alone;
+/// only the side and rotation words themselves may change.
+#[test]
+fn words_that_merely_contain_a_side_word_stay() {
+    let corpus = Corpus::load();
+    let mut texts: BTreeSet<String> = corpus.all_texts().into_iter().map(str::to_owned).collect();
+    texts.extend(other_real_texts());
+    let mut caption_words: BTreeSet<String> = BTreeSet::new();
+    for text in &texts {
+        caption_words.extend(words(text).into_iter().map(str::to_lowercase));
+    }
+    eprintln!(
+        "{} real texts, {} distinct words",
+        texts.len(),
+        caption_words.len()
+    );
+    let wordnet_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/pos-lexicon.tsv");
+    let wordnet: BTreeSet<String> = read(&wordnet_path)
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| l.split('\t').next())
+        .map(str::to_lowercase)
+        .collect();
+    assert!(wordnet.len() > 70_000, "{}", wordnet_path.display());
+    let side_like = |w: &str| ["left", "right", "clock"].iter().any(|s| w.contains(s));
+    let changed = |set: &BTreeSet<String>| -> Vec<String> {
+        set.iter()
+            .filter(|w| mirror_text(w) != **w || !side_words(w).is_empty())
+            .cloned()
+            .collect()
+    };
+    let caption_lookalikes: Vec<&String> = caption_words
+        .iter()
+        .filter(|w| side_like(w) && swap_side(w).is_none() && !is_rotation_part(w))
+        .collect();
+    let wordnet_lookalikes = wordnet
+        .iter()
+        .filter(|w| side_like(w) && swap_side(w).is_none() && !is_rotation_part(w))
+        .count();
+    eprintln!(
+        "caption words containing a side word: {caption_lookalikes:?}; WordNet: {wordnet_lookalikes}"
+    );
+    assert_eq!(
+        caption_lookalikes,
+        ["clock", "fright", "upright"],
+        "the real captions' look-alikes"
+    );
+    assert_eq!(
+        changed(&caption_words),
+        [
+            "anticlockwise",
+            "clockwise",
+            "counterclockwise",
+            "left",
+            "lefts",
+            "leftward",
+            "right"
+        ],
+        "only side and rotation words change in real captions"
+    );
+    assert!(wordnet_lookalikes >= 70, "{wordnet_lookalikes}");
+    assert_eq!(
+        changed(&wordnet),
+        [
+            "anticlockwise",
+            "clockwise",
+            "contraclockwise",
+            "counterclockwise",
+            "left",
+            "leftmost",
+            "right",
+            "rightmost"
+        ],
+        "only side and rotation words change among WordNet's 77,000"
+    );
+}

@@ -196,7 +196,9 @@ enum Command {
     /// Mirror caption lines: swap left/right and clockwise/counterclockwise, whole words only.
     ///
     /// Reads FILE (or standard input) line by line and writes the mirrored lines to standard
-    /// output, e.g. to mirror an existing HumanML3D-style caption set.
+    /// output, e.g. to mirror an existing HumanML3D-style caption set. Common misspellings
+    /// (`rigth`, `conterclockwise`) and a side word glued to the word before it
+    /// (`degreeleftwards`) are mirrored too; `upright`, `bright` or `leftover` are not.
     MirrorText {
         /// Text file to mirror; standard input when absent.
         file: Option<PathBuf>,

@@ -13,6 +13,19 @@
 //! boundaries (`left-handed`, `turn_left`) while `bright`, `upright`, `leftover`, `righteous`,
 //! `copyright` and `lefthand` are left alone.
 //!
+//! Typos in real captions (`schemas/side-words.toml`, compiled in):
+//!
+//! * misspelled side words (`rigth`, `lfet`, `leftwords`...) mirror to the correct spelling;
+//! * the rotation family takes misspelled prefixes and spellings (`conterclockwise`,
+//!   `counter clokwise`);
+//! * a side word glued to the word before it (`degreeleftwards`, `turnleft`) is mirrored in place
+//!   (`degreerightwards`) when that word has two letters or more and the whole word is not an
+//!   English word that merely ends in a side word (`upright`, `alright`, `copyright`, `bright`:
+//!   the file's `keep` list, every such word of WordNet 3.0). A side word glued to the word after
+//!   it (`leftover`, `lefthand`) and a rotation word glued to anything are left alone: the first
+//!   reads as a longer word, and `conterclockwise` shows that a glued "prefix" may be a misspelled
+//!   `counter`, whose mirror would then be wrong.
+//!
 //! `right angle` is geometry, not a side, when it reads `a right angle`, `right angles` or
 //! `right-angled`; those stay as they are. A bare `right angle` is kept as a side because real
 //! labels pair it with `left angle` ("rotate right angle" / "rotate left angle"). Other non-side
@@ -20,9 +33,10 @@
 //! have seen and guessing them would break genuine sides ("turn right away from the wall").
 //!
 //! Mirroring twice returns the input for side words written in lower, UPPER or Title case. The
-//! rotation family is exempt: its many spellings of counterclockwise collapse to `clockwise`, whose
-//! mirror is always spelled `counterclockwise`.
+//! rotation family and misspellings are exempt: their many spellings collapse to the correct one
+//! (`rigth` -> `left` -> `right`, `anticlockwise` -> `clockwise` -> `counterclockwise`).
 
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Range;
 use std::sync::LazyLock;
 
@@ -106,7 +120,26 @@ const WORDS: &[(&str, &str, Meaning)] = &[
 /// Letters are ASCII case-insensitive only: Unicode folding would let `K` (Kelvin sign) or `ſ`
 /// stand in for letters and then miss the table.
 static CANDIDATE: LazyLock<Regex> = LazyLock::new(|| {
-    Regex::new(
+    let spellings = &*SPELLINGS;
+    let join = |items: Vec<String>| items.join("|");
+    let clockwise = join(
+        spellings
+            .rotation
+            .clockwise
+            .iter()
+            .map(|s| clockwise_pattern(s))
+            .collect(),
+    );
+    let counter = join(
+        spellings
+            .rotation
+            .counter
+            .iter()
+            .map(|s| regex::escape(s))
+            .collect(),
+    );
+    let sides = join(spellings.sides.iter().map(|s| regex::escape(s)).collect());
+    Regex::new(&format!(
         r"(?x)
         (?:
             (?P<keep>(?i-u:
@@ -114,16 +147,15 @@ static CANDIDATE: LazyLock<Regex> = LazyLock::new(|| {
               | right [\ \t_-]+ angle [sd]
             ))
           | (?P<word>(?i-u:
-                (?:counter|anti) [\ \t_-]* clock [_-]? wise
-              | clock [_-]? wise
-              | left (?:wards? | most | s)?
-              | right (?:wards? | most | s)?
+                (?:{counter}) [\ \t_-]* (?:{clockwise})
+              | (?:{clockwise})
+              | (?:{sides})
             ))
         )
-        (?: [^\p{Alphabetic}\p{N}] | \z )
-        ",
-    )
-    .expect("the side-word regex is a valid literal")
+        (?: [^\p{{Alphabetic}}\p{{N}}] | \z )
+        "
+    ))
+    .expect("the side-word regex is built from literals and the bundled spellings")
 });
 
 /// A recognised span of the input: either a word to mirror, or a phrase that contains a side word
@@ -145,12 +177,116 @@ fn canonical(word: &str) -> String {
         .collect()
 }
 
-fn lookup(word: &str) -> Option<(&'static str, Meaning)> {
-    let key = canonical(word);
-    WORDS
+/// The typo data of `schemas/side-words.toml`, as written.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TypoFile {
+    misspellings: BTreeMap<String, String>,
+    rotation: RotationSpellings,
+    glued: Glued,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RotationSpellings {
+    counter: Vec<String>,
+    clockwise: Vec<String>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Glued {
+    keep: Vec<String>,
+}
+
+/// Every spelling the mirror reads, canonical (lowercase, no separators), with its meaning.
+struct Spellings {
+    /// Spelling -> (mirror, meaning).
+    table: HashMap<String, (&'static str, Meaning)>,
+    /// Side-word spellings, longest first: the regex alternatives.
+    sides: Vec<String>,
+    rotation: RotationSpellings,
+    /// English words that end in a side word (`upright`).
+    keep: HashSet<String>,
+}
+
+const TYPOS_TOML: &str = include_str!("../../schemas/side-words.toml");
+
+/// The bundled typo data is part of the source, like the regex below: a unit test loads it, so a
+/// failure here is a build defect, never an input's.
+static SPELLINGS: LazyLock<Spellings> = LazyLock::new(|| {
+    let file: TypoFile = toml::from_str(TYPOS_TOML)
+        .expect("schemas/side-words.toml is valid (a unit test loads it)");
+    let mut table: HashMap<String, (&'static str, Meaning)> = WORDS
         .iter()
-        .find(|(spelling, _, _)| *spelling == key)
-        .map(|&(_, mirror, meaning)| (mirror, meaning))
+        .map(|&(spelling, mirror, meaning)| (spelling.to_string(), (mirror, meaning)))
+        .collect();
+    let mut sides: Vec<String> = WORDS
+        .iter()
+        .filter(|(_, _, m)| matches!(m, Meaning::Side(_)))
+        .map(|(spelling, _, _)| spelling.to_string())
+        .collect();
+    for (typo, correct) in file.misspellings {
+        if let Some(&entry) = table.get(&correct) {
+            table.insert(typo.clone(), entry);
+            sides.push(typo);
+        }
+    }
+    let counterclockwise = ("clockwise", Meaning::Rotation(Rotation::Counterclockwise));
+    for cw in &file.rotation.clockwise {
+        table.insert(
+            cw.clone(),
+            ("counterclockwise", Meaning::Rotation(Rotation::Clockwise)),
+        );
+        for counter in &file.rotation.counter {
+            table.insert(format!("{counter}{cw}"), counterclockwise);
+        }
+    }
+    // Longest first, so `leftwards` is tried before `left` and the trailing boundary decides.
+    sides.sort_by(|a, b| b.len().cmp(&a.len()).then_with(|| a.cmp(b)));
+    Spellings {
+        table,
+        sides,
+        rotation: file.rotation,
+        keep: file.glued.keep.into_iter().collect(),
+    }
+});
+
+fn lookup(word: &str) -> Option<(&'static str, Meaning)> {
+    SPELLINGS.table.get(&canonical(word)).copied()
+}
+
+/// A clockwise spelling as a regex: `clock` may be split from `wise` by a separator.
+fn clockwise_pattern(spelling: &str) -> String {
+    match spelling.strip_prefix("clock") {
+        Some(rest) if rest.starts_with('w') => format!(r"clock[\ \t_-]?{}", regex::escape(rest)),
+        _ => regex::escape(spelling),
+    }
+}
+
+/// Whether a side word at `start` glued to the word before it (`degreeleftwards`) is one: the
+/// word before has two ASCII letters or more and ends in one, and the whole word is not an
+/// English word that merely ends in a side word (`upright`, `alright`), nor its plural.
+fn glued_side(text: &str, start: usize, end: usize) -> bool {
+    let before = &text[..start];
+    let prefix_start = before
+        .char_indices()
+        .rev()
+        .take_while(|&(_, c)| is_word_char(c))
+        .last()
+        .map_or(start, |(i, _)| i);
+    let prefix = &text[prefix_start..start];
+    let letters = prefix.chars().filter(char::is_ascii_alphabetic).count();
+    let ends_in_letter = prefix
+        .chars()
+        .next_back()
+        .is_some_and(|c| c.is_ascii_alphabetic());
+    if !prefix.is_ascii() || letters < 2 || !ends_in_letter {
+        return false;
+    }
+    let whole = text[prefix_start..end].to_ascii_lowercase();
+    let singular = whole.strip_suffix('s').unwrap_or(&whole);
+    !SPELLINGS.keep.contains(&whole) && !SPELLINGS.keep.contains(singular)
 }
 
 fn token_from(caps: &Captures<'_>) -> Option<Token> {
@@ -184,7 +320,9 @@ fn tokens(text: &str) -> Vec<Token> {
             .chars()
             .next_back()
             .is_some_and(is_word_char);
-        if preceded_by_word_char {
+        let glued = matches!(token.entry, Some((_, Meaning::Side(_))))
+            && glued_side(text, token.span.start, token.span.end);
+        if preceded_by_word_char && !glued {
             // Inside a longer word ("bright"): a real word can only start later, but possibly
             // within this candidate ("xa right angle"), so rescan from the next character.
             let step = text[token.span.start..]
@@ -394,6 +532,71 @@ mod tests {
         assert_eq!(mirror_text("right anglesX"), "left anglesX");
         assert_eq!(mirror_text("xa right angle"), "xa left angle");
         assert!(side_words("turn left at a right angle") == [Side::Left]);
+    }
+
+    #[test]
+    fn the_bundled_typo_data_loads() {
+        let spellings = &*SPELLINGS;
+        assert_eq!(lookup("rigth"), Some(("left", Meaning::Side(Side::Right))));
+        assert_eq!(
+            lookup("conter-clockwise"),
+            Some(("clockwise", Meaning::Rotation(Rotation::Counterclockwise)))
+        );
+        assert!(spellings.sides.iter().any(|s| s == "lfet"));
+        assert!(spellings.keep.contains("upright"));
+        // Every misspelling names a known word.
+        let file: TypoFile = toml::from_str(TYPOS_TOML).unwrap();
+        for (typo, correct) in &file.misspellings {
+            assert!(WORDS.iter().any(|w| w.0 == correct), "{typo} = {correct}");
+        }
+    }
+
+    #[test]
+    fn misspelled_side_and_rotation_words() {
+        assert_eq!(mirror_text("turn rigth"), "turn left");
+        assert_eq!(mirror_text("raise lfet hand"), "raise right hand");
+        assert_eq!(mirror_text("Rihgt"), "Left");
+        assert_eq!(mirror_text("drift leftwords"), "drift rightwards");
+        assert_eq!(mirror_text("walk conterclockwise"), "walk clockwise");
+        assert_eq!(mirror_text("counter clokwise"), "clockwise");
+        assert_eq!(mirror_text("anti-clockwize"), "clockwise");
+        assert_eq!(mirror_text("clock wise"), "counterclockwise");
+        assert_eq!(
+            rotation_words("conterclockwise"),
+            [Rotation::Counterclockwise]
+        );
+        assert_eq!(side_words("rigth then lfet"), [Side::Right, Side::Left]);
+    }
+
+    #[test]
+    fn side_words_glued_to_the_word_before() {
+        assert_eq!(
+            mirror_text("turn 90 degreeleftwards"),
+            "turn 90 degreerightwards"
+        );
+        assert_eq!(mirror_text("turnLeft"), "turnRight");
+        assert_eq!(
+            mirror_text("stepright, 90degreeleft"),
+            "stepleft, 90degreeright"
+        );
+        assert_eq!(side_words("degreeleftwards"), [Side::Left]);
+        assert_eq!(mirror_text(&mirror_text("go toright")), "go toright");
+        for text in [
+            "uprights",
+            "Alright",
+            "copyrights",
+            "OUTRIGHT",
+            "playwright",
+            "bright",
+            "xleft",
+            "3right",
+            "leftover",
+            "lefthand",
+            "conterclockwisely",
+            "turnclockwise",
+        ] {
+            assert_eq!(mirror_text(text), text, "{text:?} must stay");
+        }
     }
 
     #[test]

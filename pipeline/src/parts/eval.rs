@@ -57,6 +57,27 @@ impl Gold {
     pub fn texts(&self) -> impl Iterator<Item = &str> {
         self.entries.iter().map(|e| e.text.as_str())
     }
+
+    /// The fixed development split (tuning half, held-out half) by [`is_tuning_text`].
+    pub fn split(&self) -> (Gold, Gold) {
+        let (tuning, held_out) = self
+            .entries
+            .iter()
+            .cloned()
+            .partition(|e| is_tuning_text(&e.text));
+        (Gold { entries: tuning }, Gold { entries: held_out })
+    }
+}
+
+/// Whether a gold text is in the tuning half of the development split: the 64-bit FNV-1a hash
+/// of its UTF-8 bytes is even. The split was fixed before the held-out answers were read, so a
+/// rule tuned on one half can be measured on the other; it depends only on the text, so it is
+/// the same for any gold file and any order.
+pub fn is_tuning_text(text: &str) -> bool {
+    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    hash % 2 == 0
 }
 
 /// Why a gold file does not read.
@@ -282,6 +303,18 @@ mod tests {
         assert!(matches!(err, GoldError::Value { index: 5, .. }), "{err}");
         assert!(err.to_string().contains("right_leg"));
         assert!(matches!(read_gold("{"), Err(GoldError::Json(_))));
+    }
+
+    #[test]
+    fn the_split_depends_on_the_text_only() {
+        // FNV-1a 64 of "" is the offset basis (odd); of "a" it is 0xaf63dc4c8601ec8c (even).
+        assert!(!is_tuning_text(""));
+        assert!(is_tuning_text("a"));
+        let gold = read_gold(GOLD).unwrap();
+        let (tuning, held_out) = gold.split();
+        assert_eq!(tuning.len() + held_out.len(), gold.len());
+        assert!(tuning.texts().all(is_tuning_text));
+        assert!(!held_out.texts().any(is_tuning_text));
     }
 
     #[test]
