@@ -177,6 +177,25 @@ impl Server {
     }
 }
 
+/// Progress events of a build, as words.
+#[derive(Default)]
+struct Recorder(Mutex<Vec<String>>);
+
+impl motionforge::progress::Progress for Recorder {
+    fn requests_started(&self, stage: &str, total: u64) {
+        self.0
+            .lock()
+            .unwrap()
+            .push(format!("requests {stage} {total}"));
+    }
+    fn advanced(&self, stage: &str, n: u64) {
+        self.0.lock().unwrap().push(format!("advanced {stage} {n}"));
+    }
+    fn failed(&self, stage: &str, n: u64) {
+        self.0.lock().unwrap().push(format!("failed {stage} {n}"));
+    }
+}
+
 /// A scratch build of three real Bandai captures with the given extra config.
 fn scratch(extra: &str) -> (tempfile::TempDir, Config) {
     let dir = bandai1_scratch(&WALK_KICK_BYE);
@@ -552,7 +571,26 @@ fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
         "backoff_seconds = 0.01\nmax_retries = 2",
     );
     let (_dir, config) = scratch(&extra);
-    let report = build(&config, &BuildOptions::default()).unwrap();
+    let recorder = Arc::new(Recorder::default());
+    let report = build(
+        &config,
+        &BuildOptions {
+            progress: motionforge::progress::ProgressSink::new(recorder.clone()),
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
+    // The label stage showed its requests as they went: 3 sent, 3 failed.
+    let events = recorder.0.lock().unwrap().clone();
+    assert!(
+        events.contains(&"requests label 3".to_string()),
+        "{events:?}"
+    );
+    assert_eq!(
+        events.iter().filter(|e| *e == "advanced label 1").count(),
+        3
+    );
+    assert_eq!(events.iter().filter(|e| *e == "failed label 1").count(), 3);
     let label_rejects: Vec<_> = report
         .rejects
         .iter()

@@ -101,10 +101,11 @@ impl Asking<'_> {
             }
             RequestEvent::Sending { .. } => {}
             RequestEvent::Finished { ok } => {
-                self.progress.advanced(self.stage, 1);
+                // The failure first, so the progress line of this request counts it.
                 if !ok {
                     self.progress.failed(self.stage, 1);
                 }
+                self.progress.advanced(self.stage, 1);
             }
         }
     }
