@@ -311,6 +311,62 @@ fn bars_count_items_with_an_eta_and_disappear_when_the_stage_ends() {
     assert_eq!(bars.position("compose"), None);
 }
 
+/// An LLM stage: 5 requests, 2 of them failing.
+fn request_run(progress: &dyn Progress) {
+    progress.requests_started("label", 5);
+    for i in 0..5 {
+        // As the client reports a failed request: the failure, then the count.
+        if i % 2 == 1 {
+            progress.failed("label", 1);
+        }
+        progress.advanced("label", 1);
+        // Requests take time; the rate and ETA need some.
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    progress.stage_finished("label", 5, 0);
+}
+
+#[test]
+fn llm_stages_log_requests_rate_errors_and_eta() {
+    let out = logged(LogOptions::default(), || request_run(&LogProgress::new()));
+    let l = lines(&out);
+    assert_eq!(l[0], "label: sending 5 LLM requests", "{out}");
+    // A line per tenth crossed (every request here), the last one being the finish line.
+    assert_eq!(l.len(), 1 + 4 + 1, "{out}");
+    assert!(
+        l[2].starts_with("label: 2 of 5 requests, ") && l[2].contains("/s, 1 error, ETA "),
+        "{out}"
+    );
+    assert!(
+        l[4].contains("4 of 5 requests") && l[4].contains("2 errors"),
+        "{out}"
+    );
+    assert!(l[5].starts_with("label: ran 5, reused 0 in "), "{out}");
+}
+
+#[test]
+fn llm_stage_bars_show_requests_rate_errors_and_eta() {
+    let screen = Screen::default();
+    let bars =
+        BarProgress::with_draw_target(ProgressDrawTarget::term_like(Box::new(screen.clone())));
+    bars.requests_started("label", 4);
+    bars.advanced("label", 1);
+    bars.failed("label", 1);
+    bars.advanced("label", 1);
+    std::thread::sleep(Duration::from_millis(600));
+    let drawn = screen.text();
+    assert!(
+        drawn.contains("label [")
+            && drawn.contains("2/4 requests")
+            && drawn.contains("/s")
+            && drawn.contains("1 error,")
+            && drawn.contains("ETA"),
+        "{drawn}"
+    );
+    bars.stage_finished("label", 4, 0);
+    assert_eq!(bars.position("label"), None);
+}
+
 // ---- config check ----------------------------------------------------------------------------
 
 #[test]

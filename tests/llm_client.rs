@@ -32,6 +32,8 @@ enum Step {
     Hang(Duration),
     /// 200 with this body as JSON content type.
     Raw(&'static str),
+    /// Below this `max_tokens`, a cut-off answer (`finish_reason: "length"`); else echo.
+    CutBelow(u64),
 }
 
 #[derive(Debug, Clone)]
@@ -73,14 +75,17 @@ fn prompt_of(body: &Value) -> String {
 }
 
 fn echo(chat: bool, prompt: &str) -> Response {
-    let text = format!("echo: {prompt}");
+    answer_with(chat, &format!("echo: {prompt}"), "stop")
+}
+
+fn answer_with(chat: bool, text: &str, finish_reason: &str) -> Response {
     let body = if chat {
         json!({"object": "chat.completion", "choices": [
-            {"index": 0, "message": {"role": "assistant", "content": text}, "finish_reason": "stop"}
+            {"index": 0, "message": {"role": "assistant", "content": text}, "finish_reason": finish_reason}
         ]})
     } else {
         json!({"object": "text_completion", "choices": [
-            {"index": 0, "text": text, "finish_reason": "stop"}
+            {"index": 0, "text": text, "finish_reason": finish_reason}
         ]})
     };
     Json(body).into_response()
@@ -102,6 +107,7 @@ async fn handle(
         .map(str::to_string);
     let chat = uri.path().ends_with("/chat/completions");
     let prompt = prompt_of(&body);
+    let max_tokens = body["max_tokens"].as_u64().unwrap_or(0);
     s.seen.lock().unwrap().push(Seen {
         path: uri.path().to_string(),
         auth: auth.clone(),
@@ -137,6 +143,10 @@ async fn handle(
             echo(chat, &prompt)
         }
         Step::Raw(text) => ([(header::CONTENT_TYPE, "application/json")], text).into_response(),
+        Step::CutBelow(limit) if max_tokens < limit => {
+            answer_with(chat, "someone performs guide, chil", "length")
+        }
+        Step::CutBelow(_) => echo(chat, &prompt),
     }
 }
 
@@ -513,28 +523,212 @@ fn client_error_is_not_retried() {
     assert_eq!(server.requests(), 1);
 }
 
-#[test]
-fn connection_refused_is_retried_then_reported() {
-    // A port that was free a moment ago: nothing listens on it.
+/// A port that was free a moment ago: nothing listens on it.
+fn dead_url() -> String {
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap()
         .port();
+    format!("http://127.0.0.1:{port}/v1")
+}
+
+#[test]
+fn nothing_listening_fails_the_probe_at_once_and_sends_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let url = dead_url();
+    let config = LlmConfig {
+        backoff_seconds: 1.0,
+        max_retries: 5,
+        ..LlmConfig::new(&url, "m")
+    };
+    let client = LlmClient::new(config).unwrap();
+    let t = Instant::now();
+    let results = client.complete_all(&strings(&["p", "q", "r"]), &mut cache);
+    let elapsed = t.elapsed();
+    // Without the probe: 3 prompts x 6 attempts with up to 63 s of backoff each.
+    assert!(elapsed < Duration::from_secs(2), "took {elapsed:?}");
+    for r in &results {
+        match r {
+            Err(e @ LlmError::Unreachable { url: u, .. }) => {
+                assert_eq!(u, &url);
+                assert!(e.stops_stage());
+                let text = e.to_string();
+                assert!(
+                    text.contains(&format!("GET {url}/models"))
+                        && text.contains("--offline")
+                        && text.contains("llama-server"),
+                    "{text}"
+                );
+            }
+            other => panic!("expected Unreachable, got {other:?}"),
+        }
+    }
+    assert_eq!(cache.len(), 0);
+    assert!(matches!(client.probe(), Err(LlmError::Unreachable { .. })));
+}
+
+#[test]
+fn the_circuit_breaker_stops_sending_when_the_server_goes_away() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cache = open_cache(dir.path());
+    let server = TestServer::echo();
+    let config = LlmConfig {
+        max_retries: 5,
+        backoff_seconds: 0.05,
+        concurrency: 1,
+        ..server.config()
+    };
+    let client = LlmClient::new(config).unwrap();
+    let probe = client.probe().unwrap();
+    assert_eq!(probe.url, format!("{}/models", server.base_url));
+    assert!(client.complete_all(&strings(&["first"]), &mut cache)[0].is_ok());
+    drop(server);
+    let prompts: Vec<String> = (0..20).map(|i| format!("p{i}")).collect();
+    let t = Instant::now();
+    let results = client.complete_all(&prompts, &mut cache);
+    let open = results
+        .iter()
+        .filter(|r| matches!(r, Err(LlmError::CircuitOpen { failures: 3, .. })))
+        .count();
+    assert_eq!(open, 20, "{:?}", &results[..2]);
+    // Without the breaker: 20 prompts x 6 attempts, each waiting its backoff.
+    assert!(
+        t.elapsed() < Duration::from_secs(3),
+        "took {:?}",
+        t.elapsed()
+    );
+}
+
+#[test]
+fn a_cut_off_answer_fails_and_is_not_cached() {
+    for kind in [RequestKind::Chat, RequestKind::Completion] {
+        let server = TestServer::start(ServerSpec {
+            default: Step::CutBelow(100),
+            ..ServerSpec::default()
+        });
+        let dir = tempfile::tempdir().unwrap();
+        let mut cache = open_cache(dir.path());
+        let config = LlmConfig {
+            kind,
+            max_tokens: 64,
+            ..server.config()
+        };
+        let client = LlmClient::new(config).unwrap();
+        let results = client.complete_all(&strings(&["p"]), &mut cache);
+        match &results[0] {
+            Err(
+                e @ LlmError::Truncated {
+                    max_tokens: 64,
+                    attempts: 1,
+                    preview,
+                },
+            ) => {
+                assert_eq!(preview, "someone performs guide, chil");
+                assert!(!e.stops_stage());
+            }
+            other => panic!("{kind:?}: expected Truncated, got {other:?}"),
+        }
+        assert_eq!(server.requests(), 1, "not retried with the same limit");
+        assert_eq!(cache.len(), 0, "never cached");
+        // Not settled: the next run asks again.
+        client.complete_all(&strings(&["p"]), &mut cache);
+        assert_eq!(server.requests(), 2);
+    }
+}
+
+#[test]
+fn a_cut_off_answer_is_asked_once_more_with_retry_max_tokens() {
+    let server = TestServer::start(ServerSpec {
+        default: Step::CutBelow(100),
+        ..ServerSpec::default()
+    });
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
-        backoff_seconds: 0.01,
-        max_retries: 2,
-        requests_per_minute: 600_000,
-        ..LlmConfig::new(&format!("http://127.0.0.1:{port}/v1"), "m")
+        max_tokens: 64,
+        retry_max_tokens: Some(200),
+        ..server.config()
     };
-    let client = LlmClient::new(config).unwrap();
+    let client = LlmClient::new(config.clone()).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
-    match &results[0] {
-        Err(LlmError::Connect { attempts, .. }) => assert_eq!(*attempts, 3),
-        other => panic!("expected Connect, got {other:?}"),
-    }
+    assert_eq!(answer(&results[0]).text, "echo: p");
+    let seen = server.seen();
+    assert_eq!(seen.len(), 2);
+    assert_eq!(seen[0].body["max_tokens"], 64);
+    assert_eq!(seen[1].body["max_tokens"], 200);
+    // Cached under the config's key, with what was asked and why the server stopped.
+    let entry = cache.get_entry(&config.cache_key("p")).unwrap();
+    assert_eq!(entry.params.max_tokens, 200);
+    assert_eq!(entry.finish_reason.as_deref(), Some("stop"));
+    drop(cache);
+    let text = std::fs::read_to_string(dir.path().join("llm/responses.jsonl")).unwrap();
+    assert!(text.contains(r#""finish_reason":"stop""#), "{text}");
+    let mut cache = open_cache(dir.path());
+    let again = client.complete_all(&strings(&["p"]), &mut cache);
+    assert!(answer(&again[0]).from_cache);
+    assert_eq!(server.requests(), 2, "settled: no request on the rebuild");
+    // Still cut off at the larger limit: one retry only, then the error.
+    let server = TestServer::start(ServerSpec {
+        default: Step::CutBelow(1000),
+        ..ServerSpec::default()
+    });
+    let client = LlmClient::new(LlmConfig {
+        max_tokens: 64,
+        retry_max_tokens: Some(200),
+        ..server.config()
+    })
+    .unwrap();
+    let results = client.complete_all(&strings(&["q"]), &mut open_cache(dir.path()));
+    assert!(
+        matches!(
+            &results[0],
+            Err(LlmError::Truncated {
+                max_tokens: 200,
+                attempts: 2,
+                ..
+            })
+        ),
+        "{results:?}"
+    );
+    assert_eq!(server.requests(), 2);
+}
+
+#[test]
+fn entries_cached_without_a_finish_reason_are_asked_again_once() {
+    let server = TestServer::echo();
+    let dir = tempfile::tempdir().unwrap();
+    let config = server.config();
+    // A line as an earlier version wrote it: no finish_reason, a cut-off answer cached as good;
+    // and an imported answer, which has none either and must be kept.
+    let old = format!(
+        "{{\"key\":\"{}\",\"model\":\"test-model\",\"kind\":\"chat\",\"params\":{{\"temperature\":0.0,\"max_tokens\":256,\"seed\":null}},\"prompt_sha256\":\"x\",\"prompt_preview\":\"walk\",\"response\":\"someone performs guide, chil\",\"source\":\"llm\"}}\n{{\"key\":\"{}\",\"model\":\"test-model\",\"kind\":\"chat\",\"params\":{{\"temperature\":0.0,\"max_tokens\":256,\"seed\":null}},\"prompt_sha256\":\"y\",\"prompt_preview\":\"kick\",\"response\":\"right leg\",\"source\":\"import:gpt3.json\"}}\n",
+        config.cache_key("walk"),
+        config.cache_key("kick")
+    );
+    std::fs::create_dir_all(dir.path().join("llm")).unwrap();
+    std::fs::write(dir.path().join("llm/responses.jsonl"), old).unwrap();
+    let mut cache = open_cache(dir.path());
+    assert_eq!(cache.len(), 2, "old lines load");
+    assert_eq!(cache.corrupt_lines(), 0);
+    // Offline readers still see the old answer.
+    assert_eq!(
+        cache.get(&config.cache_key("walk")),
+        Some("someone performs guide, chil")
+    );
+    let client = LlmClient::new(config.clone()).unwrap();
+    let results = client.complete_all(&strings(&["walk", "kick"]), &mut cache);
+    assert_eq!(answer(&results[0]).text, "echo: walk");
+    assert!(!answer(&results[0]).from_cache);
+    assert_eq!(answer(&results[1]).text, "right leg");
+    assert!(answer(&results[1]).from_cache, "imports are final");
+    assert_eq!(server.requests(), 1);
+    drop(cache);
+    let mut cache = open_cache(dir.path());
+    let again = client.complete_all(&strings(&["walk", "kick"]), &mut cache);
+    assert!(again.iter().all(|r| answer(r).from_cache));
+    assert_eq!(server.requests(), 1, "asked once, then settled");
 }
 
 #[test]
@@ -894,6 +1088,15 @@ fn config_defaults_and_validation() {
         },
         LlmConfig {
             temperature: -1.0,
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+        LlmConfig {
+            max_tokens: 100,
+            retry_max_tokens: Some(100),
+            ..LlmConfig::new("http://h/v1", "m")
+        },
+        LlmConfig {
+            circuit_breaker_failures: 0,
             ..LlmConfig::new("http://h/v1", "m")
         },
     ];

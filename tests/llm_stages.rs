@@ -27,8 +27,65 @@ struct Server {
 struct ServerState {
     requests: Arc<AtomicUsize>,
     prompts: Arc<Mutex<Vec<String>>>,
-    /// Answer every part-label request with a 500.
-    fail_labels: bool,
+    mode: Mode,
+}
+
+/// How the server misbehaves.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Mode {
+    /// Answers like a capable model.
+    Good,
+    /// Every part-label request gets a 500.
+    FailLabels,
+    /// Paraphrases as a small model gave them: template tokens, links, more lines than asked.
+    JunkParaphrases,
+    /// Paraphrases cut off (`finish_reason: "length"`) below 400 tokens; part labels always.
+    Truncated,
+    /// Every part-label answer has words outside the list or no part at all.
+    FlaggedLabels,
+}
+
+/// The action text a paraphrase prompt asks about.
+fn paraphrase_text(prompt: &str) -> String {
+    prompt
+        .split("motion: \"")
+        .nth(1)
+        .and_then(|rest| rest.split('"').next())
+        .unwrap_or_default()
+        .to_string()
+}
+
+/// The answer and its finish reason.
+fn reply_for(prompt: &str, mode: Mode, max_tokens: u64) -> (String, &'static str) {
+    let labels = prompt.contains("body parts involved");
+    let paraphrase = prompt.contains("different descriptions");
+    match mode {
+        Mode::JunkParaphrases if paraphrase => {
+            let t = paraphrase_text(prompt);
+            return (
+                format!(
+                    "[/INST]\n[IMG]http://www.youtube.com/watch?v=x1[/IMG]\n1. A person does a {t} slowly.\n2. Someone does a {t} with energy.\n3. The person sits down.\n4. A person does a {t} again.\n5. Someone does a {t} twice.\n6. A {t} happens.\n7. A {t} is done.\n8. One more {t}."
+                ),
+                "stop",
+            );
+        }
+        Mode::Truncated if labels => return ("Answer: right ar".into(), "length"),
+        Mode::Truncated if paraphrase && max_tokens < 400 => {
+            return ("someone performs guide, chil".into(), "length");
+        }
+        Mode::FlaggedLabels if labels => {
+            return if prompt.contains("action of: walk?") {
+                (
+                    "question what are the body parts involved in the action".into(),
+                    "stop",
+                )
+            } else {
+                ("Answer: right arm\nthe soul".into(), "stop")
+            };
+        }
+        _ => {}
+    }
+    (answer_for(prompt), "stop")
 }
 
 fn answer_for(prompt: &str) -> String {
@@ -40,7 +97,10 @@ fn answer_for(prompt: &str) -> String {
         return "Answer: right arm\nleft arm".into();
     }
     if prompt.contains("different descriptions") {
-        return "1. A person does it calmly.\n2. Someone turns to the left while doing it.\n3. A person does it calmly.\n4. The motion is performed once.".into();
+        let t = paraphrase_text(prompt);
+        return format!(
+            "1. A person does a {t} calmly.\n2. Someone turns to the left during the {t}.\n3. The {t} is performed once.\n4. A person does a {t} calmly."
+        );
     }
     if prompt.contains("at the same time:") {
         // The kick uses the legs: say no to any pair with it.
@@ -71,20 +131,21 @@ async fn chat(
         .unwrap_or_default()
         .to_string();
     state.prompts.lock().unwrap().push(prompt.clone());
-    if state.fail_labels && prompt.contains("body parts involved") {
+    if state.mode == Mode::FailLabels && prompt.contains("body parts involved") {
         return (axum::http::StatusCode::INTERNAL_SERVER_ERROR, "overloaded").into_response();
     }
-    let content = answer_for(&prompt);
-    Json(json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": content}}]}))
+    let max_tokens = body["max_tokens"].as_u64().unwrap_or(0);
+    let (content, finish_reason) = reply_for(&prompt, state.mode, max_tokens);
+    Json(json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": content}, "finish_reason": finish_reason}]}))
         .into_response()
 }
 
 impl Server {
     fn start() -> Server {
-        Server::start_with(false)
+        Server::start_with(Mode::Good)
     }
 
-    fn start_with(fail_labels: bool) -> Server {
+    fn start_with(mode: Mode) -> Server {
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .enable_all()
@@ -97,7 +158,7 @@ impl Server {
         let state = ServerState {
             requests: Arc::default(),
             prompts: Arc::default(),
-            fail_labels,
+            mode,
         };
         let app = Router::new()
             .route("/v1/chat/completions", post(chat))
@@ -113,6 +174,25 @@ impl Server {
 
     fn requests(&self) -> usize {
         self.requests.load(Ordering::SeqCst)
+    }
+}
+
+/// Progress events of a build, as words.
+#[derive(Default)]
+struct Recorder(Mutex<Vec<String>>);
+
+impl motionforge::progress::Progress for Recorder {
+    fn requests_started(&self, stage: &str, total: u64) {
+        self.0
+            .lock()
+            .unwrap()
+            .push(format!("requests {stage} {total}"));
+    }
+    fn advanced(&self, stage: &str, n: u64) {
+        self.0.lock().unwrap().push(format!("advanced {stage} {n}"));
+    }
+    fn failed(&self, stage: &str, n: u64) {
+        self.0.lock().unwrap().push(format!("failed {stage} {n}"));
     }
 }
 
@@ -194,10 +274,13 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
         .map(|(_, r)| r.as_str())
         .collect();
     assert!(
-        rejected.contains(&"duplicate")
+        rejected.contains(&"more alternatives than asked")
             && rejected.contains(&"changes the side words (left/right)"),
         "{rejected:?}"
     );
+    // The kick's flagged answer fell back to the embedded labeller.
+    assert_eq!(first.labels.checks.accepted, 2);
+    assert_eq!(first.labels.checks.fell_back, 1);
 
     let out = dir.path().join("out/llm");
     let table = pyarrow_rows(&out.join("data"), "clip_id,parts,label_source,paraphrases");
@@ -205,7 +288,12 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
         .iter()
         .find(|r| r.contains("walk_normal_001:0-195|"))
         .unwrap();
-    assert!(walk.contains("[False, False, True, True, False, False]|llm:test-model|['A person does it calmly.', 'The motion is performed once.']"), "{walk}");
+    assert!(walk.contains("[False, False, True, True, False, False]|llm:test-model|['A person does a walk calmly.', 'The walk is performed once.']"), "{walk}");
+    let kick = table
+        .iter()
+        .find(|r| r.contains("kick_normal_001:") && !r.contains(":m|"))
+        .unwrap();
+    assert!(kick.contains("|embedded:lexicon|"), "{kick}");
     let walk_m = table
         .iter()
         .find(|r| r.contains("walk_normal_001:0-195:m|"))
@@ -477,13 +565,32 @@ fn prompt_render_prints_the_exact_prompt_and_names_unknown_templates() {
 
 #[test]
 fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
-    let server = Server::start_with(true);
+    let server = Server::start_with(Mode::FailLabels);
     let extra = llm_section(&server).replace(
         "backoff_seconds = 0.01",
         "backoff_seconds = 0.01\nmax_retries = 2",
     );
     let (_dir, config) = scratch(&extra);
-    let report = build(&config, &BuildOptions::default()).unwrap();
+    let recorder = Arc::new(Recorder::default());
+    let report = build(
+        &config,
+        &BuildOptions {
+            progress: motionforge::progress::ProgressSink::new(recorder.clone()),
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
+    // The label stage showed its requests as they went: 3 sent, 3 failed.
+    let events = recorder.0.lock().unwrap().clone();
+    assert!(
+        events.contains(&"requests label 3".to_string()),
+        "{events:?}"
+    );
+    assert_eq!(
+        events.iter().filter(|e| *e == "advanced label 1").count(),
+        3
+    );
+    assert_eq!(events.iter().filter(|e| *e == "failed label 1").count(), 3);
     let label_rejects: Vec<_> = report
         .rejects
         .iter()
@@ -543,4 +650,299 @@ fn the_optional_llm_pair_check_drops_pairs_it_says_no_to() {
     let again = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(server.requests(), asked, "answers come from the cache");
     assert!(again.nothing_ran(), "{:?}", again.stages);
+}
+
+/// `build-report.json` of a built scratch dataset.
+fn report_json(dir: &tempfile::TempDir) -> Value {
+    let text = fs::read_to_string(dir.path().join("out/llm/build-report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
+    let server = Server::start_with(Mode::JunkParaphrases);
+    let extra = format!("[task_plans]\nenabled = false\n\n{}", llm_section(&server));
+    let (dir, config) = scratch(&extra);
+    let first = build(&config, &BuildOptions::default()).unwrap();
+    // Per text: two template lines, two good lines, a line about sitting (the third asked), and
+    // five lines beyond the three asked.
+    let checks = &first.paraphrases.checks;
+    assert_eq!(checks.accepted, 6, "{checks:?}");
+    assert_eq!(
+        checks.rejected_by_reason,
+        [("action", 3), ("beyond_count", 15), ("markup", 6)]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
+        "{:?}",
+        first.paraphrases.rejected
+    );
+    assert_eq!((checks.dropped, checks.kept), (24, 0));
+    let json = report_json(&dir);
+    assert_eq!(
+        json["paraphrases"]["checks"]["rejected_by_reason"]["markup"],
+        6
+    );
+    assert_eq!(json["paraphrases"]["checks"]["dropped"], 24);
+    let table = pyarrow_rows(&dir.path().join("out/llm/data"), "clip_id,paraphrases");
+    let walk = table
+        .iter()
+        .find(|r| r.contains("walk_normal_001:0-195|"))
+        .unwrap();
+    assert!(
+        walk.ends_with("|['A person does a walk slowly.', 'Someone does a walk with energy.']"),
+        "{walk}"
+    );
+    assert!(
+        table
+            .iter()
+            .all(|r| !r.contains("INST") && !r.contains("http")),
+        "{table:?}"
+    );
+    let asked = server.requests();
+    let second = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(
+        server.requests(),
+        asked,
+        "settled answers are not asked again"
+    );
+    assert!(second.nothing_ran(), "{:?}", second.stages);
+    assert_eq!(second.paraphrases.checks, first.paraphrases.checks);
+
+    // `keep` keeps the refused lines (duplicates aside) and counts them.
+    let (_dir, config) = scratch(&format!("[paraphrases]\non_invalid = \"keep\"\n\n{extra}"));
+    let kept = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(
+        (
+            kept.paraphrases.checks.kept,
+            kept.paraphrases.checks.dropped
+        ),
+        (24, 0)
+    );
+}
+
+#[test]
+fn cut_off_answers_are_retried_with_more_tokens_never_cached_and_asked_again() {
+    let server = Server::start_with(Mode::Truncated);
+    let extra = llm_section(&server).replace(
+        "backoff_seconds = 0.01",
+        "backoff_seconds = 0.01\nretry_max_tokens = 400",
+    );
+    let (dir, config) = scratch(&extra);
+    let first = build(&config, &BuildOptions::default()).unwrap();
+    // Labels: cut off at 256 and at 400 (2 each); paraphrases: cut off at 256, whole at 400 (2
+    // each); plans: 3 and 3 repairs.
+    assert_eq!(
+        server.requests(),
+        18,
+        "{:?}",
+        server.prompts.lock().unwrap()
+    );
+    assert_eq!(first.labels.checks.truncated, 3);
+    assert_eq!(first.paraphrases.checks.truncated, 0);
+    assert_eq!(first.paraphrases.answered, 3);
+    let label_rejects: Vec<_> = first
+        .rejects
+        .iter()
+        .filter(|r| r.stage == "label")
+        .collect();
+    assert_eq!(label_rejects.len(), 3);
+    assert!(
+        label_rejects
+            .iter()
+            .all(|r| r.message.contains("cut off at max_tokens = 400")),
+        "{label_rejects:?}"
+    );
+    assert!(
+        first
+            .labels
+            .sources
+            .keys()
+            .all(|s| s.starts_with("embedded:")),
+        "{:?}",
+        first.labels.sources
+    );
+    assert_eq!(report_json(&dir)["labels"]["checks"]["truncated"], 3);
+    let cache = fs::read_to_string(dir.path().join("out/llm/llm-cache.jsonl")).unwrap();
+    assert_eq!(
+        cache.lines().count(),
+        9,
+        "3 paraphrases, 3 plans, 3 repairs"
+    );
+    assert!(!cache.contains("guide, chil") && !cache.contains("right ar\""));
+    assert!(
+        cache
+            .lines()
+            .all(|l| l.contains(r#""finish_reason":"stop""#)),
+        "{cache}"
+    );
+    assert_eq!(cache.matches(r#""max_tokens":400"#).count(), 3);
+    // The rebuild asks only the labels again (cut off: not settled), 2 requests each.
+    let second = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(server.requests(), 24);
+    assert_eq!(second.paraphrases.requests + second.plans.requests, 0);
+    assert_eq!(second.labels.requests, 0, "no label was answered");
+}
+
+#[test]
+fn flagged_labels_fall_back_drop_or_stay_as_configured() {
+    let server = Server::start_with(Mode::FlaggedLabels);
+    let base = format!(
+        "[task_plans]\nenabled = false\n\n[paraphrases]\nenabled = false\n\n{}",
+        llm_section(&server)
+    );
+    let originals = |dir: &tempfile::TempDir| -> Vec<String> {
+        let mut rows: Vec<String> = pyarrow_rows(
+            &dir.path().join("out/llm/data"),
+            "clip_id,parts,label_source",
+        )
+        .into_iter()
+        .filter(|r| r.starts_with("bandai/") && !r.contains(":m|"))
+        .collect();
+        rows.sort();
+        rows
+    };
+
+    // Default: the embedded labeller, and the label source says so.
+    let (dir, config) = scratch(&base);
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    let c = &report.labels.checks;
+    assert_eq!(c.accepted, 0);
+    assert_eq!(c.rejected_by_reason.get("no_part"), Some(&1), "{c:?}");
+    assert_eq!(c.rejected_by_reason.get("off_list"), Some(&2), "{c:?}");
+    assert_eq!((c.fell_back, c.dropped, c.kept), (3, 0, 0));
+    assert_eq!(report.labels.flagged.len(), 3);
+    let rows = originals(&dir);
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    assert!(rows.iter().all(|r| r.contains("|embedded:")), "{rows:?}");
+    let asked = server.requests();
+    build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(server.requests(), asked, "flagged answers are settled too");
+
+    // drop: no parts at all.
+    let (dir, config) = scratch(&base.replace(
+        "labeller = \"llm\"",
+        "labeller = \"llm\"\non_invalid = \"drop\"",
+    ));
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(report.labels.checks.dropped, 3);
+    let rows = originals(&dir);
+    assert!(rows.iter().all(|r| r.ends_with("|None|None")), "{rows:?}");
+
+    // keep: the answer's parts, marked as the LLM's; the answer with no part gets the motion's.
+    let (dir, config) = scratch(&base.replace(
+        "labeller = \"llm\"",
+        "labeller = \"llm\"\non_invalid = \"keep\"",
+    ));
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    assert_eq!(report.labels.checks.kept, 3);
+    let rows = originals(&dir);
+    let bye = rows.iter().find(|r| r.contains("bye_normal")).unwrap();
+    assert!(
+        bye.ends_with("|[False, False, False, True, False, False]|llm:test-model"),
+        "{bye}"
+    );
+    let walk = rows.iter().find(|r| r.contains("walk_normal")).unwrap();
+    assert!(walk.ends_with("|embedded:velocity"), "{walk}");
+
+    // Paraphrases have no embedded fallback: the config says so.
+    let path = dir.path().join("bad.toml");
+    fs::write(
+        &path,
+        fs::read_to_string(dir.path().join("build.toml"))
+            .unwrap()
+            .replace(
+                "[paraphrases]\n",
+                "[paraphrases]\non_invalid = \"embedded\"\n",
+            ),
+    )
+    .unwrap();
+    let err = Config::load(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("paraphrases.on_invalid") && err.contains("no embedded paraphraser"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let url = format!("http://127.0.0.1:{port}/v1");
+    // Retries and backoff at their defaults: 6 attempts per prompt, up to a minute apart.
+    let (dir, config) = scratch(&format!(
+        "[part_labels]\nlabeller = \"llm\"\n\n[llm]\nbase_url = \"{url}\"\nmodel = \"m\"\n"
+    ));
+    let t = std::time::Instant::now();
+    let err = build(&config, &BuildOptions::default())
+        .unwrap_err()
+        .to_string();
+    let elapsed = t.elapsed();
+    assert!(
+        elapsed < std::time::Duration::from_secs(10),
+        "took {elapsed:?}"
+    );
+    assert!(
+        err.starts_with("label: no LLM server answers at ")
+            && err.contains(&format!("GET {url}/models"))
+            && err.contains("--offline"),
+        "{err}"
+    );
+
+    // The binary: exit code 1, the error once, in seconds.
+    let t = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(dir.path().join("build.toml"))
+        .output()
+        .unwrap();
+    assert!(t.elapsed() < std::time::Duration::from_secs(10));
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        stderr.matches("no LLM server answers").count(),
+        1,
+        "{stderr}"
+    );
+
+    // `config check --probe` tries it too; without --probe the config is fine.
+    let check = |probe: bool| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_motionforge"));
+        cmd.args(["config", "check", "--config"])
+            .arg(dir.path().join("build.toml"));
+        if probe {
+            cmd.arg("--probe");
+        }
+        cmd.output().unwrap()
+    };
+    assert!(check(false).status.success());
+    let probed = check(true);
+    assert_eq!(probed.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&probed.stderr).contains("no LLM server answers"));
+
+    // With a server there, the probe says what answered.
+    let server = Server::start();
+    let (dir, _config) = scratch(&llm_section(&server));
+    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["config", "check", "--probe", "--config"])
+        .arg(dir.path().join("build.toml"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(&format!(
+            "answered GET {}/models with HTTP 404",
+            server.base_url
+        )),
+        "{stdout}"
+    );
+    assert_eq!(server.requests(), 0, "the probe sends no prompt");
 }

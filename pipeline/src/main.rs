@@ -385,7 +385,14 @@ enum ExportCommand {
 #[derive(Subcommand)]
 enum ConfigCommand {
     /// Check every value of the config and every file it names; print all problems at once.
-    #[command(after_help = EXIT_CODES)]
+    ///
+    /// With --probe, also ask the [llm] server for its model list (GET {base_url}/models, at most
+    /// 5 s) and fail (exit code 1) when nothing answers.
+    ///
+    /// Examples:
+    ///   motionforge config check --config build.toml
+    ///   motionforge config check --config build.toml --probe
+    #[command(after_help = EXIT_CODES, verbatim_doc_comment)]
     Check {
         /// Build configuration (TOML).
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -393,6 +400,9 @@ enum ConfigCommand {
         /// Check the dataset folder under this output folder, as `build --output` would.
         #[arg(long, short)]
         output: Option<PathBuf>,
+        /// Also try the [llm] endpoint: one GET of its model list.
+        #[arg(long)]
+        probe: bool,
     },
 }
 
@@ -572,8 +582,13 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             }
         }
         Command::Config {
-            command: ConfigCommand::Check { config, output },
-        } => config_check(&config, output, ui)?,
+            command:
+                ConfigCommand::Check {
+                    config,
+                    output,
+                    probe,
+                },
+        } => config_check(&config, output, probe, ui)?,
         Command::Clean {
             config,
             output,
@@ -833,7 +848,30 @@ fn load_checked(path: &Path, output: Option<PathBuf>) -> Result<Config> {
     Ok(config)
 }
 
-fn config_check(path: &Path, output: Option<PathBuf>, ui: &Ui) -> Result<()> {
+/// `config check --probe`: one GET of the endpoint's model list; `None` without an `[llm]` section.
+fn probe_llm(config: &Config) -> Result<Option<(String, motionforge::llm::client::Probe)>> {
+    let Some(llm) = &config.llm else {
+        return Ok(None);
+    };
+    let client = motionforge::llm::client::LlmClient::new(llm.clone())?;
+    let probe = client.probe()?;
+    let served = if probe.models.is_empty() {
+        String::new()
+    } else {
+        format!("; serves {}", probe.models.join(", "))
+    };
+    let line = format!(
+        "LLM {} at {}: answered GET {} with HTTP {} in {} ms{served}",
+        llm.model,
+        llm.root(),
+        probe.url,
+        probe.status,
+        probe.elapsed.as_millis()
+    );
+    Ok(Some((line, probe)))
+}
+
+fn config_check(path: &Path, output: Option<PathBuf>, probe: bool, ui: &Ui) -> Result<()> {
     let (config, summary) = match Config::load_checked(path, output) {
         Ok(ok) => ok,
         Err(err) => {
@@ -863,6 +901,7 @@ fn config_check(path: &Path, output: Option<PathBuf>, ui: &Ui) -> Result<()> {
     for warning in &summary.warnings {
         tracing::warn!("{warning}");
     }
+    let probed = if probe { probe_llm(&config)? } else { None };
     let captures: usize = summary.captures.iter().sum();
     let mut out = std::io::stdout().lock();
     if ui.log.json {
@@ -879,6 +918,12 @@ fn config_check(path: &Path, output: Option<PathBuf>, ui: &Ui) -> Result<()> {
             "dataset_dir": config.dataset_dir(),
             "sources": sources,
             "warnings": summary.warnings,
+            "probe": probed.as_ref().map(|(_, p)| serde_json::json!({
+                "url": p.url,
+                "status": p.status,
+                "millis": p.elapsed.as_millis() as u64,
+                "models": p.models,
+            })),
         });
         writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
     } else if ui.status() {
@@ -904,6 +949,11 @@ fn config_check(path: &Path, output: Option<PathBuf>, ui: &Ui) -> Result<()> {
                 .map(|l| format!("{} at {}", l.model, l.base_url))
                 .unwrap_or_else(|| "none".into())
         )?;
+        match (&probed, probe) {
+            (Some((line, _)), _) => writeln!(out, "{line}")?,
+            (None, true) => writeln!(out, "no [llm] section: nothing to probe")?,
+            (None, false) => {}
+        }
     }
     Ok(())
 }

@@ -14,6 +14,13 @@ pub trait Progress: Send + Sync {
     fn stage_finished(&self, _stage: &str, _ran: u64, _reused: u64) {}
     /// A line worth showing (a rejected input, a skipped request).
     fn note(&self, _message: &str) {}
+    /// An LLM stage starts sending `total` requests: shown like [`Progress::stage_started`], with
+    /// the request rate and errors.
+    fn requests_started(&self, stage: &str, total: u64) {
+        self.stage_started(stage, total);
+    }
+    /// `n` items of the stage failed (counted in [`Progress::advanced`] too).
+    fn failed(&self, _stage: &str, _n: u64) {}
 }
 
 /// A shared progress receiver; the default reports nowhere.
@@ -44,6 +51,20 @@ impl ProgressSink {
     pub fn stage_finished(&self, stage: &str, ran: u64, reused: u64) {
         if let Some(p) = &self.0 {
             p.stage_finished(stage, ran, reused);
+        }
+    }
+
+    /// See [`Progress::requests_started`].
+    pub fn requests_started(&self, stage: &str, total: u64) {
+        if let Some(p) = &self.0 {
+            p.requests_started(stage, total);
+        }
+    }
+
+    /// See [`Progress::failed`].
+    pub fn failed(&self, stage: &str, n: u64) {
+        if let Some(p) = &self.0 {
+            p.failed(stage, n);
         }
     }
 

@@ -152,6 +152,53 @@ struct StageState {
     done: u64,
     /// Last tenth of the total reported, so long stages log at most ten progress lines.
     tenth: u64,
+    /// Items that failed.
+    errors: u64,
+    /// An LLM stage: its progress lines are info lines with the rate, errors and ETA, every tenth
+    /// and at least every [`REQUEST_LOG_INTERVAL`], because requests can be slow.
+    requests: bool,
+    last_line: Instant,
+}
+
+/// Longest silence between two progress lines of an LLM stage.
+const REQUEST_LOG_INTERVAL: Duration = Duration::from_secs(10);
+
+impl StageState {
+    fn new(total: u64, requests: bool) -> StageState {
+        let now = Instant::now();
+        StageState {
+            started: now,
+            total,
+            done: 0,
+            tenth: 0,
+            errors: 0,
+            requests,
+            last_line: now,
+        }
+    }
+
+    /// `3 of 9 requests, 0.4/s, 1 error, ETA 15 s`.
+    fn request_line(&self) -> String {
+        let seconds = self.started.elapsed().as_secs_f64();
+        let rate = if seconds > 0.0 {
+            self.done as f64 / seconds
+        } else {
+            0.0
+        };
+        let left = self.total.saturating_sub(self.done);
+        let eta = if rate > 0.0 {
+            format!("ETA {:.0} s", left as f64 / rate)
+        } else {
+            "ETA unknown".to_string()
+        };
+        format!(
+            "{} of {} requests, {rate:.2}/s, {} error{}, {eta}",
+            self.done,
+            self.total,
+            self.errors,
+            if self.errors == 1 { "" } else { "s" }
+        )
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -175,16 +222,19 @@ impl LogProgress {
 
 impl Progress for LogProgress {
     fn stage_started(&self, stage: &str, total: u64) {
-        lock(&self.stages).insert(
-            stage.to_string(),
-            StageState {
-                started: Instant::now(),
-                total,
-                done: 0,
-                tenth: 0,
-            },
-        );
+        lock(&self.stages).insert(stage.to_string(), StageState::new(total, false));
         tracing::debug!(target: PROGRESS_TARGET, stage, total, "{stage}: started, {total} items");
+    }
+
+    fn requests_started(&self, stage: &str, total: u64) {
+        lock(&self.stages).insert(stage.to_string(), StageState::new(total, true));
+        tracing::info!(target: PROGRESS_TARGET, stage, total, "{stage}: sending {total} LLM requests");
+    }
+
+    fn failed(&self, stage: &str, n: u64) {
+        if let Some(s) = lock(&self.stages).get_mut(stage) {
+            s.errors += n;
+        }
     }
 
     fn advanced(&self, stage: &str, n: u64) {
@@ -194,6 +244,19 @@ impl Progress for LogProgress {
         };
         s.done += n;
         if s.total == 0 {
+            return;
+        }
+        if s.requests {
+            let tenth = (s.done.min(s.total) * 10) / s.total;
+            if (tenth > s.tenth || s.last_line.elapsed() >= REQUEST_LOG_INTERVAL)
+                && s.done < s.total
+            {
+                s.tenth = tenth;
+                s.last_line = Instant::now();
+                let (done, total, errors, line) = (s.done, s.total, s.errors, s.request_line());
+                drop(stages);
+                tracing::info!(target: PROGRESS_TARGET, stage, done, total, errors, "{stage}: {line}");
+            }
             return;
         }
         let tenth = (s.done.min(s.total) * 10) / s.total;
@@ -274,6 +337,15 @@ impl Default for BarProgress {
     }
 }
 
+/// The bar of an LLM stage: requests done, the rate, errors (in the message) and the ETA.
+fn request_bar_style() -> ProgressStyle {
+    ProgressStyle::with_template(
+        "{prefix:>10} [{bar:30}] {pos}/{len} requests ({per_sec}, {msg}{elapsed}, ETA {eta})",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar())
+    .progress_chars("=> ")
+}
+
 fn bar_style(total: u64) -> ProgressStyle {
     let template = if total == 0 {
         "{prefix:>10} {spinner} {pos} done, {elapsed}"
@@ -299,6 +371,29 @@ impl Progress for BarProgress {
         bar.enable_steady_tick(Duration::from_millis(250));
         if let Some(old) = lock(&self.bars).insert(stage.to_string(), bar) {
             old.finish_and_clear();
+        }
+    }
+
+    fn requests_started(&self, stage: &str, total: u64) {
+        self.log.requests_started(stage, total);
+        let bar = self.multi.add(ProgressBar::new(total));
+        bar.set_style(request_bar_style());
+        bar.set_prefix(stage.to_string());
+        bar.set_message("0 errors, ");
+        bar.enable_steady_tick(Duration::from_millis(250));
+        if let Some(old) = lock(&self.bars).insert(stage.to_string(), bar) {
+            old.finish_and_clear();
+        }
+    }
+
+    fn failed(&self, stage: &str, n: u64) {
+        self.log.failed(stage, n);
+        let errors = lock(&self.log.stages).get(stage).map(|s| s.errors);
+        if let (Some(bar), Some(errors)) = (lock(&self.bars).get(stage), errors) {
+            bar.set_message(format!(
+                "{errors} error{}, ",
+                if errors == 1 { "" } else { "s" }
+            ));
         }
     }
 

@@ -153,6 +153,9 @@ pub enum BuildError {
     /// The synthetic-pair composer's word file (`schemas/compose_text.toml`) is invalid.
     #[error(transparent)]
     Words(#[from] crate::compose_text::WordsError),
+    /// The paraphrase check's word file (`schemas/paraphrase.toml`) is invalid.
+    #[error(transparent)]
+    ParaphraseWords(#[from] crate::llm::paraphrase::ParaphraseWordsError),
     /// A dataset's `manifest.json` cannot be read.
     #[error(transparent)]
     Manifest(#[from] crate::io::manifest::ManifestError),
@@ -290,6 +293,7 @@ fn run_stages<'a>(
     }
     crate::parts::lexicon::check_lexicon()?;
     crate::compose_text::check_words()?;
+    crate::llm::paraphrase::check_words()?;
     let files = source::discover(config)?;
     let specs: Vec<ProfileSpec> = config
         .sources
@@ -357,6 +361,7 @@ fn run_stages<'a>(
             &mut items,
             options.offline || probe,
             through,
+            progress,
         )?
     } else {
         text::TextOutcome {
@@ -490,6 +495,7 @@ fn run_stages<'a>(
             &mut clips,
             &mut index,
             options.offline || probe,
+            progress,
         )? {
             Some((report, check, run)) => {
                 progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
@@ -545,6 +551,7 @@ fn compose(
     clips: &mut Vec<Clip>,
     index: &mut MotionIndex,
     offline: bool,
+    progress: &crate::progress::ProgressSink,
 ) -> Result<
     Option<(
         crate::stages::compose::ComposeReport,
@@ -557,7 +564,7 @@ fn compose(
     let all: Vec<&Clip> = clips.iter().collect();
     // The clips without frames, and where their frames are: together, the stage's input.
     let encoded = crate::base::encoded_sha256(&(&all, &*index), "clips to compose")?;
-    let vetoed = llm_vetoes(shared, &all, offline)?;
+    let vetoed = llm_vetoes(shared, &all, offline, progress)?;
     let stamp = Fingerprint::new(
         crate::stages::compose::NAME,
         crate::stages::compose::VERSION,
@@ -946,6 +953,7 @@ fn llm_vetoes(
     shared: &Shared<'_>,
     clips: &[&Clip],
     offline: bool,
+    progress: &crate::progress::ProgressSink,
 ) -> Result<
     (
         BTreeSet<(String, String)>,
@@ -969,7 +977,12 @@ fn llm_vetoes(
         offline,
         cache.as_mut(),
         &mut report,
-    )?;
+        crate::stages::augment::Asking {
+            stage: "pair_check",
+            progress,
+        },
+    )
+    .map_err(text::augment_error)?;
     Ok((vetoed, report))
 }
 

@@ -15,11 +15,12 @@ use crate::config::Labeller;
 use crate::llm::cache::ResponseCache;
 use crate::llm::plans::PlanStep;
 use crate::parts::PartSet;
-use crate::stages::augment::{self, AugmentReport};
+use crate::stages::augment::{self, Asking, AugmentError, AugmentReport};
 use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
 
-/// Bump when label assignment changes for the same inputs.
-const LABEL_VERSION: u32 = 1;
+/// Bump when label assignment changes for the same inputs. 2: flagged LLM answers follow
+/// `part_labels.on_invalid` (the embedded labeller by default) instead of being used.
+const LABEL_VERSION: u32 = 2;
 
 /// What the text stages produced.
 #[derive(Debug, Default)]
@@ -78,6 +79,7 @@ pub(super) fn run(
     items: &mut [Item],
     offline: bool,
     through: super::Stage,
+    progress: &crate::progress::ProgressSink,
 ) -> Result<TextOutcome, BuildError> {
     use super::Stage;
     let config = shared.config;
@@ -93,6 +95,7 @@ pub(super) fn run(
         llm: config.llm.as_ref(),
         prompts: &prompts,
         offline,
+        progress,
     };
     let labels =
         label::label_texts(&clips, &input, cache.as_mut(), &mut report).map_err(|e| match e {
@@ -170,11 +173,13 @@ pub(super) fn run(
             ));
         }
     }
-    // Requests and cache hits are this build's; the rest of the report is the cached assignment's.
+    // Requests, cache hits and the answers' checks are this build's; the rest of the report is the
+    // cached assignment's.
     outcome.label = LabelReport {
         requests: report.requests,
         cache_hits: report.cache_hits,
         missing: report.missing,
+        checks: report.checks,
         ..assigned.report
     };
     outcome.runs.push(StageRun {
@@ -194,12 +199,18 @@ pub(super) fn run(
         let found = augment::paraphrase(
             &texts,
             config.paraphrases.n,
+            config.paraphrases.on_invalid,
             &prompts,
             config.llm.as_ref(),
             offline,
             cache.as_mut(),
             &mut report,
-        )?;
+            Asking {
+                stage: Stage::Paraphrase.name(),
+                progress,
+            },
+        )
+        .map_err(augment_error)?;
         for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
             clip.paraphrases = found
                 .get(&normalize_text(&clip.text))
@@ -230,7 +241,12 @@ pub(super) fn run(
             offline,
             cache.as_mut(),
             &mut report,
-        )?;
+            Asking {
+                stage: Stage::Plan.name(),
+                progress,
+            },
+        )
+        .map_err(augment_error)?;
         for (text, reason) in &report.rejected {
             outcome.rejects.push(text_reject(
                 Stage::Plan.name(),
@@ -243,6 +259,14 @@ pub(super) fn run(
         outcome.plan = report;
     }
     Ok(outcome)
+}
+
+/// A prompt error stays a prompt error (exit code 2); a server that is gone is an LLM error.
+pub(super) fn augment_error(e: AugmentError) -> BuildError {
+    match e {
+        AugmentError::Prompt(p) => BuildError::Prompt(p),
+        other => BuildError::Llm(other.to_string()),
+    }
 }
 
 fn augment_run(stage: &str, report: &AugmentReport) -> StageRun {

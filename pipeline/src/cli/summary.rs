@@ -20,6 +20,36 @@ pub(crate) fn reasons(map: &std::collections::BTreeMap<String, usize>) -> String
         .join("; ")
 }
 
+/// `7 accepted, 2 rejected (off_list 2): 2 fell back to the embedded labeller, 1 cut off`, or
+/// nothing when no answer was checked.
+fn checks_line(c: &motionforge::stages::augment::AnswerChecks, fallback: &str) -> Option<String> {
+    if c.accepted == 0 && c.rejected() == 0 && c.truncated == 0 {
+        return None;
+    }
+    let mut line = format!("{} accepted, {} rejected", c.accepted, c.rejected());
+    if c.rejected() > 0 {
+        line.push_str(&format!(" ({})", counts(&c.rejected_by_reason)));
+        let mut done = Vec::new();
+        if c.fell_back > 0 {
+            done.push(format!("{} fell back to {fallback}", c.fell_back));
+        }
+        if c.dropped > 0 {
+            done.push(format!("{} dropped", c.dropped));
+        }
+        if c.kept > 0 {
+            done.push(format!("{} kept anyway", c.kept));
+        }
+        line.push_str(&format!(": {}", done.join(", ")));
+    }
+    if c.truncated > 0 {
+        line.push_str(&format!(
+            "; {} cut off by max_tokens (not cached)",
+            c.truncated
+        ));
+    }
+    Some(line)
+}
+
 pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()> {
     let mut out = std::io::stdout().lock();
     writeln!(
@@ -172,6 +202,9 @@ pub(crate) fn print_report(report: &BuildReport) -> std::io::Result<()> {
         l.cache_hits,
         l.flagged.len()
     )?;
+    if let Some(line) = checks_line(&l.checks, "the embedded labeller") {
+        writeln!(out, "  LLM answers: {line}")?;
+    }
     if let Some((agreement, n)) = l.velocity_agreement {
         writeln!(
             out,
@@ -196,6 +229,9 @@ pub(crate) fn print_report(report: &BuildReport) -> std::io::Result<()> {
             r.requests,
             r.rejected.len()
         )?;
+        if let Some(line) = checks_line(&r.checks, "nothing") {
+            writeln!(out, "  checks: {line}")?;
+        }
     }
     let c = &report.synthetic;
     writeln!(

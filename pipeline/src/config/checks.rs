@@ -82,6 +82,13 @@ impl Config {
                 "between 1 and 50 alternatives",
             );
         }
+        if self.paraphrases.on_invalid == OnInvalid::Embedded {
+            c.push(
+                &[K("paraphrases"), K("on_invalid")],
+                "\"embedded\"".into(),
+                "\"drop\" or \"keep\": there is no embedded paraphraser to fall back to",
+            );
+        }
         self.validate_splits(c);
         let p = self.synthetic.probability;
         if !(0.0..=1.0).contains(&p) {
@@ -716,6 +723,25 @@ pub(super) fn validate_llm(llm: &crate::llm::client::LlmConfig, c: &mut Checks<'
     }
     if llm.max_tokens == 0 {
         c.push(&key("max_tokens"), "0".into(), "at least 1 token");
+    }
+    if let Some(bigger) = llm.retry_max_tokens
+        && bigger <= llm.max_tokens
+    {
+        c.push(
+            &key("retry_max_tokens"),
+            bigger.to_string(),
+            &format!(
+                "more than max_tokens ({}): the retry of a cut-off answer asks for more",
+                llm.max_tokens
+            ),
+        );
+    }
+    if llm.circuit_breaker_failures == 0 {
+        c.push(
+            &key("circuit_breaker_failures"),
+            "0".into(),
+            "at least 1 connection failure",
+        );
     }
     if llm.concurrency == 0 {
         c.push(&key("concurrency"), "0".into(), "at least 1 request");

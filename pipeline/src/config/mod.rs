@@ -232,8 +232,45 @@ pub enum OnMiss {
     Fail,
 }
 
+/// What a stage does with an LLM answer that fails its checks (a flagged part label, a paraphrase
+/// line with a fault): `docs/llm-servers.md`, "What is checked".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnInvalid {
+    /// Use the embedded labeller instead (part labels only; the label source says so).
+    Embedded,
+    /// Use nothing: no parts for the text, no paraphrase for the line.
+    Drop,
+    /// Use the answer anyway (counted as kept in the build report).
+    Keep,
+}
+
+impl OnInvalid {
+    /// The value as written in configs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            OnInvalid::Embedded => "embedded",
+            OnInvalid::Drop => "drop",
+            OnInvalid::Keep => "keep",
+        }
+    }
+}
+
+fn embedded_on_invalid() -> OnInvalid {
+    OnInvalid::Embedded
+}
+fn is_embedded(v: &OnInvalid) -> bool {
+    *v == OnInvalid::Embedded
+}
+fn drop_on_invalid() -> OnInvalid {
+    OnInvalid::Drop
+}
+fn is_drop(v: &OnInvalid) -> bool {
+    *v == OnInvalid::Drop
+}
+
 /// Body-part labelling settings.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PartLabelConfig {
     /// `embedded` (default) or `llm`.
@@ -248,6 +285,22 @@ pub struct PartLabelConfig {
     /// Cache misses that cannot be asked: `embedded` (default) or `fail`.
     #[serde(default)]
     pub on_miss: OnMiss,
+    /// Flagged answers (words outside the list, no part): `embedded` (default), `drop` or `keep`.
+    // Skipped at its default so configs that leave it out keep their fingerprint.
+    #[serde(default = "embedded_on_invalid", skip_serializing_if = "is_embedded")]
+    pub on_invalid: OnInvalid,
+}
+
+impl Default for PartLabelConfig {
+    fn default() -> Self {
+        PartLabelConfig {
+            labeller: Labeller::default(),
+            variant: Default::default(),
+            offline: false,
+            on_miss: OnMiss::default(),
+            on_invalid: OnInvalid::Embedded,
+        }
+    }
 }
 
 /// Task-plan settings.
@@ -277,6 +330,10 @@ pub struct ParaphraseConfig {
     /// Alternatives asked for per text.
     #[serde(default = "default_paraphrases")]
     pub n: usize,
+    /// Lines that fail the paraphrase checks: `drop` (default) or `keep`.
+    // Skipped at its default so configs that leave it out keep their fingerprint.
+    #[serde(default = "drop_on_invalid", skip_serializing_if = "is_drop")]
+    pub on_invalid: OnInvalid,
 }
 
 fn default_paraphrases() -> usize {
@@ -288,6 +345,7 @@ impl Default for ParaphraseConfig {
         ParaphraseConfig {
             enabled: true,
             n: default_paraphrases(),
+            on_invalid: OnInvalid::Drop,
         }
     }
 }

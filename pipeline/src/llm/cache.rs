@@ -110,6 +110,11 @@ pub struct CacheEntry {
     pub response: String,
     /// Where the answer came from: `llm`, or `import:<file>` for answers imported from elsewhere.
     pub source: String,
+    /// Why the server stopped (`stop`, or `unreported` when it did not say). Absent in entries of
+    /// versions that did not record it; such `llm` entries may be cut-off answers and are asked
+    /// again when a server is available (see [`CacheEntry::is_settled`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub finish_reason: Option<String>,
 }
 
 impl CacheEntry {
@@ -130,7 +135,23 @@ impl CacheEntry {
             prompt_preview: prompt.chars().take(PREVIEW_CHARS).collect(),
             response,
             source: source.to_string(),
+            finish_reason: None,
         }
+    }
+
+    /// True when the answer was cut off by the token limit (`finish_reason` `length`).
+    pub fn is_truncated(&self) -> bool {
+        matches!(self.finish_reason.as_deref(), Some("length" | "max_tokens"))
+    }
+
+    /// True when the entry is a final answer a build may use without asking again: fetched with
+    /// its finish reason recorded and not cut off, or imported. An `llm` entry without a finish
+    /// reason comes from a version that cached cut-off answers as good; online builds ask it again.
+    pub fn is_settled(&self) -> bool {
+        if self.is_truncated() {
+            return false;
+        }
+        self.finish_reason.is_some() || self.source != "llm"
     }
 }
 
@@ -241,14 +262,15 @@ impl ResponseCache {
         })
     }
 
-    /// The cached answer for a key.
+    /// The cached answer for a key, unless it was cut off by the token limit (offline builds use
+    /// it; online ones also ask again answers that are not [settled](CacheEntry::is_settled)).
     pub fn get(&self, key: &CacheKey) -> Option<&str> {
-        self.entries.get(&key.0).map(|e| e.response.as_str())
+        self.get_entry(key).map(|e| e.response.as_str())
     }
 
-    /// The whole cached entry for a key.
+    /// The whole cached entry for a key, unless it was cut off by the token limit.
     pub fn get_entry(&self, key: &CacheKey) -> Option<&CacheEntry> {
-        self.entries.get(&key.0)
+        self.entries.get(&key.0).filter(|e| !e.is_truncated())
     }
 
     /// Appends an entry and syncs it to disk before it becomes visible; it replaces any earlier

@@ -6,6 +6,7 @@
 //! a small tokio runtime and blocks on it.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -86,6 +87,23 @@ fn default_backoff_seconds() -> f64 {
 fn default_max_retry_after_seconds() -> f64 {
     60.0
 }
+fn default_circuit_breaker_failures() -> u32 {
+    DEFAULT_CIRCUIT_BREAKER_FAILURES
+}
+fn is_default_breaker(n: &u32) -> bool {
+    *n == DEFAULT_CIRCUIT_BREAKER_FAILURES
+}
+
+/// Connection failures in a row (over all prompts) after which the client stops sending.
+pub const DEFAULT_CIRCUIT_BREAKER_FAILURES: u32 = 3;
+
+/// Longest wait for the probe of an endpoint before the first request: a server that does not
+/// answer a listing of its models in this time will not answer prompts either.
+const PROBE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// What the client writes as the finish reason of an answer whose server reported none, so that
+/// such entries are told apart from entries of versions that did not record it.
+pub const FINISH_UNREPORTED: &str = "unreported";
 
 /// How to reach an OpenAI-compatible server and how to sample from it.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -129,6 +147,17 @@ pub struct LlmConfig {
     /// Upper bound on a server's `Retry-After`.
     #[serde(default = "default_max_retry_after_seconds")]
     pub max_retry_after_seconds: f64,
+    /// `max_tokens` of the one retry of an answer cut off by the token limit (`finish_reason:
+    /// "length"`); larger than `max_tokens`. Without it a cut-off answer fails at once.
+    // Skipped when unset so configs without it keep their fingerprint.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retry_max_tokens: Option<u32>,
+    /// Connection failures in a row after which the client stops sending (the circuit breaker).
+    #[serde(
+        default = "default_circuit_breaker_failures",
+        skip_serializing_if = "is_default_breaker"
+    )]
+    pub circuit_breaker_failures: u32,
 }
 
 impl LlmConfig {
@@ -148,7 +177,14 @@ impl LlmConfig {
             timeout_seconds: default_timeout_seconds(),
             backoff_seconds: default_backoff_seconds(),
             max_retry_after_seconds: default_max_retry_after_seconds(),
+            retry_max_tokens: None,
+            circuit_breaker_failures: DEFAULT_CIRCUIT_BREAKER_FAILURES,
         }
+    }
+
+    /// The API root without a trailing `/`.
+    pub fn root(&self) -> &str {
+        self.base_url.trim_end_matches('/')
     }
 
     /// The sampling parameters of this config.
@@ -214,6 +250,42 @@ pub enum LlmError {
         /// Requests sent for this prompt.
         attempts: u32,
     },
+    /// The answer was cut off by the token limit (`finish_reason: "length"`), also after the retry
+    /// with `retry_max_tokens` when one is configured. Never cached.
+    #[error(
+        "answer cut off at max_tokens = {max_tokens} (finish_reason \"length\") after {attempts} attempt(s): `{preview}`; raise llm.max_tokens or set llm.retry_max_tokens"
+    )]
+    Truncated {
+        /// The token limit of the last attempt.
+        max_tokens: u32,
+        /// The start of the cut-off answer.
+        preview: String,
+        /// Requests sent for this prompt.
+        attempts: u32,
+    },
+    /// The endpoint did not answer the probe sent before the first request: nothing was sent.
+    #[error(
+        "no LLM server answers at {url}: tried GET {url}/models ({message}). Start one (docs/llm-servers.md, e.g. `llama-server -m model.gguf --port 8080`) and check [llm] base_url, or build with --offline to use cached answers only"
+    )]
+    Unreachable {
+        /// The API root.
+        url: String,
+        /// Why the probe failed.
+        message: String,
+    },
+    /// The circuit breaker opened: this many connection failures in a row, so nothing more is
+    /// sent in this build.
+    #[error(
+        "stopped sending to {url} after {failures} connection failures in a row (last: {message}); answers received so far are cached: restart the server and build again, or build with --offline"
+    )]
+    CircuitOpen {
+        /// The API root.
+        url: String,
+        /// Failures in a row.
+        failures: u32,
+        /// The last transport error.
+        message: String,
+    },
     /// The answer is not cached and the server may not be asked; returned by callers in offline mode.
     #[error("no cached answer, and the LLM may not be called (offline)")]
     Offline,
@@ -230,6 +302,47 @@ pub enum LlmError {
         /// What failed.
         message: String,
     },
+}
+
+impl LlmError {
+    /// True when the server is gone (nothing answers, or the circuit breaker opened): asking more
+    /// is pointless, so the stage stops with this error instead of falling back prompt by prompt.
+    pub fn stops_stage(&self) -> bool {
+        matches!(
+            self,
+            LlmError::Unreachable { .. } | LlmError::CircuitOpen { .. }
+        )
+    }
+}
+
+/// What [`LlmClient::complete_all_observed`] reports while it works.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RequestEvent {
+    /// Requests are about to be sent: `to_send` distinct prompts, `cached` answered from the cache.
+    Sending {
+        /// Prompts answered from the cache.
+        cached: usize,
+        /// Distinct prompts to send.
+        to_send: usize,
+    },
+    /// One distinct prompt is finished: answered, or failed after its retries.
+    Finished {
+        /// Whether it was answered.
+        ok: bool,
+    },
+}
+
+/// What the probe of an endpoint found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Probe {
+    /// The URL tried (`{base_url}/models`).
+    pub url: String,
+    /// The HTTP status of the answer (any status shows that a server listens).
+    pub status: u16,
+    /// How long the answer took.
+    pub elapsed: Duration,
+    /// The model ids listed, when the answer was OpenAI's model list.
+    pub models: Vec<String>,
 }
 
 /// One answer, and whether it came from the cache.
@@ -272,6 +385,15 @@ struct Shared {
     max_retry_after: Duration,
     semaphore: Semaphore,
     limiter: RateLimiter,
+    root: String,
+    retry_max_tokens: Option<u32>,
+    breaker_limit: u32,
+    /// Connection failures in a row, over all prompts; any HTTP answer resets it.
+    connect_failures: AtomicU32,
+    /// Set when `connect_failures` reached `breaker_limit`: nothing more is sent.
+    breaker_open: AtomicBool,
+    /// Set after a successful probe: one per client is enough.
+    probed: AtomicBool,
 }
 
 fn seconds(name: &str, value: f64, allow_zero: bool) -> Result<Duration, LlmError> {
@@ -315,6 +437,17 @@ impl LlmClient {
         }
         if config.requests_per_minute == 0 {
             return config_err("requests_per_minute must be at least 1".into());
+        }
+        if config.circuit_breaker_failures == 0 {
+            return config_err("circuit_breaker_failures must be at least 1".into());
+        }
+        if let Some(bigger) = config.retry_max_tokens
+            && bigger <= config.max_tokens
+        {
+            return config_err(format!(
+                "retry_max_tokens ({bigger}) must be larger than max_tokens ({})",
+                config.max_tokens
+            ));
         }
         let timeout = seconds("timeout_seconds", config.timeout_seconds, false)?;
         let max_retry_after = seconds(
@@ -371,6 +504,12 @@ impl LlmClient {
             max_retry_after,
             semaphore: Semaphore::new(config.concurrency),
             limiter: RateLimiter::new(config.requests_per_minute),
+            root: root.to_string(),
+            retry_max_tokens: config.retry_max_tokens,
+            breaker_limit: config.circuit_breaker_failures,
+            connect_failures: AtomicU32::new(0),
+            breaker_open: AtomicBool::new(false),
+            probed: AtomicBool::new(false),
         };
         Ok(LlmClient {
             config,
@@ -401,44 +540,113 @@ impl LlmClient {
         prompts: &[String],
         cache: &mut ResponseCache,
     ) -> Vec<Result<Answer, LlmError>> {
-        let Some(runtime) = &self.runtime else {
-            return internal_errors(prompts.len(), "runtime already shut down");
-        };
-        let mut work = || runtime.block_on(self.run(prompts, cache));
-        if tokio::runtime::Handle::try_current().is_ok() {
-            // block_on panics inside a runtime; a plain thread has no runtime context.
-            std::thread::scope(|s| {
-                s.spawn(work)
-                    .join()
-                    .unwrap_or_else(|_| internal_errors(prompts.len(), "request driver panicked"))
+        self.complete_all_observed(prompts, cache, &|_| {})
+    }
+
+    /// [`complete_all`](LlmClient::complete_all), telling `observe` how many prompts will be sent
+    /// and when each is finished (for progress bars).
+    ///
+    /// Before the first request of this client the endpoint is probed (`GET {base_url}/models`,
+    /// at most 5 s): when nothing answers, every prompt to send fails with
+    /// [`LlmError::Unreachable`] and nothing is sent.
+    pub fn complete_all_observed(
+        &self,
+        prompts: &[String],
+        cache: &mut ResponseCache,
+        observe: &(dyn Fn(RequestEvent) + Sync),
+    ) -> Vec<Result<Answer, LlmError>> {
+        self.block(
+            || internal_errors(prompts.len(), "request driver panicked"),
+            || self.run(prompts, cache, observe),
+        )
+        .unwrap_or_else(|| internal_errors(prompts.len(), "runtime already shut down"))
+    }
+
+    /// Asks the endpoint for its model list (`GET {base_url}/models`, at most 5 s). Any HTTP answer
+    /// shows that a server listens; only a connection failure or silence is an error.
+    pub fn probe(&self) -> Result<Probe, LlmError> {
+        self.block(
+            || {
+                Err(LlmError::Internal {
+                    message: "probe driver panicked".into(),
+                })
+            },
+            || self.shared.probe(),
+        )
+        .unwrap_or_else(|| {
+            Err(LlmError::Internal {
+                message: "runtime already shut down".into(),
             })
+        })
+    }
+
+    /// Runs `work` on the client's runtime; on a helper thread when called inside another runtime
+    /// (`block_on` panics there). `None` when the runtime is gone.
+    fn block<'s, T: Send, F>(
+        &'s self,
+        panicked: impl FnOnce() -> T,
+        work: impl FnOnce() -> F + Send,
+    ) -> Option<T>
+    where
+        F: std::future::Future<Output = T> + 's,
+    {
+        let runtime = self.runtime.as_ref()?;
+        let run = || runtime.block_on(work());
+        Some(if tokio::runtime::Handle::try_current().is_ok() {
+            std::thread::scope(|s| s.spawn(run).join().unwrap_or_else(|_| panicked()))
         } else {
-            work()
-        }
+            run()
+        })
     }
 
     async fn run(
         &self,
         prompts: &[String],
         cache: &mut ResponseCache,
+        observe: &(dyn Fn(RequestEvent) + Sync),
     ) -> Vec<Result<Answer, LlmError>> {
         let mut results: Vec<Option<Result<Answer, LlmError>>> = vec![None; prompts.len()];
-        // Distinct uncached keys, each with the prompt positions it answers.
+        // Distinct keys to send, each with the prompt positions it answers.
         let mut pending: Vec<(CacheKey, Vec<usize>)> = Vec::new();
         let mut slot_of: HashMap<CacheKey, usize> = HashMap::new();
+        let mut cached = 0;
         for (i, prompt) in prompts.iter().enumerate() {
             let key = self.key(prompt);
-            if let Some(text) = cache.get(&key) {
-                results[i] = Some(Ok(Answer {
-                    text: text.to_string(),
-                    from_cache: true,
-                }));
-            } else if let Some(&slot) = slot_of.get(&key) {
-                pending[slot].1.push(i);
-            } else {
-                slot_of.insert(key.clone(), pending.len());
-                pending.push((key, vec![i]));
+            // An entry an earlier version cached without its finish reason may be a cut-off
+            // answer: it is asked again once, and the new entry replaces it.
+            match cache.get_entry(&key).filter(|e| e.is_settled()) {
+                Some(entry) => {
+                    cached += 1;
+                    results[i] = Some(Ok(Answer {
+                        text: entry.response.clone(),
+                        from_cache: true,
+                    }));
+                }
+                None => match slot_of.get(&key) {
+                    Some(&slot) => pending[slot].1.push(i),
+                    None => {
+                        slot_of.insert(key.clone(), pending.len());
+                        pending.push((key, vec![i]));
+                    }
+                },
             }
+        }
+        observe(RequestEvent::Sending {
+            cached,
+            to_send: pending.len(),
+        });
+
+        if !pending.is_empty()
+            && !self.shared.probed.load(Ordering::SeqCst)
+            && let Err(e) = self.shared.probe().await
+        {
+            for (_, positions) in &pending {
+                for &i in positions {
+                    results[i] = Some(Err(e.clone()));
+                }
+                observe(RequestEvent::Finished { ok: false });
+            }
+            return finish(results);
         }
 
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
@@ -462,42 +670,53 @@ impl LlmClient {
         // durable before the next is taken.
         while let Some((slot, result)) = rx.recv().await {
             let (key, positions) = &pending[slot];
-            let outcome = result.and_then(|text| {
+            let outcome = result.and_then(|reply| {
                 let prompt = &prompts[positions[0]];
-                let entry = CacheEntry::new(
+                let params = SamplingParams {
+                    max_tokens: reply.max_tokens,
+                    ..self.shared.params
+                };
+                let mut entry = CacheEntry::new(
                     &self.shared.model,
                     self.shared.kind,
                     prompt,
-                    &self.shared.params,
-                    text.clone(),
+                    &params,
+                    reply.text.clone(),
                     "llm",
                 );
+                entry.finish_reason = Some(reply.finish_reason);
                 cache
                     .insert(key.clone(), entry)
                     .map_err(|e| LlmError::Cache {
                         message: e.to_string(),
                     })?;
                 Ok(Answer {
-                    text,
+                    text: reply.text,
                     from_cache: false,
                 })
+            });
+            observe(RequestEvent::Finished {
+                ok: outcome.is_ok(),
             });
             for &i in positions {
                 results[i] = Some(outcome.clone());
             }
         }
+        finish(results)
+    }
+}
 
-        results
-            .into_iter()
-            .map(|r| {
-                r.unwrap_or_else(|| {
-                    Err(LlmError::Internal {
-                        message: "request task ended without a result".into(),
-                    })
+fn finish(results: Vec<Option<Result<Answer, LlmError>>>) -> Vec<Result<Answer, LlmError>> {
+    results
+        .into_iter()
+        .map(|r| {
+            r.unwrap_or_else(|| {
+                Err(LlmError::Internal {
+                    message: "request task ended without a result".into(),
                 })
             })
-            .collect()
-    }
+        })
+        .collect()
 }
 
 impl Drop for LlmClient {
@@ -558,19 +777,70 @@ impl Failure {
     }
 }
 
+/// A complete answer: its text, why the server stopped, and the token limit it was asked with.
+struct Reply {
+    text: String,
+    finish_reason: String,
+    max_tokens: u32,
+}
+
+/// `finish_reason` values that mean the token limit cut the answer: OpenAI's, vLLM's, llama.cpp's
+/// and Ollama's `length` on both endpoints, and `max_tokens` of some proxies.
+fn cut_off(finish_reason: &str) -> bool {
+    matches!(finish_reason, "length" | "max_tokens")
+}
+
 impl Shared {
     /// One prompt with retries. Holds its concurrency permit through the backoff sleeps, so an
-    /// overloaded server sees fewer requests, not the same number reshuffled.
-    async fn request(&self, prompt: &str) -> Result<String, LlmError> {
-        let body = self.body(prompt);
+    /// overloaded server sees fewer requests, not the same number reshuffled. An answer cut off by
+    /// the token limit is asked once more with `retry_max_tokens` when set, and otherwise fails.
+    async fn request(&self, prompt: &str) -> Result<Reply, LlmError> {
+        let mut body = self.body(prompt);
+        let mut max_tokens = self.params.max_tokens;
         let mut attempts = 0;
         loop {
+            if self.breaker_open.load(Ordering::SeqCst) {
+                return Err(self.circuit_open("an earlier request".into()));
+            }
             attempts += 1;
             self.limiter.wait().await;
             let failure = match self.attempt(&body).await {
-                Ok(text) => return Ok(text),
+                Ok((text, finish_reason)) => {
+                    self.connect_failures.store(0, Ordering::SeqCst);
+                    if !cut_off(&finish_reason) {
+                        return Ok(Reply {
+                            text,
+                            finish_reason,
+                            max_tokens,
+                        });
+                    }
+                    match self.retry_max_tokens {
+                        Some(bigger) if bigger > max_tokens => {
+                            max_tokens = bigger;
+                            body["max_tokens"] = json!(bigger);
+                            continue;
+                        }
+                        _ => {
+                            return Err(LlmError::Truncated {
+                                max_tokens,
+                                preview: preview(&text),
+                                attempts,
+                            });
+                        }
+                    }
+                }
                 Err(f) => f,
             };
+            if let Failure::Transport(message) = &failure {
+                let failures = self.connect_failures.fetch_add(1, Ordering::SeqCst) + 1;
+                if failures >= self.breaker_limit {
+                    self.breaker_open.store(true, Ordering::SeqCst);
+                    return Err(self.circuit_open(message.clone()));
+                }
+            } else if !matches!(failure, Failure::Timeout) {
+                // The server answered something: it is there.
+                self.connect_failures.store(0, Ordering::SeqCst);
+            }
             if !failure.retryable() || attempts > self.max_retries {
                 return Err(failure.into_error(attempts));
             }
@@ -584,6 +854,64 @@ impl Shared {
             };
             tokio::time::sleep(delay).await;
         }
+    }
+
+    fn circuit_open(&self, message: String) -> LlmError {
+        LlmError::CircuitOpen {
+            url: self.root.clone(),
+            failures: self.breaker_limit,
+            message,
+        }
+    }
+
+    /// `GET {root}/models` within [`PROBE_TIMEOUT`] (or the attempt timeout when shorter).
+    async fn probe(&self) -> Result<Probe, LlmError> {
+        let url = format!("{}/models", self.root);
+        let mut request = self.http.get(&url);
+        if let Some(key) = &self.api_key {
+            request = request.bearer_auth(key);
+        }
+        let started = Instant::now();
+        let exchange = async {
+            let response = request.send().await?;
+            let status = response.status().as_u16();
+            let bytes = response.bytes().await?;
+            Ok::<_, reqwest::Error>((status, bytes))
+        };
+        let unreachable = |message: String| LlmError::Unreachable {
+            url: self.root.clone(),
+            message,
+        };
+        let limit = PROBE_TIMEOUT.min(self.timeout);
+        let (status, bytes) = match tokio::time::timeout(limit, exchange).await {
+            Err(_) => {
+                return Err(unreachable(format!(
+                    "no answer within {:.0} s",
+                    limit.as_secs_f64()
+                )));
+            }
+            Ok(Err(e)) => return Err(unreachable(error_chain(&e))),
+            Ok(Ok(parts)) => parts,
+        };
+        self.probed.store(true, Ordering::SeqCst);
+        let models = serde_json::from_slice::<Value>(&bytes)
+            .ok()
+            .and_then(|v| {
+                v.get("data").and_then(Value::as_array).map(|models| {
+                    models
+                        .iter()
+                        .filter_map(|m| m.get("id").and_then(Value::as_str))
+                        .map(str::to_string)
+                        .collect()
+                })
+            })
+            .unwrap_or_default();
+        Ok(Probe {
+            url,
+            status,
+            elapsed: started.elapsed(),
+            models,
+        })
     }
 
     fn body(&self, prompt: &str) -> Value {
@@ -611,7 +939,8 @@ impl Shared {
         Duration::try_from_secs_f64(fastrand::f64() * ceiling).unwrap_or_default()
     }
 
-    async fn attempt(&self, body: &Value) -> Result<String, Failure> {
+    /// One request: the answer text and its finish reason, or why there is none.
+    async fn attempt(&self, body: &Value) -> Result<(String, String), Failure> {
         let mut request = self.http.post(&self.url).json(body);
         if let Some(key) = &self.api_key {
             request = request.bearer_auth(key);
@@ -656,7 +985,7 @@ fn parse_retry_after(value: &str) -> Option<f64> {
         .filter(|s| s.is_finite() && *s >= 0.0)
 }
 
-fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<String, String> {
+fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<(String, String), String> {
     let value: Value = serde_json::from_slice(bytes).map_err(|e| {
         format!(
             "body is not JSON ({e}): {}",
@@ -680,13 +1009,19 @@ fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<String, String> {
         ),
         RequestKind::Completion => ("choices[0].text", choice.get("text")),
     };
-    match text.and_then(Value::as_str) {
-        Some(t) => Ok(t.to_string()),
-        None => Err(format!(
+    let Some(text) = text.and_then(Value::as_str) else {
+        return Err(format!(
             "{field} is missing or not a string: {}",
             preview(&choice.to_string())
-        )),
-    }
+        ));
+    };
+    // Both endpoints put `finish_reason` on the choice; a server that sends none (or null) gets
+    // FINISH_UNREPORTED, so its answers are not taken for entries of older versions.
+    let finish_reason = choice
+        .get("finish_reason")
+        .and_then(Value::as_str)
+        .unwrap_or(FINISH_UNREPORTED);
+    Ok((text.to_string(), finish_reason.to_string()))
 }
 
 fn preview(text: &str) -> String {

@@ -3,6 +3,7 @@
 
 pub mod cache;
 pub mod client;
+pub mod paraphrase;
 pub mod plans;
 pub mod prompt;
 pub mod unanswered;

@@ -1,10 +1,11 @@
-//! Answers that are not part labels: LINGO task plans (a JSON list of steps) and paraphrases.
+//! LINGO task plans (a JSON list of steps) from LLM answers, and the mirroring of paraphrases
+//! (their checks are in `paraphrase.rs`).
 //! Invalid answers are explained, never patched up: the caller retries with [`repair_message`]
 //! or rejects the item with the reason.
 
 use serde::{Deserialize, Serialize};
 
-use crate::text::{mirror_text, rotation_words, side_words};
+use crate::text::mirror_text;
 
 /// A step's category in LINGO's planner.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -127,72 +128,6 @@ pub fn repair_message(error: &PlanError) -> String {
     )
 }
 
-/// Paraphrases kept and dropped, with reasons.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct Paraphrases {
-    /// Accepted alternatives, in answer order, de-duplicated.
-    pub accepted: Vec<String>,
-    /// Dropped lines and why.
-    pub rejected: Vec<(String, String)>,
-}
-
-fn strip_list_marker(line: &str) -> &str {
-    let t = line.trim();
-    let t = t.trim_start_matches(|c: char| c.is_ascii_digit());
-    let t = t.strip_prefix(['.', ')', ':']).unwrap_or(t);
-    let t = t.trim_start_matches(['-', '*', '•', ' ']);
-    t.trim().trim_matches(['"', '\u{201c}', '\u{201d}']).trim()
-}
-
-/// Splits a paraphrase answer into lines and keeps those that describe the same sides and turning
-/// directions as `original`: a paraphrase that introduces `left` where the original says `right`,
-/// or drops a side word, is rejected. Duplicates and restatements of the original are dropped.
-pub fn parse_paraphrases(original: &str, answer: &str) -> Paraphrases {
-    let mut out = Paraphrases::default();
-    let key = |s: &str| {
-        s.to_lowercase()
-            .split_whitespace()
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    let mut seen = vec![key(original)];
-    let (sides, turns) = (
-        sorted(side_words(original)),
-        sorted(rotation_words(original)),
-    );
-    for line in answer.lines() {
-        let text = strip_list_marker(line);
-        if text.is_empty() {
-            continue;
-        }
-        let k = key(text);
-        if seen.contains(&k) {
-            out.rejected.push((text.to_string(), "duplicate".into()));
-            continue;
-        }
-        if sorted(side_words(text)) != sides {
-            out.rejected.push((
-                text.to_string(),
-                "changes the side words (left/right)".into(),
-            ));
-            continue;
-        }
-        if sorted(rotation_words(text)) != turns {
-            out.rejected
-                .push((text.to_string(), "changes the turning direction".into()));
-            continue;
-        }
-        seen.push(k);
-        out.accepted.push(text.to_string());
-    }
-    out
-}
-
-fn sorted<T: Ord>(mut v: Vec<T>) -> Vec<T> {
-    v.sort();
-    v
-}
-
 /// Paraphrases of a mirrored clip: each mirrored like its text.
 pub fn mirror_paraphrases(paraphrases: &[String]) -> Vec<String> {
     paraphrases.iter().map(|p| mirror_text(p)).collect()
@@ -233,30 +168,12 @@ mod tests {
     }
 
     #[test]
-    fn paraphrases_keep_their_sides() {
-        let p = parse_paraphrases(
-            "wave with the left hand",
-            "1. Wave using the left hand.\n2. wave with the right hand\n- raise the left hand and wave it\n3. Wave using the left hand.\n\nwave\nwave with the left hand",
-        );
+    fn mirrored_paraphrases_swap_sides() {
         assert_eq!(
-            p.accepted,
-            vec![
-                "Wave using the left hand.",
-                "raise the left hand and wave it"
-            ]
-        );
-        let reasons: Vec<&str> = p.rejected.iter().map(|(_, r)| r.as_str()).collect();
-        assert_eq!(
-            reasons,
-            vec![
-                "changes the side words (left/right)",
-                "duplicate",
-                "changes the side words (left/right)",
-                "duplicate"
-            ]
-        );
-        assert_eq!(
-            mirror_paraphrases(&p.accepted),
+            mirror_paraphrases(&[
+                "Wave using the left hand.".to_string(),
+                "raise the left hand and wave it".to_string()
+            ]),
             vec![
                 "Wave using the right hand.",
                 "raise the right hand and wave it"

@@ -6,11 +6,48 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use serde::{Deserialize, Serialize};
 
+use crate::config::OnInvalid;
 use crate::llm::Unanswered;
 use crate::llm::cache::ResponseCache;
-use crate::llm::client::{LlmClient, LlmConfig};
-use crate::llm::plans::{PlanStep, parse_paraphrases, parse_task_plan, repair_message};
+use crate::llm::client::{LlmClient, LlmConfig, LlmError, RequestEvent};
+use crate::llm::paraphrase::{ParaphraseFault, check_paraphrases};
+use crate::llm::plans::{PlanStep, parse_task_plan, repair_message};
 use crate::llm::prompt::{PromptError, Prompts};
+use crate::progress::ProgressSink;
+
+/// How a stage's LLM answers fared against its checks, for the build report: what passed, what
+/// failed by reason, and what the stage's `on_invalid` policy made of the failures.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct AnswerChecks {
+    /// Answers that passed (for paraphrases: lines).
+    pub accepted: usize,
+    /// Answers (lines) that failed, by reason code (`markup`, `off_list`, `invalid_plan`, ...).
+    pub rejected_by_reason: BTreeMap<String, usize>,
+    /// Failed answers replaced by the embedded labeller's.
+    pub fell_back: usize,
+    /// Failed answers not used.
+    pub dropped: usize,
+    /// Failed answers used anyway (`on_invalid = "keep"`).
+    pub kept: usize,
+    /// Answers cut off by the token limit (also after the retry with more tokens): failed
+    /// requests, never cached.
+    pub truncated: usize,
+}
+
+impl AnswerChecks {
+    /// Counts one failed answer under `reason`.
+    pub fn reject(&mut self, reason: &str) {
+        *self
+            .rejected_by_reason
+            .entry(reason.to_string())
+            .or_insert(0) += 1;
+    }
+
+    /// Answers that failed their checks.
+    pub fn rejected(&self) -> usize {
+        self.rejected_by_reason.values().sum()
+    }
+}
 
 /// What a text-augmentation stage did, for the build report.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -25,25 +62,74 @@ pub struct AugmentReport {
     pub skipped: BTreeMap<String, usize>,
     /// Answers rejected after parsing (and repair, for plans): text and reason.
     pub rejected: Vec<(String, String)>,
+    /// The checks' counts: accepted, rejected by reason, and what the policy did.
+    #[serde(default)]
+    pub checks: AnswerChecks,
 }
 
-/// Answers for `prompts`: from the cache when offline or without a server, else asked.
+/// Why a text-augmentation stage stops the build.
+#[derive(Debug, thiserror::Error)]
+pub enum AugmentError {
+    /// A prompt does not render.
+    #[error(transparent)]
+    Prompt(#[from] PromptError),
+    /// The server is gone (the probe found nothing, or the circuit breaker opened).
+    #[error("{stage}: {error}")]
+    Server {
+        /// The stage.
+        stage: String,
+        /// The client's error.
+        error: LlmError,
+    },
+}
+
+/// Where an LLM stage reports its requests: the stage's name and the build's progress.
+#[derive(Debug, Clone, Copy)]
+pub struct Asking<'a> {
+    /// The stage name (`paraphrase`, `plan`, `pair_check`, `label`).
+    pub stage: &'a str,
+    /// The build's progress receiver.
+    pub progress: &'a ProgressSink,
+}
+
+impl Asking<'_> {
+    /// The observer handed to the client: the stage's bar counts the prompts sent.
+    pub fn observe(&self, event: RequestEvent) {
+        match event {
+            RequestEvent::Sending { to_send, .. } if to_send > 0 => {
+                self.progress.requests_started(self.stage, to_send as u64);
+            }
+            RequestEvent::Sending { .. } => {}
+            RequestEvent::Finished { ok } => {
+                // The failure first, so the progress line of this request counts it.
+                if !ok {
+                    self.progress.failed(self.stage, 1);
+                }
+                self.progress.advanced(self.stage, 1);
+            }
+        }
+    }
+}
+
+/// Answers for `prompts`: from the cache when offline or without a server, else asked. A server
+/// that is gone stops the stage with the client's error.
 pub(crate) fn answers(
     prompts: &[String],
     llm: Option<&LlmConfig>,
     offline: bool,
     cache: Option<&mut ResponseCache>,
     report: &mut AugmentReport,
-) -> Vec<Option<String>> {
+    asking: Asking<'_>,
+) -> Result<Vec<Option<String>>, AugmentError> {
     let (Some(cfg), Some(cache)) = (llm, cache) else {
         *report
             .skipped
             .entry(Unanswered::NoLlm.to_string())
             .or_insert(0) += prompts.len();
-        return vec![None; prompts.len()];
+        return Ok(vec![None; prompts.len()]);
     };
     if offline {
-        return prompts
+        return Ok(prompts
             .iter()
             .map(|p| {
                 let hit = cache.get(&cfg.cache_key(p)).map(str::to_string);
@@ -55,7 +141,7 @@ pub(crate) fn answers(
                 }
                 hit
             })
-            .collect();
+            .collect());
     }
     let client = match LlmClient::new(cfg.clone()) {
         Ok(c) => c,
@@ -64,38 +150,53 @@ pub(crate) fn answers(
                 .skipped
                 .entry(Unanswered::Client(e.to_string()).to_string())
                 .or_insert(0) += prompts.len();
-            return vec![None; prompts.len()];
+            return Ok(vec![None; prompts.len()]);
         }
     };
-    client
-        .complete_all(prompts, cache)
-        .into_iter()
-        .map(|r| match r {
+    let results = client.complete_all_observed(prompts, cache, &|e| asking.observe(e));
+    let mut out = Vec::with_capacity(results.len());
+    for r in results {
+        match r {
             Ok(a) => {
                 report.requests += usize::from(!a.from_cache);
-                Some(a.text)
+                out.push(Some(a.text));
+            }
+            Err(e) if e.stops_stage() => {
+                return Err(AugmentError::Server {
+                    stage: asking.stage.to_string(),
+                    error: e,
+                });
             }
             Err(e) => {
+                if matches!(e, LlmError::Truncated { .. }) {
+                    report.checks.truncated += 1;
+                }
                 *report
                     .skipped
                     .entry(Unanswered::RequestFailed(e.to_string()).to_string())
                     .or_insert(0) += 1;
-                None
+                out.push(None);
             }
-        })
-        .collect()
+        }
+    }
+    Ok(out)
 }
 
-/// Paraphrases of every text: accepted alternatives per normalised text.
+/// Paraphrases of every text, each answer checked line by line (`llm::paraphrase`): the lines
+/// kept per normalised text. Refused lines are dropped, or kept with `on_invalid = "keep"`
+/// (duplicates never are); both are counted in `report.checks`.
+#[allow(clippy::too_many_arguments)]
 pub fn paraphrase(
     texts: &BTreeSet<String>,
     n: usize,
+    on_invalid: OnInvalid,
     prompts: &Prompts,
     llm: Option<&LlmConfig>,
     offline: bool,
     cache: Option<&mut ResponseCache>,
     report: &mut AugmentReport,
-) -> Result<BTreeMap<String, Vec<String>>, PromptError> {
+    asking: Asking<'_>,
+) -> Result<BTreeMap<String, Vec<String>>, AugmentError> {
     let texts: Vec<&String> = texts.iter().collect();
     report.texts = texts.len();
     let rendered: Vec<String> = texts
@@ -105,15 +206,30 @@ pub fn paraphrase(
     let mut out = BTreeMap::new();
     for (t, answer) in texts
         .iter()
-        .zip(answers(&rendered, llm, offline, cache, report))
+        .zip(answers(&rendered, llm, offline, cache, report, asking)?)
     {
         let Some(answer) = answer else { continue };
         report.answered += 1;
-        let parsed = parse_paraphrases(t, &answer);
-        for (line, reason) in parsed.rejected {
-            report.rejected.push((format!("{t} -> {line}"), reason));
+        let checked = check_paraphrases(t, &answer, n);
+        let mut kept = Vec::new();
+        for (line, fault) in checked.lines {
+            let Some(fault) = fault else {
+                report.checks.accepted += 1;
+                kept.push(line);
+                continue;
+            };
+            report.checks.reject(fault.code());
+            report
+                .rejected
+                .push((format!("{t} -> {line}"), fault.to_string()));
+            if on_invalid == OnInvalid::Keep && fault != ParaphraseFault::Duplicate {
+                report.checks.kept += 1;
+                kept.push(line);
+            } else {
+                report.checks.dropped += 1;
+            }
         }
-        out.insert((*t).clone(), parsed.accepted);
+        out.insert((*t).clone(), kept);
     }
     Ok(out)
 }
@@ -128,7 +244,8 @@ pub fn incompatible_pairs(
     offline: bool,
     cache: Option<&mut ResponseCache>,
     report: &mut AugmentReport,
-) -> Result<BTreeSet<(String, String)>, PromptError> {
+    asking: Asking<'_>,
+) -> Result<BTreeSet<(String, String)>, AugmentError> {
     report.texts = pairs.len();
     let rendered: Vec<String> = pairs
         .iter()
@@ -137,7 +254,7 @@ pub fn incompatible_pairs(
     let mut out = BTreeSet::new();
     for (pair, answer) in pairs
         .iter()
-        .zip(answers(&rendered, llm, offline, cache, report))
+        .zip(answers(&rendered, llm, offline, cache, report, asking)?)
     {
         let Some(answer) = answer else { continue };
         report.answered += 1;
@@ -147,8 +264,13 @@ pub fn incompatible_pairs(
             .to_lowercase();
         let word: String = first.chars().take_while(|c| c.is_alphabetic()).collect();
         if word == "no" {
+            report.checks.accepted += 1;
             out.insert(pair.clone());
-        } else if word != "yes" {
+        } else if word == "yes" {
+            report.checks.accepted += 1;
+        } else {
+            report.checks.reject("not_yes_or_no");
+            report.checks.dropped += 1;
             report.rejected.push((
                 format!("{} + {}", pair.0, pair.1),
                 format!("answer is neither yes nor no: `{}`", answer.trim()),
@@ -167,14 +289,22 @@ pub fn plan(
     offline: bool,
     mut cache: Option<&mut ResponseCache>,
     report: &mut AugmentReport,
-) -> Result<BTreeMap<String, Vec<PlanStep>>, PromptError> {
+    asking: Asking<'_>,
+) -> Result<BTreeMap<String, Vec<PlanStep>>, AugmentError> {
     let texts: Vec<&String> = texts.iter().collect();
     report.texts = texts.len();
     let rendered: Vec<String> = texts
         .iter()
         .map(|t| prompts.task_plan(t))
         .collect::<Result<_, _>>()?;
-    let first = answers(&rendered, llm, offline, cache.as_deref_mut(), report);
+    let first = answers(
+        &rendered,
+        llm,
+        offline,
+        cache.as_deref_mut(),
+        report,
+        asking,
+    )?;
     let mut out = BTreeMap::new();
     let mut repairs: Vec<(usize, String)> = Vec::new();
     for (i, answer) in first.iter().enumerate() {
@@ -182,6 +312,7 @@ pub fn plan(
         match parse_task_plan(answer) {
             Ok(steps) => {
                 report.answered += 1;
+                report.checks.accepted += 1;
                 out.insert(texts[i].clone(), steps);
             }
             Err(e) => repairs.push((
@@ -193,11 +324,9 @@ pub fn plan(
     if !repairs.is_empty() {
         let again: Vec<String> = repairs.iter().map(|(_, p)| p.clone()).collect();
         let mut repair_report = AugmentReport::default();
-        for ((i, _), answer) in
-            repairs
-                .iter()
-                .zip(answers(&again, llm, offline, cache, &mut repair_report))
-        {
+        let repaired = answers(&again, llm, offline, cache, &mut repair_report, asking)?;
+        report.checks.truncated += repair_report.checks.truncated;
+        for ((i, _), answer) in repairs.iter().zip(repaired) {
             report.requests += repair_report.requests;
             repair_report.requests = 0;
             let result = answer
@@ -206,12 +335,17 @@ pub fn plan(
             match result {
                 Ok(steps) => {
                     report.answered += 1;
+                    report.checks.accepted += 1;
                     out.insert(texts[*i].clone(), steps);
                 }
-                Err(reason) => report.rejected.push((
-                    texts[*i].clone(),
-                    format!("invalid plan after one repair: {reason}"),
-                )),
+                Err(reason) => {
+                    report.checks.reject("invalid_plan");
+                    report.checks.dropped += 1;
+                    report.rejected.push((
+                        texts[*i].clone(),
+                        format!("invalid plan after one repair: {reason}"),
+                    ));
+                }
             }
         }
     }

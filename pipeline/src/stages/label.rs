@@ -8,16 +8,17 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::{Deserialize, Serialize};
 
 use crate::clip::{Clip, LoadedClip, SourceKind};
-use crate::config::{Labeller, OnMiss, PartLabelConfig};
+use crate::config::{Labeller, OnInvalid, OnMiss, PartLabelConfig};
 use crate::llm::Unanswered;
 use crate::llm::cache::ResponseCache;
-use crate::llm::client::{LlmClient, LlmConfig};
+use crate::llm::client::{LlmClient, LlmConfig, LlmError};
 use crate::llm::prompt::{PromptError, Prompts};
 use crate::motion::Profile;
 use crate::parts::answer::parse_part_answer;
 use crate::parts::lexicon::label_text;
 use crate::parts::velocity::motion_parts;
 use crate::parts::{LabelSource, LabelSources, PartSet};
+use crate::stages::augment::{AnswerChecks, Asking};
 
 /// Stage name.
 pub const NAME: &str = "label";
@@ -40,6 +41,10 @@ pub struct TextParts {
     pub source: LabelSource,
     /// Why the answer needs a look (off-list words, no part), if it does.
     pub flag: Option<String>,
+    /// The answer failed its checks and `on_invalid = "drop"`: the text's clips get no parts.
+    // Skipped when false so the label fingerprint of builds without drops stays as it was.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub dropped: bool,
 }
 
 /// What the stage did, for the build report.
@@ -60,6 +65,10 @@ pub struct LabelReport {
     /// On clips labelled by the lexicon: mean fraction of the six parts on which the motion's
     /// velocity evidence agrees (SINC's baseline), and how many clips that covers.
     pub velocity_agreement: Option<(f64, usize)>,
+    /// LLM answers by check outcome (reasons `off_list`, `no_part`) and what `on_invalid` did
+    /// with the flagged ones.
+    #[serde(default)]
+    pub checks: AnswerChecks,
 }
 
 /// Why labelling stops the build.
@@ -79,6 +88,9 @@ pub enum LabelError {
     /// The LLM client cannot be created.
     #[error("LLM client: {0}")]
     Client(String),
+    /// The server is gone (the probe found nothing, or the circuit breaker opened).
+    #[error("label: {0}")]
+    Server(LlmError),
 }
 
 fn preview(texts: &[String]) -> String {
@@ -105,6 +117,8 @@ pub struct LabelInput<'a> {
     pub prompts: &'a Prompts,
     /// Force offline (the build's `--offline`).
     pub offline: bool,
+    /// Where requests are reported.
+    pub progress: &'a crate::progress::ProgressSink,
 }
 
 fn embedded(text: &str) -> TextParts {
@@ -113,6 +127,7 @@ fn embedded(text: &str) -> TextParts {
         parts: l.known.then_some(l.parts),
         source: LabelSource::Lexicon,
         flag: None,
+        dropped: false,
     }
 }
 
@@ -169,11 +184,18 @@ pub fn label_texts(
         }
     } else {
         let client = LlmClient::new(cfg.clone()).map_err(|e| LabelError::Client(e.to_string()))?;
-        for ((t, p), result) in texts
+        let asking = Asking {
+            stage: NAME,
+            progress: input.progress,
+        };
+        let results = client.complete_all_observed(&prompts, cache, &|e| asking.observe(e));
+        if let Some(Err(e)) = results
             .iter()
-            .zip(&prompts)
-            .zip(client.complete_all(&prompts, cache))
+            .find(|r| r.as_ref().is_err_and(LlmError::stops_stage))
         {
+            return Err(LabelError::Server(e.clone()));
+        }
+        for ((t, p), result) in texts.iter().zip(&prompts).zip(results) {
             match result {
                 Ok(a) => {
                     if a.from_cache {
@@ -188,6 +210,9 @@ pub fn label_texts(
                     answers.push(Some((a.text, source_name(&source, cfg))));
                 }
                 Err(e) => {
+                    if matches!(e, LlmError::Truncated { .. }) {
+                        report.checks.truncated += 1;
+                    }
                     missing.push((t.clone(), Unanswered::RequestFailed(e.to_string())));
                     answers.push(None);
                 }
@@ -211,13 +236,44 @@ pub fn label_texts(
                         format!("words outside the list: {}", parsed.off_list.join(", "))
                     }
                 });
-                if let Some(f) = &flag {
-                    report.flagged.push((t.clone(), f.clone()));
-                }
-                TextParts {
+                let llm = TextParts {
                     parts: (!parsed.empty).then_some(parsed.parts),
                     source,
-                    flag,
+                    flag: flag.clone(),
+                    dropped: false,
+                };
+                match flag {
+                    None => {
+                        report.checks.accepted += 1;
+                        llm
+                    }
+                    Some(f) => {
+                        report
+                            .checks
+                            .reject(if parsed.empty { "no_part" } else { "off_list" });
+                        report.flagged.push((t.clone(), f.clone()));
+                        match input.config.on_invalid {
+                            OnInvalid::Embedded => {
+                                report.checks.fell_back += 1;
+                                TextParts {
+                                    flag: Some(f),
+                                    ..embedded(t)
+                                }
+                            }
+                            OnInvalid::Drop => {
+                                report.checks.dropped += 1;
+                                TextParts {
+                                    parts: None,
+                                    dropped: true,
+                                    ..llm
+                                }
+                            }
+                            OnInvalid::Keep => {
+                                report.checks.kept += 1;
+                                llm
+                            }
+                        }
+                    }
                 }
             }
             None => embedded(t),
@@ -275,7 +331,11 @@ pub fn apply_labels(
             .map(|t| labels.get(&normalize_text(t)))
             .collect();
         let all_known = found.iter().all(|f| f.is_some_and(|l| l.parts.is_some()));
-        if all_known && !found.is_empty() {
+        if found.iter().any(|f| f.is_some_and(|l| l.dropped)) {
+            // A flagged answer dropped by `on_invalid = "drop"`: no parts, and no guess either.
+            clip.parts = None;
+            clip.label_source = None;
+        } else if all_known && !found.is_empty() {
             let parts = found
                 .iter()
                 .flatten()
