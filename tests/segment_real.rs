@@ -32,6 +32,7 @@ fn capture(path: &Path, profile: &str) -> Capture {
         source: "test",
         profile: &spec,
         fps_override: None,
+        positions: None,
     });
     out.capture.unwrap_or_else(|| panic!("{:?}", out.rejects))
 }
@@ -421,6 +422,7 @@ proptest! {
                 label: format!("action {i}"),
                 categories: vec![], motion_type: None, hand: None, object: None, grasp: None,
                 id: i.to_string(),
+                alternatives: Vec::new(),
             }).collect(),
             simultaneous: true,
             ..CaptureAnnotation::default()
@@ -454,6 +456,7 @@ fn hand_goals_sit_at_the_grasp_frame_and_mirror_with_the_hand() {
             object: Some("cup".into()),
             grasp: Some(Time::Seconds(1.0)),
             id: "row 1".into(),
+            alternatives: Vec::new(),
         }],
         simultaneous: true,
         ..CaptureAnnotation::default()

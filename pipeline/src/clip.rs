@@ -146,6 +146,10 @@ pub struct Capture {
     pub profile: String,
     /// The whole motion at the capture's rate (`capture.fps`).
     pub motion: Motion,
+    /// What reading it noticed without refusing it (the IK fit of joint positions whose bone
+    /// lengths are not constant); the segment stage reports them with its own notes.
+    #[serde(default)]
+    pub notes: Vec<crate::annotate::span::Note>,
 }
 
 /// A clip: a stretch of motion at the dataset frame rate on its capture's skeleton, its texts and

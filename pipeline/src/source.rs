@@ -361,6 +361,7 @@ pub fn load_annotations(
             texts,
             default_text,
             key_pattern,
+            humanml3d_cuts,
         } => {
             let re = key_regex(key_pattern);
             let file = config.resolve(Path::new(path));
@@ -369,20 +370,29 @@ pub fn load_annotations(
                 frame_index::read_frame_index(&read(&file)?, &shown).map_err(failed)?;
             notes.extend(read_notes);
             let texts_dir = texts.as_ref().map(|t| config.resolve(Path::new(t)));
-            let caption = |name: &str| {
+            // Quirks of caption files, gathered while the index asks for them.
+            let caption_notes = std::cell::RefCell::new(Vec::new());
+            let captions = |name: &str| {
                 let dir = texts_dir.as_ref()?;
-                let text =
-                    std::fs::read_to_string(dir.join(format!("{}.txt", stem_of(name)))).ok()?;
-                frame_index::read_caption(&text)
+                let path = dir.join(format!("{}.txt", stem_of(name)));
+                let text = std::fs::read_to_string(&path).ok()?;
+                let (lines, found) =
+                    frame_index::read_captions(&text, &display_path(&config.base_dir, &path));
+                caption_notes.borrow_mut().extend(found);
+                Some(lines)
             };
-            by_key = frame_index::index_annotations(
+            by_key = frame_index::index_annotations_with(
                 &rows,
-                *fps,
+                &frame_index::IndexOptions {
+                    fps: *fps,
+                    humanml3d_cuts: *humanml3d_cuts,
+                },
                 &shown,
                 |p| capture_key(p, re.as_ref()),
-                caption,
+                captions,
                 default_text,
             );
+            notes.extend(caption_notes.into_inner());
         }
     }
     Ok(SourceAnnotations::Indexed { by_key, notes })

@@ -111,6 +111,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
                 object: None,
                 grasp: None,
                 id: string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-{i}")),
+                alternatives: Vec::new(),
             });
         }
     } else if let Some(rows) = record
@@ -135,6 +136,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
                     object: None,
                     grasp: None,
                     id: format!("{sid}-{i}"),
+                    alternatives: Vec::new(),
                 }),
                 (None, Some(_), Some(_)) => nulls += 1,
                 _ => notes.push(Note::new(
@@ -162,6 +164,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
                     object: None,
                     grasp: None,
                     id: string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-seq-{i}")),
+                    alternatives: Vec::new(),
                 }),
                 None => nulls += 1,
             }

@@ -505,6 +505,7 @@ fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation
                 object: e.object.clone(),
                 grasp: None,
                 id: format!("row {}", e.n),
+                alternatives: Vec::new(),
             }
         })
         .collect();

@@ -215,6 +215,7 @@ pub fn compiled_filename_annotation(
             object: None,
             grasp: None,
             id: stem.to_string(),
+            alternatives: Vec::new(),
         }],
         simultaneous: false,
         duration: None,

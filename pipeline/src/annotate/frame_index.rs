@@ -264,6 +264,114 @@ pub fn index_annotations(
     texts: impl Fn(&str) -> Option<String>,
     default_text: &str,
 ) -> BTreeMap<String, CaptureAnnotation> {
+    let captions = |name: &str| {
+        texts(name).map(|caption| {
+            vec![CaptionLine {
+                caption,
+                start: 0.0,
+                end: 0.0,
+            }]
+        })
+    };
+    index_annotations_with(
+        rows,
+        &IndexOptions {
+            fps,
+            humanml3d_cuts: false,
+        },
+        file,
+        key,
+        captions,
+        default_text,
+    )
+}
+
+/// How rows of an index cut their captures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IndexOptions {
+    /// Rate the index counts frames at (HumanML3D: 20).
+    pub fps: f64,
+    /// Cut as HumanML3D's `raw_pose_processing` does: [`HUMANML3D_HEAD_TRIMS`] first, then
+    /// `[start_frame:end_frame]` as a Python slice (`-1` stops one frame before the end); rows of
+    /// `humanact12` files are not cut at all.
+    pub humanml3d_cuts: bool,
+}
+
+/// HumanML3D's dataset-specific head trims: a capture whose `source_path` contains the name loses
+/// that many seconds from its start before the row's frames are counted (`data[3*fps:]`, ...).
+pub const HUMANML3D_HEAD_TRIMS: [(&str, f64); 5] = [
+    ("Eyes_Japan_Dataset", 3.0),
+    ("MPI_HDM05", 3.0),
+    ("TotalCapture", 1.0),
+    ("MPI_Limits", 1.0),
+    ("Transitions_mocap", 0.5),
+];
+
+/// The frames HumanML3D trims from the head of `source_path` at `fps` (`int(seconds * fps)` for
+/// each name the path contains).
+pub fn humanml3d_head_trim(source_path: &str, fps: f64) -> i64 {
+    HUMANML3D_HEAD_TRIMS
+        .iter()
+        .filter(|(name, _)| source_path.contains(name))
+        .map(|(_, seconds)| (seconds * fps) as i64)
+        .sum()
+}
+
+/// Where a row's crop starts and ends on its capture's timeline.
+pub fn row_range(row: &IndexRow, options: &IndexOptions) -> (Time, Time) {
+    let fps = options.fps;
+    if !options.humanml3d_cuts {
+        let end = if row.end_frame == -1 {
+            Time::End
+        } else {
+            Time::Frame {
+                frame: row.end_frame,
+                fps,
+            }
+        };
+        let start = Time::Frame {
+            frame: row.start_frame,
+            fps,
+        };
+        return (start, end);
+    }
+    if row.source_path.contains("humanact12") {
+        // HumanML3D keeps these files whole.
+        return (Time::Frame { frame: 0, fps }, Time::End);
+    }
+    let trim = humanml3d_head_trim(&row.source_path, fps);
+    let end = if row.end_frame == -1 {
+        Time::BeforeEnd { frames: 1, fps }
+    } else {
+        Time::Frame {
+            frame: trim + row.end_frame,
+            fps,
+        }
+    };
+    (
+        Time::Frame {
+            frame: trim + row.start_frame,
+            fps,
+        },
+        end,
+    )
+}
+
+/// [`index_annotations`] with every caption of a clip: `captions` gives a `new_name`'s caption
+/// lines. Lines with `0#0` (the whole clip) make one span whose first caption is its text and
+/// the others its alternatives; lines naming a sub-span in seconds make a span of their own per
+/// distinct sub-span, cut from the row's crop as HumanML3D's loaders cut it
+/// (`motion[int(start*fps):int(end*fps)]`). A row whose captions are all sub-spans gives no
+/// whole-clip span, as in HumanML3D.
+pub fn index_annotations_with(
+    rows: &[IndexRow],
+    options: &IndexOptions,
+    file: &str,
+    key: impl Fn(&str) -> String,
+    captions: impl Fn(&str) -> Option<Vec<CaptionLine>>,
+    default_text: &str,
+) -> BTreeMap<String, CaptureAnnotation> {
+    let fps = options.fps;
     let mut groups: BTreeMap<String, Vec<&IndexRow>> = BTreeMap::new();
     for row in rows {
         groups.entry(key(&row.source_path)).or_default().push(row);
@@ -291,9 +399,10 @@ pub fn index_annotations(
         group.sort_by_key(|r| (r.start_frame, r.line));
         let mut spans = Vec::with_capacity(group.len());
         for row in group {
-            let text = match texts(&row.new_name) {
-                Some(t) => t,
-                None => {
+            let (start, end) = row_range(row, options);
+            let lines = match captions(&row.new_name) {
+                Some(lines) if !lines.is_empty() => lines,
+                _ => {
                     notes.push(Note::new(
                         "no_caption",
                         format!(
@@ -301,31 +410,63 @@ pub fn index_annotations(
                             row.line, row.new_name
                         ),
                     ));
-                    default_text.to_string()
+                    vec![CaptionLine {
+                        caption: default_text.to_string(),
+                        start: 0.0,
+                        end: 0.0,
+                    }]
                 }
             };
-            spans.push(Span {
-                start: Time::Frame {
-                    frame: row.start_frame,
-                    fps,
-                },
-                end: if row.end_frame == -1 {
-                    Time::End
+            // Captions grouped by the part of the clip they describe, in file order.
+            let mut parts: Vec<((f64, f64), Vec<String>)> = Vec::new();
+            for line in lines {
+                let at = (line.start, line.end);
+                match parts.iter_mut().find(|(p, _)| *p == at) {
+                    Some((_, texts)) => texts.push(line.caption),
+                    None => parts.push((at, vec![line.caption])),
+                }
+            }
+            for ((from, to), mut texts) in parts {
+                let text = texts.remove(0);
+                let whole = from == 0.0 && to == 0.0;
+                let (span_start, span_end, id) = if whole {
+                    (start, end, row.new_name.clone())
                 } else {
-                    Time::Frame {
-                        frame: row.end_frame,
-                        fps,
+                    let base = match start {
+                        Time::Frame { frame, .. } => frame,
+                        _ => 0,
+                    };
+                    let sub_start = base + (from * fps) as i64;
+                    let mut sub_end = base + (to * fps) as i64;
+                    if let Time::Frame { frame, .. } = end {
+                        sub_end = sub_end.min(frame);
                     }
-                },
-                raw_text: text.clone(),
-                label: text,
-                categories: Vec::new(),
-                motion_type: None,
-                hand: None,
-                object: None,
-                grasp: None,
-                id: row.new_name.clone(),
-            });
+                    (
+                        Time::Frame {
+                            frame: sub_start,
+                            fps,
+                        },
+                        Time::Frame {
+                            frame: sub_end,
+                            fps,
+                        },
+                        format!("{}#{from}-{to}", row.new_name),
+                    )
+                };
+                spans.push(Span {
+                    start: span_start,
+                    end: span_end,
+                    raw_text: text.clone(),
+                    label: text,
+                    categories: Vec::new(),
+                    motion_type: None,
+                    hand: None,
+                    object: None,
+                    grasp: None,
+                    id,
+                    alternatives: texts,
+                });
+            }
         }
         out.insert(
             capture,
@@ -340,6 +481,66 @@ pub fn index_annotations(
         );
     }
     out
+}
+
+/// One caption of a HumanML3D caption file: the caption and the part of the clip it describes,
+/// in seconds (`0`, `0` for the whole clip).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaptionLine {
+    /// The caption as written.
+    pub caption: String,
+    /// Start of the described part, seconds from the clip's start.
+    pub start: f64,
+    /// Its end; `0` with `start` `0` for the whole clip.
+    pub end: f64,
+}
+
+/// Every caption of a HumanML3D caption file (`caption#tokens#start#end` per line; a line with
+/// fewer fields describes the whole clip). Lines whose times are not numbers, are negative or
+/// end before they start are skipped with a `bad_caption` note naming `file` and the line.
+pub fn read_captions(text: &str, file: &str) -> (Vec<CaptionLine>, Vec<Note>) {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = Vec::new();
+    let mut notes = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let fields: Vec<&str> = line.split('#').collect();
+        let caption = fields.first().map_or("", |c| c.trim());
+        if caption.is_empty() {
+            continue;
+        }
+        let (start, end) = if fields.len() >= 4 {
+            let time = |s: &str| s.trim().parse::<f64>().ok().filter(|t| t.is_finite());
+            match (
+                time(fields[fields.len() - 2]),
+                time(fields[fields.len() - 1]),
+            ) {
+                (Some(a), Some(b)) if a >= 0.0 && b >= 0.0 && (b > a || (a == 0.0 && b == 0.0)) => {
+                    (a, b)
+                }
+                _ => {
+                    notes.push(Note::new(
+                        "bad_caption",
+                        format!(
+                            "{file}:{}: start#end `{}#{}`: expected seconds with end after \
+                             start, or 0#0 for the whole clip; caption skipped",
+                            i + 1,
+                            fields[fields.len() - 2],
+                            fields[fields.len() - 1]
+                        ),
+                    ));
+                    continue;
+                }
+            }
+        } else {
+            (0.0, 0.0)
+        };
+        lines.push(CaptionLine {
+            caption: caption.to_string(),
+            start,
+            end,
+        });
+    }
+    (lines, notes)
 }
 
 /// The first caption of a HumanML3D caption file (lines `caption#tokens#start#end`; a line

@@ -16,6 +16,14 @@ pub enum Time {
     },
     /// The end of the capture (`-1` in HumanML3D's index).
     End,
+    /// `frames` frames (at the stated rate) before the end of the capture: a Python slice's
+    /// negative end (`data[start:-1]` in HumanML3D's cuts).
+    BeforeEnd {
+        /// Frames before the end.
+        frames: i64,
+        /// The rate the number counts at.
+        fps: f64,
+    },
 }
 
 impl Time {
@@ -26,6 +34,9 @@ impl Time {
             Time::Seconds(t) => (t * fps + 1e-9).floor() as i64,
             Time::Frame { frame, fps: at } => ((frame as f64 / at) * fps + 1e-9).floor() as i64,
             Time::End => len as i64,
+            Time::BeforeEnd { frames, fps: at } => {
+                len as i64 - ((frames as f64 / at) * fps + 1e-9).floor() as i64
+            }
         }
     }
 }
@@ -95,6 +106,10 @@ pub struct Span {
     pub grasp: Option<Time>,
     /// Identifier in the source (BABEL `seg_id`, row number, ...).
     pub id: String,
+    /// Further captions of the same span by other annotators (HumanML3D's `texts/` files hold
+    /// about three per clip); the clip keeps them all, `raw_text` first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<String>,
 }
 
 /// Everything an annotation file says about one capture.

@@ -117,6 +117,9 @@ reasons! {
         InvalidPlan => "invalid_plan",
         /// The profile cannot mirror the skeleton.
         Mirror => "mirror",
+        /// A joint-position array that does not read, does not fit its layout, or whose bone
+        /// lengths wander beyond the tolerance.
+        Positions => "positions",
     }
 }
 

@@ -146,6 +146,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             source: &source.name,
             profile: spec,
             fps_override,
+            positions: source.positions.as_ref(),
         }))
     };
     let ingest_fp = ingest::fingerprint(&ingest::CaptureInput {
@@ -155,6 +156,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         source: &source.name,
         profile: spec,
         fps_override,
+        positions: source.positions.as_ref(),
     });
     let mut parsed: Option<ingest::IngestOutput> = None;
     let Some((ingested, ran)) =

@@ -302,6 +302,50 @@ impl Config {
                     "2 or more",
                 );
             }
+            if let Some(p) = &s.positions {
+                if s.profile.trim() != "smpl-22" {
+                    c.push(
+                        &at(&[K("profile")]),
+                        format!("{:?}", s.profile),
+                        "`smpl-22`: joint-position captures (`positions`) become motions on the SMPL body skeleton",
+                    );
+                }
+                if !FPS_RANGE.contains(&p.fps) {
+                    c.push(
+                        &at(&[K("positions"), K("fps")]),
+                        p.fps.to_string(),
+                        &format!(
+                            "a frame rate from {} to {} fps (HumanML3D: 20)",
+                            FPS_RANGE.start(),
+                            FPS_RANGE.end()
+                        ),
+                    );
+                }
+                if !(p.units.is_finite() && p.units > 0.0) {
+                    c.push(
+                        &at(&[K("positions"), K("units")]),
+                        p.units.to_string(),
+                        "metres per unit of the arrays, above zero (HumanML3D: 1)",
+                    );
+                }
+                if !(p.bone_tolerance.is_finite()
+                    && p.bone_tolerance > 0.0
+                    && p.bone_tolerance < 1.0)
+                {
+                    c.push(
+                        &at(&[K("positions"), K("bone_tolerance")]),
+                        p.bone_tolerance.to_string(),
+                        "a fraction above 0 and below 1 (default 0.05)",
+                    );
+                }
+                if p.up.axis == p.forward.axis {
+                    c.push(
+                        &at(&[K("positions"), K("forward")]),
+                        p.forward.to_string(),
+                        &format!("an axis other than the up axis {}", p.up),
+                    );
+                }
+            }
         }
     }
 

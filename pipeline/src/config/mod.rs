@@ -401,6 +401,95 @@ pub struct SourceConfig {
     /// How annotations become clips.
     #[serde(default)]
     pub segment: SegmentConfig,
+    /// For captures that are joint-position arrays (`.npy`): their joint layout, axes, units and
+    /// rate. Without it every capture is read as BVH.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub positions: Option<PositionsConfig>,
+}
+
+/// Joint layout of a joint-position array.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+pub enum PositionLayoutName {
+    /// The 22 SMPL body joints (HumanML3D `new_joints`).
+    #[serde(rename = "smpl-22")]
+    Smpl22,
+    /// The 52 SMPL-H joints (HumanML3D `joints` and `pose_data`): the first 22 are the body, the
+    /// 30 finger joints after them are not used.
+    #[serde(rename = "smplh-52")]
+    SmplH52,
+}
+
+impl PositionLayoutName {
+    /// Joints per frame the layout stores.
+    pub fn joints(self) -> usize {
+        match self {
+            PositionLayoutName::Smpl22 => 22,
+            PositionLayoutName::SmplH52 => 52,
+        }
+    }
+
+    /// The name as written in configs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PositionLayoutName::Smpl22 => "smpl-22",
+            PositionLayoutName::SmplH52 => "smplh-52",
+        }
+    }
+}
+
+/// How a source's joint-position arrays are read (`docs/humanml3d.md`, "Joint-position captures").
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PositionsConfig {
+    /// Joint layout of the arrays.
+    pub layout: PositionLayoutName,
+    /// The arrays' up axis (HumanML3D: `+y`; AMASS before HumanML3D's swap: `+z`).
+    #[serde(default = "default_positions_up")]
+    pub up: crate::motion::SignedAxis,
+    /// The direction the body faces at rest in the arrays (HumanML3D: `+z`).
+    #[serde(default = "default_positions_forward")]
+    pub forward: crate::motion::SignedAxis,
+    /// Metres per unit of the arrays (HumanML3D: 1).
+    #[serde(default = "default_positions_units")]
+    pub units: f64,
+    /// Frame rate of the arrays (HumanML3D: 20).
+    pub fps: f64,
+    /// Negate x before anything else, as HumanML3D's `raw_pose_processing` does to its
+    /// `pose_data` arrays when it cuts them (`data[..., 0] *= -1`); its `joints` and
+    /// `new_joints` have it done already.
+    #[serde(default)]
+    pub negate_x: bool,
+    /// Largest relative change of a bone's length from its mean over the capture; a capture
+    /// whose bones wander further is refused (file, frame, bone).
+    #[serde(default = "default_bone_tolerance")]
+    pub bone_tolerance: f64,
+}
+
+fn default_positions_up() -> crate::motion::SignedAxis {
+    crate::motion::SignedAxis {
+        axis: 1,
+        negative: false,
+    }
+}
+
+fn default_positions_forward() -> crate::motion::SignedAxis {
+    crate::motion::SignedAxis {
+        axis: 2,
+        negative: false,
+    }
+}
+
+fn default_positions_units() -> f64 {
+    1.0
+}
+
+/// The default bone-length tolerance: 5%. HumanML3D's arrays come from SMPL meshes, whose bones
+/// keep their length to float precision; 5% leaves room for other position sources (markers,
+/// estimators) while refusing arrays that are not one body (swapped joints, a wrong layout).
+pub const DEFAULT_BONE_TOLERANCE: f64 = 0.05;
+
+fn default_bone_tolerance() -> f64 {
+    DEFAULT_BONE_TOLERANCE
 }
 
 /// How a source's captures get their labels.
@@ -455,6 +544,11 @@ pub enum LabelConfig {
         /// Regex with a named group `key` that turns `source_path` into the capture's file stem.
         #[serde(default)]
         key_pattern: Option<String>,
+        /// Cut rows as HumanML3D's `raw_pose_processing` does: its dataset-specific head trims
+        /// first (by `source_path`), then `[start_frame:end_frame]` as a Python slice, so `-1`
+        /// stops one frame before the end (`docs/humanml3d.md`).
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        humanml3d_cuts: bool,
     },
 }
 

@@ -743,10 +743,20 @@ pub fn write_bvh_with_reference(
     let total = skeleton.channel_count();
     let reference = reference.filter(|r| r.len() == total * motion.num_frames());
     let mut previous: Vec<Option<[f64; 3]>> = vec![None; n];
+    // Channel values follow the hierarchy as written (depth first), whatever order the joints
+    // have in memory: skeletons made from joint positions keep their array's order (SMPL's).
+    let mut written = Vec::with_capacity(n);
+    let mut stack = vec![0usize];
+    while let Some(j) = stack.pop() {
+        written.push(j);
+        let children: Vec<usize> = skeleton.children(j).collect();
+        stack.extend(children.into_iter().rev());
+    }
     for f in 0..motion.num_frames() {
         let mut first = true;
         let mut start = f * total;
-        for (j, joint) in skeleton.joints.iter().enumerate() {
+        for &j in &written {
+            let joint = &skeleton.joints[j];
             let q = motion.rotations[f * n + j];
             let t = motion.translations[f * n + j];
             let given = reference.map(|r| &r[start..start + joint.channels.len()]);

@@ -2,9 +2,13 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::annotate::span::Note;
 use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
 use crate::clip::{Capture, CaptureRef};
+use crate::config::PositionsConfig;
 use crate::motion::bvh::FPS_RANGE;
+use crate::motion::ik::{IkError, PositionLayout, motion_from_positions};
+use crate::motion::npy::read_joint_positions;
 use crate::motion::{ProfileSpec, read_bvh};
 use crate::source::CaptureFile;
 
@@ -12,6 +16,10 @@ use crate::source::CaptureFile;
 pub const NAME: &str = "ingest";
 /// Bump when the stage's output for the same input changes.
 pub const VERSION: u32 = 4;
+
+/// Bone-length change (relative to the bone's mean) from which a capture's IK fit is reported:
+/// below it the bones are constant to the arrays' float precision.
+pub const REPORTED_LENGTH_CHANGE: f64 = 1e-4;
 
 /// What the stage reads for one capture.
 #[derive(Debug)]
@@ -29,6 +37,8 @@ pub struct CaptureInput<'a> {
     pub profile: &'a ProfileSpec,
     /// Frame-rate override for this file (BVH headers can be wrong).
     pub fps_override: Option<f64>,
+    /// For joint-position arrays: how to read them (`None`: the file is BVH).
+    pub positions: Option<&'a PositionsConfig>,
 }
 
 /// The stage's output for one capture.
@@ -85,13 +95,17 @@ impl IngestOutput {
 /// The fingerprint of one capture's ingest: everything the output depends on. The bytes are not
 /// read: `input.sha256` stands for them, so the fingerprint is known without reading the file.
 pub fn fingerprint(input: &CaptureInput<'_>) -> Stamp {
-    Fingerprint::new(NAME, VERSION)
+    let print = Fingerprint::new(NAME, VERSION)
         .text("source name", input.source)
         .text("file path", &input.file.display)
         .text("file content", input.sha256)
         .json("skeleton profile", input.profile)
-        .json("fps override", &input.fps_override)
-        .stamp()
+        .json("fps override", &input.fps_override);
+    // Only sources of joint positions name it, so BVH captures keep their fingerprints.
+    match input.positions {
+        Some(p) => print.json("positions", p).stamp(),
+        None => print.stamp(),
+    }
 }
 
 /// A refusal of `file` by `stage`.
@@ -120,6 +134,9 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
         capture: None,
         rejects: vec![r],
     };
+    if let Some(positions) = input.positions {
+        return run_positions(input, positions);
+    }
     let text = match std::str::from_utf8(input.bytes) {
         Ok(t) => t,
         Err(e) => {
@@ -197,6 +214,131 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
             stem: file.stem(),
             profile: input.profile.name.clone(),
             motion,
+            notes: Vec::new(),
+        }),
+        rejects: Vec::new(),
+    }
+}
+
+/// The joint-position array of one frame in the layout's first 22 joints, in HumanML3D's axes
+/// (x left, y up, z forward) and metres: `negate_x` first, then the units, then the rotation
+/// taking the arrays' up and forward to +y and +z.
+pub fn body_positions(
+    positions: &[glam::DVec3],
+    joints: usize,
+    config: &PositionsConfig,
+) -> Vec<glam::DVec3> {
+    let up = config.up.vector();
+    let forward = config.forward.vector();
+    let lateral = up.cross(forward);
+    positions
+        .chunks_exact(joints.max(1))
+        .flat_map(|frame| frame.iter().take(22))
+        .map(|&p| {
+            let mut v = p;
+            if config.negate_x {
+                v.x = -v.x;
+            }
+            v *= config.units;
+            glam::DVec3::new(v.dot(lateral), v.dot(up), v.dot(forward))
+        })
+        .collect()
+}
+
+/// Ingest of a joint-position array: read, checked against the layout, turned into a motion on
+/// the clip's own bone lengths by inverse kinematics (`motion::ik`).
+fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOutput {
+    let file = input.file;
+    let refuse = |reason: RejectReason, message: String, frame: Option<u64>| IngestOutput {
+        capture: None,
+        rejects: vec![reject(NAME, file, reason, message, None, frame)],
+    };
+    let array = match read_joint_positions(input.bytes) {
+        Ok(a) => a,
+        Err(e) => return refuse(RejectReason::Positions, e.to_string(), None),
+    };
+    let want = config.layout.joints();
+    if array.joints != want {
+        return refuse(
+            RejectReason::Positions,
+            format!(
+                "{} joints per frame; layout `{}` stores {want}",
+                array.joints,
+                config.layout.as_str()
+            ),
+            None,
+        );
+    }
+    if array.frames == 0 {
+        return refuse(RejectReason::Empty, "capture has no frames".into(), None);
+    }
+    let fps = input.fps_override.unwrap_or(config.fps);
+    if !FPS_RANGE.contains(&fps) {
+        let message = format!(
+            "frame rate {fps} is outside the plausible range {} to {} fps",
+            FPS_RANGE.start(),
+            FPS_RANGE.end()
+        );
+        return refuse(RejectReason::Fps, message, None);
+    }
+    let Some(layout) = PositionLayout::from_profile(input.profile) else {
+        let message = format!(
+            "profile `{}` lists no joints and parents, so it cannot hold joint positions (use `smpl-22`)",
+            input.profile.name
+        );
+        return refuse(RejectReason::Profile, message, None);
+    };
+    if layout.names.len() != 22 {
+        let message = format!(
+            "profile `{}` has {} joints; joint-position layouts give the 22 SMPL body joints (use `smpl-22`)",
+            input.profile.name,
+            layout.names.len()
+        );
+        return refuse(RejectReason::Profile, message, None);
+    }
+    let body = body_positions(&array.positions, array.joints, config);
+    let (motion, fit) = match motion_from_positions(&layout, &body, fps, config.bone_tolerance) {
+        Ok(m) => m,
+        Err(e) => {
+            let frame = match &e {
+                IkError::BoneLength { frame, .. } | IkError::ZeroBone { frame, .. } => {
+                    Some(*frame as u64)
+                }
+                _ => None,
+            };
+            return refuse(RejectReason::Positions, e.to_string(), frame);
+        }
+    };
+    if let Err(e) = input.profile.bind(&motion.skeleton) {
+        return refuse(RejectReason::Profile, e.to_string(), None);
+    }
+    let mut notes = Vec::new();
+    if fit.max_length_change > REPORTED_LENGTH_CHANGE {
+        let (frame, joint) = fit.worst;
+        notes.push(Note::new(
+            "ik_residual",
+            format!(
+                "`{}`: bone lengths vary up to {:.3}% from their means, so forward kinematics \
+                 reproduces the positions to {:.2e} m (worst: frame {frame}, joint `{}`)",
+                file.display,
+                100.0 * fit.max_length_change,
+                fit.max_residual,
+                layout.names.get(joint).map_or("?", String::as_str),
+            ),
+        ));
+    }
+    IngestOutput {
+        capture: Some(Capture {
+            capture: CaptureRef {
+                source: input.source.to_string(),
+                path: file.display.clone(),
+                sha256: input.sha256.to_string(),
+                fps,
+            },
+            stem: file.stem(),
+            profile: input.profile.name.clone(),
+            motion,
+            notes,
         }),
         rejects: Vec::new(),
     }

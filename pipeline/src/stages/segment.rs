@@ -117,7 +117,13 @@ pub fn run_with<E>(
     mut take_frames: impl FnMut(&Clip, Motion) -> Result<(), E>,
 ) -> Result<SegmentOutput, E> {
     let mut out = SegmentOutput {
-        notes: input.annotation.notes.clone(),
+        notes: input
+            .annotation
+            .notes
+            .iter()
+            .chain(&input.capture.notes)
+            .cloned()
+            .collect(),
         ..SegmentOutput::default()
     };
     let capture = input.capture;
@@ -167,9 +173,12 @@ pub fn run_with<E>(
             drop(DropReason::DroppedLabel, &span.raw_text, None);
             continue;
         }
-        let start =
-            span.start.to_frame(fps, len) + if span.start == Time::End { 0 } else { offset };
-        let mut end = span.end.to_frame(fps, len) + if span.end == Time::End { 0 } else { offset };
+        let shift = |t: Time| match t {
+            Time::End | Time::BeforeEnd { .. } => 0,
+            _ => offset,
+        };
+        let start = span.start.to_frame(fps, len) + shift(span.start);
+        let mut end = span.end.to_frame(fps, len) + shift(span.end);
         if end > len as i64 {
             out.notes.push(Note::new(
                 "end_clamped",
@@ -376,7 +385,10 @@ impl ClipMaker<'_, '_> {
         clip.annotation_origin = format!("{}#{}", clip.annotation_origin, span.id);
         clip.action = span.label.clone();
         clip.text = span.raw_text.clone();
-        clip.texts = vec![span.raw_text.clone()];
+        clip.texts = std::iter::once(&span.raw_text)
+            .chain(&span.alternatives)
+            .cloned()
+            .collect();
         clip.labels = vec![span.label.clone()];
         clip.hand = span.hand;
         clip.object = span.object.clone();

@@ -1,0 +1,399 @@
+//! Joint-position captures in a build (`fixtures/humanml3d-joints/`): HumanML3D's arrays read,
+//! cut by its index as HumanML3D cuts them, captioned from caption files, mirrored, exported as
+//! HumanML3D and as BVH, checked against HumanML3D's own arrays in `../shared`.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use glam::DVec3;
+use motionforge::annotate::frame_index::{
+    IndexOptions, IndexRow, humanml3d_head_trim, read_captions, read_frame_index, row_range,
+};
+use motionforge::annotate::span::Time;
+use motionforge::base::RejectReason;
+use motionforge::config::{PositionLayoutName, PositionsConfig};
+use motionforge::motion::{ProfileSpec, SignedAxis, read_bvh};
+use motionforge::source::CaptureFile;
+use motionforge::stages::ingest;
+
+/// A `.npy` file's shape and values (as f64).
+fn npy(path: &Path) -> (Vec<u64>, Vec<f64>) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let file = npyz::NpyFile::new(&bytes[..]).unwrap();
+    let shape = file.shape().to_vec();
+    let values = match file.dtype().num_bytes() {
+        Some(8) => file.into_vec::<f64>().unwrap(),
+        _ => file
+            .into_vec::<f32>()
+            .unwrap()
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+    };
+    (shape, values)
+}
+
+/// Frames of the first 22 joints of a `frames × joints × 3` array.
+fn body(path: &Path) -> Vec<[DVec3; 22]> {
+    let (shape, v) = npy(path);
+    let joints = shape[1] as usize;
+    v.chunks_exact(joints * 3)
+        .map(|f| std::array::from_fn(|j| DVec3::new(f[3 * j], f[3 * j + 1], f[3 * j + 2])))
+        .collect()
+}
+
+fn max_distance(a: &[[DVec3; 22]], b: &[[DVec3; 22]]) -> f64 {
+    assert_eq!(a.len(), b.len(), "frame counts");
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| p.distance(*q)))
+        .fold(0.0, f64::max)
+}
+
+/// HumanML3D's mirror (`swap_left_right`): x negated, left and right joints swapped.
+fn humanml3d_mirror(frames: &[[DVec3; 22]]) -> Vec<[DVec3; 22]> {
+    const SWAP: [usize; 22] = [
+        0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20,
+    ];
+    frames
+        .iter()
+        .map(|f| std::array::from_fn(|j| f[SWAP[j]] * DVec3::new(-1.0, 1.0, 1.0)))
+        .collect()
+}
+
+/// A copy of the fixture folder whose dataset goes to `<copy>/out`.
+fn fixture_copy() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let src = common::repo().join("fixtures/humanml3d-joints");
+    let dst = dir.path().join("humanml3d-joints");
+    copy_dir(&src, &dst);
+    let config = dst.join("build.toml");
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        text.replace("output = \"../../out\"", "output = \"out\""),
+    )
+    .unwrap();
+    (dir, config)
+}
+
+fn copy_dir(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for entry in std::fs::read_dir(src).unwrap() {
+        let entry = entry.unwrap();
+        let to = dst.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &to);
+        } else {
+            std::fs::copy(entry.path(), &to).unwrap();
+        }
+    }
+}
+
+fn motionforge() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_motionforge"))
+}
+
+fn lines(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn humanml3d_arrays_build_cut_mirror_and_export_back_to_humanml3d_s_own_positions() {
+    let (_dir, config) = fixture_copy();
+    let root = config.parent().unwrap().to_path_buf();
+    common::run_ok(motionforge().args(["build", "--config"]).arg(&config));
+    let dataset = root.join("out/hml3d-joints");
+    let rejects = std::fs::read_to_string(dataset.join("rejects.jsonl")).unwrap();
+    assert!(rejects.trim().is_empty(), "{rejects}");
+
+    let out = root.join("hml3d");
+    common::run_ok(
+        motionforge()
+            .args(["export", "humanml3d", "--dataset"])
+            .arg(&dataset)
+            .arg("--out")
+            .arg(&out),
+    );
+    // name -> clip id.
+    let names: Vec<(String, String)> = lines(&out.join("names.csv"))
+        .into_iter()
+        .skip(1)
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            (cells[0].to_string(), cells[1].to_string())
+        })
+        .collect();
+    let name_of = |clip: &str| {
+        names
+            .iter()
+            .find(|(_, c)| c == clip)
+            .map(|(n, _)| n.clone())
+            .unwrap_or_else(|| panic!("no clip `{clip}` in {names:?}"))
+    };
+    let capture = "humanml3d-pose-data/WalkInCounterClockwiseCircle02_poses";
+    let whole = name_of(&format!("{capture}:0-180"));
+    let sub = name_of(&format!("{capture}:20-90"));
+    let mirrored = name_of(&format!("{capture}:0-180:m"));
+    let tennis = name_of("humanml3d-new-joints/012314:0-170");
+    assert_eq!(names.len(), 6, "three clips and their mirrors: {names:?}");
+
+    // The pose_data array (x negated back), cut by index row 23 as HumanML3D cuts it, read
+    // through IK and exported: HumanML3D's own joints/000021.npy.
+    let reference = body(&common::shared_data().join("humanml3d/joints/000021.npy"));
+    let exported = body(&out.join("joints").join(format!("{whole}.npy")));
+    let d = max_distance(&exported, &reference);
+    assert!(d < 1e-5, "000021 off by {d} m");
+    // The caption file's sub-span 1.0#4.5 s: frames 20-90 of the clip.
+    let exported = body(&out.join("joints").join(format!("{sub}.npy")));
+    let d = max_distance(&exported, &reference[20..90]);
+    assert!(d < 1e-5, "sub-span off by {d} m");
+    // The 22-joint new_joints array, read as a capture of its own.
+    let new_joints = body(&common::shared_data().join("humanml3d/HumanML3D/new_joints/012314.npy"));
+    let exported = body(&out.join("joints").join(format!("{tennis}.npy")));
+    let d = max_distance(&exported, &new_joints);
+    assert!(d < 1e-5, "012314 off by {d} m");
+    // The mirror agrees with HumanML3D's swap_left_right up to the body's own left/right
+    // asymmetry (the IK skeleton is made symmetric; docs/humanml3d.md).
+    let exported = body(&out.join("joints").join(format!("{mirrored}.npy")));
+    let d = max_distance(&exported, &humanml3d_mirror(&reference));
+    assert!(d < 0.03, "mirror off by {d} m");
+    assert!(d > 1e-4, "the mirror is not a copy of HumanML3D's arrays");
+
+    // Every whole-clip caption kept (two lines), the sub-span's caption on its own clip, and
+    // mirrored captions on the mirror.
+    let texts = lines(&out.join("texts").join(format!("{whole}.txt")));
+    assert_eq!(texts.len(), 2, "{texts:?}");
+    assert!(texts[0].starts_with("a person walks in a counterclockwise circle.#"));
+    assert!(texts[1].starts_with("someone walks around in a circle to their left.#"));
+    let texts = lines(&out.join("texts").join(format!("{sub}.txt")));
+    assert_eq!(texts.len(), 1, "{texts:?}");
+    assert!(texts[0].starts_with("a person walks forward while curving to the left.#"));
+    let texts = lines(&out.join("texts").join(format!("{mirrored}.txt")));
+    assert!(
+        texts[0].starts_with("a person walks in a clockwise circle.#"),
+        "{texts:?}"
+    );
+    let (shape, _) = npy(&out.join("new_joint_vecs").join(format!("{whole}.npy")));
+    assert_eq!(shape, vec![179, 263]);
+
+    // BVH export of a joint-position clip: its forward kinematics gives the positions back.
+    let bvh_path = root.join("whole.bvh");
+    common::run_ok(
+        motionforge()
+            .args(["export-bvh", "--config"])
+            .arg(&config)
+            .args(["--clip", &format!("{capture}:0-180"), "--output"])
+            .arg(&bvh_path),
+    );
+    let bvh = read_bvh(&std::fs::read_to_string(&bvh_path).unwrap()).unwrap();
+    assert_eq!(bvh.motion.num_frames(), 180);
+    assert_eq!(bvh.header_fps, 20.0);
+    let pose = bvh.motion.forward_kinematics();
+    let n = pose.joints;
+    assert_eq!(n, 22);
+    // The file lists joints depth first; SMPL's order is by name.
+    let smpl = ProfileSpec::bundled("smpl-22").unwrap().joints;
+    let at: Vec<usize> = smpl
+        .iter()
+        .map(|name| {
+            bvh.skeleton
+                .joints
+                .iter()
+                .position(|j| &j.name == name)
+                .unwrap_or_else(|| panic!("no joint {name} in the BVH"))
+        })
+        .collect();
+    let from_bvh: Vec<[DVec3; 22]> = pose
+        .positions
+        .chunks_exact(n)
+        .map(|f| std::array::from_fn(|j| f[at[j]]))
+        .collect();
+    let d = max_distance(&from_bvh, &reference);
+    assert!(d < 1e-4, "BVH off by {d} m");
+}
+
+fn positions(layout: PositionLayoutName, negate_x: bool) -> PositionsConfig {
+    PositionsConfig {
+        layout,
+        up: SignedAxis {
+            axis: 1,
+            negative: false,
+        },
+        forward: SignedAxis {
+            axis: 2,
+            negative: false,
+        },
+        units: 1.0,
+        fps: 20.0,
+        negate_x,
+        bone_tolerance: 0.05,
+    }
+}
+
+fn ingest_bytes(path: &Path, bytes: &[u8], config: &PositionsConfig) -> ingest::IngestOutput {
+    let file = CaptureFile {
+        source: 0,
+        path: path.to_path_buf(),
+        display: path.file_name().unwrap().to_string_lossy().into_owned(),
+    };
+    let spec = ProfileSpec::bundled("smpl-22").unwrap();
+    ingest::run(&ingest::CaptureInput {
+        file: &file,
+        bytes,
+        sha256: "test",
+        source: "test",
+        profile: &spec,
+        fps_override: None,
+        positions: Some(config),
+    })
+}
+
+#[test]
+fn a_capture_whose_bones_wander_is_rejected_naming_file_frame_and_bone() {
+    let path = common::shared_data().join("humanml3d/joints/000021.npy");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let config = positions(PositionLayoutName::SmplH52, false);
+    // As it is: read, bones constant, nothing to report.
+    let out = ingest_bytes(&path, &bytes, &config);
+    let capture = out.capture.expect("000021 reads");
+    assert!(out.rejects.is_empty());
+    assert!(capture.notes.is_empty(), "{:?}", capture.notes);
+    assert_eq!(capture.motion.num_frames(), 180);
+    assert_eq!(capture.capture.fps, 20.0);
+
+    // Left wrist (joint 20) of frame 50 moved 10 cm along x: its forearm bone stretches.
+    let header = 10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let at = header + ((50 * 52 + 20) * 3) * 8;
+    let x = f64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) + 0.10;
+    bytes[at..at + 8].copy_from_slice(&x.to_le_bytes());
+    let out = ingest_bytes(&path, &bytes, &config);
+    assert!(out.capture.is_none());
+    let reject = &out.rejects[0];
+    assert_eq!(reject.reason, RejectReason::Positions);
+    assert_eq!(reject.file, "000021.npy");
+    assert_eq!(reject.frame, Some(50));
+    assert!(reject.message.contains("left_wrist"), "{}", reject.message);
+
+    // A looser tolerance takes it, and the IK residual is reported.
+    let loose = PositionsConfig {
+        bone_tolerance: 0.9,
+        ..config.clone()
+    };
+    let out = ingest_bytes(&path, &bytes, &loose);
+    let capture = out.capture.expect("read with a loose tolerance");
+    let note = &capture.notes[0];
+    assert_eq!(note.kind, "ik_residual");
+    assert!(note.message.contains("frame 50"), "{}", note.message);
+
+    // The wrong layout is refused, naming both counts.
+    let out = ingest_bytes(&path, &bytes, &positions(PositionLayoutName::Smpl22, false));
+    assert!(
+        out.rejects[0].message.contains("52 joints"),
+        "{:?}",
+        out.rejects
+    );
+}
+
+#[test]
+fn humanml3d_cuts_trim_dataset_heads_and_slice_as_python_does() {
+    let index = common::shared_data().join("humanml3d/index.csv");
+    let (rows, notes) =
+        read_frame_index(&std::fs::read_to_string(&index).unwrap(), "index.csv").unwrap();
+    assert!(notes.is_empty());
+    let cuts = IndexOptions {
+        fps: 20.0,
+        humanml3d_cuts: true,
+    };
+    let row = |name: &str| rows.iter().find(|r| r.new_name == name).unwrap();
+    let frames = |name: &str, len: u64| {
+        let (s, e) = row_range(row(name), &cuts);
+        (s.to_frame(20.0, len), e.to_frame(20.0, len))
+    };
+    // 012314: Eyes_Japan_Dataset, data[60:][149:320].
+    assert_eq!(frames("012314.npy", 1000), (209, 380));
+    // 000021: KIT, no trim.
+    assert_eq!(frames("000021.npy", 1000), (0, 180));
+    // Every trimmed dataset of the real index, with the trim HumanML3D applies.
+    for (dataset, trim) in [
+        ("Eyes_Japan_Dataset", 60),
+        ("MPI_HDM05", 60),
+        ("TotalCapture", 20),
+        ("MPI_Limits", 20),
+        ("Transitions_mocap", 10),
+    ] {
+        let r = rows
+            .iter()
+            .find(|r| r.source_path.contains(dataset))
+            .unwrap_or_else(|| panic!("no {dataset} row in the real index"));
+        assert_eq!(humanml3d_head_trim(&r.source_path, 20.0), trim, "{dataset}");
+        let (s, _) = row_range(r, &cuts);
+        assert_eq!(s.to_frame(20.0, 100_000), r.start_frame + trim, "{dataset}");
+    }
+    // `-1`: Python's data[start:-1] stops one frame before the end; without the option, the end.
+    // (No AMASS row of the real index ends at -1; this one is written for the test.)
+    let open = IndexRow {
+        source_path: "./pose_data/MPI_Limits/03099/op2_poses.npy".into(),
+        start_frame: 0,
+        end_frame: -1,
+        new_name: "x.npy".into(),
+        line: 2,
+    };
+    let open = &open;
+    let (s, _) = row_range(open, &cuts);
+    assert_eq!(s.to_frame(20.0, 500), 20);
+    let (_, e) = row_range(open, &cuts);
+    assert_eq!(e.to_frame(20.0, 500), 499);
+    let plain = IndexOptions {
+        fps: 20.0,
+        humanml3d_cuts: false,
+    };
+    assert_eq!(row_range(open, &plain).1, Time::End);
+    // humanact12 files are kept whole.
+    let act = rows
+        .iter()
+        .find(|r| r.source_path.contains("humanact12"))
+        .unwrap();
+    let (s, e) = row_range(act, &cuts);
+    assert_eq!((s.to_frame(20.0, 77), e.to_frame(20.0, 77)), (0, 77));
+}
+
+#[test]
+fn caption_files_give_every_caption_and_their_sub_spans() {
+    let text = "\u{feff}a man walks.#a/DET man/NOUN walk/VERB#0.0#0.0\r\n\
+                he waves.#he/PRON wave/VERB#1.5#3.0\n\
+                #only/ADV tokens#0.0#0.0\n\
+                bad times#x#3.0#1.0\n\
+                not a number#x#a#2\n\
+                plain caption line\n";
+    let (lines, notes) = read_captions(text, "texts/000001.txt");
+    let got: Vec<(&str, f64, f64)> = lines
+        .iter()
+        .map(|l| (l.caption.as_str(), l.start, l.end))
+        .collect();
+    assert_eq!(
+        got,
+        vec![
+            ("a man walks.", 0.0, 0.0),
+            ("he waves.", 1.5, 3.0),
+            ("plain caption line", 0.0, 0.0),
+        ]
+    );
+    assert_eq!(notes.len(), 2);
+    assert!(
+        notes[0].message.starts_with("texts/000001.txt:4:"),
+        "{:?}",
+        notes[0]
+    );
+    assert!(
+        notes[1].message.starts_with("texts/000001.txt:5:"),
+        "{:?}",
+        notes[1]
+    );
+}
