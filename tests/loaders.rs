@@ -47,14 +47,14 @@ frames = con.execute(f"SELECT sum(num_frames) FROM read_parquet('{pattern}')").f
 assert frames > 0
 print(expected, frames)
 "#;
-    let run = Command::new("python3")
+    let run = Command::new(common::python())
         .args(["-c", script])
         .arg(&dataset)
         .env("HF_DATASETS_OFFLINE", "1")
         .env("HF_HUB_OFFLINE", "1")
         .env("HF_HOME", hf_cache.path())
         .output()
-        .expect("python3 must be installed");
+        .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
     assert!(
         run.status.success(),
         "{}",

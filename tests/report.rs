@@ -3,6 +3,8 @@
 //!
 //! Set `MOTIONFORGE_REPORT_KEEP=<dir>` to keep the demo report there for inspection.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -66,12 +68,12 @@ fn find_build_report(dir: &Path) -> Option<PathBuf> {
 }
 
 fn python(script: &str, args: &[&Path]) -> serde_json::Value {
-    let out = Command::new("python3")
+    let out = Command::new(common::python())
         .arg("-c")
         .arg(script)
         .args(args)
         .output()
-        .expect("python3 must be installed");
+        .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
     assert!(
         out.status.success(),
         "python failed: {}",

@@ -77,20 +77,20 @@ pub fn table_bytes(dataset: &Path) -> Vec<u8> {
 }
 
 /// Columns of a Parquet file or folder of shards, read with pyarrow (an independent reader,
-/// installed by `.ci/run`): one `|`-joined line per row.
+/// from `requirements-test.txt`): one `|`-joined line per row.
 pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
     let script = format!(
         "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
     );
-    let out = std::process::Command::new("python3")
+    let out = std::process::Command::new(python())
         .arg("-c")
         .arg(script)
         .arg(table)
         .output()
-        .expect("python3 must be installed");
+        .unwrap_or_else(|e| panic!("{:?}: {e}; {PYTHON_SETUP}", python()));
     assert!(
         out.status.success(),
-        "pyarrow failed: {}",
+        "pyarrow failed: {}\n{PYTHON_SETUP}",
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout)
@@ -99,6 +99,15 @@ pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
         .map(str::to_string)
         .collect()
 }
+
+/// The Python that runs the independent readers: `MOTIONFORGE_PYTHON` (set by `scripts/test.sh` to
+/// its virtual environment built from `requirements-test.txt`), else `python3` on PATH.
+pub fn python() -> std::ffi::OsString {
+    std::env::var_os("MOTIONFORGE_PYTHON").unwrap_or_else(|| "python3".into())
+}
+
+/// How to install what a failing Python check was missing.
+pub const PYTHON_SETUP: &str = "run the tests with scripts/test.sh, which makes a Python environment from requirements-test.txt";
 
 /// Runs `command`, failing the test with its standard error unless it succeeds.
 pub fn run_ok(command: &mut std::process::Command) -> std::process::Output {
@@ -142,14 +151,14 @@ pub const WALK_KICK_BYE: [&str; 3] = [
     "dataset-1_bye_normal_001",
 ];
 
-/// Runs a Python script (the readers `.ci/run` installs) with `args`, fails the test with its
+/// Runs a Python script (the readers `requirements-test.txt` lists) with `args`, fails the test with its
 /// standard error unless it succeeds, and returns its standard output.
 pub fn run_python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> String {
-    let out = std::process::Command::new("python3")
+    let out = std::process::Command::new(python())
         .args(["-c", script])
         .args(args)
         .output()
-        .expect("python3 must be installed");
+        .unwrap_or_else(|e| panic!("{:?}: {e}; {PYTHON_SETUP}", python()));
     assert!(
         out.status.success(),
         "{}",
