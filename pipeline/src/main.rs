@@ -43,6 +43,16 @@ Exit codes:
 Logging: progress and log lines go to standard error (bars on a terminal, plain lines
 otherwise, JSON lines with --json); results go to standard output.";
 
+const CLIPS_EXAMPLES: &str = "\
+Examples:
+  motionforge clips out/demo --type wave
+  motionforge clips out/demo --kind synthetic --split train --limit 5 --json";
+
+const EXPORT_BVH_EXAMPLES: &str = "\
+Examples:
+  motionforge export-bvh out/demo --clip 'cmu/01_01:1207-2407:m' -o jump-mirrored.bvh
+  motionforge export-bvh --config fixtures/demo.toml --clip 'cmu/01_01:1207-2407'";
+
 /// Build text-to-motion training sets from mocap captures: segment, mirror, label, compose,
 /// and write sharded Parquet with statistics for papers.
 #[derive(Parser)]
@@ -199,12 +209,21 @@ enum Command {
         #[arg(required = true)]
         captures: Vec<PathBuf>,
     },
-    /// Write one clip (real, mirrored or synthetic) as a BVH file on its source skeleton, at full
-    /// precision, for inspection in Blender.
+    /// Write one clip (real, mirrored or synthetic) as a BVH file on its source skeleton, for
+    /// inspection in Blender: from a built dataset folder alone (shards and skeletons.json), or
+    /// with --config by re-running the build's stages from the captures.
+    ///
+    /// From the shards, rotations are the table's f32 values: the file has the --config one's
+    /// hierarchy exactly and its rotations to about 1e-5 degrees (docs/decisions.md).
+    #[command(after_help = EXPORT_BVH_EXAMPLES)]
     ExportBvh {
-        /// Build configuration; stages reuse their cached outputs.
-        #[arg(long, short, default_value = DEFAULT_CONFIG)]
-        config: PathBuf,
+        /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
+        #[arg(conflicts_with = "config")]
+        dataset: Option<PathBuf>,
+        /// Instead of a dataset folder: the build configuration; stages reuse their cached
+        /// outputs (default motionforge.toml when no dataset folder is given).
+        #[arg(long, short)]
+        config: Option<PathBuf>,
         /// The clip id, as in the table's `clip_id` column.
         #[arg(long)]
         clip: String,
@@ -218,6 +237,22 @@ enum Command {
         /// wait this long for it (30s, 5m, 1h).
         #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
         wait: Option<Duration>,
+    },
+    /// List a built dataset's clips: id, split, kind, motion type, frames and caption, from its
+    /// shards alone, with filters.
+    ///
+    /// Every filter given must match. `--kind` takes a source kind (real_single, real_pair,
+    /// synthetic) or `mirrored` / `original`; `--text` is a case-insensitive substring of the id,
+    /// caption, texts or paraphrases.
+    #[command(after_help = CLIPS_EXAMPLES)]
+    Clips {
+        /// The dataset folder (`<output>/<name>`, holding data/).
+        dataset: PathBuf,
+        #[command(flatten)]
+        filter: cli::browse::FilterArgs,
+        /// Print a JSON array of the clips' metadata instead of a table.
+        #[arg(long)]
+        json: bool,
     },
     /// Export a built dataset in another layout, from its shards alone (no rebuild).
     Export {
@@ -568,12 +603,27 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
         Command::MirrorText { file } => mirror_text(file.as_deref())?,
         Command::CalibrateMirror { profile, captures } => calibrate_mirror(&profile, &captures)?,
         Command::ExportBvh {
+            dataset: Some(dataset),
+            clip,
+            output,
+            ..
+        } => cli::browse::export_bvh_from_shards(&dataset, &clip, output, ui)?,
+        Command::ExportBvh {
+            dataset: None,
             config,
             clip,
             output,
             offline,
             wait,
-        } => export_bvh(&config, &clip, output, offline, wait, ui)?,
+        } => {
+            let config = config.unwrap_or_else(|| PathBuf::from(DEFAULT_CONFIG));
+            export_bvh(&config, &clip, output, offline, wait, ui)?
+        }
+        Command::Clips {
+            dataset,
+            filter,
+            json,
+        } => cli::browse::clips(&dataset, &filter, json)?,
         Command::Report { dataset, output } => {
             let files = motionforge::report::report_dataset(&dataset, output.as_deref())?;
             if ui.status() {
