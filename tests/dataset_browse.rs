@@ -193,3 +193,108 @@ fn export_bvh_command_writes_the_clip_from_the_dataset_folder() {
     std::fs::write(&path, json.to_string()).unwrap();
     assert!(dataset::read_skeletons(Path::new(&ds)).is_ok());
 }
+
+#[test]
+fn preview_gif_has_the_clip_frames_at_its_rate_and_they_differ() {
+    use motionforge::dataset::preview::{Panel, PreviewOptions, render};
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let skeletons = dataset::read_skeletons(&ds).unwrap();
+    for id in [
+        "bandai-namco-1/dataset-1_kick_normal_001:0-358",
+        "cmu/01_01:1207-2407:m",
+    ] {
+        let clip = dataset::read_clip(&ds, id).unwrap();
+        let panel = Panel {
+            frames: &clip,
+            skeleton: &skeletons[&clip.info.skeleton],
+        };
+        let options = PreviewOptions::default();
+        let preview = render(&[panel], &options).unwrap();
+        let gif = preview.gif().unwrap();
+        // Decoded with the gif crate's reader: frame count, delay, and distinct frames.
+        let mut decoder = gif::DecodeOptions::new();
+        decoder.set_color_output(gif::ColorOutput::Indexed);
+        let mut reader = decoder.read_info(gif.as_slice()).unwrap();
+        let mut frames = Vec::new();
+        while let Some(frame) = reader.read_next_frame().unwrap() {
+            assert_eq!(frame.delay, 5, "20 fps is 5 centiseconds");
+            frames.push(frame.buffer.to_vec());
+        }
+        let expected = motionforge::motion::Motion::resampled_frames(
+            clip.info.frames,
+            clip.info.fps,
+            options.fps,
+        );
+        assert_eq!(frames.len(), expected, "{id}");
+        assert_eq!(
+            expected,
+            (clip.info.frames - 1) * 2 / 3 + 1,
+            "{id}: 30 -> 20 fps"
+        );
+        let distinct: std::collections::BTreeSet<&Vec<u8>> = frames.iter().collect();
+        assert!(
+            distinct.len() * 2 > frames.len(),
+            "{id}: {} distinct of {}",
+            distinct.len(),
+            frames.len()
+        );
+        // Not blank: the bones' colours are drawn on every frame.
+        for f in &frames {
+            assert!(f.iter().filter(|&&i| (2..=7).contains(&i)).count() > 100);
+        }
+        let png = preview.png().unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+    }
+}
+
+#[test]
+fn mirrored_preview_is_the_reflection_of_its_original() {
+    use motionforge::dataset::preview::projected_points;
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let skeletons = dataset::read_skeletons(&ds).unwrap();
+    let clips = dataset::list_clips(&ds).unwrap();
+    let mut pairs = 0;
+    for original in clips
+        .iter()
+        .filter(|c| !c.mirrored && c.source_kind != "synthetic")
+    {
+        let mirror_id = format!("{}:m", original.clip_id);
+        let a = dataset::read_clip(&ds, &original.clip_id).unwrap();
+        let b = dataset::read_clip(&ds, &mirror_id).unwrap();
+        let (sa, sb) = (&skeletons[&a.info.skeleton], &skeletons[&b.info.skeleton]);
+        let (pa, pb) = (projected_points(&a, sa), projected_points(&b, sb));
+        assert_eq!(pa.len(), pb.len());
+        let n = a.info.joints;
+        // Joint j of the mirror is the reflection of its partner in the original.
+        let partner: Vec<usize> = sb
+            .joints
+            .iter()
+            .map(|j| {
+                let name = j.mirror.as_deref().unwrap_or(&j.name);
+                sa.joints.iter().position(|k| k.name == name).unwrap()
+            })
+            .collect();
+        assert!(partner.iter().enumerate().any(|(j, p)| j != *p));
+        let mut worst = 0.0f64;
+        let mut moved = 0.0f64;
+        for f in 0..a.info.frames {
+            for j in 0..n {
+                let m = pb[f * n + j];
+                let o = pa[f * n + partner[j]];
+                worst = worst.max((m[0] + o[0]).abs()).max((m[1] - o[1]).abs());
+                // Not trivially symmetric: the original's left and right differ.
+                let own = pa[f * n + j];
+                moved = moved.max((o[0] + own[0]).abs()).max((o[1] - own[1]).abs());
+            }
+        }
+        eprintln!("{}: worst reflection error {worst:.4} m", original.clip_id);
+        // Mirroring keeps each skeleton's own bone offsets (docs/mirroring.md): the drawings agree
+        // to a few centimetres, where the original's left and right sides differ by decimetres.
+        assert!(worst < 0.05, "{}: {worst} m", original.clip_id);
+        assert!(moved > 0.1, "{}: {moved} m", original.clip_id);
+        pairs += 1;
+    }
+    assert!(pairs >= 8, "{pairs} pairs");
+}

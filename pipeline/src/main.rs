@@ -48,6 +48,11 @@ Examples:
   motionforge clips out/demo --type wave
   motionforge clips out/demo --kind synthetic --split train --limit 5 --json";
 
+const PREVIEW_EXAMPLES: &str = "\
+Examples:
+  motionforge preview out/demo --clip 'cmu/01_01:1207-2407' --with mirror
+  motionforge preview out/demo --kind synthetic --limit 3 --with sources -o /tmp/pairs";
+
 const EXPORT_BVH_EXAMPLES: &str = "\
 Examples:
   motionforge export-bvh out/demo --clip 'cmu/01_01:1207-2407:m' -o jump-mirrored.bvh
@@ -253,6 +258,40 @@ enum Command {
         /// Print a JSON array of the clips' metadata instead of a table.
         #[arg(long)]
         json: bool,
+    },
+    /// Render clips as animated stick figures from a built dataset's shards alone: an animated
+    /// GIF and a PNG filmstrip per clip, optionally beside its mirror or a synthetic pair's sources.
+    ///
+    /// Each clip is drawn in its canonical frame (first frame's pelvis at the origin, facing +y)
+    /// by a fixed camera in front of the character, 20 degrees above, over a half-metre ground
+    /// grid; bones are coloured by body part (left arm blue, left leg teal, right arm red, right
+    /// leg orange, torso dark grey), the pelvis goal is a purple cross, and the caption and clip id
+    /// are the title. Files: `<output>/<clip id with / : + as _>.gif` and `.png`.
+    #[command(after_help = PREVIEW_EXAMPLES)]
+    Preview {
+        /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
+        dataset: PathBuf,
+        /// A clip id (repeat for several); without it, every clip the filters keep.
+        #[arg(long)]
+        clip: Vec<String>,
+        #[command(flatten)]
+        filter: cli::browse::FilterArgs,
+        /// Draw beside each clip: its mirror (`mirror`) or a synthetic pair's two sources
+        /// (`sources`).
+        #[arg(long, value_enum, default_value = "none")]
+        with: cli::browse::WithArg,
+        /// Folder to write the previews into.
+        #[arg(long, short, default_value = "previews")]
+        output: PathBuf,
+        /// Frames per second of the GIF (the clip is resampled to it).
+        #[arg(long, default_value_t = 20.0)]
+        fps: f64,
+        /// Size in pixels of one clip's square drawing.
+        #[arg(long, default_value_t = 280)]
+        size: u32,
+        /// Poses in the filmstrip.
+        #[arg(long, default_value_t = 8)]
+        strip: usize,
     },
     /// Export a built dataset in another layout, from its shards alone (no rebuild).
     Export {
@@ -624,6 +663,24 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             filter,
             json,
         } => cli::browse::clips(&dataset, &filter, json)?,
+        Command::Preview {
+            dataset,
+            clip,
+            filter,
+            with,
+            output,
+            fps,
+            size,
+            strip,
+        } => {
+            let options = motionforge::dataset::preview::PreviewOptions {
+                fps,
+                size,
+                strip_frames: strip,
+                animate: true,
+            };
+            cli::browse::preview(&dataset, &clip, &filter, with, &output, &options, ui)?
+        }
         Command::Report { dataset, output } => {
             let files = motionforge::report::report_dataset(&dataset, output.as_deref())?;
             if ui.status() {

@@ -4,7 +4,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use motionforge::dataset::{self, ClipFilter, ClipInfo};
+use motionforge::dataset::preview::{self, Panel, PreviewOptions};
+use motionforge::dataset::{self, ClipFilter, ClipInfo, Companions};
 
 use crate::Ui;
 
@@ -120,6 +121,99 @@ pub(crate) fn export_bvh_from_shards(
             motion.fps,
             frames.info.skeleton
         )?;
+    }
+    Ok(())
+}
+
+/// `preview --with`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum WithArg {
+    /// The clip alone.
+    None,
+    /// The clip and its mirror (or a mirror and its original).
+    Mirror,
+    /// A synthetic pair and its two sources.
+    Sources,
+}
+
+/// `motionforge preview`.
+pub(crate) fn preview(
+    dir: &Path,
+    ids: &[String],
+    args: &FilterArgs,
+    with: WithArg,
+    output: &Path,
+    options: &PreviewOptions,
+    ui: &Ui,
+) -> Result<()> {
+    let clips = dataset::list_clips(dir)?;
+    let filter = args.filter();
+    let mut chosen: Vec<&ClipInfo> = if ids.is_empty() {
+        clips.iter().filter(|c| filter.matches(c)).collect()
+    } else {
+        let mut v = Vec::new();
+        for id in ids {
+            match clips.iter().find(|c| &c.clip_id == id) {
+                Some(c) => v.push(c),
+                None => {
+                    let all: Vec<String> = clips.iter().map(|c| c.clip_id.clone()).collect();
+                    return Err(dataset::DatasetError::NoClip {
+                        path: dir.to_path_buf(),
+                        clip_id: id.clone(),
+                        count: all.len(),
+                        hint: String::new(),
+                    }
+                    .into());
+                }
+            }
+        }
+        v
+    };
+    if let Some(n) = args.limit {
+        chosen.truncate(n);
+    }
+    let with = match with {
+        WithArg::None => Companions::None,
+        WithArg::Mirror => Companions::Mirror,
+        WithArg::Sources => Companions::Sources,
+    };
+    let skeletons = dataset::read_skeletons(dir)?;
+    let mut out = std::io::stdout().lock();
+    for clip in chosen {
+        let mut rows = vec![dataset::read_clip_in(dir, &clips, &clip.clip_id)?];
+        for id in dataset::companion_ids(clip, with, &clips) {
+            rows.push(dataset::read_clip_in(dir, &clips, &id)?);
+        }
+        let panels = rows
+            .iter()
+            .map(|r| {
+                skeletons
+                    .get(&r.info.skeleton)
+                    .map(|skeleton| Panel {
+                        frames: r,
+                        skeleton,
+                    })
+                    .with_context(|| {
+                        format!(
+                            "clip `{}`: skeleton `{}` is not in skeletons.json",
+                            r.info.clip_id, r.info.skeleton
+                        )
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let rendered = preview::render(&panels, options)?;
+        let [gif, png] =
+            preview::write_preview(&rendered, output, &preview::file_stem(&clip.clip_id))?;
+        if ui.status() {
+            writeln!(
+                out,
+                "wrote {} ({} frames at {} fps) and {}",
+                gif.display(),
+                rendered.frames.len(),
+                rendered.fps,
+                png.display()
+            )?;
+        }
     }
     Ok(())
 }

@@ -6,6 +6,7 @@
 //! Columns are found by name in each shard's schema, never by position, so a table with added
 //! columns still reads.
 
+pub mod preview;
 mod read;
 pub mod skeletons;
 
@@ -13,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-pub use read::{ClipFrames, read_clip, read_frames};
+pub use read::{ClipFrames, read_clip, read_clip_in, read_frames};
 pub use skeletons::{SkeletonEntry, Skeletons, read_skeletons};
 
 /// Why a dataset folder, or a clip in it, cannot be read.
@@ -60,6 +61,12 @@ pub enum DatasetError {
         count: usize,
         /// Near ids, as `; did you mean ...`, or empty.
         hint: String,
+    },
+    /// A preview cannot be drawn or encoded.
+    #[error("preview: {message}")]
+    Render {
+        /// What went wrong.
+        message: String,
     },
     /// A row's frames are not what its own counts say.
     #[error("{}: clip `{clip_id}`: {message}", path.display())]
@@ -256,4 +263,32 @@ pub(crate) fn no_clip(dataset: &Path, clip_id: &str, ids: &[String]) -> DatasetE
             format!("; did you mean {}", near.join(", "))
         },
     }
+}
+
+/// Which clips a preview draws beside a clip.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Companions {
+    /// The clip alone.
+    #[default]
+    None,
+    /// The clip and its mirror (or, for a mirror, its original).
+    Mirror,
+    /// A synthetic pair and its two sources (nothing for other clips).
+    Sources,
+}
+
+/// The ids to draw beside `clip`, those in `clips` only.
+pub fn companion_ids(clip: &ClipInfo, with: Companions, clips: &[ClipInfo]) -> Vec<String> {
+    let wanted: Vec<String> = match with {
+        Companions::None => Vec::new(),
+        Companions::Mirror => vec![match clip.clip_id.strip_suffix(":m") {
+            Some(original) if clip.mirrored => original.to_string(),
+            _ => format!("{}:m", clip.clip_id),
+        }],
+        Companions::Sources => clip.composed_from.clone(),
+    };
+    wanted
+        .into_iter()
+        .filter(|id| clips.iter().any(|c| &c.clip_id == id))
+        .collect()
 }

@@ -438,9 +438,17 @@ pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFra
 
 /// One clip's metadata and frames, found by id.
 pub fn read_clip(dataset: &Path, clip_id: &str) -> Result<ClipFrames, DatasetError> {
-    let clips = super::list_clips(dataset)?;
+    read_clip_in(dataset, &super::list_clips(dataset)?, clip_id)
+}
+
+/// [`read_clip`] with the dataset's listing already read ([`super::list_clips`]).
+pub fn read_clip_in(
+    dataset: &Path,
+    clips: &[ClipInfo],
+    clip_id: &str,
+) -> Result<ClipFrames, DatasetError> {
     let Some(at) = clips.iter().position(|c| c.clip_id == clip_id) else {
-        let ids: Vec<String> = clips.into_iter().map(|c| c.clip_id).collect();
+        let ids: Vec<String> = clips.iter().map(|c| c.clip_id.clone()).collect();
         return Err(super::no_clip(dataset, clip_id, &ids));
     };
     // Rows before it in the same shard give its row number there.
@@ -448,11 +456,5 @@ pub fn read_clip(dataset: &Path, clip_id: &str) -> Result<ClipFrames, DatasetErr
         .iter()
         .filter(|c| c.shard == clips[at].shard)
         .count();
-    let info = clips
-        .into_iter()
-        .nth(at)
-        .ok_or_else(|| DatasetError::NotADataset {
-            path: dataset.to_path_buf(),
-        })?;
-    read_frames(dataset, info, row)
+    read_frames(dataset, clips[at].clone(), row)
 }
