@@ -70,6 +70,7 @@ pub mod build;
 pub mod clip;
 pub mod compose_text;
 pub mod config;
+pub mod dataset;
 pub mod export;
 pub mod features;
 pub mod humanml3d;

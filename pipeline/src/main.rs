@@ -57,6 +57,20 @@ Exit codes:
   0  success
   1  a file that cannot be read or written (the dataset's shards, the output folder)
   2  a scene that does not parse, fails its checks, or has no valid session";
+const CLIPS_EXAMPLES: &str = "\
+Examples:
+  motionforge clips out/demo --type wave
+  motionforge clips out/demo --kind synthetic --split train --limit 5 --json";
+
+const PREVIEW_EXAMPLES: &str = "\
+Examples:
+  motionforge preview out/demo --clip 'cmu/01_01:1207-2407' --with mirror
+  motionforge preview out/demo --kind synthetic --limit 3 --with sources -o /tmp/pairs";
+
+const EXPORT_BVH_EXAMPLES: &str = "\
+Examples:
+  motionforge export-bvh out/demo --clip 'cmu/01_01:1207-2407:m' -o jump-mirrored.bvh
+  motionforge export-bvh --config fixtures/demo.toml --clip 'cmu/01_01:1207-2407'";
 
 /// Build text-to-motion training sets from mocap captures: segment, mirror, label, compose,
 /// and write sharded Parquet with statistics for papers.
@@ -216,12 +230,21 @@ enum Command {
         #[arg(required = true)]
         captures: Vec<PathBuf>,
     },
-    /// Write one clip (real, mirrored or synthetic) as a BVH file on its source skeleton, at full
-    /// precision, for inspection in Blender.
+    /// Write one clip (real, mirrored or synthetic) as a BVH file on its source skeleton, for
+    /// inspection in Blender: from a built dataset folder alone (shards and skeletons.json), or
+    /// with --config by re-running the build's stages from the captures.
+    ///
+    /// From the shards, rotations are the table's f32 values: the file has the --config one's
+    /// hierarchy exactly and its rotations to about 1e-5 degrees (docs/decisions.md).
+    #[command(after_help = EXPORT_BVH_EXAMPLES)]
     ExportBvh {
-        /// Build configuration; stages reuse their cached outputs.
-        #[arg(long, short, default_value = DEFAULT_CONFIG)]
-        config: PathBuf,
+        /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
+        #[arg(conflicts_with = "config")]
+        dataset: Option<PathBuf>,
+        /// Instead of a dataset folder: the build configuration; stages reuse their cached
+        /// outputs (default motionforge.toml when no dataset folder is given).
+        #[arg(long, short)]
+        config: Option<PathBuf>,
         /// The clip id, as in the table's `clip_id` column.
         #[arg(long)]
         clip: String,
@@ -235,6 +258,56 @@ enum Command {
         /// wait this long for it (30s, 5m, 1h).
         #[arg(long, value_name = "DURATION", value_parser = parse_wait)]
         wait: Option<Duration>,
+    },
+    /// List a built dataset's clips: id, split, kind, motion type, frames and caption, from its
+    /// shards alone, with filters.
+    ///
+    /// Every filter given must match. `--kind` takes a source kind (real_single, real_pair,
+    /// synthetic) or `mirrored` / `original`; `--text` is a case-insensitive substring of the id,
+    /// caption, texts or paraphrases.
+    #[command(after_help = CLIPS_EXAMPLES)]
+    Clips {
+        /// The dataset folder (`<output>/<name>`, holding data/).
+        dataset: PathBuf,
+        #[command(flatten)]
+        filter: cli::browse::FilterArgs,
+        /// Print a JSON array of the clips' metadata instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Render clips as animated stick figures from a built dataset's shards alone: an animated
+    /// GIF and a PNG filmstrip per clip, optionally beside its mirror or a synthetic pair's sources.
+    ///
+    /// Each clip is drawn in its canonical frame (first frame's pelvis at the origin, facing +y)
+    /// by a fixed camera in front of the character, 20 degrees above, over a half-metre ground
+    /// grid; bones are coloured by body part (left arm blue, left leg teal, right arm red, right
+    /// leg orange, torso dark grey), the pelvis goal is a purple cross, and the caption and clip id
+    /// are the title. Files: `<output>/<clip id with / : + as _>.gif` and `.png`.
+    #[command(after_help = PREVIEW_EXAMPLES)]
+    Preview {
+        /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
+        dataset: PathBuf,
+        /// A clip id (repeat for several); without it, every clip the filters keep.
+        #[arg(long)]
+        clip: Vec<String>,
+        #[command(flatten)]
+        filter: cli::browse::FilterArgs,
+        /// Draw beside each clip: its mirror (`mirror`) or a synthetic pair's two sources
+        /// (`sources`).
+        #[arg(long, value_enum, default_value = "none")]
+        with: cli::browse::WithArg,
+        /// Folder to write the previews into.
+        #[arg(long, short, default_value = "previews")]
+        output: PathBuf,
+        /// Frames per second of the GIF (the clip is resampled to it).
+        #[arg(long, default_value_t = 20.0)]
+        fps: f64,
+        /// Size in pixels of one clip's square drawing.
+        #[arg(long, default_value_t = 280)]
+        size: u32,
+        /// Poses in the filmstrip.
+        #[arg(long, default_value_t = 8)]
+        strip: usize,
     },
     /// Export a built dataset in another layout, from its shards alone (no rebuild).
     Export {
@@ -630,12 +703,45 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
         Command::MirrorText { file } => mirror_text(file.as_deref())?,
         Command::CalibrateMirror { profile, captures } => calibrate_mirror(&profile, &captures)?,
         Command::ExportBvh {
+            dataset: Some(dataset),
+            clip,
+            output,
+            ..
+        } => cli::browse::export_bvh_from_shards(&dataset, &clip, output, ui)?,
+        Command::ExportBvh {
+            dataset: None,
             config,
             clip,
             output,
             offline,
             wait,
-        } => export_bvh(&config, &clip, output, offline, wait, ui)?,
+        } => {
+            let config = config.unwrap_or_else(|| PathBuf::from(DEFAULT_CONFIG));
+            export_bvh(&config, &clip, output, offline, wait, ui)?
+        }
+        Command::Clips {
+            dataset,
+            filter,
+            json,
+        } => cli::browse::clips(&dataset, &filter, json)?,
+        Command::Preview {
+            dataset,
+            clip,
+            filter,
+            with,
+            output,
+            fps,
+            size,
+            strip,
+        } => {
+            let options = motionforge::dataset::preview::PreviewOptions {
+                fps,
+                size,
+                strip_frames: strip,
+                animate: true,
+            };
+            cli::browse::preview(&dataset, &clip, &filter, with, &output, &options, ui)?
+        }
         Command::Report { dataset, output } => {
             let files = motionforge::report::report_dataset(&dataset, output.as_deref())?;
             if ui.status() {

@@ -99,6 +99,11 @@ pub(super) fn skeleton_json(
                 "name": joint.name,
                 "parent": joint.parent,
                 "offset_m": [o.x, o.y, o.z],
+                // In file units as read, with the channel layout and end site: what a BVH of
+                // the clip needs beyond the rows (`export-bvh` from the shards).
+                "offset": [joint.offset.x, joint.offset.y, joint.offset.z],
+                "channels": joint.channels.iter().map(|c| c.name()).collect::<Vec<_>>(),
+                "end_site": joint.end_site.map(|e| [e.x, e.y, e.z]),
                 "mirror": skeleton.joints[profile.swap[j]].name,
                 "part": profile.part_of[j],
                 "role": profile.roles[j],

@@ -31,6 +31,15 @@ impl SignedAxis {
     }
 }
 
+/// The rotation taking capture axes (`up`, `forward`) to dataset axes: x right, y forward, z up
+/// (right-handed).
+pub fn dataset_axes(up: SignedAxis, forward: SignedAxis) -> DQuat {
+    let (up, forward) = (up.vector(), forward.vector());
+    let right = forward.cross(up);
+    // Rows are the capture-frame directions that become x, y, z.
+    DQuat::from_mat3(&DMat3::from_cols(right, forward, up).transpose())
+}
+
 impl TryFrom<String> for SignedAxis {
     type Error = String;
     fn try_from(s: String) -> Result<Self, String> {
@@ -581,11 +590,7 @@ pub struct Profile {
 impl Profile {
     /// The rotation taking capture axes to dataset axes: x right, y forward, z up (right-handed).
     pub fn to_dataset_axes(&self) -> DQuat {
-        let up = self.up.vector();
-        let forward = self.forward.vector();
-        let right = forward.cross(up);
-        // Rows are the capture-frame directions that become x, y, z.
-        DQuat::from_mat3(&DMat3::from_cols(right, forward, up).transpose())
+        dataset_axes(self.up, self.forward)
     }
 
     /// Joint indices with the given role.

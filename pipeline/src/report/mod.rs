@@ -9,6 +9,7 @@
 //! same bytes: categories are sorted, floats have fixed formatting, nothing records the time.
 
 mod figures;
+mod gallery;
 mod read;
 mod stats;
 mod tables;
@@ -176,6 +177,16 @@ pub fn write_report(
     stats: &Stats,
     out_dir: &Path,
 ) -> Result<Vec<PathBuf>, ReportError> {
+    write_report_with(rows, stats, out_dir, None)
+}
+
+/// [`write_report`], with the gallery of the dataset folder `gallery_of` when given.
+fn write_report_with(
+    rows: &[ClipRow],
+    stats: &Stats,
+    out_dir: &Path,
+    gallery_of: Option<&Path>,
+) -> Result<Vec<PathBuf>, ReportError> {
     let mut written = Vec::new();
     let rows = stats::sorted_rows(rows);
 
@@ -186,8 +197,14 @@ pub fn write_report(
     let figure_dir = out_dir.join("figures");
     written.extend(figures::write_figures(&rows, stats, &figure_dir)?);
 
+    let mut markdown = tables::markdown(stats);
+    if let Some(dataset) = gallery_of {
+        let (files, section) = gallery::write_gallery(dataset, &rows, out_dir)?;
+        written.extend(files);
+        markdown.push_str(&section);
+    }
     let md_path = out_dir.join("report.md");
-    crate::base::write_atomic(&md_path, tables::markdown(stats).as_bytes())?;
+    crate::base::write_atomic(&md_path, markdown.as_bytes())?;
     written.push(md_path);
 
     // Last, so a report cut short by a crash has no `stats.json` and does not look finished.
@@ -229,5 +246,5 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
     let out = out_dir
         .map(Path::to_path_buf)
         .unwrap_or_else(|| dataset.join("report"));
-    write_report(&rows, &stats, &out)
+    write_report_with(&rows, &stats, &out, Some(dataset))
 }

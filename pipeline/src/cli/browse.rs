@@ -1,0 +1,219 @@
+//! Commands that read a built dataset folder alone: clips, export-bvh from the shards, preview.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use motionforge::dataset::preview::{self, Panel, PreviewOptions};
+use motionforge::dataset::{self, ClipFilter, ClipInfo, Companions};
+
+use crate::Ui;
+
+/// The clip filters shared by `clips` and `preview`.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub(crate) struct FilterArgs {
+    /// Only clips of this motion type (e.g. `walk forward`, `wave`).
+    #[arg(long = "type", value_name = "TYPE")]
+    pub(crate) motion_type: Option<String>,
+    /// Only clips of this split (train, val, test, or the config's own names).
+    #[arg(long)]
+    pub(crate) split: Option<String>,
+    /// Only clips of this kind: real_single, real_pair, synthetic, mirrored or original.
+    #[arg(long)]
+    pub(crate) kind: Option<String>,
+    /// Only clips whose id, caption, texts or paraphrases contain this (any case).
+    #[arg(long, value_name = "SUBSTRING")]
+    pub(crate) text: Option<String>,
+    /// At most this many clips (the first in shard order).
+    #[arg(long)]
+    pub(crate) limit: Option<usize>,
+}
+
+impl FilterArgs {
+    pub(crate) fn filter(&self) -> ClipFilter {
+        ClipFilter {
+            motion_type: self.motion_type.clone(),
+            split: self.split.clone(),
+            kind: self.kind.clone(),
+            text: self.text.clone(),
+        }
+    }
+}
+
+/// `motionforge clips`.
+pub(crate) fn clips(dir: &Path, args: &FilterArgs, json: bool) -> Result<()> {
+    let clips = dataset::find_clips(dir, &args.filter(), args.limit)?;
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    if json {
+        serde_json::to_writer_pretty(&mut out, &clips)?;
+        writeln!(out)?;
+        out.flush()?;
+        return Ok(());
+    }
+    let kind = |c: &ClipInfo| {
+        if c.mirrored {
+            format!("{} mirrored", c.source_kind)
+        } else {
+            c.source_kind.clone()
+        }
+    };
+    let width = |f: &dyn Fn(&ClipInfo) -> usize, header: &str| {
+        clips.iter().map(f).max().unwrap_or(0).max(header.len())
+    };
+    let wi = width(&|c| c.clip_id.chars().count(), "clip_id");
+    let ws = width(&|c| c.split.chars().count(), "split");
+    let wk = width(&|c| kind(c).len(), "kind");
+    let wt = width(
+        &|c| c.motion_type.as_deref().unwrap_or("-").chars().count(),
+        "type",
+    );
+    writeln!(
+        out,
+        "{:wi$}  {:ws$}  {:wk$}  {:wt$}  {:>6}  text",
+        "clip_id", "split", "kind", "type", "frames"
+    )?;
+    for c in &clips {
+        writeln!(
+            out,
+            "{:wi$}  {:ws$}  {:wk$}  {:wt$}  {:>6}  {}",
+            c.clip_id,
+            c.split,
+            kind(c),
+            c.motion_type.as_deref().unwrap_or("-"),
+            c.frames,
+            c.text
+        )?;
+    }
+    out.flush()?;
+    Ok(())
+}
+
+/// `motionforge export-bvh <dataset> --clip <id>`.
+pub(crate) fn export_bvh_from_shards(
+    dir: &Path,
+    clip_id: &str,
+    output: Option<PathBuf>,
+    ui: &Ui,
+) -> Result<()> {
+    let frames = dataset::read_clip(dir, clip_id)?;
+    let skeletons = dataset::read_skeletons(dir)?;
+    let entry = skeletons.get(&frames.info.skeleton).with_context(|| {
+        format!(
+            "clip `{clip_id}`: skeleton `{}` is not in {}",
+            frames.info.skeleton,
+            dir.join(motionforge::base::layout::SKELETONS_FILE)
+                .display()
+        )
+    })?;
+    let motion = dataset::skeletons::clip_motion(&frames, entry)
+        .map_err(|e| anyhow::anyhow!("clip `{clip_id}`: {e}"))?;
+    let text =
+        motionforge::motion::write_bvh(&motion).with_context(|| format!("clip `{clip_id}`"))?;
+    let path = output
+        .unwrap_or_else(|| PathBuf::from(format!("{}.bvh", clip_id.replace(['/', ':', '+'], "_"))));
+    motionforge::base::write_atomic(&path, text.as_bytes())?;
+    if ui.status() {
+        writeln!(
+            std::io::stdout(),
+            "wrote {} ({} frames at {} fps, skeleton {})",
+            path.display(),
+            motion.num_frames(),
+            motion.fps,
+            frames.info.skeleton
+        )?;
+    }
+    Ok(())
+}
+
+/// `preview --with`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum WithArg {
+    /// The clip alone.
+    None,
+    /// The clip and its mirror (or a mirror and its original).
+    Mirror,
+    /// A synthetic pair and its two sources.
+    Sources,
+}
+
+/// `motionforge preview`.
+pub(crate) fn preview(
+    dir: &Path,
+    ids: &[String],
+    args: &FilterArgs,
+    with: WithArg,
+    output: &Path,
+    options: &PreviewOptions,
+    ui: &Ui,
+) -> Result<()> {
+    let clips = dataset::list_clips(dir)?;
+    let filter = args.filter();
+    let mut chosen: Vec<&ClipInfo> = if ids.is_empty() {
+        clips.iter().filter(|c| filter.matches(c)).collect()
+    } else {
+        let mut v = Vec::new();
+        for id in ids {
+            match clips.iter().find(|c| &c.clip_id == id) {
+                Some(c) => v.push(c),
+                None => {
+                    let all: Vec<String> = clips.iter().map(|c| c.clip_id.clone()).collect();
+                    return Err(dataset::DatasetError::NoClip {
+                        path: dir.to_path_buf(),
+                        clip_id: id.clone(),
+                        count: all.len(),
+                        hint: String::new(),
+                    }
+                    .into());
+                }
+            }
+        }
+        v
+    };
+    if let Some(n) = args.limit {
+        chosen.truncate(n);
+    }
+    let with = match with {
+        WithArg::None => Companions::None,
+        WithArg::Mirror => Companions::Mirror,
+        WithArg::Sources => Companions::Sources,
+    };
+    let skeletons = dataset::read_skeletons(dir)?;
+    let mut out = std::io::stdout().lock();
+    for clip in chosen {
+        let mut rows = vec![dataset::read_clip_in(dir, &clips, &clip.clip_id)?];
+        for id in dataset::companion_ids(clip, with, &clips) {
+            rows.push(dataset::read_clip_in(dir, &clips, &id)?);
+        }
+        let panels = rows
+            .iter()
+            .map(|r| {
+                skeletons
+                    .get(&r.info.skeleton)
+                    .map(|skeleton| Panel {
+                        frames: r,
+                        skeleton,
+                    })
+                    .with_context(|| {
+                        format!(
+                            "clip `{}`: skeleton `{}` is not in skeletons.json",
+                            r.info.clip_id, r.info.skeleton
+                        )
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let rendered = preview::render(&panels, options)?;
+        let [gif, png] =
+            preview::write_preview(&rendered, output, &preview::file_stem(&clip.clip_id))?;
+        if ui.status() {
+            writeln!(
+                out,
+                "wrote {} ({} frames at {} fps) and {}",
+                gif.display(),
+                rendered.frames.len(),
+                rendered.fps,
+                png.display()
+            )?;
+        }
+    }
+    Ok(())
+}

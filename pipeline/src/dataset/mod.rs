@@ -1,0 +1,294 @@
+//! A built dataset read back from its folder alone (shards and `skeletons.json`): the clip
+//! listing with its filters, one clip's metadata and frames, its motion on its own skeleton (for
+//! `export-bvh`) and stick-figure previews. Used by the `clips`, `export-bvh` and `preview`
+//! commands, the report's gallery and the service's browser; it reads, never writes a dataset.
+//!
+//! Columns are found by name in each shard's schema, never by position, so a table with added
+//! columns still reads.
+
+pub mod preview;
+mod read;
+pub mod skeletons;
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+pub use read::{ClipFrames, read_clip, read_clip_in, read_frames};
+pub use skeletons::{SkeletonEntry, Skeletons, read_skeletons};
+
+/// Why a dataset folder, or a clip in it, cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// A file cannot be read.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A shard cannot be decoded, or a column is missing or of another type.
+    #[error("{}: {message}", path.display())]
+    Table {
+        /// The shard.
+        path: PathBuf,
+        /// What was found and what was expected.
+        message: String,
+    },
+    /// `skeletons.json` does not describe the skeletons.
+    #[error("{}: {message}", path.display())]
+    Skeletons {
+        /// The file.
+        path: PathBuf,
+        /// What was expected.
+        message: String,
+    },
+    /// The folder holds no clip table.
+    #[error("{}: no clip table (data/*.parquet); build the dataset first", path.display())]
+    NotADataset {
+        /// The folder.
+        path: PathBuf,
+    },
+    /// No row has this clip id.
+    #[error("no clip `{clip_id}` in {} ({count} clips){hint}", path.display())]
+    NoClip {
+        /// The dataset folder.
+        path: PathBuf,
+        /// The id asked for.
+        clip_id: String,
+        /// Rows in the dataset.
+        count: usize,
+        /// Near ids, as `; did you mean ...`, or empty.
+        hint: String,
+    },
+    /// A preview cannot be drawn or encoded.
+    #[error("preview: {message}")]
+    Render {
+        /// What went wrong.
+        message: String,
+    },
+    /// A row's frames are not what its own counts say.
+    #[error("{}: clip `{clip_id}`: {message}", path.display())]
+    BadRow {
+        /// The shard.
+        path: PathBuf,
+        /// The row's clip id.
+        clip_id: String,
+        /// What is inconsistent.
+        message: String,
+    },
+}
+
+/// One row's metadata: everything but its frames.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClipInfo {
+    /// The `clip_id` column.
+    pub clip_id: String,
+    /// `train`, `val`, `test` or the config's own split names.
+    pub split: String,
+    /// `real_single`, `real_pair` or `synthetic`.
+    pub source_kind: String,
+    /// A mirrored copy.
+    pub mirrored: bool,
+    /// The motion type (LINGO taxonomy), if it has one.
+    pub motion_type: Option<String>,
+    /// The annotation's action label.
+    pub action: String,
+    /// The caption.
+    pub text: String,
+    /// Every text of the clip.
+    pub texts: Vec<String>,
+    /// The annotation's labels.
+    pub labels: Vec<String>,
+    /// Paraphrases of the caption.
+    pub paraphrases: Vec<String>,
+    /// The hand of a hand goal (`left`, `right`).
+    pub hand: Option<String>,
+    /// Body parts the text moves, by name (`left_arm`, ...).
+    pub parts: Option<Vec<String>>,
+    /// Where the parts came from.
+    pub label_source: Option<String>,
+    /// A synthetic pair's two source clip ids.
+    pub composed_from: Vec<String>,
+    /// The parts each source gave to a synthetic pair, by name.
+    pub composed_parts: Vec<Vec<String>>,
+    /// Pelvis goal (x, y) in the clip's canonical frame, metres.
+    pub goal_pelvis: Option<Vec<f32>>,
+    /// Hand goal in the clip's canonical frame, metres.
+    pub goal_hand: Option<Vec<f32>>,
+    /// Plausibility metrics: foot skate, ground penetration, self distance, lean.
+    pub plausibility: Plausibility,
+    /// The `skeleton` column: the key of the clip's skeleton in `skeletons.json`.
+    pub skeleton: String,
+    /// Frames per second.
+    pub fps: f64,
+    /// Frames.
+    pub frames: usize,
+    /// Joints per frame.
+    pub joints: usize,
+    /// The shard holding the row, relative to the dataset folder.
+    pub shard: String,
+}
+
+/// A row's plausibility columns (null where the table has none).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct Plausibility {
+    /// Foot skating, metres per second of foot slide in contact.
+    pub foot_skate: Option<f32>,
+    /// Ground penetration, metres.
+    pub ground_penetration: Option<f32>,
+    /// Smallest distance between non-adjacent body parts, metres.
+    pub self_distance: Option<f32>,
+    /// Torso lean, degrees.
+    pub lean: Option<f32>,
+}
+
+/// Which clips a listing keeps: every given filter must match.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ClipFilter {
+    /// The motion type, exactly.
+    pub motion_type: Option<String>,
+    /// The split, exactly.
+    pub split: Option<String>,
+    /// The source kind, exactly (`real_single`, `real_pair`, `synthetic`), or `mirrored` for
+    /// mirrored copies and `original` for the rest.
+    pub kind: Option<String>,
+    /// A substring of the clip id, caption, texts or paraphrases (case-insensitive).
+    pub text: Option<String>,
+}
+
+impl ClipFilter {
+    /// Does `clip` pass every filter?
+    pub fn matches(&self, clip: &ClipInfo) -> bool {
+        if let Some(t) = &self.motion_type
+            && clip.motion_type.as_deref() != Some(t.as_str())
+        {
+            return false;
+        }
+        if let Some(s) = &self.split
+            && &clip.split != s
+        {
+            return false;
+        }
+        if let Some(k) = &self.kind {
+            let ok = match k.as_str() {
+                "mirrored" => clip.mirrored,
+                "original" => !clip.mirrored,
+                other => clip.source_kind == other,
+            };
+            if !ok {
+                return false;
+            }
+        }
+        if let Some(needle) = &self.text {
+            let needle = needle.to_lowercase();
+            let hit = std::iter::once(&clip.clip_id)
+                .chain(std::iter::once(&clip.text))
+                .chain(&clip.texts)
+                .chain(&clip.paraphrases)
+                .any(|s| s.to_lowercase().contains(&needle));
+            if !hit {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// The clip tables of a dataset folder: `data/*.parquet`, sorted by name.
+pub fn shards(dataset: &Path) -> Result<Vec<PathBuf>, DatasetError> {
+    let dir = dataset.join(crate::base::layout::DATA_DIR);
+    let entries = std::fs::read_dir(&dir).map_err(|_| DatasetError::NotADataset {
+        path: dataset.to_path_buf(),
+    })?;
+    let mut found = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|source| DatasetError::Io {
+            path: dir.clone(),
+            source,
+        })?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".parquet") && !name.starts_with('.') {
+            found.push(entry.path());
+        }
+    }
+    if found.is_empty() {
+        return Err(DatasetError::NotADataset {
+            path: dataset.to_path_buf(),
+        });
+    }
+    found.sort();
+    Ok(found)
+}
+
+/// Every row's metadata, in shard order and then row order.
+pub fn list_clips(dataset: &Path) -> Result<Vec<ClipInfo>, DatasetError> {
+    let mut out = Vec::new();
+    for shard in shards(dataset)? {
+        read::read_infos(dataset, &shard, &mut out)?;
+    }
+    Ok(out)
+}
+
+/// The clips that pass `filter`, at most `limit` of them.
+pub fn find_clips(
+    dataset: &Path,
+    filter: &ClipFilter,
+    limit: Option<usize>,
+) -> Result<Vec<ClipInfo>, DatasetError> {
+    let mut clips = list_clips(dataset)?;
+    clips.retain(|c| filter.matches(c));
+    if let Some(n) = limit {
+        clips.truncate(n);
+    }
+    Ok(clips)
+}
+
+/// `NoClip` for `clip_id`, with up to five ids that contain it (or that it contains) as a hint.
+pub(crate) fn no_clip(dataset: &Path, clip_id: &str, ids: &[String]) -> DatasetError {
+    let near: Vec<&str> = ids
+        .iter()
+        .map(String::as_str)
+        .filter(|id| id.contains(clip_id) || clip_id.contains(*id))
+        .take(5)
+        .collect();
+    DatasetError::NoClip {
+        path: dataset.to_path_buf(),
+        clip_id: clip_id.to_string(),
+        count: ids.len(),
+        hint: if near.is_empty() {
+            String::new()
+        } else {
+            format!("; did you mean {}", near.join(", "))
+        },
+    }
+}
+
+/// Which clips a preview draws beside a clip.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Companions {
+    /// The clip alone.
+    #[default]
+    None,
+    /// The clip and its mirror (or, for a mirror, its original).
+    Mirror,
+    /// A synthetic pair and its two sources (nothing for other clips).
+    Sources,
+}
+
+/// The ids to draw beside `clip`, those in `clips` only.
+pub fn companion_ids(clip: &ClipInfo, with: Companions, clips: &[ClipInfo]) -> Vec<String> {
+    let wanted: Vec<String> = match with {
+        Companions::None => Vec::new(),
+        Companions::Mirror => vec![match clip.clip_id.strip_suffix(":m") {
+            Some(original) if clip.mirrored => original.to_string(),
+            _ => format!("{}:m", clip.clip_id),
+        }],
+        Companions::Sources => clip.composed_from.clone(),
+    };
+    wanted
+        .into_iter()
+        .filter(|id| clips.iter().any(|c| &c.clip_id == id))
+        .collect()
+}

@@ -1,0 +1,670 @@
+//! Stick-figure previews of clips from the shards alone: an animated GIF and a PNG filmstrip.
+//!
+//! Each clip is drawn in its own canonical frame (origin at the first frame's pelvis on the
+//! ground, facing +y), seen by a fixed orthographic camera in front of the character, raised by
+//! [`ELEVATION_DEGREES`]: the camera lies in the character's sagittal plane, so a mirrored clip's
+//! drawing is exactly the reflection of its original's. Bones take the colour of their body part
+//! (left side cool, right side warm), over a ground grid of half-metre squares, under the clip's
+//! caption and id. Several clips (a clip and its mirror, a synthetic pair and its sources) share
+//! one scale, side by side.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use glam::{DQuat, DVec3};
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+
+use super::{ClipFrames, DatasetError, SkeletonEntry};
+use crate::motion::Motion;
+
+/// The camera's height above the character, as an angle below the horizontal.
+pub const ELEVATION_DEGREES: f64 = 20.0;
+/// Ground grid spacing, metres.
+const GRID_M: f64 = 0.5;
+/// Pixels of the title band (caption and id).
+const TITLE_PX: u32 = 34;
+const FONT: &str = "sans-serif";
+const FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+
+/// How previews are drawn.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PreviewOptions {
+    /// Frames per second of the GIF: the clip is resampled to this rate. Multiples of 100 / n
+    /// (20, 25, 50) keep GIF's centisecond delays exact.
+    pub fps: f64,
+    /// Width and height of one clip's drawing area in pixels, title excluded.
+    pub size: u32,
+    /// Frames in the filmstrip, evenly spaced over the clip.
+    pub strip_frames: usize,
+    /// Draw the GIF's frames too (a filmstrip alone needs none).
+    pub animate: bool,
+}
+
+impl Default for PreviewOptions {
+    fn default() -> Self {
+        PreviewOptions {
+            fps: 20.0,
+            size: 280,
+            strip_frames: 8,
+            animate: true,
+        }
+    }
+}
+
+/// One clip to draw: its frames and its skeleton.
+#[derive(Debug, Clone)]
+pub struct Panel<'a> {
+    /// The row's metadata and frames.
+    pub frames: &'a ClipFrames,
+    /// Its `skeletons.json` entry.
+    pub skeleton: &'a SkeletonEntry,
+}
+
+fn render_err(e: impl std::fmt::Display) -> DatasetError {
+    DatasetError::Render {
+        message: e.to_string(),
+    }
+}
+
+/// The first frame's canonical frame of a row: the root-motion joint dropped to the ground, and
+/// the turn about z that makes the character face +y (from the hips, else shoulders).
+fn canonical(frames: &ClipFrames, entry: &SkeletonEntry) -> (DVec3, DQuat) {
+    let p = |j: usize| {
+        let f = frames.frame(0);
+        DVec3::new(
+            f64::from(f[j * 3]),
+            f64::from(f[j * 3 + 1]),
+            f64::from(f[j * 3 + 2]),
+        )
+    };
+    let root = entry
+        .joints
+        .iter()
+        .position(|j| j.name == entry.root)
+        .unwrap_or(0);
+    let origin = p(root) * DVec3::new(1.0, 1.0, 0.0);
+    let side = |role: &str, part: &str| {
+        entry.joints.iter().position(|j| {
+            j.role.as_deref() == Some(role)
+                && j.part.as_deref().is_some_and(|p| p.starts_with(part))
+        })
+    };
+    let mut rotation = DQuat::IDENTITY;
+    for (role, l, r) in [("hip", "left", "right"), ("shoulder", "left", "right")] {
+        if let (Some(a), Some(b)) = (side(role, l), side(role, r)) {
+            let right = (p(b) - p(a)) * DVec3::new(1.0, 1.0, 0.0);
+            if right.length() > 1e-6 {
+                let forward = DVec3::Z.cross(right.normalize());
+                // Angle from the facing to +y, about z.
+                let angle = forward.x.atan2(forward.y);
+                rotation = DQuat::from_rotation_z(angle);
+                break;
+            }
+        }
+    }
+    (origin, rotation)
+}
+
+/// The camera's image-plane coordinates (metres: u to the image's right, v up) and depth of a
+/// canonical-frame point.
+fn project(p: DVec3) -> ([f64; 2], f64) {
+    let (s, c) = ELEVATION_DEGREES.to_radians().sin_cos();
+    // Looking along -y from in front and above: the character's right (+x) is the image's left.
+    ([-p.x, -p.y * s + p.z * c], -p.y * c - p.z * s)
+}
+
+/// Every frame's projected joints of a row at its own rate (`frames × joints` points, image-plane
+/// metres): what the preview draws, before the pixel mapping.
+pub fn projected_points(frames: &ClipFrames, entry: &SkeletonEntry) -> Vec<[f64; 2]> {
+    projected(frames, entry)
+        .into_iter()
+        .map(|(p, _)| p)
+        .collect()
+}
+
+fn projected(frames: &ClipFrames, entry: &SkeletonEntry) -> Vec<([f64; 2], f64)> {
+    let (origin, rotation) = canonical(frames, entry);
+    frames
+        .positions
+        .chunks_exact(3)
+        .map(|v| {
+            let world = DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+            project(rotation * (world - origin))
+        })
+        .collect()
+}
+
+/// RGB of a body part; left side cool, right side warm.
+fn part_colour(part: Option<&str>) -> RGBColor {
+    match part {
+        Some("left_arm") => RGBColor(31, 90, 220),
+        Some("left_leg") => RGBColor(0, 160, 170),
+        Some("right_arm") => RGBColor(220, 40, 40),
+        Some("right_leg") => RGBColor(240, 140, 0),
+        Some("torso") => RGBColor(60, 60, 60),
+        _ => RGBColor(120, 120, 120),
+    }
+}
+
+const GRID: RGBColor = RGBColor(200, 200, 200);
+const INK: RGBColor = RGBColor(0, 0, 0);
+const GOAL: RGBColor = RGBColor(150, 0, 170);
+
+fn ensure_font() -> Result<(), DatasetError> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| register_font(FONT, FontStyle::Normal, FONT_BYTES).is_ok());
+    if ok {
+        Ok(())
+    } else {
+        Err(render_err("the bundled font cannot be registered"))
+    }
+}
+
+/// One panel ready to draw: its points resampled to the preview rate, its pixel mapping and
+/// its ground grid.
+struct Scene<'a> {
+    panel: &'a Panel<'a>,
+    /// `frames × joints` projected points and depths at the preview rate.
+    points: Vec<([f64; 2], f64)>,
+    joints: usize,
+    /// Image-plane centre of the panel's extent.
+    centre: [f64; 2],
+    /// Ground extent in canonical x and y (min, max), grid-aligned.
+    ground: ([f64; 2], [f64; 2]),
+    /// Joints at or below the root-motion joint: bones hang from these only, so a static file
+    /// root left at the world origin (Bandai Namco's `joint_Root`) draws no line to the pelvis.
+    body: Vec<bool>,
+}
+
+impl Scene<'_> {
+    fn frames(&self) -> usize {
+        self.points.len() / self.joints.max(1)
+    }
+}
+
+fn scene<'a>(panel: &'a Panel<'a>, fps: f64) -> Scene<'a> {
+    let info = &panel.frames.info;
+    let joints = info.joints;
+    let all = projected(panel.frames, panel.skeleton);
+    let mut points = Vec::new();
+    for (lo, hi, t) in Motion::resample_points(info.frames, info.fps, fps) {
+        for j in 0..joints {
+            let (a, da) = all[lo * joints + j];
+            let (b, db) = all[hi * joints + j];
+            points.push((
+                [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t],
+                da + (db - da) * t,
+            ));
+        }
+    }
+    // The ground under every frame's joints, in canonical coordinates (for the grid).
+    let (origin, rotation) = canonical(panel.frames, panel.skeleton);
+    let mut gx = [f64::INFINITY, f64::NEG_INFINITY];
+    let mut gy = gx;
+    for v in panel.frames.positions.chunks_exact(3) {
+        let c = rotation * (DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])) - origin);
+        gx = [gx[0].min(c.x), gx[1].max(c.x)];
+        gy = [gy[0].min(c.y), gy[1].max(c.y)];
+    }
+    let snap = |r: [f64; 2]| {
+        [
+            ((r[0] - GRID_M) / GRID_M).floor() * GRID_M,
+            ((r[1] + GRID_M) / GRID_M).ceil() * GRID_M,
+        ]
+    };
+    let ground = (snap(gx), snap(gy));
+    let (lo, hi) = extent(&points, ground);
+    let root = panel
+        .skeleton
+        .joints
+        .iter()
+        .position(|j| j.name == panel.skeleton.root)
+        .unwrap_or(0);
+    let mut body = vec![false; panel.skeleton.joints.len()];
+    for (j, joint) in panel.skeleton.joints.iter().enumerate() {
+        body[j] = j == root || joint.parent.is_some_and(|p| p < j && body[p]);
+    }
+    Scene {
+        panel,
+        points,
+        joints,
+        body,
+        centre: [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0],
+        ground,
+    }
+}
+
+/// The image-plane box holding every point and the ground grid.
+fn extent(points: &[([f64; 2], f64)], ground: ([f64; 2], [f64; 2])) -> ([f64; 2], [f64; 2]) {
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    let mut add = |p: [f64; 2]| {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    };
+    for (p, _) in points {
+        add(*p);
+    }
+    for x in ground.0 {
+        for y in ground.1 {
+            add(project(DVec3::new(x, y, 0.0)).0);
+        }
+    }
+    (lo, hi)
+}
+
+/// Pixels per image-plane metre so that every scene fits its square panel (one scale for all, so
+/// side-by-side clips compare).
+fn common_scale(scenes: &[Scene], size: u32) -> f64 {
+    let mut span: f64 = 0.5;
+    for s in scenes {
+        let (lo, hi) = extent(&s.points, s.ground);
+        span = span.max(hi[0] - lo[0]).max(hi[1] - lo[1]);
+    }
+    f64::from(size) * 0.92 / span
+}
+
+/// Text cut to about `px` pixels at `font_px`, with an ellipsis.
+fn fit(text: &str, px: u32, font_px: u32) -> String {
+    let max = (f64::from(px) / (f64::from(font_px) * 0.55)) as usize;
+    if text.chars().count() <= max {
+        text.to_string()
+    } else {
+        let mut s: String = text.chars().take(max.saturating_sub(1)).collect();
+        s.push('…');
+        s
+    }
+}
+
+type Draw = Result<(), Box<dyn std::error::Error + Send + Sync>>;
+
+/// Draws the title and ground grid of `scene` into the panel at `x0` of a `w × h` RGB buffer.
+fn draw_background(
+    buf: &mut [u8],
+    (w, h): (u32, u32),
+    (x0, y0): (i32, i32),
+    scene: &Scene,
+    scale: f64,
+    size: u32,
+) -> Draw {
+    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+    let px = pixel_map(scene, scale, size, x0, y0);
+    let (gx, gy) = scene.ground;
+    let steps = |r: [f64; 2]| {
+        let n = ((r[1] - r[0]) / GRID_M).round().clamp(0.0, 400.0) as usize;
+        (0..=n).map(move |i| r[0] + i as f64 * GRID_M)
+    };
+    for x in steps(gx) {
+        let a = px(project(DVec3::new(x, gy[0], 0.0)).0);
+        let b = px(project(DVec3::new(x, gy[1], 0.0)).0);
+        root.draw(&PathElement::new(vec![a, b], GRID))?;
+    }
+    for y in steps(gy) {
+        let a = px(project(DVec3::new(gx[0], y, 0.0)).0);
+        let b = px(project(DVec3::new(gx[1], y, 0.0)).0);
+        root.draw(&PathElement::new(vec![a, b], GRID))?;
+    }
+    let info = &scene.panel.frames.info;
+    let caption = TextStyle::from((FONT, 13).into_font()).color(&INK);
+    let id = TextStyle::from((FONT, 10).into_font()).color(&RGBColor(90, 90, 90));
+    let label = if info.mirrored {
+        format!("{} (mirrored)", info.text)
+    } else {
+        info.text.clone()
+    };
+    root.draw(&Text::new(
+        fit(&label, size - 8, 13),
+        (x0 + 4, y0 - TITLE_PX as i32 + 3),
+        caption,
+    ))?;
+    root.draw(&Text::new(
+        fit(&info.clip_id, size - 8, 10),
+        (x0 + 4, y0 - TITLE_PX as i32 + 20),
+        id,
+    ))?;
+    root.present()?;
+    Ok(())
+}
+
+/// Image-plane metres to pixels of the panel whose drawing area starts at (`x0`, `y0`).
+fn pixel_map(
+    scene: &Scene,
+    scale: f64,
+    size: u32,
+    x0: i32,
+    y0: i32,
+) -> impl Fn([f64; 2]) -> (i32, i32) + use<> {
+    let c = scene.centre;
+    let half = f64::from(size) / 2.0;
+    move |p: [f64; 2]| {
+        (
+            x0 + (half + (p[0] - c[0]) * scale).round() as i32,
+            y0 + (half - (p[1] - c[1]) * scale).round() as i32,
+        )
+    }
+}
+
+/// Draws frame `f` of `scene`: bones far to near, coloured by the child joint's part, and the
+/// pelvis goal as a marker when the row has one.
+fn draw_pose(
+    buf: &mut [u8],
+    (w, h): (u32, u32),
+    (x0, y0): (i32, i32),
+    scene: &Scene,
+    f: usize,
+    scale: f64,
+    size: u32,
+) -> Draw {
+    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+    let px = pixel_map(scene, scale, size, x0, y0);
+    let n = scene.joints;
+    let pose = &scene.points[f * n..(f + 1) * n];
+    let joints = &scene.panel.skeleton.joints;
+    let body = &scene.body;
+    let mut bones: Vec<(f64, usize, usize)> = joints
+        .iter()
+        .enumerate()
+        .filter_map(|(j, joint)| joint.parent.filter(|p| *p < n && j < n).map(|p| (j, p)))
+        .filter(|(_, p)| body.get(*p).copied().unwrap_or(false))
+        .map(|(j, p)| ((pose[j].1 + pose[p].1) / 2.0, j, p))
+        .collect();
+    bones.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let width = (f64::from(size) / 90.0).round().max(2.0) as u32;
+    for (_, j, p) in bones {
+        let colour = part_colour(joints[j].part.as_deref());
+        root.draw(&PathElement::new(
+            vec![px(pose[p].0), px(pose[j].0)],
+            colour.stroke_width(width),
+        ))?;
+    }
+    if let Some(g) = &scene.panel.frames.info.goal_pelvis
+        && g.len() >= 2
+    {
+        let at = px(project(DVec3::new(f64::from(g[0]), f64::from(g[1]), 0.0)).0);
+        root.draw(&Cross::new(at, 5, GOAL.stroke_width(2)))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// A rendered preview: the GIF's frames (RGB), the filmstrip (RGB), their sizes.
+pub struct Preview {
+    /// Width and height of a GIF frame.
+    pub frame_size: (u32, u32),
+    /// RGB frames at the preview rate.
+    pub frames: Vec<Vec<u8>>,
+    /// Frames per second.
+    pub fps: f64,
+    /// Width and height of the filmstrip.
+    pub strip_size: (u32, u32),
+    /// The filmstrip, RGB.
+    pub strip: Vec<u8>,
+}
+
+/// Renders `panels` side by side (the GIF) and one filmstrip row per panel.
+pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, DatasetError> {
+    ensure_font()?;
+    if panels.is_empty() {
+        return Err(render_err("nothing to draw"));
+    }
+    if !(options.fps.is_finite() && options.fps > 0.0 && options.fps <= 100.0) {
+        return Err(render_err(format!(
+            "preview rate {} fps: expected more than 0 and at most 100",
+            options.fps
+        )));
+    }
+    let size = options.size.clamp(64, 2048);
+    let scenes: Vec<Scene> = panels.iter().map(|p| scene(p, options.fps)).collect();
+    let scale = common_scale(&scenes, size);
+    let count = scenes.iter().map(Scene::frames).max().unwrap_or(0);
+    let (w, h) = (size * scenes.len() as u32, size + TITLE_PX);
+    let mut background = vec![255u8; (w * h * 3) as usize];
+    for (k, s) in scenes.iter().enumerate() {
+        draw_background(
+            &mut background,
+            (w, h),
+            ((size * k as u32) as i32, TITLE_PX as i32),
+            s,
+            scale,
+            size,
+        )
+        .map_err(render_err)?;
+    }
+    let count = if options.animate { count } else { 0 };
+    let mut frames = Vec::with_capacity(count);
+    for f in 0..count {
+        let mut buf = background.clone();
+        for (k, s) in scenes.iter().enumerate() {
+            // A shorter clip holds its last pose.
+            let at = f.min(s.frames().saturating_sub(1));
+            draw_pose(
+                &mut buf,
+                (w, h),
+                ((size * k as u32) as i32, TITLE_PX as i32),
+                s,
+                at,
+                scale,
+                size,
+            )
+            .map_err(render_err)?;
+        }
+        frames.push(buf);
+    }
+    // The filmstrip: one row per panel, `strip_frames` poses each, on the same scale.
+    let cells = options.strip_frames.clamp(1, 32) as u32;
+    let (sw, sh) = (size * cells, (size + TITLE_PX) * scenes.len() as u32);
+    let mut strip = vec![255u8; (sw * sh * 3) as usize];
+    for (r, s) in scenes.iter().enumerate() {
+        let y0 = (r as u32 * (size + TITLE_PX) + TITLE_PX) as i32;
+        let n = s.frames();
+        for c in 0..cells {
+            let at = if cells == 1 || n < 2 {
+                0
+            } else {
+                (c as usize * (n - 1)) / (cells as usize - 1)
+            };
+            let x0 = (c * size) as i32;
+            if c == 0 {
+                draw_background(&mut strip, (sw, sh), (x0, y0), s, scale, size)
+                    .map_err(render_err)?;
+            } else {
+                draw_grid_cell(&mut strip, (sw, sh), (x0, y0), s, scale, size)
+                    .map_err(render_err)?;
+            }
+            draw_pose(&mut strip, (sw, sh), (x0, y0), s, at, scale, size).map_err(render_err)?;
+        }
+    }
+    Ok(Preview {
+        frame_size: (w, h),
+        frames,
+        fps: options.fps,
+        strip_size: (sw, sh),
+        strip,
+    })
+}
+
+/// The ground grid of a filmstrip cell after the first, with the cell's time.
+fn draw_grid_cell(
+    buf: &mut [u8],
+    (w, h): (u32, u32),
+    (x0, y0): (i32, i32),
+    scene: &Scene,
+    scale: f64,
+    size: u32,
+) -> Draw {
+    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+    let px = pixel_map(scene, scale, size, x0, y0);
+    let (gx, gy) = scene.ground;
+    for x in [gx[0], gx[1]] {
+        root.draw(&PathElement::new(
+            vec![
+                px(project(DVec3::new(x, gy[0], 0.0)).0),
+                px(project(DVec3::new(x, gy[1], 0.0)).0),
+            ],
+            GRID,
+        ))?;
+    }
+    let n = ((gy[1] - gy[0]) / GRID_M).round().clamp(0.0, 400.0) as usize;
+    for i in 0..=n {
+        let y = gy[0] + i as f64 * GRID_M;
+        root.draw(&PathElement::new(
+            vec![
+                px(project(DVec3::new(gx[0], y, 0.0)).0),
+                px(project(DVec3::new(gx[1], y, 0.0)).0),
+            ],
+            GRID,
+        ))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// The GIF palette: the drawing's own colours first, then a 6×6×6 cube and a grey ramp for
+/// the text's antialiasing; and the nearest entry of every 15-bit colour, computed once.
+fn palette() -> &'static (Vec<u8>, Vec<u8>) {
+    static PALETTE: OnceLock<(Vec<u8>, Vec<u8>)> = OnceLock::new();
+    PALETTE.get_or_init(|| {
+        let mut colours: Vec<[u8; 3]> = vec![[255, 255, 255], [0, 0, 0]];
+        for c in [
+            part_colour(Some("left_arm")),
+            part_colour(Some("left_leg")),
+            part_colour(Some("right_arm")),
+            part_colour(Some("right_leg")),
+            part_colour(Some("torso")),
+            part_colour(None),
+            GRID,
+            GOAL,
+            RGBColor(90, 90, 90),
+        ] {
+            colours.push([c.0, c.1, c.2]);
+        }
+        for r in 0..6u8 {
+            for g in 0..6u8 {
+                for b in 0..6u8 {
+                    colours.push([r * 51, g * 51, b * 51]);
+                }
+            }
+        }
+        let mut grey = 8u8;
+        while colours.len() < 256 {
+            colours.push([grey, grey, grey]);
+            grey = grey.saturating_add(9);
+        }
+        let flat: Vec<u8> = colours.iter().flatten().copied().collect();
+        let mut nearest = vec![0u8; 1 << 15];
+        for (key, slot) in nearest.iter_mut().enumerate() {
+            let c = [
+                ((key >> 10) & 31) as i32 * 255 / 31,
+                ((key >> 5) & 31) as i32 * 255 / 31,
+                (key & 31) as i32 * 255 / 31,
+            ];
+            let best = colours
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, p)| (0..3).map(|k| (c[k] - i32::from(p[k])).pow(2)).sum::<i32>())
+                .map(|(i, _)| i)
+                .unwrap_or(0);
+            *slot = best as u8;
+        }
+        (flat, nearest)
+    })
+}
+
+fn indexed(rgb: &[u8]) -> Vec<u8> {
+    let (_, nearest) = palette();
+    rgb.chunks_exact(3)
+        .map(|p| {
+            let key = (usize::from(p[0] >> 3) << 10)
+                | (usize::from(p[1] >> 3) << 5)
+                | usize::from(p[2] >> 3);
+            nearest[key]
+        })
+        .collect()
+}
+
+impl Preview {
+    /// The animated GIF (looping), one frame per preview frame.
+    pub fn gif(&self) -> Result<Vec<u8>, DatasetError> {
+        let (w, h) = self.frame_size;
+        let (w16, h16) = (
+            u16::try_from(w).map_err(render_err)?,
+            u16::try_from(h).map_err(render_err)?,
+        );
+        let mut out = Vec::new();
+        {
+            let mut encoder =
+                gif::Encoder::new(&mut out, w16, h16, &palette().0).map_err(render_err)?;
+            encoder
+                .set_repeat(gif::Repeat::Infinite)
+                .map_err(render_err)?;
+            let delay = (100.0 / self.fps).round() as u16;
+            for rgb in &self.frames {
+                let frame = gif::Frame {
+                    width: w16,
+                    height: h16,
+                    delay,
+                    buffer: std::borrow::Cow::Owned(indexed(rgb)),
+                    ..gif::Frame::default()
+                };
+                encoder.write_frame(&frame).map_err(render_err)?;
+            }
+        }
+        Ok(out)
+    }
+
+    /// The filmstrip as PNG.
+    pub fn png(&self) -> Result<Vec<u8>, DatasetError> {
+        png_bytes(&self.strip, self.strip_size)
+    }
+}
+
+/// RGB pixels as PNG bytes.
+pub fn png_bytes(rgb: &[u8], (w, h): (u32, u32)) -> Result<Vec<u8>, DatasetError> {
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, w, h);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(render_err)?;
+        writer.write_image_data(rgb).map_err(render_err)?;
+    }
+    Ok(out)
+}
+
+/// A file name for a clip id: `/`, `:` and `+` become `_`; a name longer than 120 characters is
+/// cut and given the id's SHA-256 prefix, so synthetic ids stay unique and within file-name
+/// limits.
+pub fn file_stem(clip_id: &str) -> String {
+    let stem = clip_id.replace(['/', ':', '+', '\\'], "_");
+    if stem.chars().count() <= 120 {
+        stem
+    } else {
+        let cut: String = stem.chars().take(100).collect();
+        let sha = crate::base::sha256_hex(clip_id.as_bytes());
+        format!("{cut}-{}", &sha[..12])
+    }
+}
+
+/// Writes `<dir>/<stem>.gif` and `<dir>/<stem>.png` atomically; returns their paths.
+pub fn write_preview(
+    preview: &Preview,
+    dir: &Path,
+    stem: &str,
+) -> Result<[PathBuf; 2], DatasetError> {
+    std::fs::create_dir_all(dir).map_err(|source| DatasetError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let gif = dir.join(format!("{stem}.gif"));
+    let png = dir.join(format!("{stem}.png"));
+    for (path, bytes) in [(&gif, preview.gif()?), (&png, preview.png()?)] {
+        crate::base::write_atomic(path, &bytes).map_err(|e| DatasetError::Io {
+            path: path.clone(),
+            source: std::io::Error::other(e.to_string()),
+        })?;
+    }
+    Ok([gif, png])
+}

@@ -1,0 +1,460 @@
+//! Shard rows to [`ClipInfo`] and [`ClipFrames`], every column found by name.
+
+use std::path::Path;
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Float32Type, Float64Type, Int32Type};
+use arrow_array::{Array, ArrayRef, RecordBatch};
+use parquet::arrow::ProjectionMask;
+use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
+
+use super::{ClipInfo, DatasetError, Plausibility};
+use crate::motion::BodyPart;
+
+/// Metadata columns a listing decodes (never the frames).
+const INFO_COLUMNS: [&str; 25] = [
+    "clip_id",
+    "split",
+    "source_kind",
+    "mirrored",
+    "motion_type",
+    "action",
+    "text",
+    "texts",
+    "labels",
+    "paraphrases",
+    "hand",
+    "parts",
+    "label_source",
+    "composed_from",
+    "composed_parts",
+    "goal_pelvis",
+    "goal_hand",
+    "foot_skate",
+    "ground_penetration",
+    "self_distance",
+    "lean",
+    "skeleton",
+    "fps",
+    "num_frames",
+    "num_joints",
+];
+
+/// One clip's metadata and its frames in the dataset frame (x right, y forward, z up, metres).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipFrames {
+    /// The row's metadata.
+    pub info: ClipInfo,
+    /// `frames × joints × 3` world positions.
+    pub positions: Vec<f32>,
+    /// `frames × joints × 4` local rotations (x, y, z, w); joint 0's includes the turn from
+    /// capture axes to dataset axes.
+    pub rotations: Vec<f32>,
+    /// `frames × 3` world position of the root-motion joint.
+    pub root: Vec<f32>,
+}
+
+impl ClipFrames {
+    /// The positions of frame `f` (`joints × 3`).
+    pub fn frame(&self, f: usize) -> &[f32] {
+        let n = self.info.joints * 3;
+        &self.positions[f * n..(f + 1) * n]
+    }
+}
+
+fn table_err(path: &Path, message: impl std::fmt::Display) -> DatasetError {
+    DatasetError::Table {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+/// A reader of `columns` (those the shard has; `required` must all be there).
+fn reader(
+    path: &Path,
+    columns: &[&str],
+    required: &[&str],
+    selection: Option<RowSelection>,
+) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReader, DatasetError> {
+    let file = std::fs::File::open(path).map_err(|source| DatasetError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
+    let schema = builder.schema().clone();
+    for c in required {
+        if schema.column_with_name(c).is_none() {
+            return Err(table_err(path, format!("no `{c}` column")));
+        }
+    }
+    let indices: Vec<usize> = columns
+        .iter()
+        .filter_map(|c| schema.index_of(c).ok())
+        .collect();
+    let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
+    let mut builder = builder.with_projection(mask).with_batch_size(256);
+    if let Some(s) = selection {
+        builder = builder.with_row_selection(s);
+    }
+    builder.build().map_err(|e| table_err(path, e))
+}
+
+/// Typed access to one batch's columns, with errors naming the shard and the column.
+struct Batch<'a> {
+    path: &'a Path,
+    batch: &'a RecordBatch,
+}
+
+impl<'a> Batch<'a> {
+    fn column(&self, name: &str) -> Option<&'a ArrayRef> {
+        self.batch.column_by_name(name)
+    }
+
+    fn wrong(&self, name: &str, expected: &str) -> DatasetError {
+        let found = self
+            .column(name)
+            .map(|c| c.data_type().to_string())
+            .unwrap_or_else(|| "no column".into());
+        table_err(
+            self.path,
+            format!("column `{name}` is {found}, expected {expected}"),
+        )
+    }
+
+    /// A string column's values (`None` per null row); an absent column is all nulls.
+    fn strings(&self, name: &str) -> Result<Vec<Option<String>>, DatasetError> {
+        let Some(c) = self.column(name) else {
+            return Ok(vec![None; self.batch.num_rows()]);
+        };
+        let a = c
+            .as_string_opt::<i32>()
+            .ok_or_else(|| self.wrong(name, "Utf8"))?;
+        Ok(a.iter().map(|v| v.map(str::to_string)).collect())
+    }
+
+    fn string_lists(&self, name: &str) -> Result<Vec<Vec<String>>, DatasetError> {
+        let Some(c) = self.column(name) else {
+            return Ok(vec![Vec::new(); self.batch.num_rows()]);
+        };
+        let list = c
+            .as_list_opt::<i32>()
+            .ok_or_else(|| self.wrong(name, "List<Utf8>"))?;
+        (0..list.len())
+            .map(|i| {
+                if list.is_null(i) {
+                    return Ok(Vec::new());
+                }
+                let v = list.value(i);
+                let s = v
+                    .as_string_opt::<i32>()
+                    .ok_or_else(|| self.wrong(name, "List<Utf8>"))?;
+                Ok(s.iter().flatten().map(str::to_string).collect())
+            })
+            .collect()
+    }
+
+    fn f32_lists(&self, name: &str) -> Result<Vec<Option<Vec<f32>>>, DatasetError> {
+        let Some(c) = self.column(name) else {
+            return Ok(vec![None; self.batch.num_rows()]);
+        };
+        let list = c
+            .as_list_opt::<i32>()
+            .ok_or_else(|| self.wrong(name, "List<Float32>"))?;
+        (0..list.len())
+            .map(|i| {
+                if list.is_null(i) {
+                    return Ok(None);
+                }
+                let v = list.value(i);
+                let f = v
+                    .as_primitive_opt::<Float32Type>()
+                    .ok_or_else(|| self.wrong(name, "List<Float32>"))?;
+                Ok(Some(f.values().to_vec()))
+            })
+            .collect()
+    }
+
+    fn bool_lists(&self, name: &str) -> Result<Vec<Option<Vec<bool>>>, DatasetError> {
+        let Some(c) = self.column(name) else {
+            return Ok(vec![None; self.batch.num_rows()]);
+        };
+        let list = c
+            .as_list_opt::<i32>()
+            .ok_or_else(|| self.wrong(name, "List<Boolean>"))?;
+        (0..list.len())
+            .map(|i| {
+                if list.is_null(i) {
+                    return Ok(None);
+                }
+                let v = list.value(i);
+                let b = v
+                    .as_boolean_opt()
+                    .ok_or_else(|| self.wrong(name, "List<Boolean>"))?;
+                Ok(Some(b.iter().map(|x| x.unwrap_or(false)).collect()))
+            })
+            .collect()
+    }
+
+    /// `composed_parts`: a list of part vectors per row.
+    fn bool_list_lists(&self, name: &str) -> Result<Vec<Vec<Vec<bool>>>, DatasetError> {
+        let Some(c) = self.column(name) else {
+            return Ok(vec![Vec::new(); self.batch.num_rows()]);
+        };
+        let outer = c
+            .as_list_opt::<i32>()
+            .ok_or_else(|| self.wrong(name, "List<List<Boolean>>"))?;
+        (0..outer.len())
+            .map(|i| {
+                if outer.is_null(i) {
+                    return Ok(Vec::new());
+                }
+                let inner = outer.value(i);
+                let inner = inner
+                    .as_list_opt::<i32>()
+                    .ok_or_else(|| self.wrong(name, "List<List<Boolean>>"))?;
+                (0..inner.len())
+                    .map(|k| {
+                        let v = inner.value(k);
+                        let b = v
+                            .as_boolean_opt()
+                            .ok_or_else(|| self.wrong(name, "List<List<Boolean>>"))?;
+                        Ok(b.iter().map(|x| x.unwrap_or(false)).collect())
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    fn f32s(&self, name: &str) -> Result<Vec<Option<f32>>, DatasetError> {
+        let Some(c) = self.column(name) else {
+            return Ok(vec![None; self.batch.num_rows()]);
+        };
+        let a = c
+            .as_primitive_opt::<Float32Type>()
+            .ok_or_else(|| self.wrong(name, "Float32"))?;
+        Ok(a.iter().collect())
+    }
+
+    fn required<T>(&self, name: &str, v: Vec<Option<T>>) -> Result<Vec<T>, DatasetError> {
+        v.into_iter()
+            .enumerate()
+            .map(|(i, x)| {
+                x.ok_or_else(|| table_err(self.path, format!("`{name}` is null in row {i}")))
+            })
+            .collect()
+    }
+}
+
+/// Part names of a six-flag vector in SINC's order.
+fn part_names(flags: &[bool]) -> Vec<String> {
+    BodyPart::ALL
+        .iter()
+        .zip(flags)
+        .filter(|(_, on)| **on)
+        .map(|(p, _)| crate::parts::part_name(*p).to_string())
+        .collect()
+}
+
+fn infos_of(
+    dataset: &Path,
+    path: &Path,
+    batch: &RecordBatch,
+) -> Result<Vec<ClipInfo>, DatasetError> {
+    let b = Batch { path, batch };
+    let ids = b.required("clip_id", b.strings("clip_id")?)?;
+    let kinds = b.required("source_kind", b.strings("source_kind")?)?;
+    let splits = b.strings("split")?;
+    let mirrored = match b.column("mirrored") {
+        Some(c) => c
+            .as_boolean_opt()
+            .ok_or_else(|| b.wrong("mirrored", "Boolean"))?
+            .iter()
+            .map(|v| v.unwrap_or(false))
+            .collect(),
+        None => vec![false; batch.num_rows()],
+    };
+    let fps: Vec<f64> = b
+        .column("fps")
+        .and_then(|c| c.as_primitive_opt::<Float64Type>())
+        .ok_or_else(|| b.wrong("fps", "Float64"))?
+        .iter()
+        .map(|v| v.unwrap_or(f64::NAN))
+        .collect();
+    let ints = |name: &str| -> Result<Vec<usize>, DatasetError> {
+        Ok(b.column(name)
+            .and_then(|c| c.as_primitive_opt::<Int32Type>())
+            .ok_or_else(|| b.wrong(name, "Int32"))?
+            .iter()
+            .map(|v| v.and_then(|v| usize::try_from(v).ok()).unwrap_or(0))
+            .collect())
+    };
+    let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
+    let skeleton = b.strings("skeleton")?;
+    let (motion_type, action, text) = (
+        b.strings("motion_type")?,
+        b.strings("action")?,
+        b.strings("text")?,
+    );
+    let (hand, label_source) = (b.strings("hand")?, b.strings("label_source")?);
+    let (texts, labels, paraphrases, composed_from) = (
+        b.string_lists("texts")?,
+        b.string_lists("labels")?,
+        b.string_lists("paraphrases")?,
+        b.string_lists("composed_from")?,
+    );
+    let parts = b.bool_lists("parts")?;
+    let composed_parts = b.bool_list_lists("composed_parts")?;
+    let (goal_pelvis, goal_hand) = (b.f32_lists("goal_pelvis")?, b.f32_lists("goal_hand")?);
+    let (skate, ground, distance, lean) = (
+        b.f32s("foot_skate")?,
+        b.f32s("ground_penetration")?,
+        b.f32s("self_distance")?,
+        b.f32s("lean")?,
+    );
+    let shard = path
+        .strip_prefix(dataset)
+        .unwrap_or(path)
+        .to_string_lossy()
+        .into_owned();
+    let mut out = Vec::with_capacity(batch.num_rows());
+    for i in 0..batch.num_rows() {
+        out.push(ClipInfo {
+            clip_id: ids[i].clone(),
+            split: splits[i].clone().unwrap_or_default(),
+            source_kind: kinds[i].clone(),
+            mirrored: mirrored[i],
+            motion_type: motion_type[i].clone(),
+            action: action[i].clone().unwrap_or_default(),
+            text: text[i].clone().unwrap_or_default(),
+            texts: texts[i].clone(),
+            labels: labels[i].clone(),
+            paraphrases: paraphrases[i].clone(),
+            hand: hand[i].clone(),
+            parts: parts[i].as_deref().map(part_names),
+            label_source: label_source[i].clone(),
+            composed_from: composed_from[i].clone(),
+            composed_parts: composed_parts[i].iter().map(|p| part_names(p)).collect(),
+            goal_pelvis: goal_pelvis[i].clone(),
+            goal_hand: goal_hand[i].clone(),
+            plausibility: Plausibility {
+                foot_skate: skate[i],
+                ground_penetration: ground[i],
+                self_distance: distance[i],
+                lean: lean[i],
+            },
+            skeleton: skeleton[i].clone().unwrap_or_default(),
+            fps: fps[i],
+            frames: frames[i],
+            joints: joints[i],
+            shard: shard.clone(),
+        });
+    }
+    Ok(out)
+}
+
+/// Appends the metadata of every row of `path` to `out`.
+pub(super) fn read_infos(
+    dataset: &Path,
+    path: &Path,
+    out: &mut Vec<ClipInfo>,
+) -> Result<(), DatasetError> {
+    let required = ["clip_id", "source_kind", "fps", "num_frames", "num_joints"];
+    for batch in reader(path, &INFO_COLUMNS, &required, None)? {
+        let batch = batch.map_err(|e| table_err(path, e))?;
+        out.extend(infos_of(dataset, path, &batch)?);
+    }
+    Ok(())
+}
+
+/// The frames of the row at `row` of the shard `info.shard`, checked against its counts.
+pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFrames, DatasetError> {
+    let path = dataset.join(&info.shard);
+    let selection = RowSelection::from(vec![RowSelector::skip(row), RowSelector::select(1)]);
+    let columns = [
+        "clip_id",
+        "joint_positions",
+        "local_rotations",
+        "root_translation",
+    ];
+    let mut found = None;
+    for batch in reader(&path, &columns, &columns, Some(selection))? {
+        let batch = batch.map_err(|e| table_err(&path, e))?;
+        let b = Batch {
+            path: &path,
+            batch: &batch,
+        };
+        let ids = b.strings("clip_id")?;
+        let (p, r, t) = (
+            b.f32_lists("joint_positions")?,
+            b.f32_lists("local_rotations")?,
+            b.f32_lists("root_translation")?,
+        );
+        if let (Some(Some(id)), Some(p), Some(r), Some(t)) = (
+            ids.into_iter().next(),
+            p.into_iter().next(),
+            r.into_iter().next(),
+            t.into_iter().next(),
+        ) && id == info.clip_id
+        {
+            found = Some((p, r, t));
+        }
+    }
+    let bad = |message: String| DatasetError::BadRow {
+        path: path.clone(),
+        clip_id: info.clip_id.clone(),
+        message,
+    };
+    let (Some(positions), Some(rotations), Some(root)) = found.unwrap_or((None, None, None)) else {
+        return Err(bad(format!("row {row} holds no frames")));
+    };
+    let (f, j) = (info.frames, info.joints);
+    for (name, len, per) in [
+        ("joint_positions", positions.len(), j * 3),
+        ("local_rotations", rotations.len(), j * 4),
+        ("root_translation", root.len(), 3),
+    ] {
+        if f == 0 || j == 0 || f.checked_mul(per) != Some(len) {
+            return Err(bad(format!(
+                "{name} holds {len} values, expected num_frames {f} × {per}"
+            )));
+        }
+    }
+    if let Some(v) = positions.iter().chain(&rotations).find(|v| !v.is_finite()) {
+        return Err(bad(format!("a non-finite value ({v}) in the frames")));
+    }
+    if !(info.fps.is_finite() && info.fps > 0.0) {
+        return Err(bad(format!(
+            "fps is {}, expected a positive number",
+            info.fps
+        )));
+    }
+    Ok(ClipFrames {
+        info,
+        positions,
+        rotations,
+        root,
+    })
+}
+
+/// One clip's metadata and frames, found by id.
+pub fn read_clip(dataset: &Path, clip_id: &str) -> Result<ClipFrames, DatasetError> {
+    read_clip_in(dataset, &super::list_clips(dataset)?, clip_id)
+}
+
+/// [`read_clip`] with the dataset's listing already read ([`super::list_clips`]).
+pub fn read_clip_in(
+    dataset: &Path,
+    clips: &[ClipInfo],
+    clip_id: &str,
+) -> Result<ClipFrames, DatasetError> {
+    let Some(at) = clips.iter().position(|c| c.clip_id == clip_id) else {
+        let ids: Vec<String> = clips.iter().map(|c| c.clip_id.clone()).collect();
+        return Err(super::no_clip(dataset, clip_id, &ids));
+    };
+    // Rows before it in the same shard give its row number there.
+    let row = clips[..at]
+        .iter()
+        .filter(|c| c.shard == clips[at].shard)
+        .count();
+    read_frames(dataset, clips[at].clone(), row)
+}

@@ -1,0 +1,300 @@
+//! A built dataset read back from its folder alone (issue 14): `clips` listing and filters against
+//! an independent reader, `export-bvh` from the shards against the config route, previews.
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+
+use common::*;
+use motionforge::build::{BuildOptions, build, collect_clips};
+use motionforge::config::Config;
+use motionforge::dataset::{self, ClipFilter};
+use motionforge::motion::{read_bvh, write_bvh};
+
+/// The demo built into a fresh folder, with its config pointed there.
+fn demo() -> (tempfile::TempDir, Config) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = Config::load(&repo().join("fixtures/demo.toml")).unwrap();
+    config.dataset.output = dir.path().to_path_buf();
+    build(&config, &BuildOptions::default()).unwrap();
+    (dir, config)
+}
+
+#[test]
+fn clips_lists_every_row_and_filters_count_as_the_report_reader_does() {
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let listed = dataset::list_clips(&ds).unwrap();
+    // The report's own reader (another code path over the same shards) as the reference.
+    let tables = motionforge::report::find_clip_tables(&ds).unwrap();
+    let rows = motionforge::report::read_rows(&tables).unwrap();
+    assert_eq!(listed.len(), rows.len());
+    assert!(listed.len() >= 20, "{} rows", listed.len());
+    for (a, b) in listed.iter().zip(&rows) {
+        assert_eq!(
+            (&a.clip_id, &a.split, &a.source_kind, a.mirrored, a.frames),
+            (&b.clip_id, &b.split, &b.source_kind, b.mirrored, b.frames)
+        );
+        assert_eq!(a.motion_type, b.motion_type);
+    }
+    let count = |f: ClipFilter| dataset::find_clips(&ds, &f, None).unwrap().len();
+    let mut by_type: BTreeMap<String, usize> = BTreeMap::new();
+    for r in rows.iter().filter_map(|r| r.motion_type.clone()) {
+        *by_type.entry(r).or_default() += 1;
+    }
+    assert!(by_type.contains_key("wave"));
+    for (t, n) in &by_type {
+        let f = ClipFilter {
+            motion_type: Some(t.clone()),
+            ..ClipFilter::default()
+        };
+        assert_eq!(count(f), *n, "type {t}");
+    }
+    for split in ["train", "val", "test"] {
+        let f = ClipFilter {
+            split: Some(split.into()),
+            ..ClipFilter::default()
+        };
+        assert_eq!(
+            count(f),
+            rows.iter().filter(|r| r.split == split).count(),
+            "{split}"
+        );
+    }
+    let synthetic = rows.iter().filter(|r| r.source_kind == "synthetic").count();
+    assert!(synthetic > 0);
+    let kind = |k: &str| ClipFilter {
+        kind: Some(k.into()),
+        ..ClipFilter::default()
+    };
+    assert_eq!(count(kind("synthetic")), synthetic);
+    assert_eq!(
+        count(kind("mirrored")),
+        rows.iter().filter(|r| r.mirrored).count()
+    );
+    // Text matches the caption, any case.
+    let f = ClipFilter {
+        text: Some("BYEBYE".into()),
+        ..ClipFilter::default()
+    };
+    let hits = dataset::find_clips(&ds, &f, None).unwrap();
+    assert!(!hits.is_empty());
+    assert!(hits.iter().all(|c| c.clip_id.contains("byebye")));
+
+    // The command: a JSON array with the same rows, and --limit.
+    let out = run_ok(
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .arg("clips")
+            .arg(&ds)
+            .args(["--type", "wave", "--json"]),
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), by_type["wave"]);
+    let out = run_ok(
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .arg("clips")
+            .arg(&ds)
+            .args(["--limit", "3"]),
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text.lines().count(), 4, "{text}");
+    assert!(text.starts_with("clip_id"));
+}
+
+#[test]
+fn unknown_clip_is_a_typed_error_with_near_ids() {
+    let (_dir, config) = demo();
+    let err = dataset::read_clip(&config.dataset_dir(), "cmu/01_01").unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("no clip `cmu/01_01`"), "{msg}");
+    assert!(msg.contains("did you mean cmu/01_01:"), "{msg}");
+}
+
+/// Largest angle (degrees) between two rotations.
+fn angle(a: glam::DQuat, b: glam::DQuat) -> f64 {
+    (a.dot(b).abs().min(1.0).acos() * 2.0).to_degrees()
+}
+
+#[test]
+fn export_bvh_from_the_shards_matches_the_config_route_on_every_demo_clip() {
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let skeletons = dataset::read_skeletons(&ds).unwrap();
+    let loaded = collect_clips(&config, &BuildOptions::default()).unwrap();
+    let listed = dataset::list_clips(&ds).unwrap();
+    assert_eq!(loaded.len(), listed.len());
+    let (mut worst_angle, mut worst_move) = (0.0f64, 0.0f64);
+    let mut kinds = std::collections::BTreeSet::new();
+    for clip in &loaded {
+        let id = &clip.clip.clip_id;
+        let frames = dataset::read_clip(&ds, id).unwrap();
+        let motion =
+            dataset::skeletons::clip_motion(&frames, &skeletons[&frames.info.skeleton]).unwrap();
+        let (ours, theirs) = (
+            write_bvh(&motion).unwrap(),
+            write_bvh(&clip.motion).unwrap(),
+        );
+        // The hierarchy (names, offsets, channels, end sites), frame count and rate: identical.
+        let head = |t: &str| t.split("Frame Time").next().unwrap().to_string();
+        assert_eq!(head(&ours), head(&theirs), "{id}");
+        let frame_time = |t: &str| {
+            t.lines()
+                .find(|l| l.starts_with("Frame Time"))
+                .map(str::to_string)
+        };
+        assert_eq!(frame_time(&ours), frame_time(&theirs), "{id}");
+        // The frames: the rows hold f32, so within float tolerance.
+        let (a, b) = (
+            read_bvh(&ours).unwrap().motion,
+            read_bvh(&theirs).unwrap().motion,
+        );
+        assert_eq!(a.rotations.len(), b.rotations.len());
+        for (p, q) in a.rotations.iter().zip(&b.rotations) {
+            worst_angle = worst_angle.max(angle(*p, *q));
+        }
+        let scale = skeletons[&frames.info.skeleton].unit_scale;
+        for (p, q) in a.translations.iter().zip(&b.translations) {
+            worst_move = worst_move.max((*p - *q).length() * scale);
+        }
+        kinds.insert((frames.info.source_kind.clone(), frames.info.mirrored));
+    }
+    eprintln!("worst rotation {worst_angle:.2e} degrees, worst translation {worst_move:.2e} m");
+    assert!(worst_angle < 1e-3, "{worst_angle} degrees");
+    assert!(worst_move < 1e-5, "{worst_move} m");
+    // Originals, mirrors and synthetic pairs were all compared.
+    assert!(kinds.contains(&("real_single".into(), false)));
+    assert!(kinds.contains(&("real_single".into(), true)));
+    assert!(kinds.iter().any(|(k, _)| k == "synthetic"));
+}
+
+#[test]
+fn export_bvh_command_writes_the_clip_from_the_dataset_folder() {
+    let (dir, config) = demo();
+    let ds = config.dataset_dir();
+    let out = dir.path().join("clip.bvh");
+    run_ok(
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .arg("export-bvh")
+            .arg(&ds)
+            .args(["--clip", "cmu/01_01:1207-2407:m", "-o"])
+            .arg(&out),
+    );
+    let bvh = read_bvh(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(bvh.motion.num_frames(), 300);
+    assert_eq!(bvh.skeleton.joints[0].name, "Hips");
+    // Skeletons with fields this reader does not know still read.
+    let path = ds.join("skeletons.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    for (_, s) in json.as_object_mut().unwrap() {
+        s["mirrored_skeleton"] = serde_json::json!({"joints": []});
+    }
+    std::fs::write(&path, json.to_string()).unwrap();
+    assert!(dataset::read_skeletons(Path::new(&ds)).is_ok());
+}
+
+#[test]
+fn preview_gif_has_the_clip_frames_at_its_rate_and_they_differ() {
+    use motionforge::dataset::preview::{Panel, PreviewOptions, render};
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let skeletons = dataset::read_skeletons(&ds).unwrap();
+    for id in [
+        "bandai-namco-1/dataset-1_kick_normal_001:0-358",
+        "cmu/01_01:1207-2407:m",
+    ] {
+        let clip = dataset::read_clip(&ds, id).unwrap();
+        let panel = Panel {
+            frames: &clip,
+            skeleton: &skeletons[&clip.info.skeleton],
+        };
+        let options = PreviewOptions::default();
+        let preview = render(&[panel], &options).unwrap();
+        let gif = preview.gif().unwrap();
+        // Decoded with the gif crate's reader: frame count, delay, and distinct frames.
+        let mut decoder = gif::DecodeOptions::new();
+        decoder.set_color_output(gif::ColorOutput::Indexed);
+        let mut reader = decoder.read_info(gif.as_slice()).unwrap();
+        let mut frames = Vec::new();
+        while let Some(frame) = reader.read_next_frame().unwrap() {
+            assert_eq!(frame.delay, 5, "20 fps is 5 centiseconds");
+            frames.push(frame.buffer.to_vec());
+        }
+        let expected = motionforge::motion::Motion::resampled_frames(
+            clip.info.frames,
+            clip.info.fps,
+            options.fps,
+        );
+        assert_eq!(frames.len(), expected, "{id}");
+        assert_eq!(
+            expected,
+            (clip.info.frames - 1) * 2 / 3 + 1,
+            "{id}: 30 -> 20 fps"
+        );
+        let distinct: std::collections::BTreeSet<&Vec<u8>> = frames.iter().collect();
+        assert!(
+            distinct.len() * 2 > frames.len(),
+            "{id}: {} distinct of {}",
+            distinct.len(),
+            frames.len()
+        );
+        // Not blank: the bones' colours are drawn on every frame.
+        for f in &frames {
+            assert!(f.iter().filter(|&&i| (2..=7).contains(&i)).count() > 100);
+        }
+        let png = preview.png().unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+    }
+}
+
+#[test]
+fn mirrored_preview_is_the_reflection_of_its_original() {
+    use motionforge::dataset::preview::projected_points;
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let skeletons = dataset::read_skeletons(&ds).unwrap();
+    let clips = dataset::list_clips(&ds).unwrap();
+    let mut pairs = 0;
+    for original in clips
+        .iter()
+        .filter(|c| !c.mirrored && c.source_kind != "synthetic")
+    {
+        let mirror_id = format!("{}:m", original.clip_id);
+        let a = dataset::read_clip(&ds, &original.clip_id).unwrap();
+        let b = dataset::read_clip(&ds, &mirror_id).unwrap();
+        let (sa, sb) = (&skeletons[&a.info.skeleton], &skeletons[&b.info.skeleton]);
+        let (pa, pb) = (projected_points(&a, sa), projected_points(&b, sb));
+        assert_eq!(pa.len(), pb.len());
+        let n = a.info.joints;
+        // Joint j of the mirror is the reflection of its partner in the original.
+        let partner: Vec<usize> = sb
+            .joints
+            .iter()
+            .map(|j| {
+                let name = j.mirror.as_deref().unwrap_or(&j.name);
+                sa.joints.iter().position(|k| k.name == name).unwrap()
+            })
+            .collect();
+        assert!(partner.iter().enumerate().any(|(j, p)| j != *p));
+        let mut worst = 0.0f64;
+        let mut moved = 0.0f64;
+        for f in 0..a.info.frames {
+            for j in 0..n {
+                let m = pb[f * n + j];
+                let o = pa[f * n + partner[j]];
+                worst = worst.max((m[0] + o[0]).abs()).max((m[1] - o[1]).abs());
+                // Not trivially symmetric: the original's left and right differ.
+                let own = pa[f * n + j];
+                moved = moved.max((o[0] + own[0]).abs()).max((o[1] - own[1]).abs());
+            }
+        }
+        eprintln!("{}: worst reflection error {worst:.4} m", original.clip_id);
+        // Mirroring keeps each skeleton's own bone offsets (docs/mirroring.md): the drawings agree
+        // to a few centimetres, where the original's left and right sides differ by decimetres.
+        assert!(worst < 0.05, "{}: {worst} m", original.clip_id);
+        assert!(moved > 0.1, "{}: {moved} m", original.clip_id);
+        pairs += 1;
+    }
+    assert!(pairs >= 8, "{pairs} pairs");
+}
