@@ -51,6 +51,7 @@ fn cmu() -> &'static Capture {
             source: "test",
             profile: &ProfileSpec::bundled("cmu").unwrap(),
             fps_override: None,
+            positions: None,
         });
         out.capture.unwrap()
     })
