@@ -13,6 +13,13 @@ use super::{PlanError, Session, Step};
 /// The most states a scene may reach; beyond it the scene is refused as too large to plan.
 pub const MAX_STATES: usize = 200_000;
 
+/// The most transitions (state, instruction) the graph may hold.
+const MAX_EDGES: usize = 4_000_000;
+
+/// The shortest duration estimate, in milliseconds: the segment stage's default shortest clip
+/// (`min_seconds`, 0.5 s). It also bounds a `minutes` session to 28,800 instructions.
+const MIN_MILLIS: u64 = 500;
+
 /// The reachable state graph of a scene.
 pub(super) struct Graph {
     /// States, the start first.
@@ -27,6 +34,7 @@ impl Graph {
         let mut states = vec![scene.start.clone()];
         let mut index: HashMap<State, usize> = HashMap::from([(scene.start.clone(), 0)]);
         let mut edges: Vec<Vec<(usize, usize)>> = Vec::new();
+        let mut total = 0usize;
         let mut i = 0;
         while i < states.len() {
             let mut out = Vec::new();
@@ -47,6 +55,12 @@ impl Graph {
                     }
                 };
                 out.push((c, j));
+            }
+            total += out.len();
+            if total > MAX_EDGES {
+                return Err(PlanError::TooLarge {
+                    states: states.len(),
+                });
             }
             edges.push(out);
             i += 1;
@@ -129,7 +143,9 @@ pub(super) fn walk(
     let millis: Vec<u64> = scene
         .candidates
         .iter()
-        .map(|c| (seconds_of(scene, counts, &c.motion_type) * 1000.0).round() as u64)
+        .map(|c| {
+            ((seconds_of(scene, counts, &c.motion_type) * 1000.0).round() as u64).max(MIN_MILLIS)
+        })
         .collect();
     let (cost, budget): (Vec<u64>, u64) = match scene.limit {
         Limit::Instructions(n) => (vec![1; scene.candidates.len()], u64::from(n)),

@@ -658,13 +658,13 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             );
             Limit::Instructions(1)
         }
-        (None, Some(m)) if finite_positive(m) && m <= 24.0 * 60.0 => {
+        (None, Some(m)) if finite_positive(m) && m <= 240.0 => {
             Limit::Millis((m * 60_000.0).round() as u64)
         }
         (None, Some(m)) => {
             problems.push(
                 &[k("limits"), k("minutes")],
-                format!("{m}: expected a number of minutes above 0, at most 1440"),
+                format!("{m}: expected a number of minutes above 0, at most 240"),
             );
             Limit::Instructions(1)
         }
@@ -831,6 +831,18 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         if problems.found.len() > before {
             continue;
         }
+        // Counted before expanding, so a long list cannot make the reader allocate its product.
+        let expansion = bound_places.len() * bound_objects.len() * hands.len();
+        if candidates.len() + expansion > MAX_CANDIDATES {
+            problems.push(
+                &[k("interactions"), Seg::I(i)],
+                format!(
+                    "the scene expands into more than {MAX_CANDIDATES} instructions (places x \
+                     objects x hands of every interaction); split it into smaller scenes"
+                ),
+            );
+            break;
+        }
         for &place in &bound_places {
             for &object in &bound_objects {
                 for &hand in &hands {
@@ -900,17 +912,6 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             }
         }
     }
-    if candidates.len() > MAX_CANDIDATES {
-        problems.push(
-            &[k("interactions")],
-            format!(
-                "expand into {} instructions (places x objects x hands); at most \
-                 {MAX_CANDIDATES} are planned",
-                candidates.len()
-            ),
-        );
-    }
-
     // Balance.
     let strength = file.balance.strength;
     if !(strength.is_finite() && (0.0..=10.0).contains(&strength)) {
