@@ -506,6 +506,24 @@ fn plan_session_writes_the_same_files_for_a_seed_and_steers_with_a_dataset() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names.len(), 2, "{names:?}");
+
+    // A capture name that is not a plain file stem is a usage error.
+    let bad = motionforge()
+        .args([
+            "plan-session",
+            "--seed",
+            "5",
+            "--capture",
+            "../elsewhere",
+            "--scene",
+        ])
+        .arg(scene_path())
+        .arg("-o")
+        .arg(out.path().join("d"))
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(!out.path().join("d").exists());
 }
 
 fn scene_with(edit: impl FnOnce(String) -> String) -> (tempfile::TempDir, PathBuf) {
