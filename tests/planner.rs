@@ -813,3 +813,60 @@ fn a_scene_expanding_into_too_many_instructions_is_refused_before_expanding() {
         "{err}"
     );
 }
+
+#[test]
+fn a_target_in_the_scene_steers_toward_it_and_must_name_the_scenes_types() {
+    let (_d, path) = scene_with(|t| {
+        t.replacen(
+            "strength = 2.0",
+            "strength = 2.0\ntarget = { \"drink\" = 3, \"sit down\" = 1 }",
+            1,
+        )
+    });
+    let scene = Scene::load(&path).unwrap();
+    let expected: BTreeMap<String, f64> =
+        [("drink".to_string(), 0.75), ("sit down".to_string(), 0.25)].into();
+    assert_eq!(scene.target, expected);
+    let drinks = |scene: &Scene| -> u64 {
+        (0..50)
+            .map(|seed| {
+                let s = plan(scene, &DatasetCounts::default(), seed).unwrap();
+                s.session_counts.get("drink").copied().unwrap_or(0)
+            })
+            .sum()
+    };
+    let (toward, uniform) = (drinks(&scene), drinks(living_room()));
+    eprintln!("drinks over seeds 0-49: {toward} toward drink 3 : sit down 1, {uniform} uniform");
+    assert!(
+        toward > uniform,
+        "{toward} drinks toward the target, {uniform} uniform"
+    );
+
+    let (_d, path) = scene_with(|t| {
+        t.replacen(
+            "strength = 2.0",
+            "strength = 2.0\ntarget = { \"kick\" = 1, \"drink\" = 0 }",
+            1,
+        )
+    });
+    let text = Scene::load(&path).unwrap_err().to_string();
+    assert!(
+        text.contains("balance.target.kick: no interaction of the scene has type `kick`")
+            && text.contains("balance.target.drink: 0: expected a share above 0"),
+        "{text}"
+    );
+
+    // A wrong posture gets the posture's own error, with its key.
+    let (_d, path) = scene_with(|t| {
+        t.replacen(
+            "[end]\nposture = \"standing\"",
+            "[end]\nposture = \"stand\"",
+            1,
+        )
+    });
+    let text = Scene::load(&path).unwrap_err().to_string();
+    assert!(
+        text.contains("end.posture: unknown variant `stand`, expected one of `standing`"),
+        "{text}"
+    );
+}

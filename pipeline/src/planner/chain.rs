@@ -189,6 +189,10 @@ pub(super) fn walk(
         // First the motion type, then the instruction of that type: a type does not gain
         // weight by expanding into many instructions (four `pick up`s: two objects, two hands).
         let balance = factors(&scene.target, &running, scene.strength);
+        // A type outside the target is a connector (walking to the table to drink): never
+        // preferred over a target type, so it gets the smallest target factor.
+        let outside = balance.values().copied().fold(f64::INFINITY, f64::min);
+        let outside = if outside.is_finite() { outside } else { 1.0 };
         let mut by_type: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
         for (k, &(c, _)) in pool.iter().enumerate() {
             by_type
@@ -204,7 +208,7 @@ pub(super) fn walk(
                     .map(|&k| scene.candidates[pool[k].0].weight)
                     .sum::<f64>()
                     / ks.len() as f64;
-                mean * balance.get(*t).copied().unwrap_or(1.0)
+                mean * balance.get(*t).copied().unwrap_or(outside)
             })
             .collect();
         let members = by_type
