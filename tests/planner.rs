@@ -507,6 +507,24 @@ fn plan_session_writes_the_same_files_for_a_seed_and_steers_with_a_dataset() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names.len(), 2, "{names:?}");
+
+    // A capture name that is not a plain file stem is a usage error.
+    let bad = motionforge()
+        .args([
+            "plan-session",
+            "--seed",
+            "5",
+            "--capture",
+            "../elsewhere",
+            "--scene",
+        ])
+        .arg(scene_path())
+        .arg("-o")
+        .arg(out.path().join("d"))
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(!out.path().join("d").exists());
 }
 
 fn scene_with(edit: impl FnOnce(String) -> String) -> (tempfile::TempDir, PathBuf) {
@@ -746,4 +764,110 @@ fn the_loop_build_plan_capture_read_back_rebuild_adds_the_session_to_the_counts(
     let before = kl_to_target(&counts.clips, &living_room().target).unwrap();
     let after = kl_to_target(&rebuilt.clips, &living_room().target).unwrap();
     assert!(after < before, "{after} vs {before}");
+}
+
+/// Replays a session through its written log (times filled in) in the simulated room.
+fn replay_in_room(session: &motionforge::planner::Session) -> Result<Room, String> {
+    let estimates: Vec<f64> = session.steps.iter().map(|s| s.seconds).collect();
+    let (filled, _) = fill_times(&event_log_csv(session), &estimates, 60.0);
+    let annotations =
+        read_event_log(&filled, EventLogFormat::Csv, "s.csv", 30.0).map_err(|e| e.to_string())?;
+    let mut room = Room::new();
+    for span in &annotations["s"].spans {
+        room.step(span)?;
+    }
+    Ok(room)
+}
+
+#[test]
+fn a_minutes_limit_keeps_the_estimated_session_within_it_and_ends_valid() {
+    let (_d, path) = scene_with(|t| t.replacen("instructions = 16", "minutes = 1.5", 1));
+    let scene = Scene::load(&path).unwrap();
+    let counts = DatasetCounts::read(&demo().join("demo")).unwrap();
+    let mut longest: f64 = 0.0;
+    for seed in 0..60 {
+        let session = plan(&scene, &counts, seed).unwrap();
+        let seconds = session.seconds();
+        assert!(seconds <= 90.0 + 1e-9, "seed {seed}: {seconds} s");
+        longest = longest.max(seconds);
+        let room = replay_in_room(&session).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        assert!(room.is_valid_end(), "seed {seed}: {room:?}");
+    }
+    // The chain uses the budget: no session stops far short of it (the shortest estimate is 2.5 s).
+    assert!(longest > 85.0, "{longest}");
+}
+
+#[test]
+fn a_scene_expanding_into_too_many_instructions_is_refused_before_expanding() {
+    let places: Vec<String> = (0..3000).map(|i| format!("\"spot {i}\"")).collect();
+    let text = format!(
+        "places = [{}]\n[limits]\ninstructions = 4\n[[interactions]]\ntype = \"walk forward\"\n\
+         text = \"walk to the {{place}}\"\nplaces = [{}]\nleaves = {{ at = \"{{place}}\" }}\n",
+        places.join(", "),
+        places.join(", ")
+    );
+    let err = Scene::parse(&text, Path::new("big.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("interactions[0]") && err.contains("more than 2000 instructions"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_target_in_the_scene_steers_toward_it_and_must_name_the_scenes_types() {
+    let (_d, path) = scene_with(|t| {
+        t.replacen(
+            "strength = 2.0",
+            "strength = 2.0\ntarget = { \"drink\" = 3, \"sit down\" = 1 }",
+            1,
+        )
+    });
+    let scene = Scene::load(&path).unwrap();
+    let expected: BTreeMap<String, f64> =
+        [("drink".to_string(), 0.75), ("sit down".to_string(), 0.25)].into();
+    assert_eq!(scene.target, expected);
+    let drinks = |scene: &Scene| -> u64 {
+        (0..50)
+            .map(|seed| {
+                let s = plan(scene, &DatasetCounts::default(), seed).unwrap();
+                s.session_counts.get("drink").copied().unwrap_or(0)
+            })
+            .sum()
+    };
+    let (toward, uniform) = (drinks(&scene), drinks(living_room()));
+    eprintln!("drinks over seeds 0-49: {toward} toward drink 3 : sit down 1, {uniform} uniform");
+    assert!(
+        toward > uniform,
+        "{toward} drinks toward the target, {uniform} uniform"
+    );
+
+    let (_d, path) = scene_with(|t| {
+        t.replacen(
+            "strength = 2.0",
+            "strength = 2.0\ntarget = { \"kick\" = 1, \"drink\" = 0 }",
+            1,
+        )
+    });
+    let text = Scene::load(&path).unwrap_err().to_string();
+    assert!(
+        text.contains("balance.target.kick: no interaction of the scene has type `kick`")
+            && text.contains("balance.target.drink: 0: expected a share above 0"),
+        "{text}"
+    );
+
+    // A wrong posture gets the posture's own error, with its key.
+    let (_d, path) = scene_with(|t| {
+        t.replacen(
+            "[end]\nposture = \"standing\"",
+            "[end]\nposture = \"stand\"",
+            1,
+        )
+    });
+    let text = Scene::load(&path).unwrap_err().to_string();
+    assert!(
+        text.contains("end.posture: unknown variant `stand`, expected one of `standing`"),
+        "{text}"
+    );
 }

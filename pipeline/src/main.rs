@@ -18,7 +18,7 @@ use motionforge::terminal::{BarProgress, LogOptions, LogProgress};
 mod cli;
 use cli::bench_build::{BuildBench, bench_build};
 use cli::labels::{LabelsCommand, PromptCommand, labels_command, prompt_command};
-use cli::session::{PlanSessionArgs, plan_session};
+use cli::session::{PlanSessionArgs, parse_capture, plan_session};
 use cli::summary::{counts, print_plan, print_report, print_status};
 use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
 
@@ -346,7 +346,7 @@ enum Command {
         #[arg(long, short, default_value = ".")]
         output: PathBuf,
         /// The capture's name, and so the files' stem; default `<scene name>-<seed>`.
-        #[arg(long)]
+        #[arg(long, value_parser = parse_capture)]
         capture: Option<String>,
     },
     /// Print the clip table schema (columns, types, version) as JSON.

@@ -16,21 +16,21 @@ pub(crate) struct PlanSessionArgs {
     pub capture: Option<String>,
 }
 
-/// The capture name: letters, digits, `-`, `_` and `.` only, so it is a file stem on any
-/// system and the event log's capture key.
-fn check_capture(name: &str) -> Result<()> {
+/// `--capture` values: letters, digits, `-`, `_` and `.` only (not first), so the name is a
+/// file stem on any system and the event log's capture key.
+pub(crate) fn parse_capture(name: &str) -> Result<String, String> {
     let ok = !name.is_empty()
         && !name.starts_with('.')
         && name
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
     if ok {
-        Ok(())
+        Ok(name.to_string())
     } else {
-        Err(anyhow::anyhow!(
-            "--capture `{name}`: expected letters, digits, `-`, `_` or `.` (it names the capture \
-             file and the log)"
-        ))
+        Err(
+            "expected letters, digits, `-`, `_` or `.` (it names the capture file and the log)"
+                .into(),
+        )
     }
 }
 
@@ -46,7 +46,6 @@ pub(crate) fn plan_session(args: PlanSessionArgs, json: bool, status: bool) -> R
     let capture = args
         .capture
         .unwrap_or_else(|| format!("{}-{}", slug(&scene.name), args.seed));
-    check_capture(&capture)?;
     let written = write_session(&session, &scene, &args.output, &capture)?;
     let (before, after) = session.kl();
     let mut out = std::io::stdout().lock();

@@ -66,7 +66,8 @@ impl DatasetCounts {
 
 /// The balance factor of each target type given the counts so far (dataset plus session):
 /// `(q_t / p_t)^strength` with `p_t = (n_t + 1) / (N + |T|)`, the smoothed share of type `t`
-/// among the target's types. Types outside the target get 1 (not steered).
+/// among the target's types. Types outside the target are not in the map (the chain gives them
+/// the smallest factor of the target's types).
 pub fn factors(
     target: &BTreeMap<String, f64>,
     counts: &BTreeMap<String, u64>,

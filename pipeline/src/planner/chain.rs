@@ -13,6 +13,13 @@ use super::{PlanError, Session, Step};
 /// The most states a scene may reach; beyond it the scene is refused as too large to plan.
 pub const MAX_STATES: usize = 200_000;
 
+/// The most transitions (state, instruction) the graph may hold.
+const MAX_EDGES: usize = 4_000_000;
+
+/// The shortest duration estimate, in milliseconds: the segment stage's default shortest clip
+/// (`min_seconds`, 0.5 s). It also bounds a `minutes` session to 28,800 instructions.
+const MIN_MILLIS: u64 = 500;
+
 /// The reachable state graph of a scene.
 pub(super) struct Graph {
     /// States, the start first.
@@ -27,6 +34,7 @@ impl Graph {
         let mut states = vec![scene.start.clone()];
         let mut index: HashMap<State, usize> = HashMap::from([(scene.start.clone(), 0)]);
         let mut edges: Vec<Vec<(usize, usize)>> = Vec::new();
+        let mut total = 0usize;
         let mut i = 0;
         while i < states.len() {
             let mut out = Vec::new();
@@ -47,6 +55,12 @@ impl Graph {
                     }
                 };
                 out.push((c, j));
+            }
+            total += out.len();
+            if total > MAX_EDGES {
+                return Err(PlanError::TooLarge {
+                    states: states.len(),
+                });
             }
             edges.push(out);
             i += 1;
@@ -129,7 +143,9 @@ pub(super) fn walk(
     let millis: Vec<u64> = scene
         .candidates
         .iter()
-        .map(|c| (seconds_of(scene, counts, &c.motion_type) * 1000.0).round() as u64)
+        .map(|c| {
+            ((seconds_of(scene, counts, &c.motion_type) * 1000.0).round() as u64).max(MIN_MILLIS)
+        })
         .collect();
     let (cost, budget): (Vec<u64>, u64) = match scene.limit {
         Limit::Instructions(n) => (vec![1; scene.candidates.len()], u64::from(n)),
@@ -173,6 +189,10 @@ pub(super) fn walk(
         // First the motion type, then the instruction of that type: a type does not gain
         // weight by expanding into many instructions (four `pick up`s: two objects, two hands).
         let balance = factors(&scene.target, &running, scene.strength);
+        // A type outside the target is a connector (walking to the table to drink): never
+        // preferred over a target type, so it gets the smallest target factor.
+        let outside = balance.values().copied().fold(f64::INFINITY, f64::min);
+        let outside = if outside.is_finite() { outside } else { 1.0 };
         let mut by_type: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
         for (k, &(c, _)) in pool.iter().enumerate() {
             by_type
@@ -188,7 +208,7 @@ pub(super) fn walk(
                     .map(|&k| scene.candidates[pool[k].0].weight)
                     .sum::<f64>()
                     / ks.len() as f64;
-                mean * balance.get(*t).copied().unwrap_or(1.0)
+                mean * balance.get(*t).copied().unwrap_or(outside)
             })
             .collect();
         let members = by_type

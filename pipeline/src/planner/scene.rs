@@ -81,11 +81,39 @@ fn invalid_message(path: &Path, problems: &[SceneProblem]) -> String {
 }
 
 /// A value or a list of values (`posture = "standing"` or `posture = ["standing", "sitting"]`).
-#[derive(Deserialize, Debug, Clone)]
-#[serde(untagged)]
+/// Read by hand rather than as an untagged enum, so a wrong value gets the value's own error
+/// (`unknown variant `sittin`, expected one of ...`) instead of "did not match any variant".
+#[derive(Debug, Clone)]
 enum OneOrMany<T> {
     One(T),
     Many(Vec<T>),
+}
+
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for OneOrMany<T> {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor<T>(std::marker::PhantomData<T>);
+        impl<'de, T: Deserialize<'de>> serde::de::Visitor<'de> for Visitor<T> {
+            type Value = OneOrMany<T>;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a name or a list of names")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+                use serde::de::IntoDeserializer;
+                T::deserialize(v.into_deserializer()).map(OneOrMany::One)
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Self::Value, A::Error> {
+                let mut all = Vec::new();
+                while let Some(x) = seq.next_element()? {
+                    all.push(x);
+                }
+                Ok(OneOrMany::Many(all))
+            }
+        }
+        deserializer.deserialize_any(Visitor(std::marker::PhantomData))
+    }
 }
 
 impl<T: Clone> OneOrMany<T> {
@@ -658,13 +686,13 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             );
             Limit::Instructions(1)
         }
-        (None, Some(m)) if finite_positive(m) && m <= 24.0 * 60.0 => {
+        (None, Some(m)) if finite_positive(m) && m <= 240.0 => {
             Limit::Millis((m * 60_000.0).round() as u64)
         }
         (None, Some(m)) => {
             problems.push(
                 &[k("limits"), k("minutes")],
-                format!("{m}: expected a number of minutes above 0, at most 1440"),
+                format!("{m}: expected a number of minutes above 0, at most 240"),
             );
             Limit::Instructions(1)
         }
@@ -831,6 +859,18 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         if problems.found.len() > before {
             continue;
         }
+        // Counted before expanding, so a long list cannot make the reader allocate its product.
+        let expansion = bound_places.len() * bound_objects.len() * hands.len();
+        if candidates.len() + expansion > MAX_CANDIDATES {
+            problems.push(
+                &[k("interactions"), Seg::I(i)],
+                format!(
+                    "the scene expands into more than {MAX_CANDIDATES} instructions (places x \
+                     objects x hands of every interaction); split it into smaller scenes"
+                ),
+            );
+            break;
+        }
         for &place in &bound_places {
             for &object in &bound_objects {
                 for &hand in &hands {
@@ -900,17 +940,6 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             }
         }
     }
-    if candidates.len() > MAX_CANDIDATES {
-        problems.push(
-            &[k("interactions")],
-            format!(
-                "expand into {} instructions (places x objects x hands); at most \
-                 {MAX_CANDIDATES} are planned",
-                candidates.len()
-            ),
-        );
-    }
-
     // Balance.
     let strength = file.balance.strength;
     if !(strength.is_finite() && (0.0..=10.0).contains(&strength)) {
