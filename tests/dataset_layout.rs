@@ -151,7 +151,7 @@ fn one_more_capture_rewrites_only_the_shards_of_its_split() {
 
 #[test]
 fn a_capture_planted_in_two_splits_makes_the_build_refuse() {
-    let split_file = "capture,split\ndataset-1_walk_normal_001,train\ndataset-1_kick_normal_001,val\ndataset-1_walk_normal_001,test\n";
+    let split_file = "capture,split\ndataset-1_walk_normal_001,train\ndataset-1_kick_normal_001,validation\ndataset-1_walk_normal_001,test\n";
     let (_dir, config) = scratch(
         &["dataset-1_walk_normal_001", "dataset-1_kick_normal_001"],
         Some(split_file),

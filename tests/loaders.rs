@@ -25,9 +25,13 @@ card = yaml.safe_load(open(os.path.join(root, 'README.md')).read().split('---')[
 shard = os.path.join(root, manifest['splits']['train']['shards'][0]['file'])
 inferred = datasets.Features.from_arrow_schema(pq.read_schema(shard))._to_yaml_list()
 assert card['dataset_info']['features'] == inferred, 'card features differ from the Parquet schema'
-assert [s['name'] for s in card['dataset_info']['splits']] == ['train', 'val', 'test']
+assert [s['name'] for s in card['dataset_info']['splits']] == ['train', 'validation', 'test']
 ds = datasets.load_dataset(root)
-assert list(ds.keys()) == ['train', 'val', 'test'], list(ds.keys())
+assert list(ds.keys()) == ['train', 'validation', 'test'], list(ds.keys())
+# The card's route and the shards' file names give the same splits (Hugging Face's names).
+by_files = datasets.load_dataset('parquet', data_dir=os.path.join(root, 'data'))
+assert sorted(by_files.keys()) == sorted(ds.keys()), (list(by_files.keys()), list(ds.keys()))
+assert {k: v.num_rows for k, v in by_files.items()} == expected
 assert {k: v.num_rows for k, v in ds.items()} == expected, ({k: v.num_rows for k, v in ds.items()}, expected)
 train = ds['train'].with_format('numpy')
 row = train[0]

@@ -371,7 +371,7 @@ fn card(
         y.push_str(&format!("  {}\n", companions.licences.join("; ")));
     }
     y.push_str("tags:\n- motion-capture\n- text-to-motion\n- motionforge\nconfigs:\n- config_name: default\n  data_files:\n");
-    // Split order (train, val, test, then others: the maps' own), as loaders list them.
+    // Split order (train, validation, test, then others: the maps' own), as loaders list them.
     let order: Vec<&Split> = splits.keys().collect();
     for split in &order {
         y.push_str(&format!(

@@ -268,7 +268,7 @@ pub struct Overview {
     pub originals: usize,
     /// Mirrored copies.
     pub mirrored: usize,
-    /// Splits present, in order (train, val, test, then alphabetical).
+    /// Splits present, in order (train, validation, test, then alphabetical).
     pub splits: Vec<String>,
     /// Hours of motion in all rows.
     pub hours: f64,
