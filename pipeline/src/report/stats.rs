@@ -338,8 +338,9 @@ pub(crate) fn typed_rows(rows: &[ClipRow]) -> impl Iterator<Item = &ClipRow> {
         .filter(|r| r.is_original() && r.source_kind == SourceKind::RealSingle.as_str())
 }
 
-/// Lengths in seconds per motion type of [`typed_rows`], types sorted by [`type_order`].
-pub(crate) fn lengths_by_type(rows: &[ClipRow]) -> Vec<(String, Vec<f64>)> {
+/// Lengths in seconds per motion type of the original single clips (ascending), types in the
+/// report's order: what the motion-length figure draws.
+pub fn lengths_by_type(rows: &[ClipRow]) -> Vec<(String, Vec<f64>)> {
     let mut map: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for r in typed_rows(rows) {
         let t = r
