@@ -186,6 +186,12 @@ fn a_build_prints_one_summary_with_the_splits_and_why_stages_were_skipped() {
         summary.contains("splits: train 17, validation 2, test 6\n"),
         "{summary}"
     );
+    // Every profile's normalisation source, CMU's from test (it has no train rows).
+    assert!(
+        summary.contains("normalisation bandai-namco: over train (")
+            && summary.contains("normalisation cmu: over test ("),
+        "{summary}"
+    );
     assert!(
         summary.contains("paraphrase  skipped (no LLM configured)")
             && summary.contains("      plan  skipped (no LLM configured)"),

@@ -488,15 +488,16 @@ struct ShardJob<'a> {
     force: bool,
     output: &'a Path,
     staging: &'a Path,
-    /// The split whose rows the normalisation statistics are gathered over.
-    stats_split: Option<&'a Split>,
+    /// Whether normalisation statistics are gathered (over every split; each profile then takes
+    /// the training split's, or the first split's that holds it).
+    stats: bool,
 }
 
 /// What writing (or keeping) one shard gave.
 struct ShardDone {
     entry: crate::io::manifest::Shard,
     fingerprint: String,
-    /// Statistics over the shard's rows, when its split is the statistics split.
+    /// Statistics over the shard's rows.
     stats: Option<NormalizationStats>,
 }
 
@@ -533,8 +534,7 @@ impl ShardJob<'_> {
             }
             _ => None,
         };
-        let for_stats = self.stats_split == Some(&plan.split);
-        let mut stats = for_stats.then(NormalizationStats::default);
+        let mut stats = self.stats.then(NormalizationStats::default);
         let (sha256, bytes) = match kept {
             Some(kept) => {
                 if let Some(stats) = &mut stats {
@@ -707,13 +707,9 @@ pub(super) fn write_outputs(
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
     let plans_for_shards = plan_shards(clips, index, companions.shard_bytes);
-    // Normalisation statistics over the training split (the first split when there is no
-    // `train`), gathered shard by shard as the rows pass.
-    let stats_split = if plans_for_shards.iter().any(|p| p.split.is_train()) {
-        Some(Split::train())
-    } else {
-        plans_for_shards.first().map(|p| p.split.clone())
-    };
+    // Normalisation statistics per split, gathered shard by shard as the rows pass; each
+    // profile takes the training split's, or the first split's holding it (CMU in the demo).
+    let with_stats = !plans_for_shards.is_empty();
     // Everything new is written into a staging folder first; the dataset folder keeps the
     // previous dataset, complete and valid, until the new one is fully written (a full disk
     // fails here and leaves it untouched). Then `switch` moves the new files in, by renames only.
@@ -731,7 +727,7 @@ pub(super) fn write_outputs(
         force,
         output,
         staging: &staging,
-        stats_split: stats_split.as_ref(),
+        stats: with_stats,
     };
     // Shards are written on all cores; their results are taken in shard order, so the manifest,
     // the merged statistics and the error reported (the first shard's that failed) are the same
@@ -743,7 +739,7 @@ pub(super) fn write_outputs(
     let done = done
         .into_iter()
         .collect::<Result<Vec<ShardDone>, BuildError>>()?;
-    let mut normalization = NormalizationStats::default();
+    let mut per_split: BTreeMap<Split, NormalizationStats> = BTreeMap::new();
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<crate::io::manifest::Shard>> = BTreeMap::new();
     let mut split_rows: BTreeMap<Split, usize> = BTreeMap::new();
@@ -751,7 +747,10 @@ pub(super) fn write_outputs(
     let mut outputs = BTreeMap::new();
     for (plan, done) in plans_for_shards.iter().zip(done) {
         if let Some(stats) = done.stats {
-            normalization.merge(stats);
+            per_split
+                .entry(plan.split.clone())
+                .or_default()
+                .merge(stats);
         }
         *split_rows.entry(plan.split.clone()).or_insert(0) += done.entry.rows;
         *split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
@@ -771,8 +770,13 @@ pub(super) fn write_outputs(
         }
     };
     check_splits(&plans_for_shards, staged_path)?;
-    if stats_split.is_some() {
-        normalization.write(&staging.join(NORMALIZATION_DIR))?;
+    if with_stats {
+        // Split order: train first.
+        let splits = per_split
+            .into_iter()
+            .map(|(split, stats)| (split.to_string(), stats))
+            .collect();
+        NormalizationStats::per_profile(splits).write(&staging.join(NORMALIZATION_DIR))?;
     }
     write_atomic(&staging.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
     let mut lines = String::new();
@@ -829,7 +833,7 @@ pub(super) fn write_outputs(
         let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
         outputs.insert(name.to_string(), sha256_hex(&bytes));
     }
-    switch(output, &staging, &plans_for_shards, stats_split.is_some())?;
+    switch(output, &staging, &plans_for_shards, with_stats)?;
     // Stat data of the files now in place, recorded before the state file is written, so each is
     // older than the record that vouches for it.
     let stamps = outputs

@@ -155,6 +155,36 @@ fn split_rows(report: &BuildReport) -> Option<String> {
     )
 }
 
+/// Per profile, which split its normalisation statistics come from and its constant dimensions
+/// (a trainer dividing by their floored std would blow up noise).
+fn print_normalization(out: &mut impl Write, report: &BuildReport) -> std::io::Result<()> {
+    let dir = report.output.join(motionforge::build::NORMALIZATION_DIR);
+    let Some(profiles) = motionforge::io::normalization::read_summary(&dir) else {
+        return Ok(());
+    };
+    for (profile, p) in &profiles {
+        let constant: Vec<String> = p
+            .constant
+            .iter()
+            .map(|(feature, dims)| {
+                let of = p.dimensions.get(feature).copied().unwrap_or_default();
+                format!("{feature} {} of {of} ({})", dims.len(), dims.join(", "))
+            })
+            .collect();
+        let constant = if constant.is_empty() {
+            "none".to_string()
+        } else {
+            constant.join("; ")
+        };
+        writeln!(
+            out,
+            "normalisation {profile}: over {} ({} frames); constant dimensions: {constant}",
+            p.split, p.frames
+        )?;
+    }
+    Ok(())
+}
+
 /// The build's one summary on standard output: stages, rows per split, counts, rejects.
 pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Result<()> {
     let mut out = std::io::stdout().lock();
@@ -185,6 +215,9 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
         .any(|s| s.stage == motionforge::build::Stage::Write.name());
     if let Some(splits) = split_rows(report).filter(|_| wrote) {
         writeln!(out, "splits: {splits}")?;
+    }
+    if wrote {
+        print_normalization(&mut out, report)?;
     }
     writeln!(out, "by kind: {}", counts(&report.kinds))?;
     writeln!(
