@@ -284,24 +284,78 @@ pub(super) fn card_body(
     for (k, n) in kinds {
         let _ = writeln!(b, "- {k}: {n}");
     }
+    let _ = writeln!(b, "\n## Using it\n");
     let _ = writeln!(
         b,
-        "\n## Columns\n\n| column | type | nullable |\n|---|---|---|"
+        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
+    );
+    // The folder's name as a Python string (JSON's quoting is valid Python for these names).
+    let root = serde_json::to_string(&config.dataset.name).unwrap_or_default();
+    let _ = writeln!(
+        b,
+        "```python\n{}```",
+        CARD_SNIPPET.replace("\"<dataset folder>\"", &root)
+    );
+    let _ = writeln!(
+        b,
+        "\n## Columns\n\n| column | type | nullable | meaning |\n|---|---|---|---|"
     );
     for f in crate::io::schema::clip_schema().fields() {
         let _ = writeln!(
             b,
-            "| `{}` | {} | {} |",
+            "| `{}` | {} | {} | {} |",
             f.name(),
             f.data_type(),
-            if f.is_nullable() { "yes" } else { "no" }
+            if f.is_nullable() { "yes" } else { "no" },
+            crate::io::schema::column_meaning(f.name())
         );
     }
     let _ = writeln!(
         b,
         "\nShards: `data/<split>-NNNNN-of-NNNNN.parquet`; checksums and provenance in `manifest.json`; skeletons in `skeletons.json`. Every mirror and synthetic pair is in the split of its source captures."
     );
+    let _ = writeln!(b, "\n## Citation\n");
+    let _ = writeln!(
+        b,
+        "Cite the source datasets above under their own terms, and this build as:\n"
+    );
+    let sources: Vec<&str> = config.sources.iter().map(|s| s.name.as_str()).collect();
+    let _ = writeln!(
+        b,
+        "```bibtex\n@misc{{{key},\n  title = {{{{{name}}}: text-to-motion clips}},\n  note = {{Built with motionforge {version} from {sources}}},\n}}\n```",
+        key = bibtex_key(&config.dataset.name),
+        name = config.dataset.name,
+        version = env!("CARGO_PKG_VERSION"),
+        sources = sources.join(", ")
+    );
     b
+}
+
+/// The card's usage snippet, run by `tests/loaders.rs` on the demo's card.
+pub const CARD_SNIPPET: &str = r#"import numpy as np
+from datasets import load_dataset
+
+root = "<dataset folder>"  # this folder (the one holding README.md and data/)
+train = load_dataset(root, split="train").with_format("numpy")
+row = train[0]
+frames, joints = int(row["num_frames"]), int(row["num_joints"])
+positions = row["joint_positions"].reshape(frames, joints, 3)  # metres, x right, y forward, z up
+profile = str(row["skeleton"]).split(":")[0]
+mean = np.load(f"{root}/normalization/{profile}/joint_positions_mean.npy")  # (joints, 3)
+std = np.load(f"{root}/normalization/{profile}/joint_positions_std.npy")
+normalised = (positions - mean) / std
+normalised[:, std < 1e-6] = 0.0  # constant dimensions
+print(row["text"], positions.shape, normalised.shape)
+"#;
+
+/// A BibTeX key of letters and digits from a dataset name.
+fn bibtex_key(name: &str) -> String {
+    let key: String = name.chars().filter(char::is_ascii_alphanumeric).collect();
+    if key.is_empty() {
+        "motionforge".to_string()
+    } else {
+        key
+    }
 }
 
 /// A column's type in the dataset card's `features` (the form Hugging Face `datasets` writes:
