@@ -293,7 +293,8 @@ pub struct Stats {
     pub motion_types_total: TypeStats,
     /// Rows per split and source kind, mirrored copies included.
     pub composition: Vec<SplitComposition>,
-    /// Original rows per `label_source` ([`NO_LABEL`] for null).
+    /// Original real rows (not mirrored, not synthetic) per `label_source` ([`NO_LABEL`] for
+    /// null).
     pub label_sources: BTreeMap<String, usize>,
     /// Locomotion goals.
     pub goals: GoalStats,
@@ -475,8 +476,9 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
         })
         .collect();
 
+    // Real clips only: a synthetic pair's `composed` label is its sources' labels again.
     let mut label_sources = BTreeMap::new();
-    for r in rows.iter().filter(|r| r.is_original()) {
+    for r in rows.iter().filter(|r| r.is_original() && !r.is_synthetic()) {
         let key = r
             .label_source
             .clone()
