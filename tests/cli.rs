@@ -118,6 +118,95 @@ fn quiet_prints_nothing_json_prints_the_report_and_json_lines_and_default_prints
     );
 }
 
+/// Leaf commands under `prefix`, read from `--help`'s "Commands:" lists (hidden ones excluded).
+fn leaf_commands(prefix: &[String]) -> Vec<Vec<String>> {
+    let mut args = prefix.to_vec();
+    args.push("--help".into());
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let help = text(&run(&args, &repo()).stdout);
+    let Some((_, list)) = help.split_once("Commands:\n") else {
+        return vec![prefix.to_vec()];
+    };
+    let names: Vec<String> = list
+        .lines()
+        .take_while(|l| l.starts_with("  "))
+        // Two spaces start a command; deeper lines continue a wrapped description.
+        .filter(|l| !l.starts_with("   "))
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|n| *n != "help")
+        .map(str::to_string)
+        .collect();
+    assert!(!names.is_empty(), "{help}");
+    let mut leaves = vec![prefix.to_vec()];
+    for name in names {
+        let mut sub = prefix.to_vec();
+        sub.push(name);
+        leaves.extend(leaf_commands(&sub));
+    }
+    leaves
+}
+
+#[test]
+fn every_commands_help_ends_with_examples() {
+    let commands = leaf_commands(&[]);
+    assert!(commands.len() > 20, "{commands:?}");
+    for command in commands {
+        let mut args: Vec<&str> = command.iter().map(String::as_str).collect();
+        args.push("--help");
+        let help = text(&run(&args, &repo()).stdout);
+        let (_, examples) = help
+            .split_once("\nExamples:\n")
+            .unwrap_or_else(|| panic!("`{}` has no examples:\n{help}", args.join(" ")));
+        let first = examples.lines().next().unwrap_or_default().trim_start();
+        assert!(
+            first.starts_with("motionforge ")
+                || first.contains("| motionforge ")
+                || first.contains(" motionforge "),
+            "`{}`: the examples run motionforge: {first}",
+            args.join(" ")
+        );
+    }
+}
+
+#[test]
+fn a_build_prints_one_summary_with_the_splits_and_why_stages_were_skipped() {
+    let out = tempfile::tempdir().unwrap();
+    let o = out.path().display().to_string();
+    let first = run(&["build", "--config", &demo(), "--output", &o], &repo());
+    assert!(first.status.success(), "{}", text(&first.stderr));
+    let (summary, err) = (text(&first.stdout), text(&first.stderr));
+    // Stage results once, on standard output; standard error says only what is being built.
+    assert_eq!(lines(&err).len(), 1, "{err}");
+    assert!(err.starts_with("building demo into"), "{err}");
+    assert!(
+        summary.contains("    ingest  ran 9 of 9 (0 reused)"),
+        "{summary}"
+    );
+    assert!(
+        summary.contains("splits: train 17, validation 2, test 6\n"),
+        "{summary}"
+    );
+    // Every profile's normalisation source, CMU's from test (it has no train rows).
+    assert!(
+        summary.contains("normalisation bandai-namco: over train (")
+            && summary.contains("normalisation cmu: over test ("),
+        "{summary}"
+    );
+    assert!(
+        summary.contains("paraphrase  skipped (no LLM configured)")
+            && summary.contains("      plan  skipped (no LLM configured)"),
+        "{summary}"
+    );
+    // --force reruns everything, the report too.
+    let forced = run(
+        &["build", "--config", &demo(), "--output", &o, "--force"],
+        &repo(),
+    );
+    let summary = text(&forced.stdout);
+    assert!(summary.contains("    report  ran 1 of 1"), "{summary}");
+    assert!(!summary.contains("up to date"), "{summary}");
+}
+
 #[test]
 fn quiet_and_verbose_together_are_a_usage_error() {
     let out = run(&["-q", "-v", "schema"], &repo());

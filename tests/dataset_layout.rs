@@ -59,6 +59,23 @@ assert mean.shape == (22, 3) and std.shape == (22, 3) and (std > 0).all()
 train = t.filter(pq.read_table(os.path.join(root, 'data')).column('split').to_numpy(zero_copy_only=False) == 'train')
 pos = np.concatenate([np.asarray(train['joint_positions'][i].values).reshape(-1, 22, 3) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
 assert np.allclose(pos.mean(0), mean, atol=1e-4), 'mean over the training split'
+# Every profile has statistics: CMU has no train rows in the demo, so its come from the first
+# split holding it, and normalization.json says which; constant dimensions are named.
+summary = json.load(open(os.path.join(root, 'normalization', 'normalization.json')))['profiles']
+assert summary['bandai-namco']['split'] == 'train', summary
+assert summary['bandai-namco']['frames'] == pos.shape[0], summary
+numpy_constant = ['joint %d %s' % (j, 'xyz'[d]) for j in range(22) for d in range(3) if pos.std(0)[j, d] < 1e-6]
+assert summary['bandai-namco']['constant'].get('joint_positions', []) == numpy_constant, (summary, numpy_constant)
+assert numpy_constant, 'the Bandai rig has a static root coordinate'
+everything = pq.read_table(os.path.join(root, 'data'))
+cmu_splits = sorted({everything['split'][i].as_py() for i in range(everything.num_rows) if everything['skeleton'][i].as_py().split(':')[0] == 'cmu'})
+assert 'train' not in cmu_splits and summary['cmu']['split'] == cmu_splits[0], (summary['cmu'], cmu_splits)
+cmu = np.concatenate([np.asarray(everything['joint_positions'][i].values).reshape(-1, 31, 3) for i in range(everything.num_rows) if everything['skeleton'][i].as_py().split(':')[0] == 'cmu' and everything['split'][i].as_py() == summary['cmu']['split']])
+cmu_mean = np.load(os.path.join(root, 'normalization', 'cmu', 'joint_positions_mean.npy'))
+assert np.allclose(cmu.mean(0), cmu_mean, atol=1e-4), 'CMU mean over its split'
+norm = pq.read_table(os.path.join(root, 'normalization', 'normalization.parquet')).to_pylist()
+assert {r['profile']: r['split'] for r in norm} == {'bandai-namco': 'train', 'cmu': summary['cmu']['split']}
+assert sorted('joint %d %s' % (r['joint'], 'xyz'[r['dim']]) for r in norm if r['constant'] and r['profile'] == 'bandai-namco') == sorted(numpy_constant)
 card = open(os.path.join(root, 'README.md')).read()
 assert card.startswith('---\n') and 'data_files' in card and 'license' in card
 import polars as pl
@@ -151,7 +168,7 @@ fn one_more_capture_rewrites_only_the_shards_of_its_split() {
 
 #[test]
 fn a_capture_planted_in_two_splits_makes_the_build_refuse() {
-    let split_file = "capture,split\ndataset-1_walk_normal_001,train\ndataset-1_kick_normal_001,val\ndataset-1_walk_normal_001,test\n";
+    let split_file = "capture,split\ndataset-1_walk_normal_001,train\ndataset-1_kick_normal_001,validation\ndataset-1_walk_normal_001,test\n";
     let (_dir, config) = scratch(
         &["dataset-1_walk_normal_001", "dataset-1_kick_normal_001"],
         Some(split_file),

@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use motionforge::report::{
-    self, ClipRow, FIGURES, NO_SPLIT, ReportInput, Stats, Summary, UNMAPPED, find_clip_tables,
-    read_build_counts, read_rows, statistics, write_report,
+    self, ClipRow, FIGURES, MIN_VIOLIN, NO_SPLIT, ReportInput, Stats, Summary, UNMAPPED,
+    find_clip_tables, lengths_by_type, read_build_counts, read_rows, statistics, violin_outline,
+    write_report,
 };
 
 fn repo() -> PathBuf {
@@ -113,8 +114,9 @@ for r in rows:
     c = out["composition"].setdefault(r["split"], {})
     c[r["source_kind"]] = c.get(r["source_kind"], 0) + 1
     if not r["mirrored"]:
-        k = r["label_source"] if r["label_source"] is not None else "(none)"
-        out["label_sources"][k] = out["label_sources"].get(k, 0) + 1
+        if r["source_kind"] != "synthetic":
+            k = r["label_source"] if r["label_source"] is not None else "(none)"
+            out["label_sources"][k] = out["label_sources"].get(k, 0) + 1
         if r["goal_pelvis"] is not None:
             out["goals"] += 1
 print(json.dumps(out))
@@ -428,6 +430,42 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
     }
 }
 
+/// The motion-length figure's violins: density only within each type's shortest and longest
+/// clip, and points instead of a violin below `MIN_VIOLIN` clips.
+#[test]
+fn violins_stay_within_each_types_data_range() {
+    let tmp = tempfile::tempdir().unwrap();
+    let build = tmp.path().join("build");
+    build_demo(&build);
+    let rows = read_rows(&clip_tables(&build)).unwrap();
+    let by_type = lengths_by_type(&rows);
+    assert!(!by_type.is_empty());
+    // The demo's types have 1 to 3 original clips each: points, no violin.
+    for (name, lengths) in &by_type {
+        assert!(lengths.len() < MIN_VIOLIN, "{name}: {lengths:?}");
+        assert_eq!(violin_outline(lengths, 0.0), None, "{name}");
+    }
+    // All lengths together (0.8 s to 23 s of real clips, skewed) do get a violin, inside them.
+    let mut all: Vec<f64> = by_type
+        .iter()
+        .flat_map(|(_, v)| v.iter().copied())
+        .collect();
+    all.sort_by(f64::total_cmp);
+    assert!(all.len() >= MIN_VIOLIN, "{all:?}");
+    let (lo, hi) = (all[0], all[all.len() - 1]);
+    let outline = violin_outline(&all, 2.0).expect("a violin");
+    for (x, y) in &outline {
+        assert!(
+            *y >= lo && *y <= hi,
+            "violin at {y} s outside the data's {lo}..{hi} s"
+        );
+        assert!((x - 2.0).abs() <= 0.4 + 1e-12, "{x}");
+    }
+    // It reaches both ends (clipped, not shrunk).
+    let ys: Vec<f64> = outline.iter().map(|p| p.1).collect();
+    assert!(ys.contains(&lo) && ys.contains(&hi));
+}
+
 /// A table with a `split` column (added with pyarrow, as the sharded writer will): composition
 /// per split, checked against pyarrow.
 #[test]
@@ -527,7 +565,8 @@ fn quartiles_and_groups_on_a_known_input() {
     // Plausibility: 6 real originals, 1 synthetic.
     assert_eq!(stats.plausibility[0].real.unwrap().n, 6);
     assert_eq!(stats.plausibility[0].synthetic.unwrap().n, 1);
-    assert_eq!(stats.label_sources["(none)"], 7);
+    // Original real clips only: the synthetic one is not a label source's.
+    assert_eq!(stats.label_sources["(none)"], 6);
 
     let q = Summary::of(&[3.0, 1.0, 2.0]).unwrap();
     assert_eq!((q.q1, q.median, q.q3), (1.5, 2.0, 2.5));

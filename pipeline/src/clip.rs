@@ -49,7 +49,8 @@ impl SourceKind {
     }
 }
 
-/// The split a clip belongs to: `train`, `val`, `test` or any other name `[splits]` configures.
+/// The split a clip belongs to: `train`, `validation`, `test` (Hugging Face's names, the
+/// defaults) or any other name `[splits]` configures.
 /// Names are the user's, so this is a name with the rules that read it in one place: the order
 /// splits are listed and written in, and which one is the training split.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -80,7 +81,7 @@ impl Split {
         self.0 == Split::TRAIN
     }
 
-    /// Where a split named `name` comes in listings: train, then val (validation, dev), then
+    /// Where a split named `name` comes in listings: train, then validation (val, dev), then
     /// test, then any other name.
     pub fn rank(name: &str) -> u8 {
         match name {

@@ -29,8 +29,11 @@ use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// Exit codes, shown after `--help` and documented in docs/user-guide.md.
-const EXIT_CODES: &str = "\
+/// Exit codes, shown after `--help` and documented in docs/user-guide.md (a macro so that
+/// commands can put their examples before it with `concat!`).
+macro_rules! exit_codes {
+    () => {
+        "\
 Exit codes:
   0  success (including a build with rejected inputs, unless --strict)
   1  failure: a file that cannot be read or written (disk full, no permission), another
@@ -42,7 +45,23 @@ Exit codes:
      (see rejects.jsonl and build-report.json)
 
 Logging: progress and log lines go to standard error (bars on a terminal, plain lines
-otherwise, JSON lines with --json); results go to standard output.";
+otherwise, JSON lines with --json); results go to standard output."
+    };
+}
+
+/// A command's `--help` ending: its examples, then the exit codes.
+macro_rules! examples_then_exit_codes {
+    ($examples:literal) => {
+        concat!("Examples:\n", $examples, "\n\n", exit_codes!())
+    };
+}
+
+/// A command's `--help` ending: its examples.
+macro_rules! examples {
+    ($examples:literal) => {
+        concat!("Examples:\n", $examples)
+    };
+}
 
 /// Examples and exit codes of `plan-session`.
 const PLAN_SESSION_HELP: &str = "\
@@ -81,7 +100,10 @@ Examples:
     about,
     long_about = None,
     propagate_version = true,
-    after_help = EXIT_CODES
+    after_help = examples_then_exit_codes!(
+        "  motionforge build --config fixtures/demo.toml     # the demo dataset into out/demo/
+  motionforge status --config fixtures/demo.toml    # what is built, rows per split"
+    )
 )]
 struct Cli {
     #[command(subcommand)]
@@ -138,7 +160,10 @@ enum Command {
     ///
     /// Work whose inputs, config and stage version are unchanged is reused from the output
     /// folder's cache; bad inputs are listed in `rejects.jsonl` and the build goes on.
-    #[command(after_help = EXIT_CODES)]
+    #[command(after_help = examples_then_exit_codes!(
+        "  motionforge build --config fixtures/demo.toml
+  motionforge build --config my.toml --output /data/sets --offline --wait 5m"
+    ))]
     Build {
         #[command(flatten)]
         args: BuildArgs,
@@ -147,6 +172,9 @@ enum Command {
     ///
     /// Prints every problem at once, as `file:line: key: value: expected ...` (exit code 2), or
     /// one line with what the build would read.
+    #[command(after_help = examples!(
+        "  motionforge config check --config fixtures/demo.toml"
+    ))]
     Config {
         #[command(subcommand)]
         command: ConfigCommand,
@@ -156,7 +184,10 @@ enum Command {
     ///
     /// Only what a build writes is removed, and only inside `<output>/<name>`; the LLM response
     /// cache and files you put there are kept. Takes the dataset folder's lock, like a build.
-    #[command(after_help = EXIT_CODES)]
+    #[command(after_help = examples_then_exit_codes!(
+        "  motionforge clean --config fixtures/demo.toml
+  motionforge clean --config fixtures/demo.toml --cache-only"
+    ))]
     Clean {
         /// Build configuration naming the dataset folder.
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -177,6 +208,10 @@ enum Command {
     /// Stages, in order: ingest, segment, label, paraphrase, plan, mirror, compose, write,
     /// report; each depends on all before it. `run segment` reads and cuts every capture and
     /// caches the result; a later `build` reuses it.
+    #[command(after_help = examples!(
+        "  motionforge run segment --config fixtures/demo.toml      # read and cut every capture
+  motionforge run label mirror --config fixtures/demo.toml"
+    ))]
     Run {
         /// Stages to run (with their dependencies).
         #[arg(required = true, value_parser = parse_stage)]
@@ -186,6 +221,10 @@ enum Command {
     },
     /// Show what a build would run and why (which input, config key or stage version changed),
     /// without running anything.
+    #[command(after_help = examples!(
+        "  motionforge plan --config fixtures/demo.toml
+  motionforge plan --config fixtures/demo.toml --through label"
+    ))]
     Plan {
         /// Build configuration (TOML).
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -199,6 +238,9 @@ enum Command {
     },
     /// Show each stage's state: fresh or stale, when it last ran and what it did, and the rows of
     /// the written dataset.
+    #[command(after_help = examples!(
+        "  motionforge status --config fixtures/demo.toml"
+    ))]
     Status {
         /// Build configuration (TOML).
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -213,6 +255,10 @@ enum Command {
     /// output, e.g. to mirror an existing HumanML3D-style caption set. Common misspellings
     /// (`rigth`, `conterclockwise`) and a side word glued to the word before it
     /// (`degreeleftwards`) are mirrored too; `upright`, `bright` or `leftover` are not.
+    #[command(after_help = examples!(
+        "  echo 'a person waves with the left hand' | motionforge mirror-text
+  motionforge mirror-text captions.txt > captions-mirrored.txt"
+    ))]
     MirrorText {
         /// Text file to mirror; standard input when absent.
         file: Option<PathBuf>,
@@ -222,6 +268,9 @@ enum Command {
     /// Among the per-joint reflections that fit the skeleton's offsets, picks the one whose
     /// mirrored rotations best match the real ones (one roughly symmetric take, e.g. a walk,
     /// is enough). Paste the output into the profile's `[reflections]` table.
+    #[command(after_help = examples!(
+        "  motionforge calibrate-mirror --profile bandai-namco ../shared/data/bandai-namco-1/data/dataset-1_walk_normal_001.bvh"
+    ))]
     CalibrateMirror {
         /// Bundled profile name (bandai-namco, cmu, smpl-22) or a profile TOML file.
         #[arg(long)]
@@ -310,12 +359,19 @@ enum Command {
         strip: usize,
     },
     /// Export a built dataset in another layout, from its shards alone (no rebuild).
+    #[command(after_help = examples!(
+        "  motionforge export humanml3d --dataset out/demo"
+    ))]
     Export {
         #[command(subcommand)]
         command: ExportCommand,
     },
     /// Write the statistics report of a built dataset: tables (LaTeX, Markdown), figures (SVG,
     /// PNG) and stats.json, from its shards and manifest alone.
+    #[command(after_help = examples!(
+        "  motionforge report out/demo
+  motionforge report out/demo --output paper/figures"
+    ))]
     Report {
         /// The dataset folder (`<output>/<name>`, holding data/ and manifest.json).
         dataset: PathBuf,
@@ -350,10 +406,16 @@ enum Command {
         capture: Option<String>,
     },
     /// Print the clip table schema (columns, types, version) as JSON.
+    #[command(after_help = examples!(
+        "  motionforge schema > clips.schema.json"
+    ))]
     Schema,
     /// Serve an HTTP API that builds the datasets on request and on their `dataset.schedule`,
     /// one build at a time per dataset, with the run history kept across restarts
     /// (docs/service.md). Calls that change state need `Authorization: Bearer <token>`.
+    #[command(after_help = examples!(
+        "  MOTIONFORGE_TOKEN=$(openssl rand -hex 16) motionforge serve --config fixtures/demo.toml"
+    ))]
     Serve {
         /// A dataset's build configuration; repeat to serve several datasets.
         #[arg(long, short, default_value = "motionforge.toml")]
@@ -378,11 +440,17 @@ enum Command {
         job: PathBuf,
     },
     /// Work with prompt templates.
+    #[command(after_help = examples!(
+        "  motionforge prompt render part_labels --text 'a person kicks with the right leg'"
+    ))]
     Prompt {
         #[command(subcommand)]
         command: PromptCommand,
     },
     /// Body-part labels: import existing LLM answers, evaluate labellers.
+    #[command(after_help = examples!(
+        "  motionforge labels eval --gold ../shared/data/sinc/part-labels-gold-dev.json"
+    ))]
     Labels {
         #[command(subcommand)]
         command: LabelsCommand,
@@ -395,6 +463,10 @@ enum Command {
     /// full builds from scratch (wall time per stage), no-op rebuilds, `plan`, and a single-thread
     /// scan that parses every number of the same bytes into f64. It prints the ratio of the build
     /// to the scan, frames/s per core, peak memory, and the stage cache and shard bytes.
+    #[command(after_help = examples!(
+        "  motionforge bench --repeat 1
+  motionforge bench --build --data ../shared/data/bandai-namco-1/data --repeat 1"
+    ))]
     Bench {
         /// Folder of BVH files (all must share one skeleton profile).
         #[arg(long, default_value = "../shared/data/bandai-namco-1/data")]
@@ -438,7 +510,10 @@ enum ExportCommand {
     /// Every row becomes SMPL's 22 body joints (by its skeleton profile's [smpl22] table), y up,
     /// 20 fps, and HumanML3D's 263 numbers per frame computed as HumanML3D computes them
     /// (docs/humanml3d.md). Mirrored rows are named M<name>, in their original's split.
-    #[command(after_help = EXIT_CODES)]
+    #[command(after_help = examples_then_exit_codes!(
+        "  motionforge export humanml3d --dataset out/demo
+  motionforge export humanml3d --dataset out/demo --out /data/HumanML3D-demo --force"
+    ))]
     Humanml3d {
         /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
         #[arg(long, short)]
@@ -461,11 +536,10 @@ enum ConfigCommand {
     ///
     /// With --probe, also ask the [llm] server for its model list (GET {base_url}/models, at most
     /// 5 s) and fail (exit code 1) when nothing answers.
-    ///
-    /// Examples:
-    ///   motionforge config check --config build.toml
-    ///   motionforge config check --config build.toml --probe
-    #[command(after_help = EXIT_CODES, verbatim_doc_comment)]
+    #[command(after_help = examples_then_exit_codes!(
+        "  motionforge config check --config fixtures/demo.toml
+  motionforge config check --config my.toml --probe --json"
+    ))]
     Check {
         /// Build configuration (TOML).
         #[arg(long, short, default_value = DEFAULT_CONFIG)]
@@ -533,9 +607,15 @@ impl Ui {
             verbose: cli.verbose,
             json: cli.json,
         };
-        let bars = log
-            .bars(std::io::stderr().is_terminal())
-            .then(|| Arc::new(BarProgress::new()));
+        // Commands that print a summary on standard output log finished stages at `debug` only.
+        let summary_follows = !log.quiet && !log.json;
+        let bars = log.bars(std::io::stderr().is_terminal()).then(|| {
+            Arc::new(if summary_follows {
+                BarProgress::before_summary()
+            } else {
+                BarProgress::new()
+            })
+        });
         let subscriber = match &bars {
             Some(b) => motionforge::terminal::subscriber(&log, b.log_writer()),
             None => motionforge::terminal::subscriber(&log, std::io::stderr),
@@ -549,6 +629,9 @@ impl Ui {
     fn progress(&self) -> ProgressSink {
         match &self.bars {
             Some(bars) => ProgressSink::new(bars.clone()),
+            None if self.status() && !self.log.json => {
+                ProgressSink::new(Arc::new(LogProgress::before_summary()))
+            }
             None => ProgressSink::new(Arc::new(LogProgress::new())),
         }
     }
@@ -885,7 +968,8 @@ fn build_command(args: BuildArgs, through: Option<Stage>, ui: &Ui) -> Result<Exi
     )?;
     ui.clear_bars();
     let seconds = started.elapsed().as_secs_f64();
-    tracing::info!(
+    // The summary on standard output (or the JSON report) says this too; `-v` shows the line.
+    tracing::debug!(
         clips = report.clips,
         captures = report.captures,
         rejects = report.rejects.len(),
@@ -910,7 +994,7 @@ fn build_command(args: BuildArgs, through: Option<Stage>, ui: &Ui) -> Result<Exi
             serde_json::to_string_pretty(&report)?
         )?;
     } else if ui.status() {
-        print_report(&report)?;
+        print_report(&report, seconds)?;
     }
     if report.clips == 0 && through.is_none_or(|t| t >= Stage::Write) {
         let dropped: usize = report.drops_by_reason.values().sum();

@@ -211,12 +211,24 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 #[derive(Default)]
 pub struct LogProgress {
     stages: Mutex<HashMap<String, StageState>>,
+    /// Finished-stage lines at `debug` rather than `info`: a summary on standard output follows
+    /// and says the same, so a plain run shows one summary, not two.
+    summary_follows: bool,
 }
 
 impl LogProgress {
     /// A reporter with no stage started.
     pub fn new() -> LogProgress {
         LogProgress::default()
+    }
+
+    /// A reporter whose finished-stage lines are `debug` (shown with `-v`), for runs that print
+    /// a summary of the stages afterwards.
+    pub fn before_summary() -> LogProgress {
+        LogProgress {
+            summary_follows: true,
+            ..LogProgress::default()
+        }
     }
 }
 
@@ -278,7 +290,11 @@ impl Progress for LogProgress {
         } else {
             format!("ran {ran}, reused {reused}")
         };
-        tracing::info!(target: PROGRESS_TARGET, stage, ran, reused, seconds, "{stage}: {what}{took}");
+        if self.summary_follows {
+            tracing::debug!(target: PROGRESS_TARGET, stage, ran, reused, seconds, "{stage}: {what}{took}");
+        } else {
+            tracing::info!(target: PROGRESS_TARGET, stage, ran, reused, seconds, "{stage}: {what}{took}");
+        }
     }
 
     fn note(&self, message: &str) {
@@ -306,6 +322,15 @@ impl BarProgress {
             multi: MultiProgress::with_draw_target(target),
             bars: Mutex::new(HashMap::new()),
             log: LogProgress::new(),
+        }
+    }
+
+    /// Bars on standard error whose finished-stage lines are `debug`, as
+    /// [`LogProgress::before_summary`].
+    pub fn before_summary() -> BarProgress {
+        BarProgress {
+            log: LogProgress::before_summary(),
+            ..BarProgress::new()
         }
     }
 

@@ -819,7 +819,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         } else if through >= Stage::Report {
             // The report is derived from the shards: redo it when they changed or it is missing.
             options.progress.stage_started(Stage::Report.name(), 1);
-            let report_ran = !report_is_current(&output, workspace, &table_fingerprint);
+            let report_ran =
+                options.force || !report_is_current(&output, workspace, &table_fingerprint);
             if report_ran {
                 let marker = workspace.root().join(REPORT_MARKER);
                 let _ = std::fs::remove_file(&marker);

@@ -289,24 +289,78 @@ pub(super) fn card_body(
     for (k, n) in kinds {
         let _ = writeln!(b, "- {k}: {n}");
     }
+    let _ = writeln!(b, "\n## Using it\n");
     let _ = writeln!(
         b,
-        "\n## Columns\n\n| column | type | nullable |\n|---|---|---|"
+        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
+    );
+    // The folder's name as a Python string (JSON's quoting is valid Python for these names).
+    let root = serde_json::to_string(&config.dataset.name).unwrap_or_default();
+    let _ = writeln!(
+        b,
+        "```python\n{}```",
+        CARD_SNIPPET.replace("\"<dataset folder>\"", &root)
+    );
+    let _ = writeln!(
+        b,
+        "\n## Columns\n\n| column | type | nullable | meaning |\n|---|---|---|---|"
     );
     for f in crate::io::schema::clip_schema().fields() {
         let _ = writeln!(
             b,
-            "| `{}` | {} | {} |",
+            "| `{}` | {} | {} | {} |",
             f.name(),
             f.data_type(),
-            if f.is_nullable() { "yes" } else { "no" }
+            if f.is_nullable() { "yes" } else { "no" },
+            crate::io::schema::column_meaning(f.name())
         );
     }
     let _ = writeln!(
         b,
         "\nShards: `data/<split>-NNNNN-of-NNNNN.parquet`; checksums and provenance in `manifest.json`; skeletons in `skeletons.json`. Every mirror and synthetic pair is in the split of its source captures."
     );
+    let _ = writeln!(b, "\n## Citation\n");
+    let _ = writeln!(
+        b,
+        "Cite the source datasets above under their own terms, and this build as:\n"
+    );
+    let sources: Vec<&str> = config.sources.iter().map(|s| s.name.as_str()).collect();
+    let _ = writeln!(
+        b,
+        "```bibtex\n@misc{{{key},\n  title = {{{{{name}}}: text-to-motion clips}},\n  note = {{Built with motionforge {version} from {sources}}},\n}}\n```",
+        key = bibtex_key(&config.dataset.name),
+        name = config.dataset.name,
+        version = env!("CARGO_PKG_VERSION"),
+        sources = sources.join(", ")
+    );
     b
+}
+
+/// The card's usage snippet, run by `tests/loaders.rs` on the demo's card.
+pub const CARD_SNIPPET: &str = r#"import numpy as np
+from datasets import load_dataset
+
+root = "<dataset folder>"  # this folder (the one holding README.md and data/)
+train = load_dataset(root, split="train").with_format("numpy")
+row = train[0]
+frames, joints = int(row["num_frames"]), int(row["num_joints"])
+positions = row["joint_positions"].reshape(frames, joints, 3)  # metres, x right, y forward, z up
+profile = str(row["skeleton"]).split(":")[0]
+mean = np.load(f"{root}/normalization/{profile}/joint_positions_mean.npy")  # (joints, 3)
+std = np.load(f"{root}/normalization/{profile}/joint_positions_std.npy")
+normalised = (positions - mean) / std
+normalised[:, std < 1e-6] = 0.0  # constant dimensions
+print(row["text"], positions.shape, normalised.shape)
+"#;
+
+/// A BibTeX key of letters and digits from a dataset name.
+fn bibtex_key(name: &str) -> String {
+    let key: String = name.chars().filter(char::is_ascii_alphanumeric).collect();
+    if key.is_empty() {
+        "motionforge".to_string()
+    } else {
+        key
+    }
 }
 
 /// A column's type in the dataset card's `features` (the form Hugging Face `datasets` writes:
@@ -376,7 +430,7 @@ fn card(
         y.push_str(&format!("  {}\n", companions.licences.join("; ")));
     }
     y.push_str("tags:\n- motion-capture\n- text-to-motion\n- motionforge\nconfigs:\n- config_name: default\n  data_files:\n");
-    // Split order (train, val, test, then others: the maps' own), as loaders list them.
+    // Split order (train, validation, test, then others: the maps' own), as loaders list them.
     let order: Vec<&Split> = splits.keys().collect();
     for split in &order {
         y.push_str(&format!(
@@ -493,15 +547,16 @@ struct ShardJob<'a> {
     force: bool,
     output: &'a Path,
     staging: &'a Path,
-    /// The split whose rows the normalisation statistics are gathered over.
-    stats_split: Option<&'a Split>,
+    /// Whether normalisation statistics are gathered (over every split; each profile then takes
+    /// the training split's, or the first split's that holds it).
+    stats: bool,
 }
 
 /// What writing (or keeping) one shard gave.
 struct ShardDone {
     entry: crate::io::manifest::Shard,
     fingerprint: String,
-    /// Statistics over the shard's rows, when its split is the statistics split.
+    /// Statistics over the shard's rows.
     stats: Option<NormalizationStats>,
 }
 
@@ -538,8 +593,7 @@ impl ShardJob<'_> {
             }
             _ => None,
         };
-        let for_stats = self.stats_split == Some(&plan.split);
-        let mut stats = for_stats.then(NormalizationStats::default);
+        let mut stats = self.stats.then(NormalizationStats::default);
         let (sha256, bytes) = match kept {
             Some(kept) => {
                 if let Some(stats) = &mut stats {
@@ -712,13 +766,9 @@ pub(super) fn write_outputs(
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
     let plans_for_shards = plan_shards(clips, index, companions.shard_bytes);
-    // Normalisation statistics over the training split (the first split when there is no
-    // `train`), gathered shard by shard as the rows pass.
-    let stats_split = if plans_for_shards.iter().any(|p| p.split.is_train()) {
-        Some(Split::train())
-    } else {
-        plans_for_shards.first().map(|p| p.split.clone())
-    };
+    // Normalisation statistics per split, gathered shard by shard as the rows pass; each
+    // profile takes the training split's, or the first split's holding it (CMU in the demo).
+    let with_stats = !plans_for_shards.is_empty();
     // Everything new is written into a staging folder first; the dataset folder keeps the
     // previous dataset, complete and valid, until the new one is fully written (a full disk
     // fails here and leaves it untouched). Then `switch` moves the new files in, by renames only.
@@ -736,7 +786,7 @@ pub(super) fn write_outputs(
         force,
         output,
         staging: &staging,
-        stats_split: stats_split.as_ref(),
+        stats: with_stats,
     };
     // Shards are written on all cores; their results are taken in shard order, so the manifest,
     // the merged statistics and the error reported (the first shard's that failed) are the same
@@ -748,7 +798,7 @@ pub(super) fn write_outputs(
     let done = done
         .into_iter()
         .collect::<Result<Vec<ShardDone>, BuildError>>()?;
-    let mut normalization = NormalizationStats::default();
+    let mut per_split: BTreeMap<Split, NormalizationStats> = BTreeMap::new();
     let mut shard_fingerprints = BTreeMap::new();
     let mut shard_entries: BTreeMap<String, Vec<crate::io::manifest::Shard>> = BTreeMap::new();
     let mut split_rows: BTreeMap<Split, usize> = BTreeMap::new();
@@ -756,7 +806,10 @@ pub(super) fn write_outputs(
     let mut outputs = BTreeMap::new();
     for (plan, done) in plans_for_shards.iter().zip(done) {
         if let Some(stats) = done.stats {
-            normalization.merge(stats);
+            per_split
+                .entry(plan.split.clone())
+                .or_default()
+                .merge(stats);
         }
         *split_rows.entry(plan.split.clone()).or_insert(0) += done.entry.rows;
         *split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
@@ -776,8 +829,13 @@ pub(super) fn write_outputs(
         }
     };
     check_splits(&plans_for_shards, staged_path)?;
-    if stats_split.is_some() {
-        normalization.write(&staging.join(NORMALIZATION_DIR))?;
+    if with_stats {
+        // Split order: train first.
+        let splits = per_split
+            .into_iter()
+            .map(|(split, stats)| (split.to_string(), stats))
+            .collect();
+        NormalizationStats::per_profile(splits).write(&staging.join(NORMALIZATION_DIR))?;
     }
     write_atomic(&staging.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
     let mut lines = String::new();
@@ -834,7 +892,7 @@ pub(super) fn write_outputs(
         let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
         outputs.insert(name.to_string(), sha256_hex(&bytes));
     }
-    switch(output, &staging, &plans_for_shards, stats_split.is_some())?;
+    switch(output, &staging, &plans_for_shards, with_stats)?;
     // Stat data of the files now in place, recorded before the state file is written, so each is
     // older than the record that vouches for it.
     let stamps = outputs

@@ -226,7 +226,7 @@ pub fn status(config: &Config) -> Result<Status, BuildError> {
     let manifest = crate::io::manifest::Manifest::read(&plan.output)?;
     let splits = manifest
         .map(|m| {
-            // Keyed by split, so listed in split order (train, val, test, then others).
+            // Keyed by split, so listed in split order (train, validation, test, then others).
             let rows: BTreeMap<crate::clip::Split, u64> = m
                 .splits
                 .iter()

@@ -273,7 +273,8 @@ fn augment_run(stage: &str, report: &AugmentReport) -> StageRun {
     StageRun {
         stage: stage.into(),
         items: report.texts,
-        ran: report.requests,
-        reused: report.answered.saturating_sub(report.requests),
+        // Texts, not requests: a plan's repair is a second request for the same text.
+        ran: report.asked,
+        reused: report.answered.saturating_sub(report.asked),
     }
 }

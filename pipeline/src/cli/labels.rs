@@ -11,6 +11,9 @@ use std::path::PathBuf;
 #[derive(Subcommand)]
 pub(crate) enum PromptCommand {
     /// Print the exact prompt a stage sends for a text (for a paper's appendix, or debugging).
+    #[command(after_help = "Examples:
+  motionforge prompt render part_labels --text 'a person kicks with the right leg'
+  motionforge prompt render pair_compat --text 'wave' --second 'walk forward'")]
     Render {
         /// Template: part_labels, task_plan, paraphrase or pair_compat.
         template: String,
@@ -40,6 +43,8 @@ pub(crate) enum LabelsCommand {
     /// answer under the key of the part_labels prompt for that text with the config's [llm]
     /// model and sampling parameters (for SINC's file: model text-davinci-003, kind completion,
     /// temperature 0, max_tokens 256).
+    #[command(after_help = "Examples:
+  motionforge labels import ../shared/data/sinc/gpt3-labels-list.json --config my-llm.toml")]
     Import {
         /// The answers file (e.g. ../shared/data/sinc/gpt3-labels-list.json).
         file: PathBuf,
@@ -55,6 +60,9 @@ pub(crate) enum LabelsCommand {
     },
     /// Evaluate labellers on a gold file with SINC's Table 1 protocol (Yes/No as 1/0,
     /// Sometimes skipped): accuracy per part and their mean.
+    #[command(after_help = "Examples:
+  motionforge labels eval --gold ../shared/data/sinc/part-labels-gold-dev.json
+  motionforge labels eval --gold ../shared/data/sinc/part-labels-gold-dev.json --source embedded --source ../shared/data/sinc/gpt3-labels-list.json")]
     Eval {
         /// Gold labels: {text: [global, torso, left arm, right arm, left leg, right leg]} with
         /// 1, 0 or 0.5 (sometimes).

@@ -154,10 +154,74 @@ pub(crate) fn print_status(status: &motionforge::build::Status) -> std::io::Resu
     Ok(())
 }
 
-pub(crate) fn print_report(report: &BuildReport) -> std::io::Result<()> {
+/// Why a text stage answered nothing, when it skipped every text (no LLM configured, offline).
+fn skipped_stage(report: &BuildReport, stage: &str) -> Option<String> {
+    use motionforge::build::Stage;
+    let r = if stage == Stage::Paraphrase.name() {
+        &report.paraphrases
+    } else if stage == Stage::Plan.name() {
+        &report.plans
+    } else {
+        return None;
+    };
+    (r.answered == 0 && !r.skipped.is_empty())
+        .then(|| r.skipped.keys().cloned().collect::<Vec<_>>().join(", "))
+}
+
+/// Rows per split of the dataset a build wrote, in split order (train, validation, test,
+/// others), from its manifest; `None` before the first write.
+fn split_rows(report: &BuildReport) -> Option<String> {
+    let manifest = motionforge::io::manifest::Manifest::read(&report.output).ok()??;
+    let rows: std::collections::BTreeMap<motionforge::clip::Split, usize> = manifest
+        .splits
+        .iter()
+        .map(|(k, v)| (motionforge::clip::Split::new(k.as_str()), v.rows))
+        .collect();
+    Some(
+        rows.iter()
+            .map(|(k, n)| format!("{k} {n}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    )
+}
+
+/// Per profile, which split its normalisation statistics come from and its constant dimensions
+/// (a trainer dividing by their floored std would blow up noise).
+fn print_normalization(out: &mut impl Write, report: &BuildReport) -> std::io::Result<()> {
+    let dir = report.output.join(motionforge::build::NORMALIZATION_DIR);
+    let Some(profiles) = motionforge::io::normalization::read_summary(&dir) else {
+        return Ok(());
+    };
+    for (profile, p) in &profiles {
+        let constant: Vec<String> = p
+            .constant
+            .iter()
+            .map(|(feature, dims)| {
+                let of = p.dimensions.get(feature).copied().unwrap_or_default();
+                format!("{feature} {} of {of} ({})", dims.len(), dims.join(", "))
+            })
+            .collect();
+        let constant = if constant.is_empty() {
+            "none".to_string()
+        } else {
+            constant.join("; ")
+        };
+        writeln!(
+            out,
+            "normalisation {profile}: over {} ({} frames); constant dimensions: {constant}",
+            p.split, p.frames
+        )?;
+    }
+    Ok(())
+}
+
+/// The build's one summary on standard output: stages, rows per split, counts, rejects.
+pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Result<()> {
     let mut out = std::io::stdout().lock();
     for stage in &report.stages {
-        let what = if stage.ran == 0 {
+        let what = if let Some(why) = skipped_stage(report, &stage.stage) {
+            format!("skipped ({why})")
+        } else if stage.ran == 0 {
             "up to date, nothing re-run".to_string()
         } else {
             format!(
@@ -169,12 +233,22 @@ pub(crate) fn print_report(report: &BuildReport) -> std::io::Result<()> {
     }
     writeln!(
         out,
-        "{} captures -> {} clips ({} mirrored) in {}/",
+        "{} captures -> {} clips ({} mirrored) in {}/ ({seconds:.1} s)",
         report.captures,
         report.clips,
         report.mirrored,
         report.output.join(motionforge::build::DATA_DIR).display()
     )?;
+    let wrote = report
+        .stages
+        .iter()
+        .any(|s| s.stage == motionforge::build::Stage::Write.name());
+    if let Some(splits) = split_rows(report).filter(|_| wrote) {
+        writeln!(out, "splits: {splits}")?;
+    }
+    if wrote {
+        print_normalization(&mut out, report)?;
+    }
     writeln!(out, "by kind: {}", counts(&report.kinds))?;
     writeln!(
         out,

@@ -364,7 +364,7 @@ impl Config {
             c.push(
                 &[K("splits"), K("ratios")],
                 "{}".into(),
-                "split names with shares, e.g. { train = 0.8, val = 0.1, test = 0.1 }",
+                "split names with shares, e.g. { train = 0.8, validation = 0.1, test = 0.1 }",
             );
         }
         for (name, share) in &splits.ratios {
@@ -618,11 +618,90 @@ impl Config {
         } else {
             format!("; folder {} does not exist", folder.display())
         };
+        let nearby = extension_of(&resolved)
+            .map(|ext| found_nearby(&folder, &ext))
+            .unwrap_or_default();
         format!(
-            "a pattern that matches {what} (resolved as {}{why}; paths are relative to the config file)",
+            "a pattern that matches {what} (resolved as {}{why}; paths are relative to the config file){nearby}",
             resolved.display()
         )
     }
+}
+
+/// The extension a pattern's file name asks for (`bvh` of `data/*.bvh`), when it is literal.
+fn extension_of(pattern: &Path) -> Option<String> {
+    let name = pattern.file_name()?.to_string_lossy().into_owned();
+    let (_, ext) = name.rsplit_once('.')?;
+    (!ext.is_empty() && !ext.contains(['*', '?', '[', ']'])).then(|| ext.to_string())
+}
+
+/// Where files with extension `ext` (any case) are, near `folder`: folders within three levels
+/// of its nearest existing ancestor (of its parent when `folder` exists), with their counts, as a hint after a pattern that
+/// matched nothing. The walk stops after 20,000 entries so a pattern under `/` stays quick.
+fn found_nearby(folder: &Path, ext: &str) -> String {
+    const MAX_ENTRIES: usize = 20_000;
+    const MAX_DEPTH: usize = 3;
+    // An existing folder without such files: look at its siblings too.
+    let start = if folder.is_dir() {
+        folder.parent().filter(|p| p.is_dir()).or(Some(folder))
+    } else {
+        // A relative pattern's ancestors end in "", which is the working folder.
+        folder
+            .ancestors()
+            .find(|a| a.is_dir())
+            .or(Some(Path::new(".")))
+    };
+    let Some(start) = start else {
+        return String::new();
+    };
+    let mut counts: std::collections::BTreeMap<PathBuf, usize> = Default::default();
+    let mut queue = std::collections::VecDeque::from([(start.to_path_buf(), 0)]);
+    let mut seen = 0;
+    while let Some((dir, depth)) = queue.pop_front() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        let mut entries: Vec<_> = entries.flatten().map(|e| e.path()).collect();
+        // Sorted so the hint is the same on every run.
+        entries.sort();
+        for path in entries {
+            seen += 1;
+            if seen > MAX_ENTRIES {
+                break;
+            }
+            let is_link = path.symlink_metadata().is_ok_and(|m| m.is_symlink());
+            if path.is_dir() && !is_link {
+                if depth < MAX_DEPTH {
+                    queue.push_back((path, depth + 1));
+                }
+            } else if path
+                .extension()
+                .is_some_and(|e| e.to_string_lossy().eq_ignore_ascii_case(ext))
+            {
+                *counts.entry(dir.clone()).or_insert(0) += 1;
+            }
+        }
+    }
+    if counts.is_empty() {
+        return format!(
+            "; no .{ext} file within {MAX_DEPTH} levels of {}",
+            start.display()
+        );
+    }
+    let mut folders: Vec<(PathBuf, usize)> = counts.into_iter().collect();
+    folders.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    let listed: Vec<String> = folders
+        .iter()
+        .take(3)
+        .map(|(dir, n)| format!("{} ({n})", dir.display()))
+        .collect();
+    let more = folders.len().saturating_sub(3);
+    let more = if more > 0 {
+        format!(" and {more} more folders")
+    } else {
+        String::new()
+    };
+    format!("; .{ext} files are in {}{more}", listed.join(", "))
 }
 
 pub(super) fn round6(x: f64) -> f64 {
@@ -811,5 +890,33 @@ pub(super) fn validate_llm(llm: &crate::llm::client::LlmConfig, c: &mut Checks<'
         if !(v.is_finite() && (0.0..=86_400.0).contains(&v)) {
             c.push(&key(k), v.to_string(), "between 0 and 86400 seconds");
         }
+    }
+}
+
+#[cfg(test)]
+mod nearby_tests {
+    use super::*;
+
+    #[test]
+    fn a_pattern_that_matches_nothing_points_to_files_with_its_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("captures/bandai")).unwrap();
+        for name in ["a.BVH", "b.bvh", "notes.txt"] {
+            std::fs::write(dir.path().join("captures/bandai").join(name), "x").unwrap();
+        }
+        // The user wrote `capture/*.bvh` (missing `s`, wrong depth).
+        let hint = found_nearby(&dir.path().join("capture"), "bvh");
+        let expected = format!(
+            "; .bvh files are in {} (2)",
+            dir.path().join("captures/bandai").display()
+        );
+        assert_eq!(hint, expected);
+        assert_eq!(extension_of(Path::new("x/*.bvh")).as_deref(), Some("bvh"));
+        assert_eq!(extension_of(Path::new("x/*")), None);
+        let none = found_nearby(&dir.path().join("capture"), "npz");
+        assert!(
+            none.starts_with("; no .npz file within 3 levels of"),
+            "{none}"
+        );
     }
 }

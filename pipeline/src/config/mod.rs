@@ -702,10 +702,21 @@ impl Config {
             } else {
                 format!("{key}: ")
             };
+            // Misspelt keys and variant names (`kind = "filname"`) get the closest valid one.
+            let typo = unknown.or_else(|| {
+                inner
+                    .message()
+                    .strip_prefix("unknown variant `")
+                    .and_then(|rest| rest.split('`').next())
+            });
+            let hint = typo
+                .and_then(|field| closest_expected(field, inner.message()))
+                .map(|k| format!("; did you mean `{k}`?"))
+                .unwrap_or_default();
             ConfigError::Parse {
                 path: path.to_path_buf(),
                 line,
-                message: format!("{key}{}", inner.message().trim_end()),
+                message: format!("{key}{}{hint}", inner.message().trim_end()),
             }
         })?;
         // Lexically normalised, so `a/../fixtures/x.toml` and `fixtures/x.toml` show the same
@@ -790,7 +801,7 @@ pub struct SplitConfig {
 fn default_ratios() -> BTreeMap<String, f64> {
     BTreeMap::from([
         ("train".to_string(), 0.8),
-        ("val".to_string(), 0.1),
+        ("validation".to_string(), 0.1),
         ("test".to_string(), 0.1),
     ])
 }
@@ -868,5 +879,40 @@ fn load_profile(config: &Config, source: &SourceConfig) -> Result<ProfileSpec, S
         ProfileSpec::from_toml(&source.profile, &text).map_err(|e| e.to_string())
     } else {
         ProfileSpec::bundled(&source.profile).map_err(|e| e.to_string())
+    }
+}
+
+/// The key serde's "unknown field `x`, expected one of `a`, `b`" message lists that is closest to
+/// `field`, when one is close enough to be a typo (Jaro-Winkler 0.7 or more, clap's threshold for
+/// subcommand suggestions).
+fn closest_expected<'m>(field: &str, message: &'m str) -> Option<&'m str> {
+    let (_, expected) = message.split_once("expected")?;
+    expected
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(|k| (strsim::jaro_winkler(field, k), k))
+        .filter(|(score, _)| *score >= 0.7)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, k)| k)
+}
+
+#[cfg(test)]
+mod suggestion_tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_key_gets_the_closest_known_one() {
+        let text = "[dataset]\nnmae = \"demo\"\nfps = 30\n";
+        let err = Config::parse(text, Path::new("typo.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("unknown field `nmae`"), "{err}");
+        assert!(err.contains("did you mean `name`?"), "{err}");
+        // Nothing close: no guess.
+        let err = Config::parse("[dataset]\nzzzzzz = 1\n", Path::new("typo.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(!err.contains("did you mean"), "{err}");
     }
 }

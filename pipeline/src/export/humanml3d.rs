@@ -637,6 +637,15 @@ fn write_captions(dir: &Path, name: &str, entry: &Entry) -> Result<Vec<Skipped>,
 }
 
 /// Split lists, `all.txt` and `names.csv`.
+/// A split's name in HumanML3D's folder: its loaders open `val.txt`, where the dataset says
+/// `validation` (Hugging Face's name).
+fn list_name(split: &Split) -> &str {
+    match split.as_str() {
+        "validation" => "val",
+        name => name,
+    }
+}
+
 fn write_lists(
     dir: &Path,
     exported: &[(String, &Entry)],
@@ -654,14 +663,17 @@ fn write_lists(
         csv.push_str(&format!(
             "{name},{},{},{},{}\n",
             csv_field(&entry.clip_id),
-            csv_field(entry.split.as_str()),
+            csv_field(list_name(&entry.split)),
             entry.source_kind,
             entry.mirrored
         ));
-        *summary.splits.entry(entry.split.to_string()).or_insert(0) += 1;
+        *summary
+            .splits
+            .entry(list_name(&entry.split).to_string())
+            .or_insert(0) += 1;
     }
     for (split, names) in by_split {
-        let path = dir.join(format!("{split}.txt"));
+        let path = dir.join(format!("{}.txt", list_name(split)));
         fs::write(&path, names).map_err(io_err(&path))?;
     }
     for (file, text) in [("all.txt", all), ("names.csv", csv)] {

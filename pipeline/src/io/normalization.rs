@@ -71,17 +71,19 @@ impl Moments {
     }
 
     /// Mean and standard deviation (population), the deviation floored at 1e-8 so dividing by it
-    /// never blows up a constant channel.
-    fn finish(&self) -> (Vec<f32>, Vec<f32>) {
+    /// never blows up a constant channel, and which elements are constant (see [`CONSTANT_STD`]).
+    fn finish(&self) -> (Vec<f32>, Vec<f32>, Vec<bool>) {
         let n = self.count.max(1) as f64;
         let mean: Vec<f64> = self.sum.iter().map(|s| s / n).collect();
-        let std = self
+        let raw: Vec<f64> = self
             .sq
             .iter()
             .zip(&mean)
-            .map(|(q, m)| (q / n - m * m).max(0.0).sqrt().max(1e-8) as f32)
+            .map(|(q, m)| (q / n - m * m).max(0.0).sqrt())
             .collect();
-        (mean.into_iter().map(|m| m as f32).collect(), std)
+        let std = raw.iter().map(|d| d.max(1e-8) as f32).collect();
+        let constant = raw.iter().map(|d| *d < CONSTANT_STD).collect();
+        (mean.into_iter().map(|m| m as f32).collect(), std, constant)
     }
 }
 
@@ -122,13 +124,47 @@ pub fn write_normalization(
     for clip in clips.iter().filter(|c| c.clip.split == split) {
         stats.add(clip, profiles, config);
     }
-    stats.write(dir)
+    NormalizationStats::per_profile(vec![(split.to_string(), stats)]).write(dir)
 }
 
 /// Per-feature moments gathered one clip at a time, so the clips need not be in memory together.
 #[derive(Default)]
 pub struct NormalizationStats {
     stats: BTreeMap<(String, &'static str), Moments>,
+    /// Per profile, the split its moments were gathered over (set by [`Self::per_profile`]).
+    split_of: BTreeMap<String, String>,
+}
+
+/// A standard deviation below this (in the feature's unit: metres, or unitless for 6D
+/// rotations) marks a constant dimension: a trainer dividing by it would blow up noise.
+pub const CONSTANT_STD: f64 = 1e-6;
+
+/// `normalization/normalization.json`: per profile, where its statistics come from and which
+/// dimensions are constant.
+pub const SUMMARY_FILE: &str = "normalization.json";
+
+/// What `normalization.json` says of one skeleton profile.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ProfileSummary {
+    /// The split the statistics are taken over: `train`, or the first split in order holding
+    /// the profile's rows when `train` holds none.
+    pub split: String,
+    /// Frames the statistics are taken over.
+    pub frames: u64,
+    /// Per feature, its number of dimensions (joints x dims).
+    pub dimensions: BTreeMap<String, usize>,
+    /// Per feature, its constant dimensions as `joint <j> <axis>` (standard deviation below
+    /// [`CONSTANT_STD`]; their `std` is floored at 1e-8 in the files).
+    pub constant: BTreeMap<String, Vec<String>>,
+}
+
+/// The name of dimension `k` of a feature with `dims` numbers per joint.
+fn dimension_name(k: usize, dims: usize) -> String {
+    let axis = match (dims, k % dims) {
+        (3, a) => ["x", "y", "z"][a].to_string(),
+        (_, a) => a.to_string(),
+    };
+    format!("joint {} {axis}", k / dims)
 }
 
 impl NormalizationStats {
@@ -192,8 +228,56 @@ impl NormalizationStats {
         }
     }
 
+    /// Per profile, the statistics of the first split in `splits` (given in split order, train
+    /// first) that holds rows of it, so every profile has statistics and says where they are from.
+    pub fn per_profile(splits: Vec<(String, NormalizationStats)>) -> NormalizationStats {
+        let mut out = NormalizationStats::default();
+        for (split, stats) in splits {
+            for ((profile, feature), moments) in stats.stats {
+                let taken = out.split_of.get(&profile);
+                if taken.is_some_and(|s| *s != split) {
+                    continue;
+                }
+                out.split_of.insert(profile.clone(), split.clone());
+                out.stats.insert((profile, feature), moments);
+            }
+        }
+        out
+    }
+
+    /// Per profile: split, frames, dimensions and constant dimensions.
+    pub fn summary(&self) -> BTreeMap<String, ProfileSummary> {
+        let mut out: BTreeMap<String, ProfileSummary> = BTreeMap::new();
+        for ((profile, feature), moments) in &self.stats {
+            let entry = out
+                .entry(profile.clone())
+                .or_insert_with(|| ProfileSummary {
+                    split: self.split_of.get(profile).cloned().unwrap_or_default(),
+                    frames: moments.count,
+                    dimensions: BTreeMap::new(),
+                    constant: BTreeMap::new(),
+                });
+            entry
+                .dimensions
+                .insert(feature.to_string(), moments.sum.len());
+            let (_, _, constant) = moments.finish();
+            let names: Vec<String> = constant
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| **c)
+                .map(|(k, _)| dimension_name(k, moments.dims))
+                .collect();
+            if !names.is_empty() {
+                entry.constant.insert(feature.to_string(), names);
+            }
+        }
+        out
+    }
+
     /// Writes the statistics gathered (see [`write_normalization`]).
     pub fn write(self, dir: &Path) -> Result<Vec<PathBuf>, NormalizationError> {
+        let summary = self.summary();
+        let split_of = self.split_of;
         let stats = self.stats;
         let mut written = Vec::new();
         let (
@@ -211,8 +295,9 @@ impl NormalizationStats {
             Vec::new(),
             Vec::new(),
         );
+        let (mut col_split, mut col_constant) = (Vec::new(), Vec::new());
         for ((profile, feature), moments) in &stats {
-            let (mean, std) = moments.finish();
+            let (mean, std, constant) = moments.finish();
             // The last guard of "nothing non-finite is written" (inputs are bounded at ingest).
             if mean.iter().chain(&std).any(|v| !v.is_finite()) {
                 return Err(NormalizationError::NonFinite {
@@ -233,6 +318,8 @@ impl NormalizationStats {
                 col_dim.push((k % moments.dims) as i32);
                 col_mean.push(mean[k]);
                 col_std.push(std[k]);
+                col_split.push(split_of.get(profile).cloned().unwrap_or_default());
+                col_constant.push(constant[k]);
             }
         }
         let schema = Arc::new(Schema::new(vec![
@@ -242,6 +329,8 @@ impl NormalizationStats {
             Field::new("dim", DataType::Int32, false),
             Field::new("mean", DataType::Float32, false),
             Field::new("std", DataType::Float32, false),
+            Field::new("split", DataType::Utf8, false),
+            Field::new("constant", DataType::Boolean, false),
         ]));
         let columns: Vec<ArrayRef> = vec![
             Arc::new(StringArray::from(col_profile)),
@@ -250,6 +339,8 @@ impl NormalizationStats {
             Arc::new(Int32Array::from(col_dim)),
             Arc::new(Float32Array::from(col_mean)),
             Arc::new(Float32Array::from(col_std)),
+            Arc::new(StringArray::from(col_split)),
+            Arc::new(arrow_array::BooleanArray::from(col_constant)),
         ];
         // Folders of profiles no longer in the split would pass for current statistics.
         let current: std::collections::BTreeSet<&str> =
@@ -291,6 +382,24 @@ impl NormalizationStats {
             None => NormalizationError::Write(e),
         })?;
         written.push(path);
+        let summary_path = dir.join(SUMMARY_FILE);
+        let json = serde_json::to_vec_pretty(&serde_json::json!({ "profiles": summary }))
+            .unwrap_or_default();
+        write_atomic(&summary_path, &json)?;
+        written.push(summary_path);
         Ok(written)
     }
+}
+
+/// The per-profile summary a build wrote into `<normalization dir>/normalization.json`; `None`
+/// when there is none (no shard written yet) or it does not parse.
+pub fn read_summary(dir: &Path) -> Option<BTreeMap<String, ProfileSummary>> {
+    #[derive(serde::Deserialize)]
+    struct File {
+        profiles: BTreeMap<String, ProfileSummary>,
+    }
+    let bytes = std::fs::read(dir.join(SUMMARY_FILE)).ok()?;
+    serde_json::from_slice::<File>(&bytes)
+        .ok()
+        .map(|f| f.profiles)
 }

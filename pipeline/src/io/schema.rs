@@ -115,6 +115,56 @@ pub fn clip_schema() -> Schema {
     ])
 }
 
+/// What a column holds, in a phrase for the dataset card (`schemas/clips.md` has the details).
+pub fn column_meaning(name: &str) -> &'static str {
+    match name {
+        "clip_id" => "unique id: source, capture, frame range, `:m` when mirrored",
+        "source_kind" => "`real_single`, `real_pair` or `synthetic` (composed by body part)",
+        "source_name" => "the build config's source the capture came from",
+        "source_path" => "capture file, relative to the build config",
+        "source_sha256" => "SHA-256 of the capture file",
+        "source_fps" => "the capture's frame rate",
+        "frame_range" => "[start, end) in the capture's own frames",
+        "mirrored" => "left/right mirrored copy of another row",
+        "split" => "train, validation or test, by capture",
+        "action" => "the action label",
+        "text" => "the caption",
+        "texts" => "every caption of the clip",
+        "labels" => "every action label of the clip",
+        "annotation_source" => "annotation format (filename, babel, event_log, frame_index)",
+        "annotation_origin" => "annotation file and span the clip was cut by",
+        "motion_type" => "LINGO motion type of the label",
+        "hand" => "hand the annotation names (left, right, both)",
+        "object" => "object the annotation names",
+        "goal_pelvis" => "[x, y] where the pelvis ends, metres, first-frame canonical frame",
+        "goal_hand" => "[x, y, z] where the hand reaches, metres, first-frame canonical frame",
+        "parts" => "body parts used: global, torso, left arm, right arm, left leg, right leg",
+        "label_source" => "which labeller gave `parts`",
+        "paraphrases" => "LLM paraphrases of `text`",
+        "composed_from" => "synthetic pairs: the two source clip ids",
+        "composed_parts" => "synthetic pairs: the parts taken from each source",
+        "foot_skate" => "plausibility: planted-foot speed, m/s",
+        "ground_penetration" => "plausibility: deepest joint below the floor, metres",
+        "self_distance" => "plausibility: closest limb to spine bone distance, metres",
+        "lean" => "plausibility: largest sustained lean, degrees",
+        "attributes" => "capture-level annotation fields (key, value)",
+        "skeleton" => "skeleton id `<profile>:<digest>`, key into skeletons.json",
+        "fps" => "the dataset's frame rate",
+        "num_frames" => "frames",
+        "num_joints" => "joints (end sites not counted)",
+        "joint_positions" => "frames x joints x 3 positions, metres (x right, y forward, z up)",
+        "local_rotations" => "frames x joints x 4 local rotations, quaternions (x, y, z, w)",
+        "root_translation" => "frames x 3 root positions, metres",
+        "rotations_6d" => "frames x joints x 6: first two rotation-matrix columns (opt-in)",
+        "joint_velocities" => "frames x joints x 3 velocities, m/s (opt-in)",
+        "foot_contacts" => "frames x 4 contacts: left ankle, left toe, right ankle, right toe",
+        "future_root" => {
+            "frames x 3 x 3: root displacement and heading change at +10, +20, +30 frames"
+        }
+        _ => "",
+    }
+}
+
 /// The schema as JSON (name, type, nullable per column), for docs and checks.
 pub fn clip_schema_json() -> serde_json::Value {
     let fields: Vec<serde_json::Value> = clip_schema()
@@ -183,5 +233,12 @@ mod order_tests {
         assert!(
             in_schema_order(&schema, vec![("a", col(1)), ("a", col(1)), ("b", col(2))]).is_err()
         );
+    }
+
+    #[test]
+    fn every_column_has_a_meaning_for_the_card() {
+        for f in clip_schema().fields() {
+            assert!(!column_meaning(f.name()).is_empty(), "{}", f.name());
+        }
     }
 }

@@ -70,7 +70,6 @@ type DrawResult<T = ()> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 const FONT: &str = "sans-serif";
 const FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
-const TITLE: f64 = 30.0;
 const DESC: f64 = 24.0;
 const TICK: f64 = 20.0;
 const NOTE: f64 = 18.0;
@@ -229,39 +228,19 @@ where
     match spec.stem {
         "motion_type_counts" => motion_type_counts(root, stats),
         "motion_lengths" => motion_lengths(root, rows, stats),
-        "goal_locations" => goal_locations(root, rows, stats),
+        "goal_locations" => goal_locations(root, rows),
         "composition" => composition(root, stats),
         _ => plausibility(root, rows, stats),
     }
 }
 
-/// Draws the figure title with room above it (glyphs rise above plotters' text box) and returns
-/// the area below.
-fn titled<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    text: &str,
-) -> DrawResult<DrawingArea<DB, Shift>>
-where
-    DB::ErrorType: 'static,
-{
-    // A long dataset name must not push the title off the figure: shrink it to fit.
-    let width = f64::from(root.dim_in_pixel().0) - 20.0;
-    let mut size = TITLE;
-    while size > 16.0 && f64::from(root.estimate_text_size(text, &font(size))?.0) > width {
-        size -= 1.0;
-    }
-    Ok(root.margin(12, 0, 0, 0).titled(text, font(size))?)
+/// The figure's drawing area. Figures carry no title: a paper sets its own caption, and
+/// `report.md` and `tables.tex` give each figure's ([`FIGURES`]). The top margin keeps the
+/// highest tick label inside the image.
+fn plot_area<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> DrawingArea<DB, Shift> {
+    root.margin(12, 0, 0, 0)
 }
 
-fn with_title(title: &str, what: &str) -> String {
-    if title.is_empty() {
-        what.to_string()
-    } else {
-        format!("{title}: {what}")
-    }
-}
-
-/// Readable source-kind names: `real_single` -> `real single`.
 pub(crate) fn kind_label(kind: &str) -> String {
     kind.replace('_', " ")
 }
@@ -499,16 +478,7 @@ where
     DB::ErrorType: 'static,
 {
     let types = types_by_count(stats);
-    let area = titled(
-        root,
-        &with_title(
-            &stats.title,
-            &format!(
-                "clips per motion type (original single clips, n = {})",
-                stats.motion_types_total.clips
-            ),
-        ),
-    )?;
+    let area = plot_area(root);
     let n = types.len().max(1);
     let max = types.iter().map(|t| t.clips).max().unwrap_or(1).max(1) as f64;
     // Bars rise from 0.5 so a type with one clip still shows a bar on the log axis; the top
@@ -609,55 +579,16 @@ where
                 .map(|(name, v)| (name.as_str(), v.as_slice()))
         })
         .collect();
-    let area = titled(
-        root,
-        &with_title(
-            &stats.title,
-            "motion length per motion type (original single clips)",
-        ),
-    )?;
-    // Each violin is a KDE polygon on [min - 2h, max + 2h] (cut at 0: lengths are positive),
-    // scaled to the same maximum width so narrow and wide types stay comparable in shape.
-    struct Violin {
-        outline: Vec<(f64, f64)>,
-    }
-    let mut violins = Vec::new();
-    let mut top: f64 = 0.0;
-    for (i, (_, values)) in data.iter().enumerate() {
-        top = top.max(values.last().copied().unwrap_or(0.0));
-        let Some(h) = silverman_bandwidth(values) else {
-            violins.push(None);
-            continue;
-        };
-        let (Some(&min), Some(&max)) = (values.first(), values.last()) else {
-            violins.push(None);
-            continue;
-        };
-        let (a, b) = ((min - 2.0 * h).max(0.0), max + 2.0 * h);
-        top = top.max(b);
-        let grid: Vec<f64> = (0..=160)
-            .map(|k| a + (b - a) * f64::from(k) / 160.0)
-            .collect();
-        let density = kde(values, h, &grid);
-        let peak = density.iter().copied().fold(0.0, f64::max);
-        if peak <= 0.0 {
-            violins.push(None);
-            continue;
-        }
-        let x = i as f64;
-        let mut outline: Vec<(f64, f64)> = grid
-            .iter()
-            .zip(&density)
-            .map(|(y, d)| (x + 0.4 * d / peak, *y))
-            .collect();
-        outline.extend(
-            grid.iter()
-                .zip(&density)
-                .rev()
-                .map(|(y, d)| (x - 0.4 * d / peak, *y)),
-        );
-        violins.push(Some(Violin { outline }));
-    }
+    let area = plot_area(root);
+    let violins: Vec<Option<Vec<(f64, f64)>>> = data
+        .iter()
+        .enumerate()
+        .map(|(i, (_, values))| violin_outline(values, i as f64))
+        .collect();
+    let top: f64 = data
+        .iter()
+        .filter_map(|(_, v)| v.last().copied())
+        .fold(0.0, f64::max);
     let top = if top > 0.0 { top * 1.05 } else { 1.0 };
     let n = data.len().max(1);
     let (margin, y_area) = (20u32, 90u32);
@@ -693,27 +624,27 @@ where
         draw_note(&area, "no original single clips", 0.45)?;
         return Ok(());
     }
-    for v in violins.iter().flatten() {
-        {
-            chart.draw_series(std::iter::once(Polygon::new(
-                v.outline.clone(),
-                BLUE.mix(0.3).filled(),
-            )))?;
-            chart.draw_series(std::iter::once(PathElement::new(
-                v.outline
-                    .iter()
-                    .copied()
-                    .chain(v.outline.first().copied())
-                    .collect::<Vec<_>>(),
-                BLUE.stroke_width(2),
-            )))?;
-        }
+    for outline in violins.iter().flatten() {
+        chart.draw_series(std::iter::once(Polygon::new(
+            outline.clone(),
+            BLUE.mix(0.3).filled(),
+        )))?;
+        chart.draw_series(std::iter::once(PathElement::new(
+            outline
+                .iter()
+                .copied()
+                .chain(outline.first().copied())
+                .collect::<Vec<_>>(),
+            BLUE.stroke_width(2),
+        )))?;
     }
     // At least a few pixels wide, however many types share the axis.
     let half = 0.06f64.max(4.0 / slot).min(0.25);
     for (i, (_, values)) in data.iter().enumerate() {
         draw_box(&mut chart, values, i as f64, half, DARK)?;
-        if values.len() <= MAX_STRIP && data.len() <= MAX_STRIP_CATEGORIES {
+        // Without a violin the points are the distribution: always drawn.
+        let no_violin = violins[i].is_none();
+        if no_violin || (values.len() <= MAX_STRIP && data.len() <= MAX_STRIP_CATEGORIES) {
             chart.draw_series(values.iter().enumerate().map(|(k, v)| {
                 Circle::new(
                     (i as f64 + 0.18 + jitter(k, 0.1), *v),
@@ -728,6 +659,42 @@ where
         .collect();
     draw_categories(root, &anchors, &cats)?;
     Ok(())
+}
+
+/// Fewer values than this get their points and a box plot, not a violin: a density of three
+/// clips is mostly the kernel's shape.
+pub const MIN_VIOLIN: usize = 5;
+
+/// The outline of a violin of ascending `values` at category `x`: a Gaussian KDE (Silverman's
+/// bandwidth) on the values' own range, so no density is drawn beyond the shortest and longest
+/// clip, scaled to a half-width of 0.4 at its peak so narrow and wide types stay comparable in
+/// shape. `None` for fewer than [`MIN_VIOLIN`] values or no spread.
+pub fn violin_outline(values: &[f64], x: f64) -> Option<Vec<(f64, f64)>> {
+    if values.len() < MIN_VIOLIN {
+        return None;
+    }
+    let h = silverman_bandwidth(values)?;
+    let (a, b) = (*values.first()?, *values.last()?);
+    let grid: Vec<f64> = (0..=160)
+        .map(|k| a + (b - a) * f64::from(k) / 160.0)
+        .collect();
+    let density = kde(values, h, &grid);
+    let peak = density.iter().copied().fold(0.0, f64::max);
+    if peak <= 0.0 || !peak.is_finite() {
+        return None;
+    }
+    let mut outline: Vec<(f64, f64)> = grid
+        .iter()
+        .zip(&density)
+        .map(|(y, d)| (x + 0.4 * d / peak, *y))
+        .collect();
+    outline.extend(
+        grid.iter()
+            .zip(&density)
+            .rev()
+            .map(|(y, d)| (x - 0.4 * d / peak, *y)),
+    );
+    Some(outline)
 }
 
 /// Draws a box plot of ascending `sorted` at `x` with box half-width `half`: a filled quartile
@@ -827,11 +794,7 @@ fn heat_color(t: f64) -> RGBColor {
     RGBColor(m(a.0, b.0), m(a.1, b.1), m(a.2, b.2))
 }
 
-fn goal_locations<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    rows: &[ClipRow],
-    stats: &Stats,
-) -> DrawResult
+fn goal_locations<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, rows: &[ClipRow]) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
@@ -842,16 +805,7 @@ where
         .map(|g| (f64::from(g[0]), f64::from(g[1])))
         .filter(|(x, y)| x.is_finite() && y.is_finite())
         .collect();
-    let area = titled(
-        root,
-        &with_title(
-            &stats.title,
-            &format!(
-                "locomotion goals in the first-frame canonical frame (n = {})",
-                goals.len()
-            ),
-        ),
-    )?;
+    let area = plot_area(root);
     let (aw, _) = area.dim_in_pixel();
     let bar_width = 140;
     let (main, bar) = area.split_horizontally(aw.saturating_sub(bar_width));
@@ -1024,16 +978,7 @@ where
     DB::ErrorType: 'static,
 {
     let splits = &stats.composition;
-    let area = titled(
-        root,
-        &with_title(
-            &stats.title,
-            &format!(
-                "composition by source kind ({} rows, {} mirrored)",
-                stats.overview.rows, stats.overview.mirrored
-            ),
-        ),
-    )?;
+    let area = plot_area(root);
     let n = splits.len().max(1);
     let k = splits.first().map_or(1, |s| s.kinds.len()).max(1);
     let max = splits
@@ -1149,13 +1094,7 @@ fn plausibility<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let area = titled(
-        root,
-        &with_title(
-            &stats.title,
-            "plausibility of real versus synthetic clips (originals)",
-        ),
-    )?;
+    let area = plot_area(root);
     let panels = area.split_evenly((2, 2));
     for (k, (panel, metric)) in panels.iter().zip(&stats.plausibility).enumerate() {
         let info = &metric.info;

@@ -17,12 +17,12 @@ mod tables;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-pub use figures::{FIGURES, FigureSpec};
+pub use figures::{FIGURES, FigureSpec, MIN_VIOLIN, violin_outline};
 pub use read::{find_clip_tables, read_build_counts, read_rows};
 pub use stats::{
     GoalStats, KNOWN_KINDS, KindCount, METRICS, MetricInfo, MetricStats, NO_LABEL, NO_SPLIT,
-    NULL_SPLIT, Overview, SplitComposition, Stats, Summary, TypeStats, UNMAPPED, quantile,
-    silverman_bandwidth, statistics,
+    NULL_SPLIT, Overview, SplitComposition, Stats, Summary, TypeStats, UNMAPPED, lengths_by_type,
+    quantile, silverman_bandwidth, statistics,
 };
 pub use tables::{latex_escape, markdown_escape};
 

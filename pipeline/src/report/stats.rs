@@ -268,7 +268,7 @@ pub struct Overview {
     pub originals: usize,
     /// Mirrored copies.
     pub mirrored: usize,
-    /// Splits present, in order (train, val, test, then alphabetical).
+    /// Splits present, in order (train, validation, test, then alphabetical).
     pub splits: Vec<String>,
     /// Hours of motion in all rows.
     pub hours: f64,
@@ -293,7 +293,8 @@ pub struct Stats {
     pub motion_types_total: TypeStats,
     /// Rows per split and source kind, mirrored copies included.
     pub composition: Vec<SplitComposition>,
-    /// Original rows per `label_source` ([`NO_LABEL`] for null).
+    /// Original real rows (not mirrored, not synthetic) per `label_source` ([`NO_LABEL`] for
+    /// null).
     pub label_sources: BTreeMap<String, usize>,
     /// Locomotion goals.
     pub goals: GoalStats,
@@ -338,8 +339,9 @@ pub(crate) fn typed_rows(rows: &[ClipRow]) -> impl Iterator<Item = &ClipRow> {
         .filter(|r| r.is_original() && r.source_kind == SourceKind::RealSingle.as_str())
 }
 
-/// Lengths in seconds per motion type of [`typed_rows`], types sorted by [`type_order`].
-pub(crate) fn lengths_by_type(rows: &[ClipRow]) -> Vec<(String, Vec<f64>)> {
+/// Lengths in seconds per motion type of the original single clips (ascending), types in the
+/// report's order: what the motion-length figure draws.
+pub fn lengths_by_type(rows: &[ClipRow]) -> Vec<(String, Vec<f64>)> {
     let mut map: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for r in typed_rows(rows) {
         let t = r
@@ -474,8 +476,9 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
         })
         .collect();
 
+    // Real clips only: a synthetic pair's `composed` label is its sources' labels again.
     let mut label_sources = BTreeMap::new();
-    for r in rows.iter().filter(|r| r.is_original()) {
+    for r in rows.iter().filter(|r| r.is_original() && !r.is_synthetic()) {
         let key = r
             .label_source
             .clone()

@@ -200,7 +200,9 @@ pub(crate) fn latex(stats: &Stats) -> String {
     }
     tex_table(
         &mut out,
-        &format!("Sources of the body-part labels of {title} (original clips)."),
+        &format!(
+            "Sources of the body-part labels of {title} (original real clips; synthetic pairs take their sources' labels)."
+        ),
         "tab:mf-label-sources",
         "lr",
         &body,
@@ -454,7 +456,7 @@ pub(crate) fn markdown(stats: &Stats) -> String {
     md_figure(&mut out, "composition");
 
     out.push_str(
-        "## Label sources\n\nOriginal clips per `label_source` (`(none)`: unlabelled).\n\n",
+        "## Label sources\n\nOriginal real clips per `label_source` (`(none)`: unlabelled); synthetic pairs are left out: their `composed` labels are their sources' labels.\n\n",
     );
     md_header(&mut out, &["label source", "clips"], 1);
     for (source, n) in &stats.label_sources {

@@ -56,8 +56,11 @@ pub struct AugmentReport {
     pub texts: usize,
     /// Texts answered (cache or LLM).
     pub answered: usize,
-    /// Requests sent.
+    /// Requests sent (repairs included).
     pub requests: usize,
+    /// Texts whose answer was asked of the LLM this run rather than found in the cache.
+    #[serde(default)]
+    pub asked: usize,
     /// Texts skipped, by reason (no LLM configured, offline cache miss, request failed).
     pub skipped: BTreeMap<String, usize>,
     /// Answers rejected after parsing (and repair, for plans): text and reason.
@@ -159,6 +162,7 @@ pub(crate) fn answers(
         match r {
             Ok(a) => {
                 report.requests += usize::from(!a.from_cache);
+                report.asked += usize::from(!a.from_cache);
                 out.push(Some(a.text));
             }
             Err(e) if e.stops_stage() => {

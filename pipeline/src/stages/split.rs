@@ -234,7 +234,7 @@ mod tests {
         }
         let share = |n: &str| counts[n] as f64 / 10_000.0;
         assert!(
-            (share("train") - 0.8).abs() < 0.02 && (share("val") - 0.1).abs() < 0.02,
+            (share("train") - 0.8).abs() < 0.02 && (share("validation") - 0.1).abs() < 0.02,
             "{counts:?}"
         );
         assert_eq!(s.split_of("a/b.bvh", "b"), s.split_of("a/b.bvh", "b"));
@@ -246,7 +246,7 @@ mod tests {
             &SplitConfig::default(),
             Some((
                 "splits.csv",
-                "capture,split\nwalk_001,train\nkick_001,val\nwalk_001,test\n",
+                "capture,split\nwalk_001,train\nkick_001,validation\nwalk_001,test\n",
             )),
         )
         .unwrap_err()
