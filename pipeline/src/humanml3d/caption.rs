@@ -6,10 +6,14 @@
 //! MoMask read those pairs back (GloVe vector of the word, one-hot class of the tag), so a
 //! caption line made here has to carry the words and tags spaCy would have given.
 //!
-//! This module does it without spaCy: a rule-based tagger over data files compiled into the
-//! crate (`schemas/caption-tagger.toml` for closed-class words and rules, WordNet 3.0 for
-//! open-class words and irregular forms). `docs/humanml3d-captions.md` describes the rules, the
-//! data's provenance and how often the result agrees with spaCy on real captions.
+//! This module does it without spaCy: an averaged-perceptron tagger whose weights were trained
+//! at development time on spaCy's tags of real captions (`schemas/caption-tagger-weights.tsv`,
+//! written by `tools/train-caption-tagger.py`), with the lexicon's word classes among its
+//! features, and a lemmatiser over data files compiled into the crate
+//! (`schemas/caption-tagger.toml`, WordNet 3.0 for open-class words and irregular forms). The
+//! earlier rule-based tagger stays available as [`rule_tokens`] for comparison.
+//! `docs/humanml3d-captions.md` describes the method, the data's provenance and how often the
+//! result agrees with spaCy on held-out real captions.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
@@ -21,6 +25,7 @@ use serde::Deserialize;
 const RULES_TOML: &str = include_str!("../../../schemas/caption-tagger.toml");
 const LEXICON_TSV: &str = include_str!("../../../schemas/pos-lexicon.tsv");
 const EXCEPTIONS_TSV: &str = include_str!("../../../schemas/pos-exceptions.tsv");
+const WEIGHTS_TSV: &str = include_str!("../../../schemas/caption-tagger-weights.tsv");
 
 /// A Universal POS tag as spaCy assigns them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -179,12 +184,59 @@ pub enum CaptionError {
     Data(String),
 }
 
-/// The caption's words and tags as HumanML3D's `process_text` gives them.
+/// The caption's words and tags as HumanML3D's `process_text` gives them: tags from the
+/// averaged perceptron, lemmas from the lexicon.
 pub fn tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
+    let tagger = tagger()?;
+    let model = perceptron()?;
+    let words = split_words(&caption.replace('-', ""));
+    let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
+    let seen = tagger.seen(&analysed);
+    let tags = model.tag(&seen);
+    finish(caption, &analysed, tags, tagger)
+}
+
+/// One token of a caption as the perceptron sees it: the token, the rule-based tagger's tag,
+/// its closed-class tags (`-` for none) and the open classes the lexicon reads it as (letters
+/// N, V, A, R; `-` for none). `tools/train-caption-tagger.py` trains on exactly this.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct TokenAnalysis {
+    /// The token as written (punctuation and numbers included).
+    pub text: String,
+    /// The rule-based tagger's tag.
+    pub rule: String,
+    /// Closed-class tags, space-separated, or `-`.
+    pub closed: String,
+    /// Open-class readings as letters, or `-`.
+    pub open: String,
+}
+
+/// Every token of a caption (hyphens removed, as for [`tokens`]) with what the perceptron's
+/// features are made of; for the training script (`cargo run --example caption_analysis`).
+pub fn analyse(caption: &str) -> Result<Vec<TokenAnalysis>, CaptionError> {
+    let tagger = tagger()?;
+    let words = split_words(&caption.replace('-', ""));
+    let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
+    Ok(tagger.seen(&analysed))
+}
+
+/// [`tokens`] as the rule-based tagger that preceded the perceptron tags them (context rules
+/// over the lexicon's readings; `docs/humanml3d-captions.md`), kept to compare the two.
+pub fn rule_tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let tagger = tagger()?;
     let words = split_words(&caption.replace('-', ""));
     let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
     let tags = tagger.tag(&analysed);
+    finish(caption, &analysed, tags, tagger)
+}
+
+/// The alphabetic tokens with their tags, nouns and verbs lemmatised.
+fn finish(
+    caption: &str,
+    analysed: &[Word],
+    tags: Vec<Upos>,
+    tagger: &Tagger,
+) -> Result<Vec<Token>, CaptionError> {
     let out: Vec<Token> = analysed
         .iter()
         .zip(tags)
@@ -841,6 +893,236 @@ fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<(Upos, String)>>, 
     Ok(map)
 }
 
+/// The averaged perceptron: weights per feature and tag (Collins 2002; the feature set of
+/// Honnibal's "A good part-of-speech tagger in about 200 lines of Python" plus the lexicon's word
+/// classes). Trained by `tools/train-caption-tagger.py`; this side only loads and applies it, and
+/// must compute the same feature strings as that script's `features`.
+struct Perceptron {
+    /// The tags it chooses from, ordered by name (ties go to the first).
+    classes: Vec<Upos>,
+    /// Feature -> (index into `classes`, weight).
+    weights: HashMap<String, Vec<(usize, f64)>>,
+}
+
+fn perceptron() -> Result<&'static Perceptron, CaptionError> {
+    static MODEL: OnceLock<Result<Perceptron, String>> = OnceLock::new();
+    MODEL
+        .get_or_init(|| Perceptron::load(WEIGHTS_TSV))
+        .as_ref()
+        .map_err(|e| CaptionError::Data(e.clone()))
+}
+
+/// Last three characters (the script's `w[-3:]`).
+fn suffix3(word: &str) -> &str {
+    let start = word.char_indices().rev().nth(2).map_or(0, |(i, _)| i);
+    &word[start..]
+}
+
+impl Perceptron {
+    fn load(text: &str) -> Result<Perceptron, String> {
+        const FILE: &str = "schemas/caption-tagger-weights.tsv";
+        let mut classes: Vec<Upos> = Vec::new();
+        let mut weights = HashMap::with_capacity(16_384);
+        for (n, line) in text.lines().enumerate() {
+            if let Some(list) = line.strip_prefix("# Classes: ") {
+                let list = list.split_once('.').map_or(list, |(l, _)| l);
+                classes = list
+                    .split_whitespace()
+                    .map(Upos::from_str)
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| format!("{FILE} line {}: {e}", n + 1))?;
+                classes.sort_by_key(|t| t.as_str());
+                continue;
+            }
+            if line.starts_with('#') || line.is_empty() {
+                continue;
+            }
+            let bad = |why: &str| format!("{FILE} line {}: {why}: {line:?}", n + 1);
+            let (feature, list) = line
+                .split_once('\t')
+                .ok_or_else(|| bad("expected feature<TAB>TAG=weight ..."))?;
+            let mut row = Vec::new();
+            for pair in list.split(' ') {
+                let (tag, w) = pair
+                    .split_once('=')
+                    .ok_or_else(|| bad("expected TAG=weight"))?;
+                let tag = Upos::from_str(tag).map_err(|e| bad(&e))?;
+                let class = classes
+                    .iter()
+                    .position(|&c| c == tag)
+                    .ok_or_else(|| bad("a tag the `# Classes:` line does not list"))?;
+                let w: f64 = w
+                    .parse()
+                    .ok()
+                    .filter(|w: &f64| w.is_finite())
+                    .ok_or_else(|| bad("a weight is not a finite number"))?;
+                row.push((class, w));
+            }
+            weights.insert(feature.to_string(), row);
+        }
+        if classes.is_empty() || weights.is_empty() {
+            return Err(format!("{FILE}: no `# Classes:` line or no weights"));
+        }
+        Ok(Perceptron { classes, weights })
+    }
+
+    /// Tags words left to right, each decision seeing the two tags before it.
+    fn tag(&self, seen: &[TokenAnalysis]) -> Vec<Upos> {
+        let lowers: Vec<String> = seen.iter().map(|t| t.text.to_lowercase()).collect();
+        let mut out = Vec::with_capacity(seen.len());
+        let (mut prev, mut prev2) = ("-START-", "-START2-");
+        let mut scores = vec![0.0; self.classes.len()];
+        for i in 0..seen.len() {
+            // A word the closed-class list gives one tag only takes it, in training too.
+            if !seen[i].closed.contains([' ', '-'])
+                && let Ok(tag) = Upos::from_str(&seen[i].closed)
+            {
+                out.push(tag);
+                prev2 = prev;
+                prev = tag.as_str();
+                continue;
+            }
+            // A word training never saw takes the rule-based tag: the perceptron learned its
+            // context from short labels, the rules know sentences.
+            if !self.weights.contains_key(&format!("w {}", lowers[i])) {
+                let tag = Upos::from_str(&seen[i].rule).unwrap_or(Upos::X);
+                out.push(tag);
+                prev2 = prev;
+                prev = tag.as_str();
+                continue;
+            }
+            scores.iter_mut().for_each(|s| *s = 0.0);
+            for f in features(seen, &lowers, i, prev, prev2) {
+                if let Some(row) = self.weights.get(&f) {
+                    for &(c, w) in row {
+                        scores[c] += w;
+                    }
+                }
+            }
+            let mut best = 0;
+            for c in 1..scores.len() {
+                if scores[c] > scores[best] {
+                    best = c;
+                }
+            }
+            let tag = self.classes[best];
+            out.push(tag);
+            prev2 = prev;
+            prev = tag.as_str();
+        }
+        out
+    }
+}
+
+/// The features of token `i` given the two tags before it (the training script's `features`).
+fn features(
+    seen: &[TokenAnalysis],
+    lowers: &[String],
+    i: usize,
+    prev: &str,
+    prev2: &str,
+) -> Vec<String> {
+    let w = |k: isize| -> &str {
+        let j = i as isize + k;
+        if j < 0 {
+            if j == -1 { "-START-" } else { "-START2-" }
+        } else if j as usize >= seen.len() {
+            if j as usize == seen.len() {
+                "-END-"
+            } else {
+                "-END2-"
+            }
+        } else {
+            &lowers[j as usize]
+        }
+    };
+    let at = |k: isize, f: fn(&TokenAnalysis) -> &str| -> &str {
+        let j = i as isize + k;
+        if j < 0 {
+            "-START-"
+        } else {
+            seen.get(j as usize).map_or("-END-", f)
+        }
+    };
+    let word = lowers[i].as_str();
+    let t = &seen[i];
+    let first = t.text.chars().next();
+    let shape = if first.is_some_and(char::is_uppercase) {
+        "X"
+    } else if first.is_some_and(|c| c.is_ascii_digit()) {
+        "d"
+    } else {
+        "x"
+    };
+    let first_char: String = word.chars().take(1).collect();
+    vec![
+        "b".to_string(),
+        format!("s {}", suffix3(word)),
+        format!("p {first_char}"),
+        format!("t1 {prev}"),
+        format!("t2 {prev2}"),
+        format!("tt {prev} {prev2}"),
+        format!("w {word}"),
+        format!("tw {prev} {word}"),
+        format!("w-1 {}", w(-1)),
+        format!("s-1 {}", suffix3(w(-1))),
+        format!("w-2 {}", w(-2)),
+        format!("w+1 {}", w(1)),
+        format!("s+1 {}", suffix3(w(1))),
+        format!("w+2 {}", w(2)),
+        format!("ww {} {word}", w(-1)),
+        format!("wn {word} {}", w(1)),
+        format!("sh {shape}"),
+        format!("cl {}", t.closed),
+        format!("lx {}", t.open),
+        format!("lx+1 {}", at(1, |t| t.open.as_str())),
+        format!("cl+1 {}", at(1, |t| t.closed.as_str())),
+        format!("lxt {prev} {}", t.open),
+        format!("r {}", t.rule),
+        format!("rw {} {word}", t.rule),
+        format!("r-1 {}", at(-1, |t| t.rule.as_str())),
+        format!("r+1 {}", at(1, |t| t.rule.as_str())),
+        format!("rt {} {prev}", t.rule),
+    ]
+}
+
+impl Tagger {
+    /// The tokens as the perceptron sees them: the rule-based tags and each word's classes.
+    fn seen(&self, words: &[Word]) -> Vec<TokenAnalysis> {
+        let rules = self.tag(words);
+        words
+            .iter()
+            .zip(rules)
+            .map(|(w, rule)| {
+                let closed = if w.closed.is_empty() {
+                    "-".to_string()
+                } else {
+                    w.closed
+                        .iter()
+                        .map(|t| t.as_str())
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                };
+                let mut open: String = OPEN
+                    .iter()
+                    .zip(['N', 'V', 'A', 'R'])
+                    .filter(|(t, _)| w.reading(**t).is_some())
+                    .map(|(_, letter)| letter)
+                    .collect();
+                if open.is_empty() {
+                    open.push('-');
+                }
+                TokenAnalysis {
+                    text: w.text.clone(),
+                    rule: rule.as_str().to_string(),
+                    closed,
+                    open,
+                }
+            })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -870,5 +1152,21 @@ mod tests {
         .err()
         .unwrap();
         assert!(err.contains("caption-tagger.toml"), "{err}");
+    }
+
+    #[test]
+    fn bundled_weights_load_and_bad_lines_are_refused_with_their_line() {
+        let m = perceptron().map_err(|e| e.to_string()).unwrap();
+        assert!(m.weights.len() > 5_000);
+        assert!(m.classes.contains(&Upos::Det) && m.classes.contains(&Upos::Verb));
+        let err = Perceptron::load("# Classes: NOUN VERB. x\nb\tNOUN=abc\n")
+            .err()
+            .unwrap();
+        assert!(err.contains("line 2"), "{err}");
+        let err = Perceptron::load("# Classes: NOUN VERB. x\nb\tADJ=1\n")
+            .err()
+            .unwrap();
+        assert!(err.contains("does not list"), "{err}");
+        assert!(Perceptron::load("b\tNOUN=1\n").is_err());
     }
 }
