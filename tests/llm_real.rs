@@ -33,6 +33,7 @@ base_url = "{url}"
 model = "{model}"
 temperature = 0
 max_tokens = 200
+retry_max_tokens = 400
 seed = 7
 concurrency = 1
 requests_per_minute = 600
@@ -57,16 +58,40 @@ text = "a person does a {{content}}"
         "labels: {:#?}\nparaphrases: {:#?}\nplans: {:#?}",
         first.labels, first.paraphrases, first.plans
     );
-    assert_eq!(first.labels.requests, 3, "one request per unique text");
-    assert!(
-        first.labels.sources.keys().any(|s| s.starts_with("llm:"))
-            || !first.labels.flagged.is_empty()
-    );
-    assert!(first.paraphrases.requests >= 3 && first.plans.requests >= 3);
-    let second = build(&config, &BuildOptions::default()).unwrap();
+    for (stage, c) in [
+        ("labels", &first.labels.checks),
+        ("paraphrases", &first.paraphrases.checks),
+        ("plans", &first.plans.checks),
+    ] {
+        println!(
+            "{stage}: accepted {}, rejected {:?}, fell back {}, dropped {}, kept {}, cut off {}",
+            c.accepted, c.rejected_by_reason, c.fell_back, c.dropped, c.kept, c.truncated
+        );
+    }
+    let l = &first.labels;
+    // Every label answer is accounted for: accepted, refused (and handled), or cut off.
     assert_eq!(
-        second.labels.requests + second.paraphrases.requests + second.plans.requests,
-        0
+        l.checks.accepted + l.checks.rejected() + l.checks.truncated,
+        3,
+        "{l:?}"
     );
-    assert!(second.nothing_ran(), "{:?}", second.stages);
+    assert_eq!(
+        l.checks.rejected(),
+        l.checks.fell_back,
+        "on_invalid = embedded"
+    );
+    assert!(first.labels.requests >= 3, "one request per unique text");
+    assert!(first.paraphrases.requests >= 3 && first.plans.requests >= 3);
+    // The rebuild asks only what was not settled: answers cut off even with retry_max_tokens.
+    let unsettled = l.checks.truncated + first.paraphrases.checks.truncated;
+    let second = build(&config, &BuildOptions::default()).unwrap();
+    let asked = second.labels.requests + second.paraphrases.requests + second.plans.requests;
+    assert!(
+        asked <= 2 * unsettled + first.plans.checks.truncated * 2,
+        "asked {asked}"
+    );
+    if unsettled == 0 && first.plans.checks.truncated == 0 {
+        assert_eq!(asked, 0);
+        assert!(second.nothing_ran(), "{:?}", second.stages);
+    }
 }
