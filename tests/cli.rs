@@ -157,7 +157,12 @@ fn every_commands_help_ends_with_examples() {
         let (_, examples) = help
             .split_once("\nExamples:\n")
             .unwrap_or_else(|| panic!("`{}` has no examples:\n{help}", args.join(" ")));
-        let first = examples.lines().next().unwrap_or_default().trim_start();
+        // The first example line, past any `# what this does` comment above it.
+        let first = examples
+            .lines()
+            .map(str::trim_start)
+            .find(|l| !l.starts_with('#'))
+            .unwrap_or_default();
         assert!(
             first.starts_with("motionforge ")
                 || first.contains("| motionforge ")
