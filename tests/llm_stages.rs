@@ -60,6 +60,10 @@ fn reply_for(prompt: &str, mode: Mode, max_tokens: u64) -> (String, &'static str
     let labels = prompt.contains("body parts involved");
     let paraphrase = prompt.contains("different descriptions");
     match mode {
+        Mode::JunkParaphrases if paraphrase && paraphrase_text(prompt) == "kick" => {
+            // A bare newline, as Gemma 3 270M answered with the Llama 2 chat format.
+            return ("\n".into(), "stop");
+        }
         Mode::JunkParaphrases if paraphrase => {
             let t = paraphrase_text(prompt);
             return (
@@ -664,26 +668,32 @@ fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
     let extra = format!("[task_plans]\nenabled = false\n\n{}", llm_section(&server));
     let (dir, config) = scratch(&extra);
     let first = build(&config, &BuildOptions::default()).unwrap();
-    // Per text: two template lines, two good lines, a line about sitting (the third asked), and
-    // five lines beyond the three asked.
+    // Walk and bye: two template lines, two good lines, a line about sitting (the third asked),
+    // and five lines beyond the three asked. Kick: an empty answer.
     let checks = &first.paraphrases.checks;
-    assert_eq!(checks.accepted, 6, "{checks:?}");
+    assert_eq!(checks.accepted, 4, "{checks:?}");
     assert_eq!(
         checks.rejected_by_reason,
-        [("action", 3), ("beyond_count", 15), ("markup", 6)]
-            .into_iter()
-            .map(|(k, v)| (k.to_string(), v))
-            .collect(),
+        [
+            ("action", 2),
+            ("beyond_count", 10),
+            ("empty", 1),
+            ("markup", 4)
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect(),
         "{:?}",
         first.paraphrases.rejected
     );
-    assert_eq!((checks.dropped, checks.kept), (24, 0));
+    assert_eq!((checks.dropped, checks.kept), (17, 0));
     let json = report_json(&dir);
+    let reasons = &json["paraphrases"]["checks"]["rejected_by_reason"];
     assert_eq!(
-        json["paraphrases"]["checks"]["rejected_by_reason"]["markup"],
-        6
+        (&reasons["markup"], &reasons["empty"]),
+        (&json!(4), &json!(1))
     );
-    assert_eq!(json["paraphrases"]["checks"]["dropped"], 24);
+    assert_eq!(json["paraphrases"]["checks"]["dropped"], 17);
     let table = pyarrow_rows(&dir.path().join("out/llm/data"), "clip_id,paraphrases");
     let walk = table
         .iter()
@@ -717,7 +727,8 @@ fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
             kept.paraphrases.checks.kept,
             kept.paraphrases.checks.dropped
         ),
-        (24, 0)
+        (16, 1),
+        "an empty answer has nothing to keep"
     );
 }
 

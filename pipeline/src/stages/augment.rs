@@ -215,6 +215,14 @@ pub fn paraphrase(
         let Some(answer) = answer else { continue };
         report.answered += 1;
         let checked = check_paraphrases(t, &answer, n);
+        if checked.lines.is_empty() {
+            // Small models answer nothing at all; that is a failed answer too, not a quiet one.
+            report.checks.reject("empty");
+            report.checks.dropped += 1;
+            report
+                .rejected
+                .push(((*t).clone(), "the answer holds no line".into()));
+        }
         let mut kept = Vec::new();
         for (line, fault) in checked.lines {
             let Some(fault) = fault else {
