@@ -106,6 +106,21 @@ fn canonical(frames: &ClipFrames, entry: &SkeletonEntry) -> (DVec3, DQuat) {
     (origin, rotation)
 }
 
+/// Every frame's joint positions in the row's first-frame canonical frame (`frames × joints × 3`,
+/// metres, x right, y forward, z up): what the service's player draws.
+pub fn canonical_positions(frames: &ClipFrames, entry: &SkeletonEntry) -> Vec<f32> {
+    let (origin, rotation) = canonical(frames, entry);
+    frames
+        .positions
+        .chunks_exact(3)
+        .flat_map(|v| {
+            let c =
+                rotation * (DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])) - origin);
+            [c.x as f32, c.y as f32, c.z as f32]
+        })
+        .collect()
+}
+
 /// The camera's image-plane coordinates (metres: u to the image's right, v up) and depth of a
 /// canonical-frame point.
 fn project(p: DVec3) -> ([f64; 2], f64) {
