@@ -8,6 +8,7 @@ use common::repo;
 use common::service::start_service;
 use motionforge::build::{BuildOptions, build};
 use motionforge::config::Config;
+use serde_json::Value;
 
 const SCRIPT: &str = include_str!("browser/check_page.py");
 
@@ -70,6 +71,107 @@ async fn the_page_filters_plays_and_draws_a_clip_beside_its_mirror() {
     for shot in ["browser-paused.png", "browser-playing.png"] {
         let bytes = std::fs::read(shots.join(shot)).unwrap();
         assert!(bytes.len() > 10_000 && &bytes[1..4] == b"PNG", "{shot}");
+    }
+    service.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn browser_endpoints_page_the_clips_answer_f32_motions_and_stay_inside_the_report() {
+    use common::service::get;
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let mut config = Config::load(&repo().join("fixtures/demo.toml")).unwrap();
+    config.dataset.output = out.path().to_path_buf();
+    let built = config.clone();
+    tokio::task::spawn_blocking(move || build(&built, &BuildOptions::default()).unwrap())
+        .await
+        .unwrap();
+    let ds = config.dataset_dir();
+    // A file beside the report that must never be answered.
+    std::fs::write(ds.join("secret.txt"), "not for the browser").unwrap();
+    let (service, base) = start_service(
+        state.path(),
+        vec![config],
+        env!("CARGO_BIN_EXE_motionforge").into(),
+        "t0ken",
+    )
+    .await;
+    let client = reqwest::Client::new();
+
+    // Pages of 10 cover the listing once, in order.
+    let (status, all) = get(&client, &format!("{base}/datasets/demo/clips?limit=1000")).await;
+    assert_eq!(status, 200, "{all}");
+    let total = all["total"].as_u64().unwrap() as usize;
+    let mut paged = Vec::new();
+    for offset in (0..total).step_by(10) {
+        let (_, page) = get(
+            &client,
+            &format!("{base}/datasets/demo/clips?limit=10&offset={offset}"),
+        )
+        .await;
+        paged.extend(page["clips"].as_array().unwrap().iter().cloned());
+    }
+    assert_eq!(&Value::from(paged), &all["clips"]);
+    let (status, _) = get(&client, &format!("{base}/datasets/demo/clips?limit=0")).await;
+    assert_eq!(status, 400);
+
+    // One clip: its mirror is named; its motion has frames × joints × 3 numbers, and the first
+    // frame's pelvis is on the ground at the origin (the canonical frame).
+    let id = "cmu/01_01:1207-2407";
+    let (status, meta) = get(&client, &format!("{base}/datasets/demo/clip?id={id}")).await;
+    assert_eq!(status, 200, "{meta}");
+    assert_eq!(meta["mirror"], format!("{id}:m"));
+    let (status, motion) = get(&client, &format!("{base}/datasets/demo/motion?id={id}")).await;
+    assert_eq!(status, 200);
+    let (frames, joints) = (
+        motion["frames"].as_u64().unwrap() as usize,
+        motion["joints"].as_u64().unwrap() as usize,
+    );
+    let positions = motion["positions"].as_array().unwrap();
+    assert_eq!((frames, positions.len()), (300, frames * joints * 3));
+    let root = motion["names"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|n| n == &motion["root"])
+        .unwrap();
+    for k in 0..2 {
+        assert!(positions[root * 3 + k].as_f64().unwrap().abs() < 1e-6);
+    }
+    let (status, body) = get(&client, &format!("{base}/datasets/demo/motion?id=nope")).await;
+    assert_eq!(status, 404, "{body}");
+
+    // The report's files, and nothing outside the report folder.
+    let (_, files) = get(&client, &format!("{base}/datasets/demo/report")).await;
+    let files: Vec<&str> = files["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    assert!(files.contains(&"report.md") && files.contains(&"gallery/wave.png"));
+    let png = client
+        .get(format!(
+            "{base}/datasets/demo/report/file?path=gallery/wave.png"
+        ))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(png.headers()["content-type"], "image/png");
+    assert_eq!(&png.bytes().await.unwrap()[1..4], b"PNG");
+    for path in [
+        "../secret.txt",
+        "/etc/passwd",
+        "figures/../../secret.txt",
+        "",
+    ] {
+        let (status, body) = get(
+            &client,
+            &format!("{base}/datasets/demo/report/file?path={path}"),
+        )
+        .await;
+        assert_eq!(status, 400, "{path}: {body}");
+        assert!(!body.to_string().contains("not for the browser"));
     }
     service.stop().await.unwrap();
 }

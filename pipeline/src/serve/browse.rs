@@ -188,6 +188,15 @@ pub(crate) async fn clip_motion(
             frames.info.skeleton
         )));
     };
+    if skeleton.joints.len() != frames.info.joints {
+        return Err(ApiError::internal(format!(
+            "skeleton `{}` has {} joints, the row of `{}` {}",
+            frames.info.skeleton,
+            skeleton.joints.len(),
+            frames.info.clip_id,
+            frames.info.joints
+        )));
+    }
     let positions = dataset::preview::canonical_positions(&frames, skeleton);
     Ok(Json(json!({
         "clip_id": frames.info.clip_id,
