@@ -499,6 +499,10 @@ enum Command {
         /// Namco: `dataset-2_{content}_{style}_{take}`).
         #[arg(long, requires = "build")]
         pattern: Option<String>,
+        /// Instead, time `preview` (GIF and filmstrip, one thread) on the first 100 original
+        /// clips of this built dataset folder, written to a temporary folder: previews per second.
+        #[arg(long, value_name = "DATASET", conflicts_with_all = ["build", "write_frames"])]
+        previews: Option<PathBuf>,
     },
 }
 
@@ -924,7 +928,11 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             copies,
             keep,
             pattern,
+            previews,
         } => match write_frames {
+            _ if previews.is_some() => {
+                cli::browse::bench_previews(previews.as_deref().unwrap_or(Path::new(".")))?
+            }
             Some(frames) => bench_write(&data, &profile, frames)?,
             None if build => bench_build(
                 &BuildBench {

@@ -217,3 +217,51 @@ pub(crate) fn preview(
     }
     Ok(())
 }
+
+/// `bench --previews <dataset>`: GIF and filmstrip of the first 100 original clips, one thread.
+pub(crate) fn bench_previews(dir: &Path) -> Result<()> {
+    let clips = dataset::list_clips(dir)?;
+    let skeletons = dataset::read_skeletons(dir)?;
+    let chosen: Vec<&ClipInfo> = clips.iter().filter(|c| !c.mirrored).take(100).collect();
+    let work = tempfile_dir()?;
+    let options = PreviewOptions::default();
+    let start = std::time::Instant::now();
+    let (mut frames, mut bytes) = (0usize, 0u64);
+    for clip in &chosen {
+        let row = dataset::read_clip_in(dir, &clips, &clip.clip_id)?;
+        let skeleton = skeletons
+            .get(&row.info.skeleton)
+            .with_context(|| format!("skeleton `{}` not in skeletons.json", row.info.skeleton))?;
+        let drawn = preview::render(
+            &[Panel {
+                frames: &row,
+                skeleton,
+            }],
+            &options,
+        )?;
+        frames += drawn.frames.len();
+        let [gif, png] = preview::write_preview(&drawn, &work, &preview::file_stem(&clip.clip_id))?;
+        bytes += std::fs::metadata(gif)?.len() + std::fs::metadata(png)?.len();
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let _ = std::fs::remove_dir_all(&work);
+    writeln!(
+        std::io::stdout(),
+        "{} previews ({} GIF frames at {} fps, {} px, filmstrips of {}), {:.1} MB, one thread: {:.2} s, {:.1} previews/s",
+        chosen.len(),
+        frames,
+        options.fps,
+        options.size,
+        options.strip_frames,
+        bytes as f64 / 1e6,
+        seconds,
+        chosen.len() as f64 / seconds
+    )?;
+    Ok(())
+}
+
+fn tempfile_dir() -> Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("motionforge-previews-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    Ok(dir)
+}

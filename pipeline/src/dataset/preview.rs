@@ -70,13 +70,9 @@ fn render_err(e: impl std::fmt::Display) -> DatasetError {
 /// The first frame's canonical frame of a row: the root-motion joint dropped to the ground, and
 /// the turn about z that makes the character face +y (from the hips, else shoulders).
 fn canonical(frames: &ClipFrames, entry: &SkeletonEntry) -> (DVec3, DQuat) {
-    let p = |j: usize| {
-        let f = frames.frame(0);
-        DVec3::new(
-            f64::from(f[j * 3]),
-            f64::from(f[j * 3 + 1]),
-            f64::from(f[j * 3 + 2]),
-        )
+    let p = |j: usize| match frames.positions.get(j * 3..j * 3 + 3) {
+        Some(v) => DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])),
+        None => DVec3::ZERO,
     };
     let root = entry
         .joints
@@ -104,6 +100,21 @@ fn canonical(frames: &ClipFrames, entry: &SkeletonEntry) -> (DVec3, DQuat) {
         }
     }
     (origin, rotation)
+}
+
+/// Every frame's joint positions in the row's first-frame canonical frame (`frames × joints × 3`,
+/// metres, x right, y forward, z up): what the service's player draws.
+pub fn canonical_positions(frames: &ClipFrames, entry: &SkeletonEntry) -> Vec<f32> {
+    let (origin, rotation) = canonical(frames, entry);
+    frames
+        .positions
+        .chunks_exact(3)
+        .flat_map(|v| {
+            let c =
+                rotation * (DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])) - origin);
+            [c.x as f32, c.y as f32, c.z as f32]
+        })
+        .collect()
 }
 
 /// The camera's image-plane coordinates (metres: u to the image's right, v up) and depth of a
@@ -415,6 +426,17 @@ pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, Dat
             "preview rate {} fps: expected more than 0 and at most 100",
             options.fps
         )));
+    }
+    for p in panels {
+        if p.skeleton.joints.len() != p.frames.info.joints {
+            return Err(render_err(format!(
+                "clip `{}`: skeleton `{}` has {} joints, the row {}",
+                p.frames.info.clip_id,
+                p.frames.info.skeleton,
+                p.skeleton.joints.len(),
+                p.frames.info.joints
+            )));
+        }
     }
     let size = options.size.clamp(64, 2048);
     let scenes: Vec<Scene> = panels.iter().map(|p| scene(p, options.fps)).collect();

@@ -82,6 +82,28 @@ fn table() -> Vec<Route> {
         route(Verb::Get, "/builds/{id}", get_build),
         route(Verb::Get, "/datasets", list_datasets),
         route(Verb::Get, "/datasets/{name}/stats", dataset_stats),
+        route(Verb::Get, "/", super::browse::page),
+        route(
+            Verb::Get,
+            "/datasets/{name}/clips",
+            super::browse::list_clips,
+        ),
+        route(Verb::Get, "/datasets/{name}/clip", super::browse::clip_meta),
+        route(
+            Verb::Get,
+            "/datasets/{name}/motion",
+            super::browse::clip_motion,
+        ),
+        route(
+            Verb::Get,
+            "/datasets/{name}/report",
+            super::browse::report_files,
+        ),
+        route(
+            Verb::Get,
+            "/datasets/{name}/report/file",
+            super::browse::report_file,
+        ),
     ]
 }
 
@@ -173,7 +195,7 @@ pub(crate) struct ApiError {
 }
 
 impl ApiError {
-    fn new(status: StatusCode, message: impl Into<String>) -> ApiError {
+    pub(crate) fn new(status: StatusCode, message: impl Into<String>) -> ApiError {
         ApiError {
             status,
             message: message.into(),
@@ -182,7 +204,7 @@ impl ApiError {
 
     /// A failure of the service itself: the details (paths, SQLite errors) go to its log, not
     /// to a caller who may not hold the token.
-    fn internal(err: impl std::fmt::Display) -> ApiError {
+    pub(crate) fn internal(err: impl std::fmt::Display) -> ApiError {
         say(&format!("internal error answering a request: {err}"));
         ApiError::new(
             StatusCode::INTERNAL_SERVER_ERROR,
@@ -328,7 +350,7 @@ async fn create_build(
     ))
 }
 
-fn unknown_dataset(shared: &Shared, name: &str) -> ApiError {
+pub(crate) fn unknown_dataset(shared: &Shared, name: &str) -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
         format!(

@@ -6,6 +6,7 @@
 //! service down. `docs/service.md` explains running it and `docs/openapi.json` describes the API.
 
 pub mod api;
+mod browse;
 mod child;
 pub mod history;
 pub mod log;
