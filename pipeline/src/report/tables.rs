@@ -105,6 +105,27 @@ fn title_or(stats: &Stats, fallback: &str) -> String {
 // ---------------------------------------------------------------------------------------------
 // LaTeX.
 
+/// The text-statistics rows: (statistic, value) in the order both tables print them.
+fn text_rows(t: &super::stats::TextStats) -> Vec<(String, String)> {
+    let summary = |s: &Option<super::Summary>| match s {
+        None => "none".to_string(),
+        Some(s) => format!(
+            "{:.1} mean, {} median, {}-{}",
+            s.mean, s.median, s.min, s.max
+        ),
+    };
+    vec![
+        ("Original real clips".into(), t.clips.to_string()),
+        ("Captions".into(), t.captions.to_string()),
+        (
+            "Vocabulary (distinct words)".into(),
+            t.vocabulary.to_string(),
+        ),
+        ("Words per caption".into(), summary(&t.words_per_caption)),
+        ("Captions per clip".into(), summary(&t.captions_per_clip)),
+    ]
+}
+
 fn tex_table(out: &mut String, caption: &str, label: &str, spec: &str, body: &str) {
     let _ = writeln!(out, "\\begin{{table}}[tbp]");
     let _ = writeln!(out, "\\centering");
@@ -204,6 +225,25 @@ pub(crate) fn latex(stats: &Stats) -> String {
             "Sources of the body-part labels of {title} (original real clips; synthetic pairs take their sources' labels)."
         ),
         "tab:mf-label-sources",
+        "lr",
+        &body,
+    );
+
+    let mut body = String::from("Statistic & Value \\\\\n\\midrule\n");
+    for (name, value) in text_rows(&stats.text) {
+        let _ = writeln!(body, "{name} & {value} \\\\");
+    }
+    let _ = writeln!(
+        body,
+        "\\midrule\nMost frequent verbs & Captions \\\\\n\\midrule"
+    );
+    for (verb, n) in &stats.text.top_verbs {
+        let _ = writeln!(body, "{} & {n} \\\\", latex_escape(verb));
+    }
+    tex_table(
+        &mut out,
+        &format!("Captions of {title} (original real clips)."),
+        "tab:mf-text",
         "lr",
         &body,
     );
@@ -461,6 +501,19 @@ pub(crate) fn markdown(stats: &Stats) -> String {
     md_header(&mut out, &["label source", "clips"], 1);
     for (source, n) in &stats.label_sources {
         md_row(&mut out, &[markdown_escape(source), n.to_string()]);
+    }
+
+    out.push_str(
+        "\n## Captions\n\nThe captions (`texts`) of the original real clips: words are lowercase runs of letters, digits and `'`; verbs are lemmas tagged by the HumanML3D caption tagger, counted once per caption.\n\n",
+    );
+    md_header(&mut out, &["statistic", "value"], 1);
+    for (name, value) in text_rows(&stats.text) {
+        md_row(&mut out, &[name, value]);
+    }
+    out.push('\n');
+    md_header(&mut out, &["most frequent verb", "captions"], 1);
+    for (verb, n) in &stats.text.top_verbs {
+        md_row(&mut out, &[markdown_escape(verb), n.to_string()]);
     }
 
     out.push_str(
