@@ -421,7 +421,7 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
         "tab:mf-composition",
         "tab:mf-plausibility",
         "tab:mf-text",
-        "Vocabulary (distinct words)",
+        "Vocabulary &",
     ] {
         assert!(tex.contains(needle), "tables.tex lacks {needle:?}");
     }
@@ -433,6 +433,9 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
         tex.matches("\\begin{table}").count(),
         tex.matches("\\end{table}").count()
     );
+
+    // tables.tex typesets in a two-column paper without an overfull box.
+    compile_two_column(&out1.join("tables.tex"));
 
     // report.md embeds every figure.
     let md = String::from_utf8(a[Path::new("report.md")].clone()).unwrap();
@@ -496,6 +499,39 @@ fn violins_stay_within_each_types_data_range() {
     // It reaches both ends (clipped, not shrunk).
     let ys: Vec<f64> = outline.iter().map(|p| p.1).collect();
     assert!(ys.contains(&lo) && ys.contains(&hi));
+}
+
+/// Compiles `tables` in a two-column article with pdflatex and fails on any overfull box (a table
+/// wider than its column). Where LaTeX is not installed (scripts/test.sh installs it from Debian
+/// packages when run as root) it says so on standard error and checks nothing more.
+fn compile_two_column(tables: &Path) {
+    if Command::new("pdflatex").arg("--version").output().is_err() {
+        eprintln!(
+            "SKIPPED: tables.tex two-column compile: pdflatex is not installed (apt-get install texlive-latex-base texlive-latex-recommended)"
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(tables, dir.path().join("tables.tex")).unwrap();
+    std::fs::write(
+        dir.path().join("paper.tex"),
+        "\\documentclass[twocolumn]{article}\n\\usepackage{booktabs}\n\\begin{document}\nText.\n\\input{tables.tex}\n\\end{document}\n",
+    )
+    .unwrap();
+    let out = Command::new("pdflatex")
+        .args(["-interaction=nonstopmode", "-halt-on-error", "paper.tex"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let log = std::fs::read_to_string(dir.path().join("paper.log")).unwrap_or_default();
+    assert!(out.status.success(), "pdflatex failed:\n{log}");
+    assert!(dir.path().join("paper.pdf").is_file());
+    let overfull: Vec<&str> = log.lines().filter(|l| l.starts_with("Overfull")).collect();
+    assert!(
+        overfull.is_empty(),
+        "{overfull:#?}\n{}",
+        std::fs::read_to_string(tables).unwrap()
+    );
 }
 
 /// A table with a `split` column (added with pyarrow, as the sharded writer will): composition

@@ -107,27 +107,45 @@ fn title_or(stats: &Stats, fallback: &str) -> String {
 
 /// The text-statistics rows: (statistic, value) in the order both tables print them.
 fn text_rows(t: &super::stats::TextStats) -> Vec<(String, String)> {
-    let summary = |s: &Option<super::Summary>| match s {
-        None => "none".to_string(),
-        Some(s) => format!(
-            "{:.1} mean, {} median, {}-{}",
-            s.mean, s.median, s.min, s.max
-        ),
+    // Short cells, so the table fits one column of a two-column paper.
+    let mean =
+        |s: &Option<super::Summary>| s.map_or("none".to_string(), |s| format!("{:.1}", s.mean));
+    let range = |s: &Option<super::Summary>| {
+        s.map_or("none".to_string(), |s| format!("{} to {}", s.min, s.max))
     };
     vec![
-        ("Original real clips".into(), t.clips.to_string()),
+        ("Clips".into(), t.clips.to_string()),
         ("Captions".into(), t.captions.to_string()),
+        ("Vocabulary".into(), t.vocabulary.to_string()),
+        ("Words per caption, mean".into(), mean(&t.words_per_caption)),
         (
-            "Vocabulary (distinct words)".into(),
-            t.vocabulary.to_string(),
+            "Words per caption, range".into(),
+            range(&t.words_per_caption),
         ),
-        ("Words per caption".into(), summary(&t.words_per_caption)),
-        ("Captions per clip".into(), summary(&t.captions_per_clip)),
+        ("Captions per clip, mean".into(), mean(&t.captions_per_clip)),
+        (
+            "Captions per clip, range".into(),
+            range(&t.captions_per_clip),
+        ),
     ]
 }
 
+/// Tables that cannot fit one column of a two-column paper (eight or more columns, or columns
+/// per source kind) are set as `table*`, across both columns; the rest fit a column.
+/// `tests/report.rs` compiles `tables.tex` in a two-column document and checks for overfull boxes.
+const WIDE_TABLES: [&str; 3] = [
+    "tab:mf-motion-types",
+    "tab:mf-composition",
+    "tab:mf-plausibility",
+];
+
 fn tex_table(out: &mut String, caption: &str, label: &str, spec: &str, body: &str) {
-    let _ = writeln!(out, "\\begin{{table}}[tbp]");
+    let float = if WIDE_TABLES.contains(&label) {
+        "table*"
+    } else {
+        "table"
+    };
+    let _ = writeln!(out, "\\begin{{{float}}}[tbp]");
     let _ = writeln!(out, "\\centering");
     let _ = writeln!(out, "\\caption{{{caption}}}");
     let _ = writeln!(out, "\\label{{{label}}}");
@@ -136,7 +154,7 @@ fn tex_table(out: &mut String, caption: &str, label: &str, spec: &str, body: &st
     out.push_str(body);
     let _ = writeln!(out, "\\bottomrule");
     let _ = writeln!(out, "\\end{{tabular}}");
-    let _ = writeln!(out, "\\end{{table}}");
+    let _ = writeln!(out, "\\end{{{float}}}");
     out.push('\n');
 }
 
