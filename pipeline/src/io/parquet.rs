@@ -135,6 +135,9 @@ pub struct Row<'a> {
     pub frames: usize,
     /// Positions, rotations and root in the dataset frame.
     pub motion: DatasetMotion,
+    /// `frames × joints × 3` positions in the clip's first-frame canonical frame (what a
+    /// trainer feeds a model: the start over the origin, facing +y).
+    pub canonical: Vec<f32>,
     /// The derived feature columns that are switched on.
     pub features: Features,
     /// Plausibility metrics: the clip's own when it has them (a synthetic pair, measured when it
@@ -156,6 +159,7 @@ impl<'a> Row<'a> {
             .plausibility
             .or_else(|| Some(plausibility(&world, joints, motion.fps, profile)));
         let dataset = dataset_motion_at(motion, profile, &world);
+        let canonical = canonical_positions(&dataset.positions, joints, profile);
         let features = crate::features::features(
             &dataset.positions,
             &dataset.rotations,
@@ -171,6 +175,7 @@ impl<'a> Row<'a> {
             joints,
             frames: motion.num_frames(),
             motion: dataset,
+            canonical,
             features,
             plausibility,
         }
@@ -191,6 +196,28 @@ impl<'a> Row<'a> {
             })?;
         Ok(Row::new(clip, &loaded.motion, profile, config))
     }
+}
+
+/// Dataset-frame positions (`frames × joints × 3`) in the first frame's canonical frame
+/// ([`crate::motion::canonical::canonical_frame`], as the goals use). A first frame with no
+/// facing direction (hips and shoulders stacked) is only moved over the origin.
+fn canonical_positions(positions: &[f32], joints: usize, profile: &Profile) -> Vec<f32> {
+    use glam::DVec3;
+    let point = |c: &[f32]| DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]));
+    let first: Vec<DVec3> = positions.chunks_exact(3).take(joints).map(point).collect();
+    let frame = crate::motion::canonical::canonical_frame(&first, profile).unwrap_or_else(|| {
+        let pelvis = first.get(profile.root).copied().unwrap_or_default();
+        crate::motion::canonical::CanonicalFrame {
+            origin: DVec3::new(pelvis.x, pelvis.y, 0.0),
+            rotation: glam::DQuat::IDENTITY,
+        }
+    });
+    let mut out = Vec::with_capacity(positions.len());
+    for c in positions.chunks_exact(3) {
+        let p = frame.apply(point(c));
+        out.extend_from_slice(&[p.x as f32, p.y as f32, p.z as f32]);
+    }
+    out
 }
 
 fn list(values: Vec<f32>, lengths: Vec<usize>) -> Result<ArrayRef, ArrowError> {
@@ -500,6 +527,14 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             optional_bool_lists(rows.iter().map(|r| r.features.foot_contacts.as_deref())),
         ),
         ("future_root", derived(|f| f.future_root.as_deref())),
+        ("canonical_positions", {
+            let lengths: Vec<usize> = rows.iter().map(|r| r.canonical.len()).collect();
+            let mut values = Vec::with_capacity(lengths.iter().sum());
+            for r in rows {
+                values.extend_from_slice(&r.canonical);
+            }
+            list(values, lengths)?
+        }),
     ];
     let columns = crate::io::schema::in_schema_order(&schema, named)?;
     let batch = RecordBatch::try_new(schema, columns)?;
