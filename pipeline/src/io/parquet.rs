@@ -220,6 +220,40 @@ fn canonical_positions(positions: &[f32], joints: usize, profile: &Profile) -> V
     out
 }
 
+/// One row of a per-frame array column (`joint_positions`, `canonical_positions`, ...) as flat
+/// f32 values in frame, joint, component order. The one place readers take the column's list
+/// layout from: flat lists today, and nested or fixed-size lists (frames x joints x 3) read the
+/// same, so a change of layout stays here. `None` for a null row, a row out of range or a column
+/// that is not a list of f32.
+pub fn frame_values(column: &ArrayRef, row: usize) -> Option<Vec<f32>> {
+    use arrow_array::Array;
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::Float32Type;
+    fn flatten(array: &ArrayRef, out: &mut Vec<f32>) -> Option<()> {
+        if let Some(values) = array.as_primitive_opt::<Float32Type>() {
+            out.extend_from_slice(values.values());
+        } else if let Some(list) = array.as_list_opt::<i32>() {
+            for i in 0..list.len() {
+                flatten(&list.value(i), out)?;
+            }
+        } else if let Some(list) = array.as_fixed_size_list_opt() {
+            for i in 0..list.len() {
+                flatten(&list.value(i), out)?;
+            }
+        } else {
+            return None;
+        }
+        Some(())
+    }
+    let list = column.as_list_opt::<i32>()?;
+    if row >= list.len() || list.is_null(row) {
+        return None;
+    }
+    let mut out = Vec::new();
+    flatten(&list.value(row), &mut out)?;
+    Some(out)
+}
+
 fn list(values: Vec<f32>, lengths: Vec<usize>) -> Result<ArrayRef, ArrowError> {
     let field = Arc::new(Field::new("item", DataType::Float32, false));
     let offsets = checked_offsets(&lengths)?;
@@ -723,4 +757,39 @@ pub fn write_plans(
     let mut writer = ArrowWriter::try_new(file, schema, Some(props))?;
     writer.write(&batch)?;
     Ok(writer.into_inner()?)
+}
+
+#[cfg(test)]
+mod frame_values_tests {
+    use super::*;
+    use arrow_array::{Array, FixedSizeListArray};
+
+    #[test]
+    fn flat_and_nested_layouts_give_the_same_values() {
+        // Two rows: 2 frames x 1 joint x 3, then 1 frame x 1 joint x 3.
+        let values: Vec<f32> = (0..9).map(|v| v as f32).collect();
+        let flat = list(values.clone(), vec![6, 3]).unwrap();
+        let item = Arc::new(Field::new("item", DataType::Float32, false));
+        let triples = FixedSizeListArray::try_new(
+            Arc::clone(&item),
+            3,
+            Arc::new(Float32Array::from(values.clone())),
+            None,
+        )
+        .unwrap();
+        let nested: ArrayRef = Arc::new(
+            ListArray::try_new(
+                Arc::new(Field::new("item", triples.data_type().clone(), false)),
+                checked_offsets(&[2, 1]).unwrap(),
+                Arc::new(triples),
+                None,
+            )
+            .unwrap(),
+        );
+        for row in 0..2 {
+            assert_eq!(frame_values(&flat, row), frame_values(&nested, row));
+        }
+        assert_eq!(frame_values(&nested, 1), Some(vec![6.0, 7.0, 8.0]));
+        assert_eq!(frame_values(&flat, 2), None);
+    }
 }
