@@ -1,18 +1,19 @@
 #!/usr/bin/env bash
-# Installs the Debian packages the tests drive (tests/browser.rs: headless Chromium and its
-# driver) when they are missing. Needs root or sudo; on a machine without apt-get it says what to
-# install instead of guessing.
+# Installs the Debian packages the tests drive when they are missing: headless Chromium and its
+# driver (tests/browser.rs) and LaTeX (tests/report.rs compiles tables.tex in a two-column
+# document). Needs root or sudo; on a machine without apt-get it says what to install instead.
 set -euo pipefail
-packages=(chromium chromium-driver)
-if command -v chromium >/dev/null && command -v chromedriver >/dev/null; then
-  exit 0
-fi
+missing=()
+command -v chromium >/dev/null || missing+=(chromium)
+command -v chromedriver >/dev/null || missing+=(chromium-driver)
+command -v pdflatex >/dev/null || missing+=(texlive-latex-base texlive-latex-recommended)
+[ ${#missing[@]} -eq 0 ] && exit 0
 if ! command -v apt-get >/dev/null; then
-  echo "scripts/system-packages.sh: install ${packages[*]} (Chromium and ChromeDriver) with your package manager; tests/browser.rs needs them" >&2
+  echo "scripts/system-packages.sh: install ${missing[*]} (or your system's equivalents) with your package manager; the browser and report tests need them" >&2
   exit 1
 fi
 sudo=()
 [ "$(id -u)" -eq 0 ] || sudo=(sudo)
-echo "installing ${packages[*]} for the browser test (first run only)" >&2
+echo "installing ${missing[*]} for the tests (first run only)" >&2
 "${sudo[@]}" apt-get update -qq >&2
-DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq "${packages[@]}" >&2
+DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2

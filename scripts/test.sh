@@ -3,9 +3,10 @@
 # Arguments go to `cargo test` (for example `scripts/test.sh --test loaders`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# tests/common runs the independent readers (pyarrow, polars, datasets, duckdb, spaCy) with this
-# Python instead of whatever `python3` is on PATH.
+# Debian packages the tests drive (Chromium, LaTeX), when missing.
 scripts/system-packages.sh
+# tests/common runs the independent readers (pyarrow, polars, datasets, duckdb, spaCy, selenium)
+# with this Python instead of whatever `python3` is on PATH.
 MOTIONFORGE_PYTHON="$(scripts/python-env.sh)"
 export MOTIONFORGE_PYTHON
 cargo test --workspace "$@"

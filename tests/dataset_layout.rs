@@ -22,7 +22,7 @@ import glob, hashlib, json, os, sys
 import numpy as np, pyarrow.parquet as pq
 root = sys.argv[1]
 manifest = json.load(open(os.path.join(root, 'manifest.json')))
-assert manifest['schema_version'] == 7, manifest['schema_version']
+assert manifest['schema_version'] == 8, manifest['schema_version']
 total = 0
 captures = {}
 for split, entry in manifest['splits'].items():
@@ -53,12 +53,26 @@ for i in range(t.num_rows):
     assert t['rotations_6d'][i].as_py() is None and t['joint_velocities'][i].as_py() is None
     np.asarray(t['foot_contacts'][i].values).reshape(n, 4)
     np.asarray(t['future_root'][i].values).reshape(n, 3, 3)
+    # Canonical positions: the same motion moved rigidly (rotation about z, then a shift), the
+    # first frame's pelvis (the root-motion joint, `root_translation`) over the origin.
+    world = np.asarray(t['joint_positions'][i].values, dtype=np.float64).reshape(n, j, 3)
+    canon = np.asarray(t['canonical_positions'][i].values, dtype=np.float64).reshape(n, j, 3)
+    root0 = np.asarray(t['root_translation'][i].values, dtype=np.float64).reshape(n, 3)[0]
+    pelvis = int(np.argmin(np.abs(world[0] - root0).sum(1)))
+    assert np.abs(canon[0, pelvis, :2]).max() < 1e-4, canon[0, pelvis]
+    assert np.abs(canon[..., 2] - world[..., 2]).max() < 1e-4, 'heights kept'
+    d_world = np.linalg.norm(world[:, :, None] - world[:, None, :], axis=-1)
+    d_canon = np.linalg.norm(canon[:, :, None] - canon[:, None, :], axis=-1)
+    assert np.abs(d_world - d_canon).max() < 1e-4, np.abs(d_world - d_canon).max()
 mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positions_mean.npy'))
 std = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positions_std.npy'))
 assert mean.shape == (22, 3) and std.shape == (22, 3) and (std > 0).all()
 train = t.filter(pq.read_table(os.path.join(root, 'data')).column('split').to_numpy(zero_copy_only=False) == 'train')
 pos = np.concatenate([np.asarray(train['joint_positions'][i].values).reshape(-1, 22, 3) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
 assert np.allclose(pos.mean(0), mean, atol=1e-4), 'mean over the training split'
+canon_train = np.concatenate([np.asarray(train['canonical_positions'][i].values).reshape(-1, 22, 3) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
+canon_mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'canonical_positions_mean.npy'))
+assert np.allclose(canon_train.mean(0), canon_mean, atol=1e-4), 'canonical mean over the training split'
 # Every profile has statistics: CMU has no train rows in the demo, so its come from the first
 # split holding it, and normalization.json says which; constant dimensions are named.
 summary = json.load(open(os.path.join(root, 'normalization', 'normalization.json')))['profiles']
@@ -75,7 +89,7 @@ cmu_mean = np.load(os.path.join(root, 'normalization', 'cmu', 'joint_positions_m
 assert np.allclose(cmu.mean(0), cmu_mean, atol=1e-4), 'CMU mean over its split'
 norm = pq.read_table(os.path.join(root, 'normalization', 'normalization.parquet')).to_pylist()
 assert {r['profile']: r['split'] for r in norm} == {'bandai-namco': 'train', 'cmu': summary['cmu']['split']}
-assert sorted('joint %d %s' % (r['joint'], 'xyz'[r['dim']]) for r in norm if r['constant'] and r['profile'] == 'bandai-namco') == sorted(numpy_constant)
+assert sorted('joint %d %s' % (r['joint'], 'xyz'[r['dim']]) for r in norm if r['constant'] and r['profile'] == 'bandai-namco' and r['feature'] == 'joint_positions') == sorted(numpy_constant)
 card = open(os.path.join(root, 'README.md')).read()
 assert card.startswith('---\n') and 'data_files' in card and 'license' in card
 import polars as pl

@@ -95,7 +95,8 @@ for t in tables:
     has_split = "split" in t.column_names
     d = t.select([c for c in ["clip_id", "source_kind", "mirrored", "motion_type", "fps",
                               "num_frames", "label_source", "goal_pelvis"]
-                  + (["split"] if has_split else [])]).to_pylist()
+                  + (["split"] if has_split else [])
+                  + (["texts"] if "texts" in t.column_names else [])]).to_pylist()
     for r in d:
         r["split"] = r["split"] if has_split else "all"
         rows.append(r)
@@ -119,6 +120,14 @@ for r in rows:
             out["label_sources"][k] = out["label_sources"].get(k, 0) + 1
         if r["goal_pelvis"] is not None:
             out["goals"] += 1
+import re
+captions = [c for r in rows if not r["mirrored"] and r["source_kind"] != "synthetic" for c in (r.get("texts") or [])]
+words = [re.findall(r"[a-z0-9']+", c.lower()) for c in captions]
+per_clip = [len(r.get("texts") or []) for r in rows if not r["mirrored"] and r["source_kind"] != "synthetic"]
+out["text"] = {"captions": len(captions), "vocabulary": len({w for ws in words for w in ws}),
+               "words_median": float(np.median([len(ws) for ws in words])) if words else None,
+               "words_mean": float(np.mean([len(ws) for ws in words])) if words else None,
+               "per_clip_mean": float(np.mean(per_clip)) if per_clip else None}
 print(json.dumps(out))
 "#;
 
@@ -169,6 +178,20 @@ fn check_against_pyarrow(stats: &Stats, tables: &[PathBuf]) {
         serde_json::from_value(py["label_sources"].clone()).unwrap();
     assert_eq!(stats.label_sources, py_labels);
     assert_eq!(stats.goals.clips as u64, py["goals"].as_u64().unwrap());
+    // Caption statistics: counts, vocabulary and words per caption as numpy computes them.
+    let t = &stats.text;
+    assert_eq!(t.captions as u64, py["text"]["captions"].as_u64().unwrap());
+    assert_eq!(
+        t.vocabulary as u64,
+        py["text"]["vocabulary"].as_u64().unwrap()
+    );
+    if let Some(w) = t.words_per_caption {
+        assert!((w.median - py["text"]["words_median"].as_f64().unwrap()).abs() < 1e-9);
+        assert!((w.mean - py["text"]["words_mean"].as_f64().unwrap()).abs() < 1e-6);
+    }
+    if let Some(c) = t.captions_per_clip {
+        assert!((c.mean - py["text"]["per_clip_mean"].as_f64().unwrap()).abs() < 1e-6);
+    }
 }
 
 fn input(tables: &[PathBuf], drops: BTreeMap<String, usize>) -> ReportInput {
@@ -279,6 +302,13 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
     let input = input(&tables, drops);
     let stats = statistics(&rows, &input);
     check_against_pyarrow(&stats, &tables);
+    // The demo's captions ("walk, normal style", "wave", ...) give verbs; the tagger lemmatises.
+    assert!(stats.text.vocabulary > 5, "{:?}", stats.text);
+    assert!(
+        stats.text.top_verbs.iter().any(|(v, _)| v == "walk"),
+        "{:?}",
+        stats.text.top_verbs
+    );
 
     // Order of rows does not matter.
     let mut reversed = rows.clone();
@@ -390,6 +420,8 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
         "tab:mf-motion-types",
         "tab:mf-composition",
         "tab:mf-plausibility",
+        "tab:mf-text",
+        "Vocabulary &",
     ] {
         assert!(tex.contains(needle), "tables.tex lacks {needle:?}");
     }
@@ -401,6 +433,9 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
         tex.matches("\\begin{table}").count(),
         tex.matches("\\end{table}").count()
     );
+
+    // tables.tex typesets in a two-column paper without an overfull box.
+    compile_two_column(&out1.join("tables.tex"));
 
     // report.md embeds every figure.
     let md = String::from_utf8(a[Path::new("report.md")].clone()).unwrap();
@@ -466,6 +501,39 @@ fn violins_stay_within_each_types_data_range() {
     assert!(ys.contains(&lo) && ys.contains(&hi));
 }
 
+/// Compiles `tables` in a two-column article with pdflatex and fails on any overfull box (a table
+/// wider than its column). Where LaTeX is not installed (scripts/test.sh installs it from Debian
+/// packages when run as root) it says so on standard error and checks nothing more.
+fn compile_two_column(tables: &Path) {
+    if Command::new("pdflatex").arg("--version").output().is_err() {
+        eprintln!(
+            "SKIPPED: tables.tex two-column compile: pdflatex is not installed (apt-get install texlive-latex-base texlive-latex-recommended)"
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(tables, dir.path().join("tables.tex")).unwrap();
+    std::fs::write(
+        dir.path().join("paper.tex"),
+        "\\documentclass[twocolumn]{article}\n\\usepackage{booktabs}\n\\begin{document}\nText.\n\\input{tables.tex}\n\\end{document}\n",
+    )
+    .unwrap();
+    let out = Command::new("pdflatex")
+        .args(["-interaction=nonstopmode", "-halt-on-error", "paper.tex"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let log = std::fs::read_to_string(dir.path().join("paper.log")).unwrap_or_default();
+    assert!(out.status.success(), "pdflatex failed:\n{log}");
+    assert!(dir.path().join("paper.pdf").is_file());
+    let overfull: Vec<&str> = log.lines().filter(|l| l.starts_with("Overfull")).collect();
+    assert!(
+        overfull.is_empty(),
+        "{overfull:#?}\n{}",
+        std::fs::read_to_string(tables).unwrap()
+    );
+}
+
 /// A table with a `split` column (added with pyarrow, as the sharded writer will): composition
 /// per split, checked against pyarrow.
 #[test]
@@ -515,6 +583,7 @@ fn row(id: &str, kind: &str, mirrored: bool, motion_type: Option<&str>, frames: 
         frames,
         goal_pelvis: None,
         label_source: None,
+        texts: vec![format!("a person does {id}")],
         plausibility: Some([0.1, 0.0, 0.1, 5.0]),
     }
 }
@@ -666,6 +735,7 @@ fn large_dataset_renders_every_figure() {
                 }
                 .to_string(),
             ),
+            texts: vec!["a person walks forward and waves".to_string()],
             plausibility: Some([
                 (next() * 0.1) as f32,
                 (next() * 0.01) as f32,

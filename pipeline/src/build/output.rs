@@ -292,7 +292,7 @@ pub(super) fn card_body(
     let _ = writeln!(b, "\n## Using it\n");
     let _ = writeln!(
         b,
-        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
+        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's canonical joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
     );
     // The folder's name as a Python string (JSON's quoting is valid Python for these names).
     let root = serde_json::to_string(&config.dataset.name).unwrap_or_default();
@@ -344,10 +344,11 @@ root = "<dataset folder>"  # this folder (the one holding README.md and data/)
 train = load_dataset(root, split="train").with_format("numpy")
 row = train[0]
 frames, joints = int(row["num_frames"]), int(row["num_joints"])
-positions = row["joint_positions"].reshape(frames, joints, 3)  # metres, x right, y forward, z up
+# Metres, the first frame's pelvis over the origin facing +y (x right, z up).
+positions = row["canonical_positions"].reshape(frames, joints, 3)
 profile = str(row["skeleton"]).split(":")[0]
-mean = np.load(f"{root}/normalization/{profile}/joint_positions_mean.npy")  # (joints, 3)
-std = np.load(f"{root}/normalization/{profile}/joint_positions_std.npy")
+mean = np.load(f"{root}/normalization/{profile}/canonical_positions_mean.npy")  # (joints, 3)
+std = np.load(f"{root}/normalization/{profile}/canonical_positions_std.npy")
 normalised = (positions - mean) / std
 normalised[:, std < 1e-6] = 0.0  # constant dimensions
 print(row["text"], positions.shape, normalised.shape)

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 
 use arrow_array::RecordBatch;
 use arrow_array::cast::AsArray;
-use arrow_array::types::{Float32Type, Float64Type, Int32Type};
+use arrow_array::types::{Float64Type, Int32Type};
 use glam::DVec3;
 use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
@@ -475,20 +475,17 @@ fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportErro
     let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
     let positions = batch
         .column_by_name("joint_positions")
-        .and_then(|c| c.as_list_opt::<i32>())
         .ok_or_else(|| missing("joint_positions"))?;
     let mut out = Vec::with_capacity(batch.num_rows());
     for i in 0..batch.num_rows() {
-        let values = positions.value(i);
-        let values = values
-            .as_primitive_opt::<Float32Type>()
+        let values = crate::io::parquet::frame_values(positions, i)
             .ok_or_else(|| missing("joint_positions"))?;
         out.push(Frames {
             skeleton: skeleton.value(i).to_string(),
             fps: fps.value(i),
             frames: usize::try_from(frames.value(i)).unwrap_or(0),
             joints: usize::try_from(joints.value(i)).unwrap_or(0),
-            positions: values.values().to_vec(),
+            positions: values,
         });
     }
     Ok(out)

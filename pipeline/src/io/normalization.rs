@@ -183,8 +183,10 @@ impl NormalizationStats {
     /// Adds every frame of a prepared row: the values its shard holds.
     pub fn add_row(&mut self, row: &Row<'_>) {
         let n = row.joints;
-        let mut groups: Vec<(&'static str, usize, &[f32])> =
-            vec![("joint_positions", 3, &row.motion.positions)];
+        let mut groups: Vec<(&'static str, usize, &[f32])> = vec![
+            ("joint_positions", 3, &row.motion.positions),
+            ("canonical_positions", 3, &row.canonical),
+        ];
         if let Some(v) = &row.features.rotations_6d {
             groups.push(("rotations_6d", 6, v));
         }

@@ -135,6 +135,9 @@ pub struct Row<'a> {
     pub frames: usize,
     /// Positions, rotations and root in the dataset frame.
     pub motion: DatasetMotion,
+    /// `frames × joints × 3` positions in the clip's first-frame canonical frame (what a
+    /// trainer feeds a model: the start over the origin, facing +y).
+    pub canonical: Vec<f32>,
     /// The derived feature columns that are switched on.
     pub features: Features,
     /// Plausibility metrics: the clip's own when it has them (a synthetic pair, measured when it
@@ -156,6 +159,7 @@ impl<'a> Row<'a> {
             .plausibility
             .or_else(|| Some(plausibility(&world, joints, motion.fps, profile)));
         let dataset = dataset_motion_at(motion, profile, &world);
+        let canonical = canonical_positions(&dataset.positions, joints, profile);
         let features = crate::features::features(
             &dataset.positions,
             &dataset.rotations,
@@ -171,6 +175,7 @@ impl<'a> Row<'a> {
             joints,
             frames: motion.num_frames(),
             motion: dataset,
+            canonical,
             features,
             plausibility,
         }
@@ -191,6 +196,62 @@ impl<'a> Row<'a> {
             })?;
         Ok(Row::new(clip, &loaded.motion, profile, config))
     }
+}
+
+/// Dataset-frame positions (`frames × joints × 3`) in the first frame's canonical frame
+/// ([`crate::motion::canonical::canonical_frame`], as the goals use). A first frame with no
+/// facing direction (hips and shoulders stacked) is only moved over the origin.
+fn canonical_positions(positions: &[f32], joints: usize, profile: &Profile) -> Vec<f32> {
+    use glam::DVec3;
+    let point = |c: &[f32]| DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]));
+    let first: Vec<DVec3> = positions.chunks_exact(3).take(joints).map(point).collect();
+    let frame = crate::motion::canonical::canonical_frame(&first, profile).unwrap_or_else(|| {
+        let pelvis = first.get(profile.root).copied().unwrap_or_default();
+        crate::motion::canonical::CanonicalFrame {
+            origin: DVec3::new(pelvis.x, pelvis.y, 0.0),
+            rotation: glam::DQuat::IDENTITY,
+        }
+    });
+    let mut out = Vec::with_capacity(positions.len());
+    for c in positions.chunks_exact(3) {
+        let p = frame.apply(point(c));
+        out.extend_from_slice(&[p.x as f32, p.y as f32, p.z as f32]);
+    }
+    out
+}
+
+/// One row of a per-frame array column (`joint_positions`, `canonical_positions`, ...) as flat
+/// f32 values in frame, joint, component order. The one place readers take the column's list
+/// layout from: flat lists today, and nested or fixed-size lists (frames x joints x 3) read the
+/// same, so a change of layout stays here. `None` for a null row, a row out of range or a column
+/// that is not a list of f32.
+pub fn frame_values(column: &ArrayRef, row: usize) -> Option<Vec<f32>> {
+    use arrow_array::Array;
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::Float32Type;
+    fn flatten(array: &ArrayRef, out: &mut Vec<f32>) -> Option<()> {
+        if let Some(values) = array.as_primitive_opt::<Float32Type>() {
+            out.extend_from_slice(values.values());
+        } else if let Some(list) = array.as_list_opt::<i32>() {
+            for i in 0..list.len() {
+                flatten(&list.value(i), out)?;
+            }
+        } else if let Some(list) = array.as_fixed_size_list_opt() {
+            for i in 0..list.len() {
+                flatten(&list.value(i), out)?;
+            }
+        } else {
+            return None;
+        }
+        Some(())
+    }
+    let list = column.as_list_opt::<i32>()?;
+    if row >= list.len() || list.is_null(row) {
+        return None;
+    }
+    let mut out = Vec::new();
+    flatten(&list.value(row), &mut out)?;
+    Some(out)
 }
 
 fn list(values: Vec<f32>, lengths: Vec<usize>) -> Result<ArrayRef, ArrowError> {
@@ -500,6 +561,14 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             optional_bool_lists(rows.iter().map(|r| r.features.foot_contacts.as_deref())),
         ),
         ("future_root", derived(|f| f.future_root.as_deref())),
+        ("canonical_positions", {
+            let lengths: Vec<usize> = rows.iter().map(|r| r.canonical.len()).collect();
+            let mut values = Vec::with_capacity(lengths.iter().sum());
+            for r in rows {
+                values.extend_from_slice(&r.canonical);
+            }
+            list(values, lengths)?
+        }),
     ];
     let columns = crate::io::schema::in_schema_order(&schema, named)?;
     let batch = RecordBatch::try_new(schema, columns)?;
@@ -688,4 +757,39 @@ pub fn write_plans(
     let mut writer = ArrowWriter::try_new(file, schema, Some(props))?;
     writer.write(&batch)?;
     Ok(writer.into_inner()?)
+}
+
+#[cfg(test)]
+mod frame_values_tests {
+    use super::*;
+    use arrow_array::{Array, FixedSizeListArray};
+
+    #[test]
+    fn flat_and_nested_layouts_give_the_same_values() {
+        // Two rows: 2 frames x 1 joint x 3, then 1 frame x 1 joint x 3.
+        let values: Vec<f32> = (0..9).map(|v| v as f32).collect();
+        let flat = list(values.clone(), vec![6, 3]).unwrap();
+        let item = Arc::new(Field::new("item", DataType::Float32, false));
+        let triples = FixedSizeListArray::try_new(
+            Arc::clone(&item),
+            3,
+            Arc::new(Float32Array::from(values.clone())),
+            None,
+        )
+        .unwrap();
+        let nested: ArrayRef = Arc::new(
+            ListArray::try_new(
+                Arc::new(Field::new("item", triples.data_type().clone(), false)),
+                checked_offsets(&[2, 1]).unwrap(),
+                Arc::new(triples),
+                None,
+            )
+            .unwrap(),
+        );
+        for row in 0..2 {
+            assert_eq!(frame_values(&flat, row), frame_values(&nested, row));
+        }
+        assert_eq!(frame_values(&nested, 1), Some(vec![6.0, 7.0, 8.0]));
+        assert_eq!(frame_values(&flat, 2), None);
+    }
 }

@@ -7,7 +7,7 @@ use arrow_array::ArrayRef;
 use arrow_schema::{ArrowError, DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 7;
+pub const SCHEMA_VERSION: u32 = 8;
 
 fn list_f32(name: &str) -> Field {
     Field::new(
@@ -112,6 +112,7 @@ pub fn clip_schema() -> Schema {
             true,
         ),
         goal("future_root"),
+        list_f32("canonical_positions"),
     ])
 }
 
@@ -160,6 +161,9 @@ pub fn column_meaning(name: &str) -> &'static str {
         "foot_contacts" => "frames x 4 contacts: left ankle, left toe, right ankle, right toe",
         "future_root" => {
             "frames x 3 x 3: root displacement and heading change at +10, +20, +30 frames"
+        }
+        "canonical_positions" => {
+            "frames x joints x 3 positions in the first frame's canonical frame: pelvis over the origin, facing +y"
         }
         _ => "",
     }

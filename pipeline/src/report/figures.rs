@@ -641,10 +641,11 @@ where
     // At least a few pixels wide, however many types share the axis.
     let half = 0.06f64.max(4.0 / slot).min(0.25);
     for (i, (_, values)) in data.iter().enumerate() {
-        draw_box(&mut chart, values, i as f64, half, DARK)?;
         // Without a violin the points are the distribution: always drawn.
         let no_violin = violins[i].is_none();
-        if no_violin || (values.len() <= MAX_STRIP && data.len() <= MAX_STRIP_CATEGORIES) {
+        let points = no_violin || (values.len() <= MAX_STRIP && data.len() <= MAX_STRIP_CATEGORIES);
+        draw_box(&mut chart, values, i as f64, half, DARK, !points)?;
+        if points {
             chart.draw_series(values.iter().enumerate().map(|(k, v)| {
                 Circle::new(
                     (i as f64 + 0.18 + jitter(k, 0.1), *v),
@@ -698,13 +699,16 @@ pub fn violin_outline(values: &[f64], x: f64) -> Option<Vec<(f64, f64)>> {
 }
 
 /// Draws a box plot of ascending `sorted` at `x` with box half-width `half`: a filled quartile
-/// box, a white median bar, Tukey whiskers and outliers. One value draws as a single bar.
+/// box, a white median bar, Tukey whiskers and, when `outliers`, the values beyond them (left
+/// out when every value is drawn as a point beside the box anyway, so none is drawn twice). One
+/// value draws as a single bar.
 fn draw_box<DB: DrawingBackend, X, Y>(
     chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
     sorted: &[f64],
     x: f64,
     half: f64,
     color: RGBColor,
+    outliers: bool,
 ) -> DrawResult
 where
     DB::ErrorType: 'static,
@@ -746,12 +750,14 @@ where
         vec![(x - reach, med), (x + reach, med)],
         median_color.stroke_width(3),
     )))?;
-    chart.draw_series(
-        sorted
-            .iter()
-            .filter(|v| **v < lo || **v > hi)
-            .map(|v| Circle::new((x, *v), 4, color.stroke_width(1))),
-    )?;
+    if outliers {
+        chart.draw_series(
+            sorted
+                .iter()
+                .filter(|v| **v < lo || **v > hi)
+                .map(|v| Circle::new((x, *v), 4, color.stroke_width(1))),
+        )?;
+    }
     Ok(())
 }
 
@@ -1106,8 +1112,16 @@ where
             .iter()
             .flat_map(|g| g.1.last().copied())
             .fold(0.0, f64::max);
+        // The build's default threshold, drawn so the distance to it shows; the axis reaches it.
+        let threshold = info
+            .threshold
+            .split_whitespace()
+            .last()
+            .and_then(|t| t.parse::<f64>().ok())
+            .filter(|t| t.is_finite());
+        let reach = max.max(threshold.unwrap_or(0.0));
         // An all-zero metric (no penetration anywhere) still gets a readable axis.
-        let top = if max > 0.0 { max * 1.12 } else { 0.01 };
+        let top = if reach > 0.0 { reach * 1.12 } else { 0.01 };
         let (ticks, step) = nice_ticks(0.0, top, 5);
         let mut chart = ChartBuilder::on(panel)
             .caption(
@@ -1142,6 +1156,31 @@ where
             .x_desc("clips")
             .y_desc(format!("{} ({})", info.name, info.unit))
             .draw()?;
+        if let Some(t) = threshold {
+            chart.draw_series(DashedLineSeries::new(
+                [(-0.5, t), (1.5, t)],
+                8,
+                5,
+                RED.stroke_width(2),
+            ))?;
+            chart.draw_series(std::iter::once(Text::new(
+                format!("default threshold {}", info.threshold),
+                (1.45, t),
+                font(NOTE)
+                    .color(&RED)
+                    .pos(Pos::new(HPos::Right, VPos::Bottom)),
+            )))?;
+        }
+        if max == 0.0 && groups.iter().any(|g| !g.1.is_empty()) {
+            // A flat panel is a result, not a drawing error: say what it means.
+            chart.draw_series(std::iter::once(Text::new(
+                format!("every clip measures 0 {}", info.unit),
+                (0.5, top * 0.5),
+                font(NOTE)
+                    .color(&GREY)
+                    .pos(Pos::new(HPos::Center, VPos::Center)),
+            )))?;
+        }
         for (g, (_, values, color)) in groups.iter().enumerate() {
             let x = g as f64;
             if values.is_empty() {
@@ -1154,8 +1193,9 @@ where
                 )))?;
                 continue;
             }
-            draw_box(&mut chart, values, x, 0.12, *color)?;
-            if values.len() <= MAX_STRIP {
+            let points = values.len() <= MAX_STRIP;
+            draw_box(&mut chart, values, x, 0.12, *color, !points)?;
+            if points {
                 chart.draw_series(values.iter().enumerate().map(|(i, v)| {
                     Circle::new((x + 0.3 + jitter(i, 0.16), *v), 4, color.mix(0.7).filled())
                 }))?;

@@ -21,8 +21,8 @@ pub use figures::{FIGURES, FigureSpec, MIN_VIOLIN, violin_outline};
 pub use read::{find_clip_tables, read_build_counts, read_rows};
 pub use stats::{
     GoalStats, KNOWN_KINDS, KindCount, METRICS, MetricInfo, MetricStats, NO_LABEL, NO_SPLIT,
-    NULL_SPLIT, Overview, SplitComposition, Stats, Summary, TypeStats, UNMAPPED, lengths_by_type,
-    quantile, silverman_bandwidth, statistics,
+    NULL_SPLIT, Overview, SplitComposition, Stats, Summary, TextStats, TypeStats, UNMAPPED,
+    lengths_by_type, quantile, silverman_bandwidth, statistics,
 };
 pub use tables::{latex_escape, markdown_escape};
 
@@ -64,6 +64,8 @@ pub struct ClipRow {
     pub goal_pelvis: Option<[f32; 2]>,
     /// `label_source` column.
     pub label_source: Option<String>,
+    /// `texts` column: every caption of the clip (empty when the table has no such column).
+    pub texts: Vec<String>,
     /// `[foot_skate, ground_penetration, self_distance, lean]` (m/s, m, m, degrees); `None` when
     /// all four are null or the table has none of these columns. A single null metric is NaN.
     pub plausibility: Option<[f32; 4]>,

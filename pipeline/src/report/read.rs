@@ -17,8 +17,9 @@ use super::{ClipRow, ReportError};
 /// Columns without which a table is not a clip table.
 const REQUIRED: [&str; 5] = ["clip_id", "source_kind", "mirrored", "fps", "num_frames"];
 /// Columns read when present: older layouts lack some, and `split` comes with sharded outputs.
-const OPTIONAL: [&str; 8] = [
+const OPTIONAL: [&str; 9] = [
     "split",
+    "texts",
     "motion_type",
     "goal_pelvis",
     "label_source",
@@ -144,6 +145,36 @@ impl<'a> Columns<'a> {
     }
 
     /// A list-of-floats column as one `Vec<f64>` per row.
+    fn string_lists(&self, name: &str) -> Result<Option<Vec<Vec<String>>>, ReportError> {
+        let Some(column) = self.get(name) else {
+            return Ok(None);
+        };
+        let items = |item: ArrayRef| -> Option<Vec<String>> {
+            string_values(&item).map(|v| v.into_iter().flatten().collect())
+        };
+        let lists: Vec<Option<ArrayRef>> = if let Some(list) = column.as_list_opt::<i32>() {
+            (0..list.len())
+                .map(|i| (!list.is_null(i)).then(|| list.value(i)))
+                .collect()
+        } else if let Some(list) = column.as_list_opt::<i64>() {
+            (0..list.len())
+                .map(|i| (!list.is_null(i)).then(|| list.value(i)))
+                .collect()
+        } else {
+            return Err(self.type_error(name, column, "List<Utf8>"));
+        };
+        lists
+            .into_iter()
+            .map(|item| match item {
+                None => Ok(Vec::new()),
+                Some(item) => {
+                    items(item).ok_or_else(|| self.type_error(name, column, "List<Utf8>"))
+                }
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Some)
+    }
+
     fn float_lists(&self, name: &str) -> Result<Option<Vec<Option<Vec<f64>>>>, ReportError> {
         let Some(column) = self.get(name) else {
             return Ok(None);
@@ -257,6 +288,7 @@ fn read_batch(
     let motion_types = c.strings("motion_type")?;
     let goals = c.float_lists("goal_pelvis")?;
     let label_sources = c.strings("label_source")?;
+    let texts = c.string_lists("texts")?;
     let metrics: Vec<Option<Vec<Option<f64>>>> = METRIC_COLUMNS
         .iter()
         .map(|name| c.floats(name))
@@ -318,6 +350,7 @@ fn read_batch(
             frames,
             goal_pelvis,
             label_source: label_sources.as_ref().and_then(|l| l[i].clone()),
+            texts: texts.as_ref().map(|t| t[i].clone()).unwrap_or_default(),
             plausibility,
         });
     }

@@ -283,6 +283,8 @@ pub struct Overview {
 pub struct Stats {
     /// Report title.
     pub title: String,
+    /// Caption statistics of the original real clips.
+    pub text: TextStats,
     /// File names of the tables read, sorted.
     pub tables: Vec<String>,
     /// Dataset-wide counts.
@@ -337,6 +339,76 @@ pub(crate) fn sorted_rows(rows: &[ClipRow]) -> Vec<ClipRow> {
 pub(crate) fn typed_rows(rows: &[ClipRow]) -> impl Iterator<Item = &ClipRow> {
     rows.iter()
         .filter(|r| r.is_original() && r.source_kind == SourceKind::RealSingle.as_str())
+}
+
+/// What a text-to-motion paper reports of its captions, over the original real clips (mirrored
+/// copies repeat their original's captions mirrored; synthetic pairs' are composed from their
+/// sources').
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct TextStats {
+    /// Clips counted.
+    pub clips: usize,
+    /// Their captions (`texts` entries).
+    pub captions: usize,
+    /// Distinct words over the captions: lowercase runs of ASCII letters, digits and `'`.
+    pub vocabulary: usize,
+    /// Words per caption.
+    pub words_per_caption: Option<Summary>,
+    /// Captions per clip.
+    pub captions_per_clip: Option<Summary>,
+    /// The most frequent verbs (lemmas, by HumanML3D's caption tagger), as (verb, captions
+    /// holding it), most frequent first, ties by name; at most [`TOP_VERBS`].
+    pub top_verbs: Vec<(String, usize)>,
+}
+
+/// How many verbs [`TextStats::top_verbs`] lists.
+pub const TOP_VERBS: usize = 10;
+
+/// The words of a caption as the text statistics count them.
+pub fn caption_words(caption: &str) -> Vec<String> {
+    caption
+        .to_lowercase()
+        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '\''))
+        .filter(|w| !w.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+fn text_statistics(rows: &[ClipRow]) -> TextStats {
+    let clips: Vec<&ClipRow> = rows
+        .iter()
+        .filter(|r| r.is_original() && !r.is_synthetic())
+        .collect();
+    let mut vocabulary = std::collections::BTreeSet::new();
+    let mut words_per_caption = Vec::new();
+    let mut verbs: BTreeMap<String, usize> = BTreeMap::new();
+    for caption in clips.iter().flat_map(|r| &r.texts) {
+        let words = caption_words(caption);
+        words_per_caption.push(words.len() as f64);
+        vocabulary.extend(words);
+        if let Ok(tokens) = crate::humanml3d::caption::tokens(caption) {
+            let in_caption: std::collections::BTreeSet<String> = tokens
+                .into_iter()
+                .filter(|t| t.tag == crate::humanml3d::caption::Upos::Verb)
+                .map(|t| t.word.to_lowercase())
+                .collect();
+            for verb in in_caption {
+                *verbs.entry(verb).or_insert(0) += 1;
+            }
+        }
+    }
+    let mut top_verbs: Vec<(String, usize)> = verbs.into_iter().collect();
+    top_verbs.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    top_verbs.truncate(TOP_VERBS);
+    let per_clip: Vec<f64> = clips.iter().map(|r| r.texts.len() as f64).collect();
+    TextStats {
+        clips: clips.len(),
+        captions: words_per_caption.len(),
+        vocabulary: vocabulary.len(),
+        words_per_caption: Summary::of(&words_per_caption),
+        captions_per_clip: Summary::of(&per_clip),
+        top_verbs,
+    }
 }
 
 /// Lengths in seconds per motion type of the original single clips (ascending), types in the
@@ -545,6 +617,7 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
 
     Stats {
         title: input.title.clone(),
+        text: text_statistics(&rows),
         tables,
         overview: Overview {
             rows: rows.len(),

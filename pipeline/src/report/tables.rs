@@ -105,8 +105,47 @@ fn title_or(stats: &Stats, fallback: &str) -> String {
 // ---------------------------------------------------------------------------------------------
 // LaTeX.
 
+/// The text-statistics rows: (statistic, value) in the order both tables print them.
+fn text_rows(t: &super::stats::TextStats) -> Vec<(String, String)> {
+    // Short cells, so the table fits one column of a two-column paper.
+    let mean =
+        |s: &Option<super::Summary>| s.map_or("none".to_string(), |s| format!("{:.1}", s.mean));
+    let range = |s: &Option<super::Summary>| {
+        s.map_or("none".to_string(), |s| format!("{} to {}", s.min, s.max))
+    };
+    vec![
+        ("Clips".into(), t.clips.to_string()),
+        ("Captions".into(), t.captions.to_string()),
+        ("Vocabulary".into(), t.vocabulary.to_string()),
+        ("Words per caption, mean".into(), mean(&t.words_per_caption)),
+        (
+            "Words per caption, range".into(),
+            range(&t.words_per_caption),
+        ),
+        ("Captions per clip, mean".into(), mean(&t.captions_per_clip)),
+        (
+            "Captions per clip, range".into(),
+            range(&t.captions_per_clip),
+        ),
+    ]
+}
+
+/// Tables that cannot fit one column of a two-column paper (eight or more columns, or columns
+/// per source kind) are set as `table*`, across both columns; the rest fit a column.
+/// `tests/report.rs` compiles `tables.tex` in a two-column document and checks for overfull boxes.
+const WIDE_TABLES: [&str; 3] = [
+    "tab:mf-motion-types",
+    "tab:mf-composition",
+    "tab:mf-plausibility",
+];
+
 fn tex_table(out: &mut String, caption: &str, label: &str, spec: &str, body: &str) {
-    let _ = writeln!(out, "\\begin{{table}}[tbp]");
+    let float = if WIDE_TABLES.contains(&label) {
+        "table*"
+    } else {
+        "table"
+    };
+    let _ = writeln!(out, "\\begin{{{float}}}[tbp]");
     let _ = writeln!(out, "\\centering");
     let _ = writeln!(out, "\\caption{{{caption}}}");
     let _ = writeln!(out, "\\label{{{label}}}");
@@ -115,7 +154,7 @@ fn tex_table(out: &mut String, caption: &str, label: &str, spec: &str, body: &st
     out.push_str(body);
     let _ = writeln!(out, "\\bottomrule");
     let _ = writeln!(out, "\\end{{tabular}}");
-    let _ = writeln!(out, "\\end{{table}}");
+    let _ = writeln!(out, "\\end{{{float}}}");
     out.push('\n');
 }
 
@@ -204,6 +243,25 @@ pub(crate) fn latex(stats: &Stats) -> String {
             "Sources of the body-part labels of {title} (original real clips; synthetic pairs take their sources' labels)."
         ),
         "tab:mf-label-sources",
+        "lr",
+        &body,
+    );
+
+    let mut body = String::from("Statistic & Value \\\\\n\\midrule\n");
+    for (name, value) in text_rows(&stats.text) {
+        let _ = writeln!(body, "{name} & {value} \\\\");
+    }
+    let _ = writeln!(
+        body,
+        "\\midrule\nMost frequent verbs & Captions \\\\\n\\midrule"
+    );
+    for (verb, n) in &stats.text.top_verbs {
+        let _ = writeln!(body, "{} & {n} \\\\", latex_escape(verb));
+    }
+    tex_table(
+        &mut out,
+        &format!("Captions of {title} (original real clips)."),
+        "tab:mf-text",
         "lr",
         &body,
     );
@@ -461,6 +519,19 @@ pub(crate) fn markdown(stats: &Stats) -> String {
     md_header(&mut out, &["label source", "clips"], 1);
     for (source, n) in &stats.label_sources {
         md_row(&mut out, &[markdown_escape(source), n.to_string()]);
+    }
+
+    out.push_str(
+        "\n## Captions\n\nThe captions (`texts`) of the original real clips: words are lowercase runs of letters, digits and `'`; verbs are lemmas tagged by the HumanML3D caption tagger, counted once per caption.\n\n",
+    );
+    md_header(&mut out, &["statistic", "value"], 1);
+    for (name, value) in text_rows(&stats.text) {
+        md_row(&mut out, &[name, value]);
+    }
+    out.push('\n');
+    md_header(&mut out, &["most frequent verb", "captions"], 1);
+    for (verb, n) in &stats.text.top_verbs {
+        md_row(&mut out, &[markdown_escape(verb), n.to_string()]);
     }
 
     out.push_str(
