@@ -5,6 +5,7 @@
 pub mod layout;
 pub mod lock;
 mod reject;
+pub mod toml_path;
 mod write;
 
 pub use reject::{DropReason, Dropped, MAX_MESSAGE_CHARS, Reject, RejectReason};

@@ -708,60 +708,26 @@ pub(super) fn round6(x: f64) -> f64 {
     (x * 1e6).round() / 1e6
 }
 
-/// 1-based line of a byte offset.
-pub(super) fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())]
-        .iter()
-        .filter(|b| **b == b'\n')
-        .count()
-        + 1
-}
-
-/// One step of a key path: a table key or an array position.
-#[derive(Debug, Clone, Copy)]
-pub(super) enum Seg<'a> {
-    K(&'a str),
-    I(usize),
-}
+pub(super) use crate::base::toml_path::{Seg, line_of};
+use crate::base::toml_path::{SpannedToml, key_name};
 
 /// Problems found while checking a config, with the lines of their keys.
 pub(super) struct Checks<'i> {
-    text: &'i str,
-    root: toml::de::DeValue<'i>,
+    doc: SpannedToml<'i>,
     problems: Vec<Problem>,
 }
 
 impl<'i> Checks<'i> {
     pub(super) fn new(text: &'i str, root: toml::de::DeTable<'i>) -> Checks<'i> {
         Checks {
-            text,
-            root: toml::de::DeValue::Table(root),
+            doc: SpannedToml::new(text, root),
             problems: Vec::new(),
         }
     }
 
     pub(super) fn push(&mut self, path: &[Seg<'_>], value: String, expected: &str) {
-        let mut key = String::new();
-        for seg in path {
-            match seg {
-                Seg::K(k) => {
-                    if !key.is_empty() {
-                        key.push('.');
-                    }
-                    if !k.is_empty()
-                        && k.chars()
-                            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-                    {
-                        key.push_str(k);
-                    } else {
-                        key.push_str(&format!("{k:?}"));
-                    }
-                }
-                Seg::I(i) => key.push_str(&format!("[{i}]")),
-            }
-        }
         self.problems.push(Problem {
-            key,
+            key: key_name(path),
             value,
             expected: expected.to_string(),
             line: self.line(path),
@@ -771,33 +737,12 @@ impl<'i> Checks<'i> {
     /// The line of the deepest part of `path` the file spells out (a key left at its default
     /// points at its table).
     pub(super) fn line(&self, path: &[Seg<'_>]) -> Option<usize> {
-        self.find(path).1.map(|s| line_of(self.text, s.start))
+        self.doc.line(path)
     }
 
     /// The line of `path` itself, if the file spells all of it out.
     pub(super) fn exact_line(&self, path: &[Seg<'_>]) -> Option<usize> {
-        match self.find(path) {
-            (found, Some(span)) if found == path.len() => Some(line_of(self.text, span.start)),
-            _ => None,
-        }
-    }
-
-    /// How many steps of `path` the file has, and the span of the last one found.
-    pub(super) fn find(&self, path: &[Seg<'_>]) -> (usize, Option<std::ops::Range<usize>>) {
-        let mut value = &self.root;
-        let mut span = None;
-        let mut found = 0;
-        for seg in path {
-            let next = match seg {
-                Seg::K(k) => value.get(*k),
-                Seg::I(i) => value.get(*i),
-            };
-            let Some(next) = next else { break };
-            span = Some(next.span());
-            value = next.get_ref();
-            found += 1;
-        }
-        (found, span)
+        self.doc.exact_line(path)
     }
 
     pub(super) fn finish(mut self, path: &Path) -> Result<(), ConfigError> {

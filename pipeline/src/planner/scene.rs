@@ -13,6 +13,7 @@ use serde::Deserialize;
 use super::state::{Effect, Loc, Posture, Requirement, State};
 use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::{Taxonomy, normalize_label};
+use crate::base::toml_path::{self, SpannedToml, line_of};
 
 /// The most candidates a scene may expand into: the chain enumerates states times candidates.
 const MAX_CANDIDATES: usize = 2_000;
@@ -393,17 +394,14 @@ impl Scene {
         })?;
         let parsed: Result<SceneFile, _> =
             serde_path_to_error::deserialize(toml::Deserializer::from(tree.clone()));
-        let lines = Lines {
-            text,
-            root: toml::de::DeValue::Table(tree.into_inner()),
-        };
+        let lines = SpannedToml::new(text, tree.into_inner());
         let file = parsed.map_err(|e| {
             let keys = segments(e.path());
             let line = e
                 .inner()
                 .span()
                 .map(|s| line_of(text, s.start))
-                .or_else(|| lines.line(&keys));
+                .or_else(|| lines.line(&steps(&keys)));
             let key = e.path().to_string();
             let key = if key == "." {
                 String::new()
@@ -447,15 +445,6 @@ impl Scene {
     }
 }
 
-/// 1-based line of a byte offset.
-fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())]
-        .iter()
-        .filter(|b| **b == b'\n')
-        .count()
-        + 1
-}
-
 #[derive(Debug, Clone)]
 enum Seg {
     K(String),
@@ -473,59 +462,27 @@ fn segments(path: &serde_path_to_error::Path) -> Vec<Seg> {
         .collect()
 }
 
-/// The spanned TOML tree, to find a key's line.
-struct Lines<'i> {
-    text: &'i str,
-    root: toml::de::DeValue<'i>,
-}
-
-impl Lines<'_> {
-    /// The line of the deepest part of `path` the file spells out.
-    fn line(&self, path: &[Seg]) -> Option<usize> {
-        let mut value = &self.root;
-        let mut span = None;
-        for seg in path {
-            let next = match seg {
-                Seg::K(k) => value.get(k.as_str()),
-                Seg::I(i) => value.get(*i),
-            };
-            let Some(next) = next else { break };
-            span = Some(next.span());
-            value = next.get_ref();
-        }
-        span.map(|s| line_of(self.text, s.start))
-    }
+/// `path` as the borrowed steps `base::toml_path` reads.
+fn steps(path: &[Seg]) -> Vec<toml_path::Seg<'_>> {
+    path.iter()
+        .map(|seg| match seg {
+            Seg::K(k) => toml_path::Seg::K(k),
+            Seg::I(i) => toml_path::Seg::I(*i),
+        })
+        .collect()
 }
 
 struct Problems<'a, 'i> {
-    lines: &'a Lines<'i>,
+    lines: &'a SpannedToml<'i>,
     found: Vec<SceneProblem>,
 }
 
 impl Problems<'_, '_> {
     fn push(&mut self, path: &[Seg], message: String) {
-        let mut key = String::new();
-        for seg in path {
-            match seg {
-                Seg::K(k) => {
-                    if !key.is_empty() {
-                        key.push('.');
-                    }
-                    if !k.is_empty()
-                        && k.chars()
-                            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-                    {
-                        key.push_str(k);
-                    } else {
-                        key.push_str(&format!("{k:?}"));
-                    }
-                }
-                Seg::I(i) => key.push_str(&format!("[{i}]")),
-            }
-        }
+        let path = steps(path);
         self.found.push(SceneProblem {
-            key,
-            line: self.lines.line(path),
+            key: toml_path::key_name(&path),
+            line: self.lines.line(&path),
             message,
         });
     }
