@@ -452,3 +452,80 @@ fn every_metric_of_a_real_capture_equals_the_metric_of_the_builds_mirror() {
         &broken[..broken.len().min(5)]
     );
 }
+
+/// A build of the fixture capture whose label contradicts its motion, beside the Bandai Namco 2
+/// subset's walk-turns and hand takes (real captures, read in place); mirrors on.
+fn label_check_build(label_check: &str) -> (tempfile::TempDir, motionforge::config::Config) {
+    let dir = tempfile::tempdir().unwrap();
+    let subset = shared_data().join("bandai-namco-2-subset/data");
+    let fixture = repo().join("fixtures/bandai-namco-2/data");
+    let text = format!(
+        r#"
+[dataset]
+name = "labels"
+output = "out"
+
+[synthetic]
+probability = 1.0
+
+[label_check]
+{label_check}
+
+[[sources]]
+name = "bandai-2"
+captures = ["{fixture}/*.bvh", "{subset}/dataset-2_walk-turn-*.bvh", "{subset}/dataset-2_*-hand_*.bvh"]
+profile = "bandai-namco"
+[sources.labels]
+kind = "filename"
+pattern = "dataset-2_{{content}}_{{style}}_{{take}}"
+action = "{{content}}"
+text = "{{content}}, {{style}} style"
+"#,
+        fixture = fixture.display(),
+        subset = subset.display()
+    );
+    std::fs::write(dir.path().join("build.toml"), text).unwrap();
+    let config = motionforge::config::Config::load(&dir.path().join("build.toml")).unwrap();
+    (dir, config)
+}
+
+#[test]
+fn labels_that_contradict_the_motion_are_listed_and_dropped_on_request() {
+    // Issue 16, finding 5: `walk-turn-left_masculine_006` turns right by 93 degrees. Its label and
+    // its mirror's passed through unnoticed. The 48 consistent takes beside it (walk-turns left
+    // and right, left- and right-hand waves and raises, and their mirrors) must not be listed.
+    use motionforge::build::{BuildOptions, build};
+    let (dir, config) = label_check_build("");
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    let listed: Vec<_> = report
+        .label_contradictions
+        .iter()
+        .map(|c| (c.clip_id.as_str(), c.claim.as_str(), c.measured))
+        .collect();
+    println!("{:#?}", report.label_contradictions);
+    assert_eq!(listed.len(), 2, "{listed:?}");
+    let (original, mirror) = (listed[0], listed[1]);
+    assert!(original.0.contains("walk-turn-left_masculine_006") && !original.0.ends_with(":m"));
+    assert_eq!(original.1, "turn left");
+    assert!((-100.0..=-85.0).contains(&original.2), "{original:?}");
+    assert!(mirror.0.ends_with(":m") && mirror.1 == "turn right" && mirror.2 > 85.0);
+    // Listed in build-report.json, and the label is kept as it was.
+    let written: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("out/labels/build-report.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(written["label_contradictions"].as_array().unwrap().len(), 2);
+    assert_eq!(report.label_contradictions_dropped, 0);
+    let kept = report.clips;
+
+    // `label_check.drop = true` leaves them out, and every pair made from them.
+    let (_dir, dropping) = label_check_build("drop = true");
+    let report = build(&dropping, &BuildOptions::default()).unwrap();
+    assert_eq!(report.label_contradictions.len(), 2);
+    assert!(report.label_contradictions_dropped >= 2);
+    assert_eq!(report.clips, kept - report.label_contradictions_dropped);
+    println!(
+        "{} rows without the drop, {} with it ({} left out)",
+        kept, report.clips, report.label_contradictions_dropped
+    );
+}

@@ -702,6 +702,39 @@ pub fn claims(text: &str) -> Claims {
     out
 }
 
+/// The largest left turn and the largest right turn (degrees, both `>= 0`) anywhere in a motion:
+/// the largest rise and the largest fall of its heading, averaged over 0.5 s so the hips' swing
+/// with every step does not count. `None` without a facing direction.
+fn largest_turns(
+    positions: &[DVec3],
+    joints: usize,
+    fps: f64,
+    profile: &Profile,
+) -> Option<(f64, f64)> {
+    let track = crate::motion::canonical::heading_track(positions, joints, profile)?;
+    let n = track.len();
+    let half = if fps.is_finite() && fps > 0.0 {
+        (0.25 * fps).round() as usize
+    } else {
+        0
+    };
+    let mut sums = vec![0.0; n + 1];
+    for (f, h) in track.iter().enumerate() {
+        sums[f + 1] = sums[f] + h;
+    }
+    let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut left, mut right) = (0.0f64, 0.0f64);
+    for f in 0..n {
+        let (lo, hi) = (f.saturating_sub(half), (f + half + 1).min(n));
+        let h = ((sums[hi] - sums[lo]) / (hi - lo) as f64).to_degrees();
+        low = low.min(h);
+        high = high.max(h);
+        left = left.max(h - low);
+        right = right.max(high - h);
+    }
+    Some((left, right))
+}
+
 /// A clip whose text says one thing and whose motion measurably does another. The label is never
 /// changed: the build lists these, and drops them only when asked.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -745,10 +778,13 @@ pub fn contradictions(
     };
     if let Some(side) = said.turn
         && let Some(turn) = net_turn(positions, joints, fps, 0.5, profile).map(f64::to_degrees)
+        && let Some((left, right)) = largest_turns(positions, joints, fps, profile)
     {
+        // The other way overall, and never the way the text says: a walk that turns right and
+        // then, at the end of the take, turns round to the left is not a contradiction.
         let wrong = match side {
-            Side::Left => turn <= -CONTRADICTING_TURN_DEG,
-            Side::Right => turn >= CONTRADICTING_TURN_DEG,
+            Side::Left => turn <= -CONTRADICTING_TURN_DEG && left < CONTRADICTING_TURN_DEG,
+            Side::Right => turn >= CONTRADICTING_TURN_DEG && right < CONTRADICTING_TURN_DEG,
         };
         if wrong {
             let did = if turn > 0.0 { "left" } else { "right" };
