@@ -192,6 +192,6 @@ fn the_commands_print_plan_and_status() {
     let status = run(&["status"]);
     let text = String::from_utf8_lossy(&status.stdout);
     assert!(status.status.success());
-    assert!(text.contains("train 17, val 2, test 6"), "{text}");
+    assert!(text.contains("train 16, val 2, test 6"), "{text}");
     assert_eq!(text.matches(" fresh ").count(), 9, "{text}");
 }
