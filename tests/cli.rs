@@ -86,7 +86,7 @@ fn quiet_prints_nothing_json_prints_the_report_and_json_lines_and_default_prints
         let json = run(&args, &repo());
         assert!(json.status.success(), "{}", text(&json.stderr));
         let report: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
-        assert_eq!(report["clips"], 25);
+        assert_eq!(report["clips"], 24);
         let logged: Vec<serde_json::Value> = lines(&text(&json.stderr))
             .iter()
             .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))

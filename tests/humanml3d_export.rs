@@ -52,7 +52,7 @@ fn the_demo_exports_as_a_humanml3d_folder_whose_files_agree_with_each_other() {
     let out = dir.path().join("hml3d");
     let run = export(&dataset, &out);
     let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(stdout.contains("exported 25 of 25 clips"), "{stdout}");
+    assert!(stdout.contains("exported 24 of 24 clips"), "{stdout}");
 
     // Names: one per row, mirrors `M` + their original's name, in their original's split.
     let table: Vec<Vec<String>> = lines(&out.join("names.csv"))
@@ -60,17 +60,17 @@ fn the_demo_exports_as_a_humanml3d_folder_whose_files_agree_with_each_other() {
         .skip(1)
         .map(|l| l.split(',').map(str::to_string).collect())
         .collect();
-    assert_eq!(table.len(), 25);
+    assert_eq!(table.len(), 24);
     let by_id: BTreeMap<&str, &Vec<String>> = table.iter().map(|r| (r[1].as_str(), r)).collect();
     let all = lines(&out.join("all.txt"));
-    assert_eq!(all.len(), 25);
+    assert_eq!(all.len(), 24);
     let mut split_of: BTreeMap<String, String> = BTreeMap::new();
     for split in ["train", "val", "test"] {
         for name in lines(&out.join(format!("{split}.txt"))) {
             assert!(split_of.insert(name, split.to_string()).is_none());
         }
     }
-    assert_eq!(split_of.len(), 25, "every name in exactly one split list");
+    assert_eq!(split_of.len(), 24, "every name in exactly one split list");
     for row in &table {
         let (name, id, split, mirrored) = (&row[0], &row[1], &row[2], &row[4]);
         assert_eq!(&split_of[name], split);
@@ -185,8 +185,8 @@ fn an_existing_folder_is_kept_without_force_and_a_skeleton_without_a_map_is_skip
             && s.reason
                 .contains("no `[smpl22]` entry for SMPL joint `pelvis`")
     }));
-    assert_eq!(summary.exported, 21);
-    assert_eq!(lines(&out.join("all.txt")).len(), 21);
+    assert_eq!(summary.exported, 20);
+    assert_eq!(lines(&out.join("all.txt")).len(), 20);
 
     let missing = export_humanml3d(&dir.path().join("nothing"), &out, &options).unwrap_err();
     assert!(missing.to_string().contains("nothing"), "{missing}");
@@ -243,6 +243,6 @@ fn every_demo_clip_loads_the_way_text_to_motion_loads_humanml3d() {
         kept += printed.trim().parse::<usize>().unwrap();
     }
     // Every clip loads except those the loader filters by length, as export.json lists.
-    assert_eq!(kept, 25 - filtered);
+    assert_eq!(kept, 24 - filtered);
     assert!(kept > 0);
 }

@@ -40,7 +40,7 @@ assert np.asarray(row['joint_positions']).reshape(frames, joints, 3).shape == (f
 attrs = {a['key']: a['value'] for a in ds['train'][0]['attributes']}
 assert all(isinstance(v, str) for v in attrs.values()), attrs
 synthetic = [r for r in ds['train'] if r['source_kind'] == 'synthetic']
-assert synthetic and {a['key'] for a in synthetic[0]['attributes']} == {'start_a', 'start_b'}
+assert synthetic and {a['key'] for a in synthetic[0]['attributes']} == {'start_a', 'start_b', 'action_kept'}
 
 import duckdb
 con = duckdb.connect()

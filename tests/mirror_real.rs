@@ -236,3 +236,72 @@ fn mirrored_walk_left_moves_to_the_characters_right() {
         "mirrored walk-left should move to the character's right"
     );
 }
+
+/// Every real capture the project has, with its profile: the fixtures, and `../shared/data`'s
+/// CMU take, Bandai Namco 1 and the Bandai Namco 2 subset.
+fn every_real_capture() -> Vec<(std::path::PathBuf, &'static str)> {
+    let mut out = vec![
+        (repo().join("fixtures/cmu/01_01.bvh"), "cmu"),
+        (shared_data().join("cmu/01_01.bvh"), "cmu"),
+    ];
+    for dir in [
+        repo().join("fixtures/bandai-namco-1/data"),
+        shared_data().join("bandai-namco-1/data"),
+        shared_data().join("bandai-namco-2-subset/data"),
+    ] {
+        out.extend(bvh_files(&dir).into_iter().map(|p| (p, "bandai-namco")));
+    }
+    out
+}
+
+#[test]
+fn the_builds_mirror_is_the_reflection_on_every_real_capture_with_the_mirrored_skeleton() {
+    // Issue 16, finding 2: with the original skeleton kept, CMU 01_01's mirror was 2.17e-2 of
+    // body height from the reflected original. The build's default now mirrors the offsets too.
+    let offsets = motionforge::config::MirrorConfig::default().offsets;
+    let captures = every_real_capture();
+    assert!(captures.len() > 230, "{} captures", captures.len());
+    let mut worst = (0.0f64, String::new());
+    let mut own_skeleton = 0;
+    for (path, name) in &captures {
+        let bvh = load(path);
+        let profile = ProfileSpec::bundled(name)
+            .unwrap()
+            .bind(&bvh.skeleton)
+            .unwrap();
+        let plan = MirrorPlan::from_profile(&bvh.skeleton, &profile).unwrap();
+        let err = relative_mirror_error(&bvh, &plan, offsets);
+        if err > worst.0 {
+            worst = (err, path.display().to_string());
+        }
+        let mirrored = plan.mirror(&bvh.motion, offsets);
+        // The mirror's skeleton is the mirrored one, and mirroring it gives the capture's back.
+        assert_eq!(*mirrored.skeleton, plan.mirror_skeleton(&bvh.skeleton));
+        let twice = plan.mirror(&mirrored, offsets);
+        assert_eq!(*twice.skeleton, *bvh.skeleton, "{path:?}");
+        if mirrored.skeleton.digest() != bvh.skeleton.digest() {
+            own_skeleton += 1;
+        }
+    }
+    println!(
+        "worst relative mirror error {:.2e} in {}; {own_skeleton} of {} mirrors on a skeleton of their own",
+        worst.0,
+        worst.1,
+        captures.len()
+    );
+    assert!(worst.0 < 1e-3, "{:.2e} in {}", worst.0, worst.1);
+    // CMU's left and right bones differ by up to 1.46 cm: its mirror cannot share its skeleton.
+    let cmu = load(&shared_data().join("cmu/01_01.bvh"));
+    let profile = ProfileSpec::bundled("cmu")
+        .unwrap()
+        .bind(&cmu.skeleton)
+        .unwrap();
+    let plan = MirrorPlan::from_profile(&cmu.skeleton, &profile).unwrap();
+    let mirrored = plan.mirror(&cmu.motion, offsets);
+    assert_ne!(mirrored.skeleton.digest(), cmu.skeleton.digest());
+    let keep = relative_mirror_error(&cmu, &plan, OffsetPolicy::Keep);
+    assert!(
+        keep > 1e-2,
+        "the kept-skeleton option is documented at 2.2e-2: {keep:.2e}"
+    );
+}

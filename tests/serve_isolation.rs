@@ -294,7 +294,7 @@ async fn a_real_build_runs_in_a_serve_build_process_and_records_its_report() {
     let id = request_build(&client, &base).await;
     let build = poll_build(&client, &base, id, is_final).await;
     assert_eq!(build["state"], "succeeded", "{build}");
-    assert_eq!(build["counts"]["clips"], 25, "{build}");
+    assert_eq!(build["counts"]["clips"], 24, "{build}");
     assert_eq!(build["counts"]["captures"], 9, "{build}");
     let stages = build["stages"].as_array().unwrap();
     assert!(
@@ -328,7 +328,7 @@ async fn a_real_build_runs_in_a_serve_build_process_and_records_its_report() {
     let history = History::open(&state).unwrap();
     let record = history.get(id).unwrap().unwrap();
     let report: Value = serde_json::from_str(record.report.as_deref().unwrap()).unwrap();
-    assert_eq!(report["clips"], 25);
+    assert_eq!(report["clips"], 24);
 }
 
 #[test]

@@ -182,3 +182,147 @@ fn export_bvh_writes_a_synthetic_clip_that_reads_back_on_the_source_skeleton() {
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("no clip `nope`"));
 }
+
+/// A build of the Bandai Namco 2 subset's walk-turns and raise-up-hand takes (real captures,
+/// read in place), every compatible pair composed, mirrors off; `synthetic` adds to
+/// `[synthetic]`.
+fn turns_and_raises(synthetic: &str) -> (tempfile::TempDir, Config) {
+    let dir = tempfile::tempdir().unwrap();
+    let data = shared_data().join("bandai-namco-2-subset/data");
+    let text = format!(
+        r#"
+[dataset]
+name = "turns"
+output = "out"
+seed = 3
+
+[mirror]
+enabled = false
+
+[synthetic]
+exhaustive = true
+{synthetic}
+
+[[sources]]
+name = "bandai-2"
+captures = ["{data}/dataset-2_walk-turn-*.bvh", "{data}/dataset-2_raise-up-*-hand_*.bvh"]
+profile = "bandai-namco"
+[sources.labels]
+kind = "filename"
+pattern = "dataset-2_{{content}}_{{style}}_{{take}}"
+action = "{{content}}"
+text = "{{content}}"
+"#,
+        data = data.display()
+    );
+    fs::write(dir.path().join("build.toml"), text).unwrap();
+    let config = Config::load(&dir.path().join("build.toml")).unwrap();
+    (dir, config)
+}
+
+/// Net heading change (degrees, left positive) of a motion, from the hips' facing averaged over
+/// its first and last half second.
+fn net_turn(motion: &motionforge::motion::Motion) -> f64 {
+    use motionforge::motion::canonical::{dataset_positions, heading};
+    let profile = motionforge::motion::ProfileSpec::bundled("bandai-namco")
+        .unwrap()
+        .bind(&motion.skeleton)
+        .unwrap();
+    let positions = dataset_positions(motion, &profile);
+    let mut unwrapped: Vec<f64> = Vec::new();
+    for frame in positions.chunks_exact(motion.num_joints()) {
+        let h = heading(frame, &profile).unwrap().to_degrees();
+        let next = match unwrapped.last() {
+            Some(&last) => last + (h - last + 180.0).rem_euclid(360.0) - 180.0,
+            None => h,
+        };
+        unwrapped.push(next);
+    }
+    let k = 15.min(unwrapped.len() / 4).max(1);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    mean(&unwrapped[unwrapped.len() - k..]) - mean(&unwrapped[..k])
+}
+
+/// For every pair whose legs come from a walk-turn: (id, share of the walk-turn's turn the pair
+/// keeps, its `action_kept`).
+fn turn_kept(config: &Config) -> Vec<(String, f64, f64)> {
+    let clips = collect_clips(config, &BuildOptions::default()).unwrap();
+    let turns: std::collections::BTreeMap<String, f64> = clips
+        .iter()
+        .filter(|c| c.clip.clip_id.contains("walk-turn") && c.clip.kind != SourceKind::Synthetic)
+        .map(|c| (c.clip.clip_id.clone(), net_turn(&c.motion)))
+        .collect();
+    clips
+        .iter()
+        .filter(|c| c.clip.kind == SourceKind::Synthetic)
+        .filter_map(|c| {
+            let legs = c
+                .clip
+                .composed_from
+                .iter()
+                .zip(&c.clip.composed_parts)
+                .find(|(_, parts)| parts.contains(motionforge::motion::BodyPart::Global))?
+                .0;
+            let whole = turns.get(legs)?;
+            let kept: f64 = c.clip.attributes.get("action_kept")?.parse().ok()?;
+            Some((c.clip.clip_id.clone(), net_turn(&c.motion) / whole, kept))
+        })
+        .collect()
+}
+
+#[test]
+fn pairs_keep_the_turn_of_their_walk_turns_and_drop_what_cannot_keep_it() {
+    // Issue 16, finding 4: SINC's crop from the start kept less than half the turn of 405 of
+    // 1,143 Bandai Namco 2 pairs whose legs came from a walk-turn. Here a raise-up take (51 to 60
+    // frames) crops a walk-turn (100 to 215 frames) to its length.
+    let (_dir, config) = turns_and_raises("");
+    let report = build(&config, &BuildOptions::default()).unwrap();
+    let s = &report.synthetic;
+    assert_eq!(s.composed + s.dropped.values().sum::<usize>(), s.sampled);
+    let kept = turn_kept(&config);
+    let worst = kept.iter().map(|k| k.1).fold(f64::INFINITY, f64::min);
+    println!(
+        "{:?}; {} walk-turn pairs, least share of the turn kept {worst:.3}",
+        s,
+        kept.len()
+    );
+    assert!(kept.len() >= 100, "{} walk-turn pairs", kept.len());
+    for (id, share, action_kept) in &kept {
+        assert!(*action_kept >= 0.5, "{id}: action_kept {action_kept}");
+        // Measured here on the composite's own frames, independently of the stage's window.
+        assert!(*share >= 0.45, "{id} keeps {share:.2} of the turn");
+    }
+
+    // SINC's protocol is still there (`keep_action = false`): it cuts the turn away.
+    let (_sinc_dir, sinc) = turns_and_raises("keep_action = false\nmin_action_kept = 0.0");
+    let cut = turn_kept(&sinc);
+    let below_half = cut.iter().filter(|k| k.1 < 0.5).count();
+    println!(
+        "crop from the start: {below_half} of {} walk-turn pairs keep less than half the turn",
+        cut.len()
+    );
+    assert!(below_half * 4 > cut.len(), "{below_half} of {}", cut.len());
+    for (id, share, action_kept) in &cut {
+        // The attribute says so: it is the measured share, within the two measures' smoothing.
+        assert!(
+            (share.clamp(0.0, 1.0) - action_kept).abs() < 0.25,
+            "{id}: {share} vs {action_kept}"
+        );
+    }
+
+    // Pairs that keep too little are dropped and counted under `action_cut`.
+    let (_strict_dir, strict) = turns_and_raises("min_action_kept = 1.0");
+    let report = build(&strict, &BuildOptions::default()).unwrap();
+    let dropped = report
+        .synthetic
+        .dropped
+        .get("action_cut")
+        .copied()
+        .unwrap_or(0);
+    println!("min_action_kept = 1.0: {:?}", report.synthetic);
+    assert!(dropped > 0);
+    assert_eq!(
+        report.synthetic.composed + report.synthetic.dropped.values().sum::<usize>(),
+        report.synthetic.sampled
+    );
+}

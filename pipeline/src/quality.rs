@@ -609,6 +609,239 @@ fn lean(clip: &Clip, body: &[usize], fps: f64, out: &mut Plausibility) {
     }
 }
 
+/// Net heading change (degrees) past which a motion counts as turning the other way than its text
+/// says; Bandai Namco 2's walk-turns turn 90 to 180 degrees.
+pub const CONTRADICTING_TURN_DEG: f64 = 45.0;
+/// Displacement (metres) along the first frame's facing past which a motion counts as walking
+/// the other way than its text says.
+pub const CONTRADICTING_TRAVEL: f64 = 0.5;
+/// A hand the text names contradicts the motion when it travels (relative to the pelvis) less
+/// than this share of the other hand's path.
+pub const CONTRADICTING_HAND_SHARE: f64 = 0.5;
+/// Least path (metres, relative to the pelvis) of the other hand for a hand claim to be judged:
+/// below it neither hand does anything to compare.
+pub const MIN_HAND_PATH: f64 = 0.3;
+
+/// A side.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Side {
+    /// The character's left.
+    Left,
+    /// The character's right.
+    Right,
+}
+
+impl Side {
+    fn word(self) -> &'static str {
+        match self {
+            Side::Left => "left",
+            Side::Right => "right",
+        }
+    }
+}
+
+/// What a text says a motion does, in terms the motion can be measured against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Claims {
+    /// "turn left", "walk-turn-right", "turns to the left".
+    pub turn: Option<Side>,
+    /// Walking or stepping forward (`Some(true)`) or back (`Some(false)`).
+    pub forward: Option<bool>,
+    /// "left hand", "wave-right-hand" (only one side named).
+    pub hand: Option<Side>,
+}
+
+/// The claims of `text`, read from its words (letters and digits; `-` and `_` separate words, so
+/// file-name labels such as `walk-turn-left` read as text).
+pub fn claims(text: &str) -> Claims {
+    let lower = text.to_ascii_lowercase();
+    let words: Vec<&str> = lower
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| !w.is_empty())
+        .collect();
+    let side = |w: &str| match w {
+        "left" | "leftward" | "leftwards" => Some(Side::Left),
+        "right" | "rightward" | "rightwards" => Some(Side::Right),
+        _ => None,
+    };
+    let mut out = Claims::default();
+    let mut turns: Vec<Side> = Vec::new();
+    let mut hands: Vec<Side> = Vec::new();
+    for (i, w) in words.iter().enumerate() {
+        let after = &words[i + 1..words.len().min(i + 4)];
+        if matches!(*w, "turn" | "turns" | "turning" | "turned")
+            && let Some(s) = after.iter().find_map(|a| side(a))
+        {
+            turns.push(s);
+        }
+        if let Some(s) = side(w)
+            && words
+                .get(i + 1)
+                .is_some_and(|n| matches!(*n, "hand" | "hands"))
+        {
+            hands.push(s);
+        }
+        if matches!(
+            *w,
+            "walk" | "walks" | "walking" | "step" | "steps" | "stepping"
+        ) {
+            match words.get(i + 1).copied() {
+                Some("back" | "backward" | "backwards") => out.forward = Some(false),
+                Some("forward" | "forwards") => out.forward = Some(true),
+                _ => {}
+            }
+        }
+    }
+    let one = |sides: &[Side]| match sides {
+        [first, rest @ ..] if rest.iter().all(|s| s == first) => Some(*first),
+        _ => None,
+    };
+    out.turn = one(&turns);
+    out.hand = one(&hands);
+    out
+}
+
+/// The largest left turn and the largest right turn (degrees, both `>= 0`) anywhere in a motion:
+/// the largest rise and the largest fall of its heading, averaged over 0.5 s so the hips' swing
+/// with every step does not count. `None` without a facing direction.
+fn largest_turns(
+    positions: &[DVec3],
+    joints: usize,
+    fps: f64,
+    profile: &Profile,
+) -> Option<(f64, f64)> {
+    let track = crate::motion::canonical::heading_track(positions, joints, profile)?;
+    let n = track.len();
+    let half = if fps.is_finite() && fps > 0.0 {
+        (0.25 * fps).round() as usize
+    } else {
+        0
+    };
+    let mut sums = vec![0.0; n + 1];
+    for (f, h) in track.iter().enumerate() {
+        sums[f + 1] = sums[f] + h;
+    }
+    let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut left, mut right) = (0.0f64, 0.0f64);
+    for f in 0..n {
+        let (lo, hi) = (f.saturating_sub(half), (f + half + 1).min(n));
+        let h = ((sums[hi] - sums[lo]) / (hi - lo) as f64).to_degrees();
+        low = low.min(h);
+        high = high.max(h);
+        left = left.max(h - low);
+        right = right.max(high - h);
+    }
+    Some((left, right))
+}
+
+/// A clip whose text says one thing and whose motion measurably does another. The label is never
+/// changed: the build lists these, and drops them only when asked.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Contradiction {
+    /// The clip.
+    pub clip_id: String,
+    /// What the text says: `turn left`, `walk back`, `right hand`, ...
+    pub claim: String,
+    /// What the motion does, in words: `turns right`, `walks forward`, `moves the left hand`.
+    pub motion: String,
+    /// The measurement: degrees of net turn (left positive), metres along the first frame's
+    /// facing, or the named hand's path over the other's.
+    pub measured: f64,
+}
+
+/// The contradictions between `text` and a motion (dataset-axes positions, frame-major, `joints`
+/// per frame, at `fps`): a turn the other way by more than [`CONTRADICTING_TURN_DEG`], a walk the
+/// other way by more than [`CONTRADICTING_TRAVEL`], a named hand that moves less than
+/// [`CONTRADICTING_HAND_SHARE`] of the other. Claims the motion cannot be measured for are not
+/// judged.
+pub fn contradictions(
+    clip_id: &str,
+    text: &str,
+    positions: &[DVec3],
+    joints: usize,
+    fps: f64,
+    profile: &Profile,
+) -> Vec<Contradiction> {
+    use crate::motion::canonical::{canonical_frame, hand_joint, net_turn};
+    let said = claims(text);
+    let mut out = Vec::new();
+    let frames = positions.len().checked_div(joints).unwrap_or(0);
+    if frames < 2 || !positions.iter().all(|p| p.is_finite()) {
+        return out;
+    }
+    let note = |claim: String, motion: String, measured: f64| Contradiction {
+        clip_id: clip_id.to_string(),
+        claim,
+        motion,
+        measured,
+    };
+    if let Some(side) = said.turn
+        && let Some(turn) = net_turn(positions, joints, fps, 0.5, profile).map(f64::to_degrees)
+        && let Some((left, right)) = largest_turns(positions, joints, fps, profile)
+    {
+        // The other way overall, and never the way the text says: a walk that turns right and
+        // then, at the end of the take, turns round to the left is not a contradiction.
+        let wrong = match side {
+            Side::Left => turn <= -CONTRADICTING_TURN_DEG && left < CONTRADICTING_TURN_DEG,
+            Side::Right => turn >= CONTRADICTING_TURN_DEG && right < CONTRADICTING_TURN_DEG,
+        };
+        if wrong {
+            let did = if turn > 0.0 { "left" } else { "right" };
+            out.push(note(
+                format!("turn {}", side.word()),
+                format!("turns {did} {:.0} degrees", turn.abs()),
+                turn,
+            ));
+        }
+    }
+    if let Some(forward) = said.forward
+        && let Some(frame) = canonical_frame(&positions[..joints], profile)
+        && let Some(last) = positions.get((frames - 1) * joints + profile.root)
+    {
+        let along = frame.apply(*last).y;
+        let wrong = if forward {
+            along <= -CONTRADICTING_TRAVEL
+        } else {
+            along >= CONTRADICTING_TRAVEL
+        };
+        if wrong {
+            let did = if along > 0.0 { "forward" } else { "back" };
+            out.push(note(
+                format!("walk {}", if forward { "forward" } else { "back" }),
+                format!("walks {did} {:.2} m", along.abs()),
+                along,
+            ));
+        }
+    }
+    if let Some(side) = said.hand {
+        let (named, other) = match side {
+            Side::Left => (BodyPart::LeftArm, BodyPart::RightArm),
+            Side::Right => (BodyPart::RightArm, BodyPart::LeftArm),
+        };
+        let path = |part: BodyPart| -> Option<f64> {
+            let hand = hand_joint(profile, part)?;
+            let at = |f: usize| positions[f * joints + hand] - positions[f * joints + profile.root];
+            Some((1..frames).map(|f| (at(f) - at(f - 1)).length()).sum())
+        };
+        if let (Some(named_path), Some(other_path)) = (path(named), path(other))
+            && other_path >= MIN_HAND_PATH
+            && named_path < CONTRADICTING_HAND_SHARE * other_path
+        {
+            let did = if side == Side::Left { "right" } else { "left" };
+            out.push(note(
+                format!("{} hand", side.word()),
+                format!(
+                    "moves the {did} hand ({:.2} m against {:.2} m)",
+                    other_path, named_path
+                ),
+                named_path / other_path,
+            ));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use std::path::PathBuf;

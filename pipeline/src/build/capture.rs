@@ -273,7 +273,8 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
     // The stage's input is exactly the clips, labels included, and their frames (named by where
     // they are): that encoding is the fingerprint.
     let encoded = crate::base::encoded_sha256(&(&item.clips, &item.refs), "clips to mirror")?;
-    let fp = mirror::fingerprint(&encoded, spec, &shared.types_digest);
+    let offsets = shared.config.mirror.offsets;
+    let fp = mirror::fingerprint(&encoded, spec, &shared.types_digest, offsets);
     // The copies' texts and labels are made here; their frames are made from the originals'
     // when read (`MotionRef::Mirrored`), so the stage reads and stores no frames.
     let Some(((mirrored, refs), ran)): Option<((mirror::MirrorOutput, Vec<MotionRef>), bool)> =
@@ -286,6 +287,7 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
                     spec,
                     &shared.bound,
                     shared.types.taxonomy(),
+                    offsets,
                 );
                 for copy in one.clips {
                     refs.push(MotionRef::Mirrored(Box::new(at.clone())));

@@ -35,7 +35,7 @@ use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
 use crate::clip::{Clip, LoadedClip};
 use crate::config::Config;
 use crate::io::parquet::TableError;
-use crate::motion::{Profile, ProfileSpec};
+use crate::motion::{MirrorPlan, OffsetPolicy, Profile, ProfileSpec};
 use crate::source::{self, SourceAnnotations, SourceError};
 use crate::stages::{ingest, mirror};
 use crate::stages::{label, segment};
@@ -250,6 +250,14 @@ pub struct BuildReport {
     pub pair_check: crate::stages::augment::AugmentReport,
     /// Fingerprint of the written table's inputs.
     pub table_fingerprint: String,
+    /// Real clips whose motion contradicts their text (turn side, walking direction, hand), in
+    /// `clip_id` order. Listed, never fixed; left out of the table with `label_check.drop`.
+    #[serde(default)]
+    pub label_contradictions: Vec<crate::quality::Contradiction>,
+    /// Rows left out because of them (`label_check.drop`): the clips and the synthetic pairs
+    /// made from them.
+    #[serde(default)]
+    pub label_contradictions_dropped: usize,
 }
 
 impl BuildReport {
@@ -329,7 +337,12 @@ fn run_stages<'a>(
         types_digest,
         digests,
     };
-    let motions = MotionSource::new(&shared.workspace, &shared.specs, &shared.bound);
+    let motions = MotionSource::new(
+        &shared.workspace,
+        &shared.specs,
+        &shared.bound,
+        config.mirror.offsets,
+    );
 
     progress.stage_started(ingest::NAME, files.len() as u64);
     let mut items: Vec<Item> = files
@@ -685,6 +698,7 @@ pub fn collect_clips(
         &staged.shared.workspace,
         &staged.shared.specs,
         &staged.shared.bound,
+        config.mirror.offsets,
     );
     staged
         .clips
@@ -706,6 +720,7 @@ pub fn find_clip(
         &staged.shared.workspace,
         &staged.shared.specs,
         &staged.shared.bound,
+        config.mirror.offsets,
     );
     let found = staged
         .clips
@@ -714,6 +729,45 @@ pub fn find_clip(
         .map(|c| motions.load(c, &staged.index))
         .transpose()?;
     Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
+}
+
+/// The real single clips (mirrors included) whose motion contradicts what their text says
+/// (`quality::contradictions`), in `clip_id` order. Only clips whose text makes a claim the
+/// motion can be measured for are read.
+fn contradicting_labels(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    clips: &[Clip],
+    index: &MotionIndex,
+) -> Result<Vec<crate::quality::Contradiction>, BuildError> {
+    let mut out = Vec::new();
+    for clip in clips
+        .iter()
+        .filter(|c| c.kind == crate::clip::SourceKind::RealSingle)
+    {
+        if crate::quality::claims(&clip.text) == crate::quality::Claims::default() {
+            continue;
+        }
+        let Some(profile) = shared.profile_of(clip) else {
+            continue;
+        };
+        let motion = motions.motion_of(clip, index)?;
+        let positions = crate::motion::canonical::dataset_positions(&motion, &profile);
+        out.extend(crate::quality::contradictions(
+            &clip.clip_id,
+            &clip.text,
+            &positions,
+            motion.num_joints(),
+            motion.fps,
+            &profile,
+        ));
+    }
+    out.sort_by(|a, b| {
+        a.clip_id
+            .cmp(&b.clip_id)
+            .then_with(|| a.claim.cmp(&b.claim))
+    });
+    Ok(out)
 }
 
 /// Runs every stage of the build described by `config` and writes the dataset.
@@ -738,7 +792,26 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         blocked: _,
         index,
     } = run_stages(config, options, false)?;
-    let motions = MotionSource::new(&shared.workspace, &shared.specs, &shared.bound);
+    let motions = MotionSource::new(
+        &shared.workspace,
+        &shared.specs,
+        &shared.bound,
+        config.mirror.offsets,
+    );
+    let label_contradictions = contradicting_labels(&shared, &motions, &clips, &index)?;
+    let mut clips = clips;
+    let before = clips.len();
+    if config.label_check.drop && !label_contradictions.is_empty() {
+        let wrong: std::collections::BTreeSet<&str> = label_contradictions
+            .iter()
+            .map(|c| c.clip_id.as_str())
+            .collect();
+        clips.retain(|c| {
+            !wrong.contains(c.clip_id.as_str())
+                && !c.composed_from.iter().any(|id| wrong.contains(id.as_str()))
+        });
+    }
+    let label_contradictions_dropped = before - clips.len();
     let workspace = &shared.workspace;
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
@@ -751,7 +824,18 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         if let Some(spec) = specs.iter().find(|s| s.name == clip.profile)
             && let Ok(bound) = shared.bound.bind(spec, &clip.skeleton)
         {
-            skeletons.insert(id, skeleton_json(&clip.skeleton, &bound));
+            // A mirror on its own skeleton names the skeleton it reflects (mirroring is an
+            // involution, so mirroring this one gives that one back).
+            let mirror_of = if clip.mirrored && config.mirror.offsets == OffsetPolicy::Mirror {
+                MirrorPlan::from_profile(&clip.skeleton, &bound)
+                    .ok()
+                    .map(|plan| plan.skeleton_of_mirror(&clip.skeleton, OffsetPolicy::Mirror))
+                    .map(|original| crate::clip::skeleton_name(&clip.profile, &original))
+                    .filter(|original| *original != id)
+            } else {
+                None
+            };
+            skeletons.insert(id, skeleton_json(&clip.skeleton, &bound, mirror_of));
             profiles.entry(clip.profile.clone()).or_insert(bound);
         }
     }
@@ -837,6 +921,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;
     }
     let report = BuildReport {
+        label_contradictions,
+        label_contradictions_dropped,
         dataset: config.dataset.name.clone(),
         output: output.clone(),
         stages,

@@ -97,6 +97,8 @@ pub(super) struct MotionSource {
     /// Skeleton profiles by name: mirrors and composites need the bound profile.
     specs: Vec<ProfileSpec>,
     bound: Arc<BoundProfiles>,
+    /// Bone offsets of mirrors (`[mirror] offsets`).
+    offsets: OffsetPolicy,
     recent: Mutex<VecDeque<(String, Arc<Vec<Motion>>)>>,
 }
 
@@ -106,18 +108,20 @@ impl MotionSource {
         workspace: &Workspace,
         specs: &[ProfileSpec],
         bound: &Arc<BoundProfiles>,
+        offsets: OffsetPolicy,
     ) -> MotionSource {
         MotionSource {
             workspace: workspace.clone(),
             specs: specs.to_vec(),
             bound: Arc::clone(bound),
+            offsets,
             recent: Mutex::new(VecDeque::new()),
         }
     }
 
     /// A source over the same cache with its own memory of recent entries, for another thread.
     pub(super) fn sibling(&self) -> MotionSource {
-        MotionSource::new(&self.workspace, &self.specs, &self.bound)
+        MotionSource::new(&self.workspace, &self.specs, &self.bound, self.offsets)
     }
 
     /// The motion `at` points to, on a skeleton of profile `profile`.
@@ -129,7 +133,7 @@ impl MotionSource {
                 let bound = self.bind(&original, profile)?;
                 let plan = MirrorPlan::from_profile(&original.skeleton, &bound)
                     .map_err(|e| BuildError::Motion(format!("cannot mirror a held motion: {e}")))?;
-                Ok(plan.mirror(&original, OffsetPolicy::Keep))
+                Ok(plan.mirror(&original, self.offsets))
             }
             MotionRef::Composed {
                 first,

@@ -85,9 +85,12 @@ impl Recorded {
     }
 }
 
+/// A skeleton's entry in `skeletons.json`. `mirror_of` names the skeleton (by id) whose
+/// reflection this is, for the skeleton of a mirrored clip that differs from its original's.
 pub(super) fn skeleton_json(
     skeleton: &crate::motion::Skeleton,
     profile: &Profile,
+    mirror_of: Option<String>,
 ) -> serde_json::Value {
     let joints: Vec<serde_json::Value> = skeleton
         .joints
@@ -110,13 +113,17 @@ pub(super) fn skeleton_json(
             })
         })
         .collect();
-    serde_json::json!({
+    let mut entry = serde_json::json!({
         "profile": profile.name,
         "root": skeleton.joints[profile.root].name,
         "capture_axes": { "up": profile.up.to_string(), "forward": profile.forward.to_string() },
         "unit_scale": profile.unit_scale,
         "joints": joints,
-    })
+    });
+    if let (Some(of), Some(map)) = (mirror_of, entry.as_object_mut()) {
+        map.insert("mirror_of".into(), serde_json::Value::String(of));
+    }
+    entry
 }
 
 /// What the write stage writes.

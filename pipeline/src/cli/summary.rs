@@ -317,6 +317,22 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
         c.composed,
         counts(&c.dropped)
     )?;
+    if !report.label_contradictions.is_empty() {
+        let left_out = report.label_contradictions_dropped;
+        writeln!(
+            out,
+            "labels contradicting the motion: {} (listed in build-report.json){}",
+            report.label_contradictions.len(),
+            if left_out > 0 {
+                format!("; {left_out} rows left out (label_check.drop)")
+            } else {
+                String::new()
+            }
+        )?;
+        for c in report.label_contradictions.iter().take(10) {
+            writeln!(out, "  {}: says {}, {}", c.clip_id, c.claim, c.motion)?;
+        }
+    }
     let pc = &report.pair_check;
     if pc.texts > 0 {
         writeln!(

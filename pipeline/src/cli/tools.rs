@@ -115,7 +115,7 @@ pub(crate) fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
             let t1 = std::time::Instant::now();
             let pose = bvh.motion.forward_kinematics();
             let t2 = std::time::Instant::now();
-            let mirrored = plan.mirror(&bvh.motion, OffsetPolicy::Keep);
+            let mirrored = plan.mirror(&bvh.motion, OffsetPolicy::default());
             let t3 = std::time::Instant::now();
             std::hint::black_box((&pose, &mirrored));
             frames += bvh.motion.num_frames();

@@ -98,6 +98,14 @@ impl Config {
                 "a probability between 0 and 1",
             );
         }
+        let kept = self.synthetic.min_action_kept;
+        if !(0.0..=1.0).contains(&kept) {
+            c.push(
+                &[K("synthetic"), K("min_action_kept")],
+                kept.to_string(),
+                "a share between 0 and 1",
+            );
+        }
         let t = &self.synthetic.thresholds;
         for (key, value, expected) in [
             (

@@ -141,6 +141,9 @@ pub struct Config {
     /// Synthetic simultaneous pairs and their plausibility checks.
     #[serde(default)]
     pub synthetic: SyntheticConfig,
+    /// The check of texts against motions (turn side, walking direction, hand).
+    #[serde(default)]
+    pub label_check: LabelCheckConfig,
     /// Body-part labelling.
     #[serde(default)]
     pub part_labels: PartLabelConfig,
@@ -350,6 +353,17 @@ impl Default for ParaphraseConfig {
     }
 }
 
+/// The check of what a clip's text says (turn left or right, walk forward or back, left or right
+/// hand) against what its motion does (`docs/plausibility.md`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct LabelCheckConfig {
+    /// Leave out of the table the clips whose motion contradicts their text, and the synthetic
+    /// pairs made from them. Off by default: they are only listed in the build report.
+    #[serde(default)]
+    pub drop: bool,
+}
+
 /// Mirroring settings.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -357,6 +371,11 @@ pub struct MirrorConfig {
     /// Add a mirrored copy of every clip.
     #[serde(default = "yes")]
     pub enabled: bool,
+    /// Bone offsets of the copy: `mirror` (default; the copy is the exact reflection, on the
+    /// mirrored skeleton) or `keep` (the copy stays on the original skeleton, off by its
+    /// left/right asymmetry). `docs/mirroring.md`.
+    #[serde(default)]
+    pub offsets: crate::motion::OffsetPolicy,
 }
 
 fn yes() -> bool {
@@ -365,7 +384,10 @@ fn yes() -> bool {
 
 impl Default for MirrorConfig {
     fn default() -> Self {
-        MirrorConfig { enabled: true }
+        MirrorConfig {
+            enabled: true,
+            offsets: crate::motion::OffsetPolicy::default(),
+        }
     }
 }
 
@@ -832,9 +854,18 @@ pub struct SyntheticConfig {
     /// Compose every compatible pair instead of sampling (small sets).
     #[serde(default)]
     pub exhaustive: bool,
-    /// Trim the longer clip from its start (SINC) or from a seeded random offset.
+    /// Crop the longer clip at a seeded random offset (overrides `keep_action`).
     #[serde(default)]
     pub random_offset: bool,
+    /// Crop the longer clip to the window that keeps most of its action (locomotion: path and
+    /// heading change; other parts: their motion energy). `false` crops from its start (SINC's
+    /// protocol). `docs/synthetic-pairs.md`.
+    #[serde(default = "yes")]
+    pub keep_action: bool,
+    /// Pairs whose crop keeps less than this share of the longer clip's action are dropped
+    /// (`action_cut`); 0 keeps every pair.
+    #[serde(default = "half")]
+    pub min_action_kept: f64,
     /// Plausibility thresholds; composites that fail are dropped, counted by reason.
     #[serde(default)]
     pub thresholds: Thresholds,
@@ -856,6 +887,8 @@ impl Default for SyntheticConfig {
             max_per_clip: None,
             exhaustive: false,
             random_offset: false,
+            keep_action: true,
+            min_action_kept: half(),
             thresholds: Thresholds::default(),
             llm_check: false,
         }

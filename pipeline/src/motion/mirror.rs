@@ -1,4 +1,4 @@
-//! Mirroring motions across the character's sagittal plane, on the same skeleton.
+//! Mirroring motions across the character's sagittal plane, with their skeletons.
 //!
 //! Each joint `j` has a reflection `B_j` (diagonal ±1, determinant -1) that maps the child offsets
 //! of its partner `swap(j)` onto its own. Mirrored local transforms are
@@ -16,14 +16,16 @@ use super::motion::Motion;
 use super::profile::{Profile, Reflection};
 use super::skeleton::Skeleton;
 
-/// How translations of joints that do not carry motion are mirrored.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How translations of joints that do not carry motion (bone offsets) are mirrored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum OffsetPolicy {
-    /// Keep each joint's own values, so the mirrored motion uses the original skeleton
-    /// (what a dataset wants: one skeleton, two motions).
-    #[default]
+    /// Keep each joint's own values: the mirrored motion stays on the original skeleton, and its
+    /// positions are off by the skeleton's left/right asymmetry (2.2% of body height on CMU).
     Keep,
-    /// Use `B_parent · T_swap`: the mirrored skeleton; exact for asymmetric skeletons.
+    /// Use `B_parent · T_swap`: the mirrored motion is on the mirrored skeleton
+    /// ([`MirrorPlan::mirror_skeleton`]) and is the exact reflection of the original.
+    #[default]
     Mirror,
 }
 
@@ -113,7 +115,58 @@ impl MirrorPlan {
             .unwrap_or(self.world)
     }
 
-    /// The mirrored motion on the same skeleton.
+    /// The skeleton of a mirrored motion: every offset `B_parent · offset_swap(j)` and every end
+    /// site `B_j · end_site_swap(j)`, names and channels kept. A skeleton whose left and right
+    /// sides are reflections of each other comes back equal (same digest); mirroring twice gives
+    /// the original back.
+    pub fn mirror_skeleton(&self, skeleton: &Skeleton) -> Skeleton {
+        // A coordinate equal to the joint's own keeps its own bits, so a symmetric skeleton keeps
+        // its digest (which hashes the bytes of every offset, and a negated 0.0 is -0.0).
+        fn settle(own: DVec3, mirrored: DVec3) -> DVec3 {
+            let pick = |a: f64, b: f64| if a == b { a } else { b };
+            DVec3::new(
+                pick(own.x, mirrored.x),
+                pick(own.y, mirrored.y),
+                pick(own.z, mirrored.z),
+            )
+        }
+        let mut out = skeleton.clone();
+        for (j, joint) in out.joints.iter_mut().enumerate() {
+            let s = self.swap.get(j).copied().unwrap_or(j);
+            let (Some(source), Some(&b)) = (skeleton.joints.get(s), self.reflections.get(j)) else {
+                continue;
+            };
+            joint.offset = settle(joint.offset, self.parent_reflection(j).apply(source.offset));
+            joint.end_site = match (joint.end_site, source.end_site) {
+                (Some(own), Some(e)) => Some(settle(own, b.apply(e))),
+                (_, e) => e.map(|e| b.apply(e)),
+            };
+        }
+        out
+    }
+
+    /// The skeleton a mirror of a motion on `skeleton` is on: the same one under
+    /// [`OffsetPolicy::Keep`] or when the skeleton is symmetric, else [`MirrorPlan::mirror_skeleton`].
+    pub fn skeleton_of_mirror(
+        &self,
+        skeleton: &Arc<Skeleton>,
+        offsets: OffsetPolicy,
+    ) -> Arc<Skeleton> {
+        match offsets {
+            OffsetPolicy::Keep => Arc::clone(skeleton),
+            OffsetPolicy::Mirror => {
+                let mirrored = self.mirror_skeleton(skeleton);
+                if mirrored == **skeleton {
+                    Arc::clone(skeleton)
+                } else {
+                    Arc::new(mirrored)
+                }
+            }
+        }
+    }
+
+    /// The mirrored motion: on the mirrored skeleton under [`OffsetPolicy::Mirror`] (one shared
+    /// copy when the skeleton is symmetric), on the same skeleton under [`OffsetPolicy::Keep`].
     pub fn mirror(&self, motion: &Motion, offsets: OffsetPolicy) -> Motion {
         let n = motion.num_joints();
         let frames = motion.num_frames();
@@ -145,7 +198,7 @@ impl MirrorPlan {
             }
         }
         Motion {
-            skeleton: Arc::clone(&motion.skeleton),
+            skeleton: self.skeleton_of_mirror(&motion.skeleton, offsets),
             fps: motion.fps,
             rotations,
             translations,

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::clip::{Clip, SourceKind, Split};
 use crate::compose_text::compose_variants;
 use crate::motion::canonical::dataset_positions;
-use crate::motion::compose::{Trim, compose};
+use crate::motion::compose::{Trim, action_kept, action_window, compose, contributions};
 use crate::motion::{BodyPart, Motion, Profile};
 use crate::parts::PartSet;
 use crate::quality::{Plausibility, plausibility};
@@ -19,7 +19,7 @@ use crate::quality::{Plausibility, plausibility};
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 
 pub use crate::config::SyntheticConfig;
 
@@ -35,7 +35,8 @@ pub struct ComposeReport {
     pub sampled: usize,
     /// Composites kept.
     pub composed: usize,
-    /// Pairs dropped, each under one reason: the LLM veto or the first plausibility check it fails.
+    /// Pairs dropped, each under one reason: the LLM veto, `action_cut` (the crop keeps less of
+    /// the longer clip's action than `min_action_kept`) or the first plausibility check it fails.
     pub dropped: BTreeMap<String, usize>,
 }
 
@@ -252,7 +253,9 @@ struct Made {
     /// The pair's generator, after the draw of the offset (the text draw continues it).
     rng: Rng,
     trim: Trim,
-    composite: crate::motion::compose::Composite,
+    /// Share of the cropped clip's action the composite keeps.
+    kept: f64,
+    composite: Option<crate::motion::compose::Composite>,
     metrics: Plausibility,
 }
 
@@ -320,13 +323,35 @@ pub fn run<E: Send>(
                 };
                 let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
                 let (motion_a, motion_b) = (motion_of(a)?, motion_of(b)?);
-                let trim = if config.random_offset {
-                    let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
-                    Trim::At(rng.below(spare + 1))
-                } else {
-                    Trim::Start
-                };
                 let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
+                // The longer clip is cropped; its action is what its own label says it does,
+                // among the parts it gives the composite.
+                let (from_a, from_b) = contributions(mask(pa), mask(pb));
+                let frames = motion_a.num_frames().min(motion_b.num_frames());
+                let (longer, action) = if motion_a.num_frames() >= motion_b.num_frames() {
+                    (&motion_a, from_a & mask(pa))
+                } else {
+                    (&motion_b, from_b & mask(pb))
+                };
+                let (trim, kept) = if config.random_offset {
+                    let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
+                    let k = rng.below(spare + 1);
+                    (Trim::At(k), action_kept(longer, action, profile, k, frames))
+                } else if config.keep_action {
+                    let w = action_window(longer, action, profile, frames);
+                    (Trim::At(w.start), w.kept)
+                } else {
+                    (Trim::Start, action_kept(longer, action, profile, 0, frames))
+                };
+                if kept < config.min_action_kept {
+                    return Ok(Some(Made {
+                        rng,
+                        trim,
+                        kept,
+                        composite: None,
+                        metrics: Plausibility::default(),
+                    }));
+                }
                 let composite = compose(&motion_a, mask(pa), &motion_b, mask(pb), profile, trim);
                 let positions = dataset_positions(&composite.motion, profile);
                 let metrics = plausibility(
@@ -338,7 +363,8 @@ pub fn run<E: Send>(
                 Ok(Some(Made {
                     rng,
                     trim,
-                    composite,
+                    kept,
+                    composite: Some(composite),
                     metrics,
                 }))
             })
@@ -351,10 +377,18 @@ pub fn run<E: Send>(
             let Some(Made {
                 mut rng,
                 trim,
+                kept,
                 composite,
                 metrics,
             }) = made
             else {
+                continue;
+            };
+            let Some(composite) = composite else {
+                *out.report
+                    .dropped
+                    .entry("action_cut".to_string())
+                    .or_insert(0) += 1;
                 continue;
             };
             let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
@@ -389,6 +423,7 @@ pub fn run<E: Send>(
                 attributes: BTreeMap::from([
                     ("start_a".to_string(), composite.starts[0].to_string()),
                     ("start_b".to_string(), composite.starts[1].to_string()),
+                    ("action_kept".to_string(), format!("{kept:.3}")),
                 ]),
                 profile: a.profile.clone(),
                 motion_type: None,

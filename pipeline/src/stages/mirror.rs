@@ -1,4 +1,4 @@
-//! `mirror`: every clip in, its mirrored copy out: motion reflected on the same skeleton, and
+//! `mirror`: every clip in, its mirrored copy out: motion and skeleton reflected, and
 //! everything that carries a side (texts, labels, motion type, hand, goals) swapped with it.
 
 use serde::{Deserialize, Serialize};
@@ -15,18 +15,20 @@ use crate::text::mirror_text;
 /// Stage name.
 pub const NAME: &str = "mirror";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 
 /// Fingerprint of mirroring one segmented capture.
 pub fn fingerprint(
     segment_fingerprint: &str,
     profile: &ProfileSpec,
     types: &impl Serialize,
+    offsets: OffsetPolicy,
 ) -> Stamp {
     Fingerprint::new(NAME, VERSION)
         .text("labelled clips", segment_fingerprint)
         .json("skeleton profile", profile)
         .json("motion types", types)
+        .json("offsets", &offsets)
         .stamp()
 }
 
@@ -39,9 +41,16 @@ pub struct MirrorOutput {
     pub rejects: Vec<Reject>,
 }
 
-/// Mirrored copies of `clips`; a clip whose skeleton the profile cannot mirror is rejected.
+/// Mirrored copies of `clips` (bone offsets mirrored too, so each copy is on the mirrored
+/// skeleton); a clip whose skeleton the profile cannot mirror is rejected.
 pub fn run(clips: &[Clip], profile: &ProfileSpec, taxonomy: &Taxonomy) -> MirrorOutput {
-    run_with(clips, profile, &BoundProfiles::default(), taxonomy)
+    run_with(
+        clips,
+        profile,
+        &BoundProfiles::default(),
+        taxonomy,
+        OffsetPolicy::Mirror,
+    )
 }
 
 /// [`run`], binding the profile through `bound` (shared by the calls of one build).
@@ -50,6 +59,7 @@ pub fn run_with(
     profile: &ProfileSpec,
     bound: &BoundProfiles,
     taxonomy: &Taxonomy,
+    offsets: OffsetPolicy,
 ) -> MirrorOutput {
     let mut out = Vec::with_capacity(clips.len());
     let mut rejects = Vec::new();
@@ -62,7 +72,11 @@ pub fn run_with(
                 MirrorPlan::from_profile(skeleton, &bound).map_err(|e| e.to_string())
             });
         match plan {
-            Ok(_) => out.push(mirror_clip(clip, taxonomy)),
+            Ok(plan) => {
+                let mut copy = mirror_clip(clip, taxonomy);
+                copy.skeleton = plan.skeleton_of_mirror(&clip.skeleton, offsets);
+                out.push(copy);
+            }
             Err(message) => rejects.push(Reject {
                 stage: NAME.to_string(),
                 file: clip.capture.path.clone(),
@@ -80,7 +94,8 @@ pub fn run_with(
 }
 
 /// The mirrored copy of one clip: everything that carries a side swaps with the motion (whose
-/// frames are `plan.mirror` of the clip's, on the same skeleton). The attributes are left as they
+/// frames are `plan.mirror` of the clip's; the caller sets the copy's skeleton, which is the
+/// clip's until then). The attributes are left as they
 /// are: they describe the source capture as annotated (file-name fields, sidecar ids), which a
 /// mirror does not change.
 pub fn mirror_clip(clip: &Clip, taxonomy: &Taxonomy) -> Clip {
@@ -104,10 +119,16 @@ pub fn mirror_clip(clip: &Clip, taxonomy: &Taxonomy) -> Clip {
     }
 }
 
-/// The mirrored copy of a clip with its frames: [`mirror_clip`] and the reflected motion.
-pub fn mirror_loaded(loaded: &LoadedClip, plan: &MirrorPlan, taxonomy: &Taxonomy) -> LoadedClip {
-    LoadedClip {
-        clip: mirror_clip(&loaded.clip, taxonomy),
-        motion: plan.mirror(&loaded.motion, OffsetPolicy::Keep),
-    }
+/// The mirrored copy of a clip with its frames: [`mirror_clip`] and the reflected motion, on
+/// the skeleton `offsets` gives it.
+pub fn mirror_loaded(
+    loaded: &LoadedClip,
+    plan: &MirrorPlan,
+    taxonomy: &Taxonomy,
+    offsets: OffsetPolicy,
+) -> LoadedClip {
+    let motion = plan.mirror(&loaded.motion, offsets);
+    let mut clip = mirror_clip(&loaded.clip, taxonomy);
+    clip.skeleton = std::sync::Arc::clone(&motion.skeleton);
+    LoadedClip { clip, motion }
 }
