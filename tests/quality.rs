@@ -516,6 +516,31 @@ fn labels_that_contradict_the_motion_are_listed_and_dropped_on_request() {
     .unwrap();
     assert_eq!(written["label_contradictions"].as_array().unwrap().len(), 2);
     assert_eq!(report.label_contradictions_dropped, 0);
+    // And in the statistics report, by clip: stats.json and report.md (read from the manifest).
+    let stats: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("out/labels/report/stats.json")).unwrap(),
+    )
+    .unwrap();
+    let in_stats: Vec<&str> = stats["label_contradictions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["clip_id"].as_str().unwrap())
+        .collect();
+    assert_eq!(in_stats, [original.0, mirror.0]);
+    let md = std::fs::read_to_string(dir.path().join("out/labels/report/report.md")).unwrap();
+    let section = md
+        .split_once("## Labels that contradict the motion")
+        .expect("report.md lists the contradictions")
+        .1;
+    assert!(
+        section.contains("walk-turn-left\\_masculine\\_006"),
+        "{section}"
+    );
+    assert!(
+        section.contains("turn left") && section.contains("turns right"),
+        "{section}"
+    );
     let kept = report.clips;
 
     // `label_check.drop = true` leaves them out, and every pair made from them.

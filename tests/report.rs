@@ -202,6 +202,7 @@ fn input(tables: &[PathBuf], drops: BTreeMap<String, usize>) -> ReportInput {
         drops,
         rejects,
         title: "demo_set & co".to_string(),
+        contradictions: Vec::new(),
     }
 }
 
@@ -460,6 +461,7 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
             drops,
             rejects,
             title: "demo".to_string(),
+            contradictions: Vec::new(),
         };
         write_report(&rows, &statistics(&rows, &input), Path::new(&keep)).unwrap();
     }

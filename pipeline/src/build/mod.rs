@@ -851,8 +851,10 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         motions: &motions,
     };
     let counts = crate::io::manifest::Counts::of(&clips, &rejects, drops_by_reason.clone());
-    let manifest =
+    let mut manifest =
         crate::io::manifest::Manifest::new(config, &clips, counts.clone(), &table_fingerprint);
+    // The statistics report reads them from the manifest, so a paper's tables list them too.
+    manifest.label_contradictions = label_contradictions.clone();
     let licences: Vec<String> = config
         .sources
         .iter()

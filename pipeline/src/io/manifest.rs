@@ -27,6 +27,10 @@ pub struct Manifest {
     pub files: Files,
     /// Frame rate of every clip.
     pub fps: f64,
+    /// Clips whose text contradicts what their motion measurably does (issue 16), by clip id;
+    /// listed, never fixed. Absent when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub label_contradictions: Vec<crate::quality::Contradiction>,
     /// The program that wrote it (`motionforge 0.1.0`).
     pub pipeline: String,
     /// Version of the clip table's schema.
@@ -233,6 +237,7 @@ impl Manifest {
                 skeletons: crate::base::layout::SKELETONS_FILE.into(),
             },
             fps: config.dataset.fps,
+            label_contradictions: Vec::new(),
             pipeline: format!("motionforge {}", env!("CARGO_PKG_VERSION")),
             schema_version: crate::io::schema::SCHEMA_VERSION,
             seed: config.dataset.seed,

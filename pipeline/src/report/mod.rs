@@ -40,6 +40,8 @@ pub struct ReportInput {
     pub rejects: BTreeMap<String, usize>,
     /// Title of the report and of its figures, usually the dataset name.
     pub title: String,
+    /// Clips whose text contradicts their motion (the manifest's `label_contradictions`).
+    pub contradictions: Vec<crate::quality::Contradiction>,
 }
 
 /// One clip, reduced to what the statistics need.
@@ -230,6 +232,10 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
         .as_ref()
         .map(|m| m.counts.clone())
         .unwrap_or_default();
+    let contradictions = manifest
+        .as_ref()
+        .map(|m| m.label_contradictions.clone())
+        .unwrap_or_default();
     let tables = find_clip_tables(&dataset.join(crate::base::layout::DATA_DIR))?;
     let title = manifest.map(|m| m.dataset).unwrap_or_else(|| {
         dataset
@@ -242,6 +248,7 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
         drops: counts.drop_reason,
         rejects: counts.reject_reason,
         title,
+        contradictions,
     };
     let rows = read_rows(&input.tables)?;
     let stats = statistics(&rows, &input);

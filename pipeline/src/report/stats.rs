@@ -306,6 +306,9 @@ pub struct Stats {
     pub drops: BTreeMap<String, usize>,
     /// Rejected items by reason.
     pub rejects: BTreeMap<String, usize>,
+    /// Clips whose text contradicts what their motion does, by clip id (absent when none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub label_contradictions: Vec<crate::quality::Contradiction>,
 }
 
 /// Orders motion-type names alphabetically with [`UNMAPPED`] last.
@@ -636,6 +639,11 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
         plausibility,
         drops: input.drops.clone(),
         rejects: input.rejects.clone(),
+        label_contradictions: {
+            let mut listed = input.contradictions.clone();
+            listed.sort_by(|a, b| (&a.clip_id, &a.claim).cmp(&(&b.clip_id, &b.claim)));
+            listed
+        },
     }
 }
 

@@ -594,6 +594,26 @@ pub(crate) fn markdown(stats: &Stats) -> String {
     out.push_str("## Drops and rejects\n\n");
     md_counts(&mut out, "Dropped segments", &stats.drops);
     md_counts(&mut out, "Rejected items", &stats.rejects);
+    if !stats.label_contradictions.is_empty() {
+        // Listed for the reader to judge, never fixed: a label may be wrong, or the take.
+        out.push_str(
+            "## Labels that contradict the motion
+
+",
+        );
+        out.push_str("| clip | the text says | the motion | measured |\n|---|---|---|---:|\n");
+        for c in &stats.label_contradictions {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {:.2} |",
+                markdown_escape(&c.clip_id),
+                markdown_escape(&c.claim),
+                markdown_escape(&c.motion),
+                c.measured
+            );
+        }
+        out.push('\n');
+    }
     out
 }
 
