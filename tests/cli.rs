@@ -188,7 +188,7 @@ fn a_build_prints_one_summary_with_the_splits_and_why_stages_were_skipped() {
         "{summary}"
     );
     assert!(
-        summary.contains("splits: train 17, validation 2, test 6\n"),
+        summary.contains("splits: train 16, validation 2, test 6\n"),
         "{summary}"
     );
     // Every profile's normalisation source, CMU's from test (it has no train rows).

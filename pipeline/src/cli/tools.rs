@@ -178,7 +178,7 @@ pub(crate) fn export_bvh(
         },
         clip_id,
     )?;
-    let Some(clip) = found else {
+    let Some((clip, profile)) = found else {
         let near: Vec<&str> = ids
             .iter()
             .map(String::as_str)
@@ -195,8 +195,11 @@ pub(crate) fn export_bvh(
             ids.len()
         );
     };
-    let text = motionforge::motion::write_bvh(&clip.motion)
-        .with_context(|| format!("clip `{clip_id}`"))?;
+    // The clip as the dataset stores it, so this route and `export-bvh <dataset>` write the same
+    // file.
+    let motion = motionforge::build::stored_motion(&clip, &profile);
+    let text =
+        motionforge::motion::write_bvh(&motion).with_context(|| format!("clip `{clip_id}`"))?;
     let path = output
         .unwrap_or_else(|| PathBuf::from(format!("{}.bvh", clip_id.replace(['/', ':', '+'], "_"))));
     motionforge::build::write_atomic(&path, text.as_bytes())?;

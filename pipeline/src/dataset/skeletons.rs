@@ -154,13 +154,40 @@ pub fn clip_motion(frames: &ClipFrames, entry: &SkeletonEntry) -> Result<Motion,
         ));
     }
     let to_capture = dataset_axes(entry.capture_axes.up, entry.capture_axes.forward).inverse();
-    let scale = entry.unit_scale;
-    let count = frames.info.frames;
-    let mut rotations = Vec::with_capacity(frames.rotations.len() / 4);
-    let mut translations = Vec::with_capacity(frames.rotations.len() / 4);
+    Ok(motion_from_rows(
+        skeleton,
+        to_capture,
+        entry.unit_scale,
+        frames.info.fps,
+        &frames.positions,
+        &frames.rotations,
+    ))
+}
+
+/// [`clip_motion`] from a row's arrays: `positions` (`frames × joints × 3`, dataset frame,
+/// metres) and `rotations` (`frames × joints × 4`) on `skeleton`, whose capture axes are
+/// `to_capture` from the dataset frame and whose file units are `scale` metres. Frames run as far
+/// as both arrays hold whole frames.
+pub fn motion_from_rows(
+    skeleton: Skeleton,
+    to_capture: DQuat,
+    scale: f64,
+    fps: f64,
+    positions: &[f32],
+    rotations: &[f32],
+) -> Motion {
+    let n = skeleton.len();
+    let count = if n == 0 {
+        0
+    } else {
+        (positions.len() / (n * 3)).min(rotations.len() / (n * 4))
+    };
+    let stored_rotations = rotations;
+    let mut rotations = Vec::with_capacity(count * n);
+    let mut translations = Vec::with_capacity(count * n);
     let mut world = vec![DQuat::IDENTITY; n];
     for f in 0..count {
-        let p = frames.frame(f);
+        let p = &positions[f * n * 3..(f + 1) * n * 3];
         let at = |j: usize| {
             DVec3::new(
                 f64::from(p[j * 3]),
@@ -169,7 +196,7 @@ pub fn clip_motion(frames: &ClipFrames, entry: &SkeletonEntry) -> Result<Motion,
             )
         };
         for (j, joint) in skeleton.joints.iter().enumerate() {
-            let q = &frames.rotations[(f * n + j) * 4..(f * n + j) * 4 + 4];
+            let q = &stored_rotations[(f * n + j) * 4..(f * n + j) * 4 + 4];
             let stored = DQuat::from_xyzw(
                 f64::from(q[0]),
                 f64::from(q[1]),
@@ -196,10 +223,10 @@ pub fn clip_motion(frames: &ClipFrames, entry: &SkeletonEntry) -> Result<Motion,
             translations.push(translation);
         }
     }
-    Ok(Motion {
+    Motion {
         skeleton: Arc::new(skeleton),
-        fps: frames.info.fps,
+        fps,
         rotations,
         translations,
-    })
+    }
 }
