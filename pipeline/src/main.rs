@@ -283,8 +283,8 @@ enum Command {
     /// inspection in Blender: from a built dataset folder alone (shards and skeletons.json), or
     /// with --config by re-running the build's stages from the captures.
     ///
-    /// From the shards, rotations are the table's f32 values: the file has the --config one's
-    /// hierarchy exactly and its rotations to about 1e-5 degrees (docs/decisions.md).
+    /// Both routes write the clip as the dataset stores it (its f32 rotations), so they give the
+    /// same file (docs/decisions.md).
     #[command(after_help = EXPORT_BVH_EXAMPLES)]
     ExportBvh {
         /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
