@@ -165,7 +165,10 @@ fn humanml3d_arrays_build_cut_mirror_and_export_back_to_humanml3d_s_own_position
     let d = max_distance(&exported, &humanml3d_mirror(&reference));
     assert!(d < 1e-5, "mirror off by {d} m");
     let from_original = max_distance(&exported, &reference);
-    assert!(from_original > 0.05, "the mirror is a copy of the original ({from_original} m)");
+    assert!(
+        from_original > 0.05,
+        "the mirror is a copy of the original ({from_original} m)"
+    );
 
     // Every whole-clip caption kept (two lines), the sub-span's caption on its own clip, and
     // mirrored captions on the mirror.
