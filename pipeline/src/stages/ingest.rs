@@ -9,7 +9,7 @@ use crate::config::PositionsConfig;
 use crate::motion::bvh::FPS_RANGE;
 use crate::motion::ik::{IkError, PositionLayout, motion_from_positions};
 use crate::motion::npy::read_joint_positions;
-use crate::motion::{ProfileSpec, read_bvh};
+use crate::motion::{Motion, ProfileSpec, read_bvh};
 use crate::source::CaptureFile;
 
 /// Stage name.
@@ -203,21 +203,7 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
     let fps = input.fps_override.unwrap_or(bvh.header_fps);
     let mut motion = bvh.motion;
     motion.fps = fps;
-    IngestOutput {
-        capture: Some(Capture {
-            capture: CaptureRef {
-                source: input.source.to_string(),
-                path: file.display.clone(),
-                sha256: input.sha256.to_string(),
-                fps,
-            },
-            stem: file.stem(),
-            profile: input.profile.name.clone(),
-            motion,
-            notes: Vec::new(),
-        }),
-        rejects: Vec::new(),
-    }
+    accepted(input, fps, motion, Vec::new())
 }
 
 /// The joint-position array of one frame in the layout's first 22 joints, in HumanML3D's axes
@@ -327,6 +313,12 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
             ),
         ));
     }
+    accepted(input, fps, motion, notes)
+}
+
+/// A capture read: its motion at `fps`, with what the reader noted.
+fn accepted(input: &CaptureInput<'_>, fps: f64, motion: Motion, notes: Vec<Note>) -> IngestOutput {
+    let file = input.file;
     IngestOutput {
         capture: Some(Capture {
             capture: CaptureRef {
