@@ -588,3 +588,84 @@ fn the_readme_table_and_the_reference_cover_every_command() {
         );
     }
 }
+
+/// GitHub's anchor for a heading: lowercase, punctuation dropped, spaces as hyphens.
+fn anchor(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter(|c| c.is_alphanumeric() || matches!(c, '-' | '_' | ' '))
+        .map(|c| if c == ' ' { '-' } else { c })
+        .collect()
+}
+
+#[test]
+fn the_pages_files_and_anchors_exist() {
+    let path = regex::Regex::new(
+        r"`((?:docs|schemas|prompts|scripts|fixtures|tests|tools|pipeline)/[A-Za-z0-9_./-]+)`",
+    )
+    .unwrap();
+    let link = regex::Regex::new(r"\]\(#([^)]+)\)").unwrap();
+    for page in ["README.md", "docs/getting-started.md", "docs/reference.md"] {
+        let markdown = std::fs::read_to_string(common::repo().join(page)).unwrap();
+        for found in path.captures_iter(&markdown) {
+            let file = &found[1];
+            assert!(
+                common::repo().join(file).exists(),
+                "{page} names `{file}`, which does not exist"
+            );
+        }
+        let mut in_code = false;
+        let mut anchors = Vec::new();
+        for line in markdown.lines() {
+            if line.trim_start().starts_with("```") {
+                in_code = !in_code;
+            } else if !in_code && line.starts_with('#') {
+                anchors.push(anchor(line.trim_start_matches('#')));
+            }
+        }
+        for found in link.captures_iter(&markdown) {
+            assert!(
+                anchors.contains(&found[1].to_string()),
+                "{page} links to #{}, which no heading makes",
+                &found[1]
+            );
+        }
+    }
+}
+
+/// The reference quotes some commands' `--help` in full ("`--help` prints:"): the quotes are what
+/// the binary prints.
+#[test]
+fn the_references_help_quotes_are_the_help() {
+    let reference = std::fs::read_to_string(common::repo().join("docs/reference.md")).unwrap();
+    let mut command: Option<String> = None;
+    let mut quoted = 0;
+    let mut lines = reference.lines();
+    while let Some(line) = lines.next() {
+        if let Some(heading) = line.strip_prefix("### `") {
+            command = heading.split('`').next().map(str::to_string);
+        }
+        if !line.trim_end().ends_with("`--help` prints:") {
+            continue;
+        }
+        let command = command.clone().expect("a quote under a command's heading");
+        assert_eq!(lines.next().map(str::trim), Some(""));
+        assert_eq!(lines.next().map(str::trim), Some("```"));
+        let quote: Vec<&str> = lines.by_ref().take_while(|l| l.trim() != "```").collect();
+        let out = common::run_ok(
+            Command::new(env!("CARGO_BIN_EXE_motionforge"))
+                .args(command.split_whitespace())
+                .arg("--help"),
+        );
+        let help = String::from_utf8(out.stdout).unwrap();
+        assert_eq!(
+            without_timings(&quote.join("\n")),
+            without_timings(&help),
+            "docs/reference.md quotes `motionforge {command} --help`, which now prints otherwise"
+        );
+        quoted += 1;
+    }
+    assert!(quoted >= 2, "the reference quotes {quoted} help texts");
+}
