@@ -423,11 +423,14 @@ fn check_serve(sandbox: &Sandbox, body: &str, at: &str) {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let outcome = std::panic::catch_unwind(|| {
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             if let Ok((200, _)) = http_get(port, "/health") {
                 break;
+            }
+            if let Some(status) = child.try_wait().unwrap() {
+                panic!("{at}: the service stopped ({status}) before answering");
             }
             assert!(
                 Instant::now() < deadline,
@@ -443,7 +446,7 @@ fn check_serve(sandbox: &Sandbox, body: &str, at: &str) {
         assert_eq!(status, 200, "{at}: {clips}");
         let clips: serde_json::Value = serde_json::from_str(&clips).unwrap();
         assert_eq!(clips["total"], 24, "{at}: {clips}");
-    });
+    }));
     // Stop the whole group: bash and the service it started.
     let _ = Command::new("kill")
         .args(["-TERM", "--", &format!("-{}", child.id())])
