@@ -29,7 +29,7 @@ use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// Exit codes, shown after `--help` and documented in docs/user-guide.md (a macro so that
+/// Exit codes, shown after `--help` and documented in docs/reference.md (a macro so that
 /// commands can put their examples before it with `concat!`).
 macro_rules! exit_codes {
     () => {

@@ -488,8 +488,8 @@ const STAGING_DIR: &str = "staging";
 /// Moves a fully written dataset from `staging` into `output`, by renames only (no new bytes, so
 /// no disk-space failure part-way). The old manifest goes first and the new one comes last:
 /// while the switch runs, the folder has no manifest, which readers are told means "not a
-/// finished dataset" (user guide, "Write faults"); before and after, the manifest describes
-/// exactly the shards in `data/`.
+/// finished dataset" (docs/reference.md, "Disk full, unwritable folders"); before and after, the
+/// manifest describes exactly the shards in `data/`.
 fn switch(
     output: &Path,
     staging: &Path,
