@@ -15,7 +15,7 @@ pub(crate) struct FilterArgs {
     /// Only clips of this motion type (e.g. `walk forward`, `wave`).
     #[arg(long = "type", value_name = "TYPE")]
     pub(crate) motion_type: Option<String>,
-    /// Only clips of this split (train, val, test, or the config's own names).
+    /// Only clips of this split (train, validation, test, or the config's own names).
     #[arg(long)]
     pub(crate) split: Option<String>,
     /// Only clips of this kind: real_single, real_pair, synthetic, mirrored or original.

@@ -316,7 +316,7 @@ pub(crate) fn type_order(a: &str, b: &str) -> Ordering {
     (a == UNMAPPED, a).cmp(&(b == UNMAPPED, b))
 }
 
-/// Orders split names as the build writes them ([`Split`]'s order: train, val, test), with
+/// Orders split names as the build writes them ([`Split`]'s order: train, validation, test), with
 /// [`NO_SPLIT`] after test and other names last, alphabetically.
 pub(crate) fn split_order(a: &str, b: &str) -> Ordering {
     let rank = |s: &str| {
