@@ -189,6 +189,18 @@ for split, rows in ds.items():
             assert not (r['composed_parts'][0] & r['composed_parts'][1]).any(), 'complementary parts'
 assert checked == 8 * table.num_rows, (checked, table.num_rows)
 assert sum(1 for g in table['goal_pelvis'].to_pylist() if g is not None) > 0, 'the demo has pelvis goals'
+# The nesting keeps the leaf encodings: every float leaf BYTE_STREAM_SPLIT, everything zstd.
+floats = 0
+for shard in sorted(os.listdir(os.path.join(root, 'data'))):
+    meta = pq.ParquetFile(os.path.join(root, 'data', shard)).metadata
+    for g in range(meta.num_row_groups):
+        for c in range(meta.num_columns):
+            col = meta.row_group(g).column(c)
+            assert col.compression == 'ZSTD', (shard, col.path_in_schema, col.compression)
+            if col.physical_type == 'FLOAT':
+                assert 'BYTE_STREAM_SPLIT' in col.encodings, (shard, col.path_in_schema, col.encodings)
+                floats += 1
+assert floats > 0
 print(checked)
 "#;
     let hf_cache = tempfile::tempdir().unwrap();

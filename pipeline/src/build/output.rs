@@ -299,7 +299,7 @@ pub(super) fn card_body(
     let _ = writeln!(b, "\n## Using it\n");
     let _ = writeln!(
         b,
-        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's canonical joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
+        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's canonical joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Every per-frame column comes in the shape the table below gives it (frames x joints x 3, frames x 4, ...): no reshape. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
     );
     // The folder's name as a Python string (JSON's quoting is valid Python for these names).
     let root = serde_json::to_string(&config.dataset.name).unwrap_or_default();
