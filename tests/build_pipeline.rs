@@ -279,15 +279,19 @@ t = pq.read_table(sys.argv[1])
 assert t.num_rows == int(sys.argv[2]), t.num_rows
 for i in range(t.num_rows):
     n, j = t['num_frames'][i].as_py(), t['num_joints'][i].as_py()
-    p = np.asarray(t['joint_positions'][i].values).reshape(n, j, 3)
-    q = np.asarray(t['local_rotations'][i].values).reshape(n, j, 4)
-    r = np.asarray(t['root_translation'][i].values).reshape(n, 3)
+    p = np.array(t['joint_positions'][i].as_py())
+    q = np.array(t['local_rotations'][i].as_py())
+    r = np.array(t['root_translation'][i].as_py())
+    assert (p.shape, q.shape, r.shape) == ((n, j, 3), (n, j, 4), (n, 3)), (p.shape, q.shape, r.shape)
     assert np.allclose(np.linalg.norm(q, axis=-1), 1, atol=1e-5)
     assert 1.2 < p[0, :, 2].max() - p[0, :, 2].min() < 2.0, 'body height in metres, z up'
     assert np.allclose(r, p[:, 1, :]), 'root translation is the Hips position'
 df = pl.read_parquet(sys.argv[1])
-first = df['joint_positions'][0].to_numpy().reshape(df['num_frames'][0], df['num_joints'][0], 3)
-assert first.shape[2] == 3
+assert df.schema['joint_positions'] == pl.List(pl.List(pl.Array(pl.Float32, 3))), df.schema['joint_positions']
+# One clip's frames: a list (frames) of joint lists; fixing the joint count gives the ndarray.
+first = df['joint_positions'][0].list.to_array(df['num_joints'][0]).to_numpy()
+assert first.shape == (df['num_frames'][0], df['num_joints'][0], 3), first.shape
+assert np.allclose(first, np.array(t['joint_positions'][0].as_py()))
 print('ok')
 "#;
     run_python(

@@ -292,3 +292,67 @@ fn mirrored_preview_is_the_reflection_of_its_original() {
     }
     assert!(pairs >= 8, "{pairs} pairs");
 }
+
+/// Rewrites `shard` with pyarrow in another layout: `flat` as schema version 8 wrote it (every
+/// per-frame array one flat list, goals and parts variable-length lists), `float64` with
+/// `joint_positions` as doubles (a layout no version wrote).
+fn rewrite_shard(shard: &Path, layout: &str) {
+    let script = r#"
+import sys, numpy as np, pyarrow as pa, pyarrow.parquet as pq
+path, layout = sys.argv[1], sys.argv[2]
+t = pq.read_table(path)
+def flat(name, item):
+    rows = [None if x is None else np.array(x).ravel().tolist() for x in t[name].to_pylist()]
+    return pa.array(rows, type=pa.list_(item))
+if layout == 'flat':
+    for name in ['joint_positions', 'canonical_positions', 'local_rotations', 'root_translation',
+                 'rotations_6d', 'joint_velocities', 'future_root', 'goal_pelvis', 'goal_hand']:
+        t = t.set_column(t.schema.get_field_index(name), name, flat(name, pa.float32()))
+    for name in ['foot_contacts', 'parts']:
+        t = t.set_column(t.schema.get_field_index(name), name, flat(name, pa.bool_()))
+    parts = t['composed_parts'].cast(pa.list_(pa.list_(pa.bool_())))
+    t = t.set_column(t.schema.get_field_index('composed_parts'), 'composed_parts', parts)
+else:
+    t = t.set_column(t.schema.get_field_index('joint_positions'), 'joint_positions', flat('joint_positions', pa.float64()))
+pq.write_table(t, path, compression="zstd")
+print(t.schema.field('joint_positions').type)
+"#;
+    run_python(script, &[shard.as_os_str(), layout.as_ref()]);
+}
+
+/// A version 8 table (flat lists) reads as the same frames; a layout no version wrote is refused
+/// with an error naming the shard and the column.
+#[test]
+fn a_version_8_flat_shard_reads_the_same_and_an_unknown_layout_is_refused() {
+    let (_dir, config) = demo();
+    let ds = config.dataset_dir();
+    let shard = ds.join("data/validation-00000-of-00001.parquet");
+    let before = dataset::list_clips(&ds).unwrap();
+    let ids: Vec<String> = before
+        .iter()
+        .filter(|c| c.split == "validation")
+        .map(|c| c.clip_id.clone())
+        .collect();
+    assert!(!ids.is_empty());
+    let shaped: Vec<_> = ids
+        .iter()
+        .map(|id| dataset::read_clip(&ds, id).unwrap())
+        .collect();
+    rewrite_shard(&shard, "flat");
+    assert_eq!(
+        dataset::list_clips(&ds).unwrap(),
+        before,
+        "metadata of a v8 shard"
+    );
+    for (id, frames) in ids.iter().zip(&shaped) {
+        assert_eq!(&dataset::read_clip(&ds, id).unwrap(), frames, "{id}");
+    }
+    rewrite_shard(&shard, "float64");
+    let err = dataset::read_clip(&ds, &ids[0]).unwrap_err().to_string();
+    assert!(
+        err.contains("validation-00000-of-00001.parquet")
+            && err.contains("`joint_positions`")
+            && err.contains("Float64"),
+        "{err}"
+    );
+}

@@ -22,7 +22,7 @@ import glob, hashlib, json, os, sys
 import numpy as np, pyarrow.parquet as pq
 root = sys.argv[1]
 manifest = json.load(open(os.path.join(root, 'manifest.json')))
-assert manifest['schema_version'] == 8, manifest['schema_version']
+assert manifest['schema_version'] == 9, manifest['schema_version']
 total = 0
 captures = {}
 for split, entry in manifest['splits'].items():
@@ -46,18 +46,22 @@ listed = sorted(os.path.join(root, s['file']) for e in manifest['splits'].values
 assert files == listed, (files, listed)
 t = pq.read_table(os.path.join(root, 'data'))
 assert t.num_rows == total
+# Per-frame arrays come shaped (version 9): pyarrow's nested lists give the array as is.
+def shaped(table, column, i, dtype=np.float64):
+    return np.array(table[column][i].as_py(), dtype=dtype)
 for i in range(t.num_rows):
     n, j = t['num_frames'][i].as_py(), t['num_joints'][i].as_py()
-    np.asarray(t['joint_positions'][i].values).reshape(n, j, 3)
+    assert shaped(t, 'joint_positions', i).shape == (n, j, 3)
     # Opt-in columns (`docs/decisions.md`, "Derived columns"): null unless switched on.
     assert t['rotations_6d'][i].as_py() is None and t['joint_velocities'][i].as_py() is None
-    np.asarray(t['foot_contacts'][i].values).reshape(n, 4)
-    np.asarray(t['future_root'][i].values).reshape(n, 3, 3)
+    assert shaped(t, 'foot_contacts', i, bool).shape == (n, 4)
+    assert shaped(t, 'future_root', i).shape == (n, 3, 3)
     # Canonical positions: the same motion moved rigidly (rotation about z, then a shift), the
     # first frame's pelvis (the root-motion joint, `root_translation`) over the origin.
-    world = np.asarray(t['joint_positions'][i].values, dtype=np.float64).reshape(n, j, 3)
-    canon = np.asarray(t['canonical_positions'][i].values, dtype=np.float64).reshape(n, j, 3)
-    root0 = np.asarray(t['root_translation'][i].values, dtype=np.float64).reshape(n, 3)[0]
+    world = shaped(t, 'joint_positions', i)
+    canon = shaped(t, 'canonical_positions', i)
+    assert canon.shape == world.shape
+    root0 = shaped(t, 'root_translation', i)[0]
     pelvis = int(np.argmin(np.abs(world[0] - root0).sum(1)))
     assert np.abs(canon[0, pelvis, :2]).max() < 1e-4, canon[0, pelvis]
     assert np.abs(canon[..., 2] - world[..., 2]).max() < 1e-4, 'heights kept'
@@ -68,9 +72,9 @@ mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positi
 std = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'joint_positions_std.npy'))
 assert mean.shape == (22, 3) and std.shape == (22, 3) and (std > 0).all()
 train = t.filter(pq.read_table(os.path.join(root, 'data')).column('split').to_numpy(zero_copy_only=False) == 'train')
-pos = np.concatenate([np.asarray(train['joint_positions'][i].values).reshape(-1, 22, 3) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
+pos = np.concatenate([shaped(train, 'joint_positions', i) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
 assert np.allclose(pos.mean(0), mean, atol=1e-4), 'mean over the training split'
-canon_train = np.concatenate([np.asarray(train['canonical_positions'][i].values).reshape(-1, 22, 3) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
+canon_train = np.concatenate([shaped(train, 'canonical_positions', i) for i in range(train.num_rows) if train['num_joints'][i].as_py() == 22])
 canon_mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', 'canonical_positions_mean.npy'))
 assert np.allclose(canon_train.mean(0), canon_mean, atol=1e-4), 'canonical mean over the training split'
 # Every profile has statistics: CMU has no train rows in the demo, so its come from the first
@@ -84,7 +88,7 @@ assert numpy_constant, 'the Bandai rig has a static root coordinate'
 everything = pq.read_table(os.path.join(root, 'data'))
 cmu_splits = sorted({everything['split'][i].as_py() for i in range(everything.num_rows) if everything['skeleton'][i].as_py().split(':')[0] == 'cmu'})
 assert 'train' not in cmu_splits and summary['cmu']['split'] == cmu_splits[0], (summary['cmu'], cmu_splits)
-cmu = np.concatenate([np.asarray(everything['joint_positions'][i].values).reshape(-1, 31, 3) for i in range(everything.num_rows) if everything['skeleton'][i].as_py().split(':')[0] == 'cmu' and everything['split'][i].as_py() == summary['cmu']['split']])
+cmu = np.concatenate([shaped(everything, 'joint_positions', i) for i in range(everything.num_rows) if everything['skeleton'][i].as_py().split(':')[0] == 'cmu' and everything['split'][i].as_py() == summary['cmu']['split']])
 cmu_mean = np.load(os.path.join(root, 'normalization', 'cmu', 'joint_positions_mean.npy'))
 assert np.allclose(cmu.mean(0), cmu_mean, atol=1e-4), 'CMU mean over its split'
 norm = pq.read_table(os.path.join(root, 'normalization', 'normalization.parquet')).to_pylist()
@@ -270,17 +274,21 @@ t = pq.read_table(os.path.join(root, 'data'))
 assert t.num_rows >= 4
 for i in range(t.num_rows):
     n, j, fps = t['num_frames'][i].as_py(), t['num_joints'][i].as_py(), t['fps'][i].as_py()
-    q = np.asarray(t['local_rotations'][i].values, dtype=np.float64).reshape(n, j, 4)
+    # Shaped as stored (version 9): no reshape.
+    q = np.array(t['local_rotations'][i].as_py(), dtype=np.float64)
+    assert q.shape == (n, j, 4), q.shape
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     # First two columns of each rotation matrix.
     derived6 = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y),
                          2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], -1)
-    r6 = np.asarray(t['rotations_6d'][i].values).reshape(n, j, 6)
+    r6 = np.array(t['rotations_6d'][i].as_py())
+    assert r6.shape == (n, j, 6), r6.shape
     assert np.abs(r6 - derived6).max() < 1e-5, np.abs(r6 - derived6).max()
-    p = np.asarray(t['joint_positions'][i].values, dtype=np.float64).reshape(n, j, 3)
+    p = np.array(t['joint_positions'][i].as_py(), dtype=np.float64)
     v = np.diff(p, axis=0) * fps
     v = np.concatenate([v, v[-1:]], 0)
-    vel = np.asarray(t['joint_velocities'][i].values).reshape(n, j, 3)
+    vel = np.array(t['joint_velocities'][i].as_py())
+    assert vel.shape == (n, j, 3), vel.shape
     assert np.abs(vel - v).max() < 1e-3, np.abs(vel - v).max()
 for feature in ['joint_positions', 'rotations_6d', 'joint_velocities']:
     mean = np.load(os.path.join(root, 'normalization', 'bandai-namco', feature + '_mean.npy'))

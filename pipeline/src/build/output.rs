@@ -299,7 +299,7 @@ pub(super) fn card_body(
     let _ = writeln!(b, "\n## Using it\n");
     let _ = writeln!(
         b,
-        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's canonical joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
+        "With Hugging Face `datasets` (no PyTorch needed), from the folder holding this one: one split, one clip's canonical joint positions as a (frames, joints, 3) array, normalised with its skeleton profile's statistics. Every per-frame column comes in the shape the table below gives it (frames x joints x 3, frames x 4, ...): no reshape. Dimensions that are constant over the statistics' split (listed in `normalization/normalization.json`) have their standard deviation floored at 1e-8: set them to 0 rather than divide.\n"
     );
     // The folder's name as a Python string (JSON's quoting is valid Python for these names).
     let root = serde_json::to_string(&config.dataset.name).unwrap_or_default();
@@ -350,9 +350,8 @@ from datasets import load_dataset
 root = "<dataset folder>"  # this folder (the one holding README.md and data/)
 train = load_dataset(root, split="train").with_format("numpy")
 row = train[0]
-frames, joints = int(row["num_frames"]), int(row["num_joints"])
-# Metres, the first frame's pelvis over the origin facing +y (x right, z up).
-positions = row["canonical_positions"].reshape(frames, joints, 3)
+# (frames, joints, 3), metres, the first frame's pelvis over the origin facing +y (x right, z up).
+positions = row["canonical_positions"]
 profile = str(row["skeleton"]).split(":")[0]
 mean = np.load(f"{root}/normalization/{profile}/canonical_positions_mean.npy")  # (joints, 3)
 std = np.load(f"{root}/normalization/{profile}/canonical_positions_std.npy")
@@ -377,13 +376,19 @@ fn hf_feature(y: &mut String, data_type: &arrow_schema::DataType, indent: usize)
     use arrow_schema::DataType;
     let pad = " ".repeat(indent);
     match data_type {
-        DataType::List(item) => match scalar_dtype(item.data_type()) {
-            Some(dtype) => y.push_str(&format!("{pad}list: {dtype}\n")),
-            None => {
-                y.push_str(&format!("{pad}list:\n"));
-                hf_nested(y, item.data_type(), indent + 2);
+        // A fixed-size list is a `list` with its `length` after it, as `datasets` writes it.
+        DataType::List(item) | DataType::FixedSizeList(item, _) => {
+            match scalar_dtype(item.data_type()) {
+                Some(dtype) => y.push_str(&format!("{pad}list: {dtype}\n")),
+                None => {
+                    y.push_str(&format!("{pad}list:\n"));
+                    hf_nested(y, item.data_type(), indent + 2);
+                }
             }
-        },
+            if let DataType::FixedSizeList(_, n) = data_type {
+                y.push_str(&format!("{pad}length: {n}\n"));
+            }
+        }
         DataType::Struct(fields) => {
             y.push_str(&format!("{pad}struct:\n"));
             hf_fields(y, fields, indent);

@@ -153,23 +153,21 @@ impl<'a> Batch<'a> {
             .collect()
     }
 
+    /// A small vector per row (a goal), as a list or a fixed-size list of Float32.
     fn f32_lists(&self, name: &str) -> Result<Vec<Option<Vec<f32>>>, DatasetError> {
         let Some(c) = self.column(name) else {
             return Ok(vec![None; self.batch.num_rows()]);
         };
-        let list = c
-            .as_list_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "List<Float32>"))?;
-        (0..list.len())
-            .map(|i| {
-                if list.is_null(i) {
-                    return Ok(None);
-                }
-                let v = list.value(i);
-                let f = v
-                    .as_primitive_opt::<Float32Type>()
-                    .ok_or_else(|| self.wrong(name, "List<Float32>"))?;
-                Ok(Some(f.values().to_vec()))
+        let rows = crate::io::parquet::list_rows(c)
+            .ok_or_else(|| self.wrong(name, "a list of Float32"))?;
+        rows.into_iter()
+            .map(|row| {
+                row.map(|v| {
+                    v.as_primitive_opt::<Float32Type>()
+                        .map(|f| f.values().to_vec())
+                        .ok_or_else(|| self.wrong(name, "a list of Float32"))
+                })
+                .transpose()
             })
             .collect()
     }
@@ -178,19 +176,16 @@ impl<'a> Batch<'a> {
         let Some(c) = self.column(name) else {
             return Ok(vec![None; self.batch.num_rows()]);
         };
-        let list = c
-            .as_list_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "List<Boolean>"))?;
-        (0..list.len())
-            .map(|i| {
-                if list.is_null(i) {
-                    return Ok(None);
-                }
-                let v = list.value(i);
-                let b = v
-                    .as_boolean_opt()
-                    .ok_or_else(|| self.wrong(name, "List<Boolean>"))?;
-                Ok(Some(b.iter().map(|x| x.unwrap_or(false)).collect()))
+        let rows = crate::io::parquet::list_rows(c)
+            .ok_or_else(|| self.wrong(name, "a list of Boolean"))?;
+        rows.into_iter()
+            .map(|row| {
+                row.map(|v| {
+                    v.as_boolean_opt()
+                        .map(|b| b.iter().map(|x| x.unwrap_or(false)).collect())
+                        .ok_or_else(|| self.wrong(name, "a list of Boolean"))
+                })
+                .transpose()
             })
             .collect()
     }
@@ -200,29 +195,40 @@ impl<'a> Batch<'a> {
         let Some(c) = self.column(name) else {
             return Ok(vec![Vec::new(); self.batch.num_rows()]);
         };
-        let outer = c
-            .as_list_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "List<List<Boolean>>"))?;
-        (0..outer.len())
-            .map(|i| {
-                if outer.is_null(i) {
+        let expected = "a list of lists of Boolean";
+        let rows = crate::io::parquet::list_rows(c).ok_or_else(|| self.wrong(name, expected))?;
+        rows.into_iter()
+            .map(|row| {
+                let Some(inner) = row else {
                     return Ok(Vec::new());
-                }
-                let inner = outer.value(i);
-                let inner = inner
-                    .as_list_opt::<i32>()
-                    .ok_or_else(|| self.wrong(name, "List<List<Boolean>>"))?;
-                (0..inner.len())
-                    .map(|k| {
-                        let v = inner.value(k);
-                        let b = v
-                            .as_boolean_opt()
-                            .ok_or_else(|| self.wrong(name, "List<List<Boolean>>"))?;
-                        Ok(b.iter().map(|x| x.unwrap_or(false)).collect())
+                };
+                let inner = crate::io::parquet::list_rows(&inner)
+                    .ok_or_else(|| self.wrong(name, expected))?;
+                inner
+                    .into_iter()
+                    .map(|v| {
+                        v.as_ref()
+                            .and_then(|v| v.as_boolean_opt())
+                            .map(|b| b.iter().map(|x| x.unwrap_or(false)).collect())
+                            .ok_or_else(|| self.wrong(name, expected))
                     })
                     .collect()
             })
             .collect()
+    }
+
+    /// Row 0's per-frame values of `name` (`io::parquet::frame_values`: the layout lives there).
+    fn frames0(&self, name: &str, info: &ClipInfo) -> Result<Option<Vec<f32>>, DatasetError> {
+        let column = self
+            .column(name)
+            .ok_or_else(|| self.wrong(name, "a per-frame column"))?;
+        crate::io::parquet::frame_values(column, name, 0, info.frames, info.joints).map_err(|e| {
+            DatasetError::BadRow {
+                path: self.path.to_path_buf(),
+                clip_id: info.clip_id.clone(),
+                message: e.to_string(),
+            }
+        })
     }
 
     fn f32s(&self, name: &str) -> Result<Vec<Option<f32>>, DatasetError> {
@@ -384,20 +390,14 @@ pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFra
             batch: &batch,
         };
         let ids = b.strings("clip_id")?;
-        let (p, r, t) = (
-            b.f32_lists("joint_positions")?,
-            b.f32_lists("local_rotations")?,
-            b.f32_lists("root_translation")?,
-        );
-        if let (Some(Some(id)), Some(p), Some(r), Some(t)) = (
-            ids.into_iter().next(),
-            p.into_iter().next(),
-            r.into_iter().next(),
-            t.into_iter().next(),
-        ) && id == info.clip_id
-        {
-            found = Some((p, r, t));
+        if ids.first().and_then(|id| id.as_deref()) != Some(info.clip_id.as_str()) {
+            continue;
         }
+        found = Some((
+            b.frames0("joint_positions", &info)?,
+            b.frames0("local_rotations", &info)?,
+            b.frames0("root_translation", &info)?,
+        ));
     }
     let bad = |message: String| DatasetError::BadRow {
         path: path.clone(),
@@ -407,17 +407,12 @@ pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFra
     let (Some(positions), Some(rotations), Some(root)) = found.unwrap_or((None, None, None)) else {
         return Err(bad(format!("row {row} holds no frames")));
     };
+    // frame_values checked each column against these counts; an empty clip has nothing to show.
     let (f, j) = (info.frames, info.joints);
-    for (name, len, per) in [
-        ("joint_positions", positions.len(), j * 3),
-        ("local_rotations", rotations.len(), j * 4),
-        ("root_translation", root.len(), 3),
-    ] {
-        if f == 0 || j == 0 || f.checked_mul(per) != Some(len) {
-            return Err(bad(format!(
-                "{name} holds {len} values, expected num_frames {f} × {per}"
-            )));
-        }
+    if f == 0 || j == 0 {
+        return Err(bad(format!(
+            "num_frames {f} and num_joints {j}, expected at least one of each"
+        )));
     }
     if let Some(v) = positions.iter().chain(&rotations).find(|v| !v.is_finite()) {
         return Err(bad(format!("a non-finite value ({v}) in the frames")));

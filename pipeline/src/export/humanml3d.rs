@@ -439,7 +439,8 @@ struct Frames {
     fps: f64,
     frames: usize,
     joints: usize,
-    positions: Vec<f32>,
+    /// The positions, or why the row's column could not be read.
+    positions: Result<Vec<f32>, String>,
 }
 
 /// The frames of every row of a shard, a batch of rows at a time.
@@ -478,13 +479,23 @@ fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportErro
         .ok_or_else(|| missing("joint_positions"))?;
     let mut out = Vec::with_capacity(batch.num_rows());
     for i in 0..batch.num_rows() {
-        let values = crate::io::parquet::frame_values(positions, i)
-            .ok_or_else(|| missing("joint_positions"))?;
+        let (n, j) = (
+            usize::try_from(frames.value(i)).unwrap_or(0),
+            usize::try_from(joints.value(i)).unwrap_or(0),
+        );
+        // A row whose frames do not match its counts is skipped with the reason (the export goes
+        // on); a column of another layout fails the shard.
+        let values = match crate::io::parquet::frame_values(positions, "joint_positions", i, n, j) {
+            Ok(Some(v)) => Ok(v),
+            Ok(None) => Err("joint_positions is null".to_string()),
+            Err(e @ crate::io::parquet::FrameColumnError::Shape { .. }) => Err(e.to_string()),
+            Err(e) => return Err(table_err(path, e)),
+        };
         out.push(Frames {
             skeleton: skeleton.value(i).to_string(),
             fps: fps.value(i),
-            frames: usize::try_from(frames.value(i)).unwrap_or(0),
-            joints: usize::try_from(joints.value(i)).unwrap_or(0),
+            frames: n,
+            joints: j,
             positions: values,
         });
     }
@@ -518,20 +529,18 @@ fn convert(
             )));
         }
     };
-    if frames.joints == 0
-        || frames.frames.checked_mul(frames.joints * 3) != Some(frames.positions.len())
-    {
+    let positions = frames.positions.as_ref().map_err(|why| skip(why.clone()))?;
+    if frames.joints == 0 || frames.frames.checked_mul(frames.joints * 3) != Some(positions.len()) {
         return Err(skip(format!(
             "joint_positions holds {} values, not num_frames × num_joints × 3 = {} × {} × 3",
-            frames.positions.len(),
+            positions.len(),
             frames.frames,
             frames.joints
         )));
     }
     // Dataset frame (x right, y forward, z up) to HumanML3D's (y up; x = -right, z = forward):
     // a rotation, so left stays left.
-    let smpl: Vec<DVec3> = frames
-        .positions
+    let smpl: Vec<DVec3> = positions
         .chunks_exact(frames.joints * 3)
         .flat_map(|frame| {
             let frame: Vec<DVec3> = frame

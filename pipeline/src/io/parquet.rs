@@ -1,21 +1,20 @@
 //! Writes clips as a Parquet table (arrow-rs, zstd), streaming one row group at a time.
 //!
 //! Motion columns are in the dataset frame: metres, x right, y forward, z up (right-handed), see
-//! `schemas/clips.md`. Arrays are flat `list<float32>` so any reader reshapes them with one call.
+//! `schemas/clips.md`. Per-frame arrays nest as frames, joints, then fixed-size lists of
+//! components ([`FrameShape`](super::schema::FrameShape)), so readers get shaped arrays.
 
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::Write;
 use std::sync::Arc;
 
-use arrow_array::builder::{
-    BooleanBuilder, Float32Builder, ListBuilder, StringBuilder, StructBuilder,
-};
+use arrow_array::builder::{ListBuilder, StringBuilder, StructBuilder};
 use arrow_array::{
-    ArrayRef, BooleanArray, Float32Array, Float64Array, Int32Array, Int64Array, ListArray,
-    RecordBatch, StringArray, StructArray,
+    ArrayRef, BooleanArray, FixedSizeListArray, Float32Array, Float64Array, Int32Array, Int64Array,
+    ListArray, RecordBatch, StringArray, StructArray,
 };
-use arrow_buffer::{OffsetBuffer, ScalarBuffer};
+use arrow_buffer::{NullBuffer, OffsetBuffer, ScalarBuffer};
 use arrow_schema::{ArrowError, DataType, Field, Fields};
 use glam::{DQuat, DVec3};
 use parquet::arrow::ArrowWriter;
@@ -220,56 +219,169 @@ fn canonical_positions(positions: &[f32], joints: usize, profile: &Profile) -> V
     out
 }
 
-/// One row of a per-frame array column (`joint_positions`, `canonical_positions`, ...) as flat
-/// f32 values in frame, joint, component order. The one place readers take the column's list
-/// layout from: flat lists today, and nested or fixed-size lists (frames x joints x 3) read the
-/// same, so a change of layout stays here. `None` for a null row, a row out of range or a column
-/// that is not a list of f32.
-pub fn frame_values(column: &ArrayRef, row: usize) -> Option<Vec<f32>> {
+/// Why a per-frame column could not be read (callers add the file).
+#[derive(Debug, thiserror::Error)]
+pub enum FrameColumnError {
+    /// The column's type is neither this version's nesting nor version 8's flat list.
+    #[error(
+        "column `{column}` is {found}, expected {expected} (clip table version {SCHEMA_VERSION}) or List<Float32> (version 8); rebuild the dataset with this motionforge"
+    )]
+    Layout {
+        /// The column.
+        column: String,
+        /// Its type in the file.
+        found: String,
+        /// The type this version writes.
+        expected: String,
+    },
+    /// A row whose nesting or length does not match its `num_frames` and `num_joints`.
+    #[error("column `{column}`, row {row}: {message}")]
+    Shape {
+        /// The column.
+        column: String,
+        /// The row in the batch.
+        row: usize,
+        /// What was found and expected.
+        message: String,
+    },
+}
+
+/// True when `a` and `b` nest the same lists and fixed-size lists over the same leaf type, field
+/// names and nullability aside (another writer, pyarrow say, may mark items nullable).
+fn same_nesting(a: &DataType, b: &DataType) -> bool {
+    match (a, b) {
+        (DataType::List(x), DataType::List(y)) => same_nesting(x.data_type(), y.data_type()),
+        (DataType::FixedSizeList(x, n), DataType::FixedSizeList(y, m)) => {
+            n == m && same_nesting(x.data_type(), y.data_type())
+        }
+        _ => a == b,
+    }
+}
+
+/// One row of per-frame Float32 column `name` (`joint_positions`, `canonical_positions`,
+/// `local_rotations`, `root_translation`, ...) as flat values in frame, joint, component order,
+/// checked against the row's `frames` and `joints` (ignored for a column without joints). The one
+/// place readers take the columns' layout from ([`FrameShape`](super::schema::FrameShape)):
+/// this version's nested lists, and version 8's flat `List<Float32>` (same values, same order).
+/// `Ok(None)` for a null row (an opt-in feature that is off).
+pub fn frame_values(
+    column: &ArrayRef,
+    name: &str,
+    row: usize,
+    frames: usize,
+    joints: usize,
+) -> Result<Option<Vec<f32>>, FrameColumnError> {
     use arrow_array::Array;
     use arrow_array::cast::AsArray;
     use arrow_array::types::Float32Type;
-    fn flatten(array: &ArrayRef, out: &mut Vec<f32>) -> Option<()> {
-        if let Some(values) = array.as_primitive_opt::<Float32Type>() {
-            out.extend_from_slice(values.values());
-        } else if let Some(list) = array.as_list_opt::<i32>() {
-            for i in 0..list.len() {
-                flatten(&list.value(i), out)?;
-            }
-        } else if let Some(list) = array.as_fixed_size_list_opt() {
-            for i in 0..list.len() {
-                flatten(&list.value(i), out)?;
-            }
-        } else {
-            return None;
+    let shape = |message: String| FrameColumnError::Shape {
+        column: name.to_string(),
+        row,
+        message,
+    };
+    let layout = || FrameColumnError::Layout {
+        column: name.to_string(),
+        found: column.data_type().to_string(),
+        expected: super::schema::frame_shape(name)
+            .map(|s| s.data_type().to_string())
+            .unwrap_or_else(|| "a per-frame column".into()),
+    };
+    let Some(expected) = super::schema::frame_shape(name).filter(|s| !s.boolean) else {
+        return Err(layout());
+    };
+    let flat = DataType::List(Arc::new(Field::new("item", DataType::Float32, true)));
+    let nested = same_nesting(column.data_type(), &expected.data_type());
+    if !nested && !same_nesting(column.data_type(), &flat) {
+        return Err(layout());
+    }
+    let Some(top) = column.as_list_opt::<i32>() else {
+        return Err(layout());
+    };
+    if row >= top.len() {
+        return Err(shape(format!("no such row (the batch has {})", top.len())));
+    }
+    if top.is_null(row) {
+        return Ok(None);
+    }
+    // The row's range of the next level down, narrowed level by level to the leaf values.
+    let offsets = top.value_offsets();
+    let (mut start, mut end) = (offsets[row] as usize, offsets[row + 1] as usize);
+    let mut level = top.values();
+    let joints = if expected.per_joint { joints } else { 1 };
+    let per_frame = joints * expected.width();
+    if nested && end - start != frames {
+        return Err(shape(format!("{} frames, expected {frames}", end - start)));
+    }
+    loop {
+        if level.null_count() > 0 {
+            return Err(shape("a null inside the frames".into()));
         }
-        Some(())
+        if let Some(list) = level.as_list_opt::<i32>() {
+            let offsets = &list.value_offsets()[start..=end];
+            if let Some(bad) = offsets
+                .windows(2)
+                .find(|w| (w[1] - w[0]) as usize != joints)
+            {
+                return Err(shape(format!(
+                    "a frame of {} joints, expected {joints}",
+                    bad[1] - bad[0]
+                )));
+            }
+            (start, end) = (offsets[0] as usize, offsets[end - start] as usize);
+            level = list.values();
+        } else if let Some(fixed) = level.as_fixed_size_list_opt() {
+            (start, end) = (fixed.value_offset_at(start), fixed.value_offset_at(end));
+            level = fixed.values();
+        } else if let Some(values) = level.as_primitive_opt::<Float32Type>() {
+            let values = &values.values()[start..end];
+            if frames.checked_mul(per_frame) != Some(values.len()) {
+                return Err(shape(format!(
+                    "{} values, expected num_frames {frames} × {per_frame}",
+                    values.len()
+                )));
+            }
+            return Ok(Some(values.to_vec()));
+        } else {
+            return Err(layout());
+        }
     }
-    let list = column.as_list_opt::<i32>()?;
-    if row >= list.len() || list.is_null(row) {
-        return None;
-    }
-    let mut out = Vec::new();
-    flatten(&list.value(row), &mut out)?;
-    Some(out)
 }
 
-fn list(values: Vec<f32>, lengths: Vec<usize>) -> Result<ArrayRef, ArrowError> {
-    let field = Arc::new(Field::new("item", DataType::Float32, false));
-    let offsets = checked_offsets(&lengths)?;
-    Ok(Arc::new(ListArray::try_new(
-        field,
-        offsets,
-        Arc::new(Float32Array::from(values)),
-        None,
-    )?))
+/// Each row's items of a list or fixed-size list column (`goal_pelvis`, `parts`,
+/// `composed_parts`'s outer list, `texts`): `None` for a null row; `None` overall when the column
+/// is not a list. Readers take small per-clip vectors through this, so either list form reads.
+pub fn list_rows(column: &ArrayRef) -> Option<Vec<Option<ArrayRef>>> {
+    use arrow_array::Array;
+    use arrow_array::cast::AsArray;
+    let row = |valid: bool, value: ArrayRef| valid.then_some(value);
+    if let Some(list) = column.as_list_opt::<i32>() {
+        return Some(
+            (0..list.len())
+                .map(|i| row(list.is_valid(i), list.value(i)))
+                .collect(),
+        );
+    }
+    if let Some(list) = column.as_list_opt::<i64>() {
+        return Some(
+            (0..list.len())
+                .map(|i| row(list.is_valid(i), list.value(i)))
+                .collect(),
+        );
+    }
+    let list = column.as_fixed_size_list_opt()?;
+    Some(
+        (0..list.len())
+            .map(|i| row(list.is_valid(i), list.value(i)))
+            .collect(),
+    )
 }
 
-fn checked_offsets(lengths: &[usize]) -> Result<OffsetBuffer<i32>, ArrowError> {
-    let mut offsets = Vec::with_capacity(lengths.len() + 1);
+/// Offsets of lists with these lengths, checked against Arrow's 2^31 limit.
+fn checked_offsets(lengths: impl Iterator<Item = usize>) -> Result<OffsetBuffer<i32>, ArrowError> {
+    let mut offsets = Vec::with_capacity(lengths.size_hint().0 + 1);
     let mut total: i32 = 0;
     offsets.push(0);
-    for &l in lengths {
+    for l in lengths {
         let l = i32::try_from(l)
             .map_err(|_| ArrowError::ComputeError("list longer than 2^31 values".into()))?;
         total = total.checked_add(l).ok_or_else(|| {
@@ -278,6 +390,95 @@ fn checked_offsets(lengths: &[usize]) -> Result<OffsetBuffer<i32>, ArrowError> {
         offsets.push(total);
     }
     Ok(OffsetBuffer::new(ScalarBuffer::from(offsets)))
+}
+
+/// A validity buffer, `None` when every row is valid (Arrow's cheaper form of the same).
+fn validity(valid: &[bool]) -> Option<NullBuffer> {
+    valid
+        .iter()
+        .any(|v| !v)
+        .then(|| NullBuffer::from(valid.to_vec()))
+}
+
+/// `values` (already in frame, joint, component order) wrapped in the fixed-size lists of
+/// `inner`, innermost first, without copying.
+fn fixed_lists(mut values: ArrayRef, inner: &[i32]) -> Result<ArrayRef, ArrowError> {
+    for &n in inner.iter().rev() {
+        let field = Arc::new(Field::new("item", values.data_type().clone(), false));
+        values = Arc::new(FixedSizeListArray::try_new(field, n, values, None)?);
+    }
+    Ok(values)
+}
+
+/// One per-frame column of `name`'s [`FrameShape`](super::schema::FrameShape) from each row's
+/// flat values and counts (`None` for a null row). The leaf values go into one buffer and the
+/// nesting is offsets over it (no element-by-element builder): frames per row, joints per frame.
+fn frame_column(
+    name: &str,
+    leaf: ArrayRef,
+    rows: &[Option<(usize, usize, usize)>],
+) -> Result<ArrayRef, ArrowError> {
+    let shape = super::schema::frame_shape(name)
+        .ok_or_else(|| ArrowError::SchemaError(format!("`{name}` is not a per-frame column")))?;
+    // Each row's values must fill its frames exactly: a mismatch here is a bug, not bad input.
+    let mut total = 0usize;
+    for (frames, joints, len) in rows.iter().flatten() {
+        let joints = if shape.per_joint { *joints } else { 1 };
+        if frames * joints * shape.width() != *len {
+            return Err(ArrowError::ComputeError(format!(
+                "`{name}`: {len} values for {frames} frames × {joints} joints × {}",
+                shape.width()
+            )));
+        }
+        total += len;
+    }
+    if total != leaf.len() {
+        return Err(ArrowError::ComputeError(format!(
+            "`{name}`: {} values, rows give {total}",
+            leaf.len()
+        )));
+    }
+    let mut values = fixed_lists(leaf, shape.inner)?;
+    if shape.per_joint {
+        let per_frame = rows
+            .iter()
+            .flatten()
+            .flat_map(|&(frames, joints, _)| std::iter::repeat_n(joints, frames));
+        let field = Arc::new(Field::new("item", values.data_type().clone(), false));
+        values = Arc::new(ListArray::try_new(
+            field,
+            checked_offsets(per_frame)?,
+            values,
+            None,
+        )?);
+    }
+    let field = Arc::new(Field::new("item", values.data_type().clone(), false));
+    let valid: Vec<bool> = rows.iter().map(Option::is_some).collect();
+    Ok(Arc::new(ListArray::try_new(
+        field,
+        checked_offsets(rows.iter().map(|r| r.map_or(0, |(frames, _, _)| frames)))?,
+        values,
+        validity(&valid),
+    )?))
+}
+
+/// A Float32 per-frame column from each row's values (`None`: a null row).
+fn f32_frames<'r, 'c>(
+    name: &str,
+    rows: &'r [Row<'c>],
+    part: impl Fn(&'r Row<'c>) -> Option<&'r [f32]>,
+) -> Result<ArrayRef, ArrowError> {
+    let parts: Vec<Option<&[f32]>> = rows.iter().map(part).collect();
+    let mut values = Vec::with_capacity(parts.iter().flatten().map(|v| v.len()).sum());
+    for v in parts.iter().flatten() {
+        values.extend_from_slice(v);
+    }
+    let counts: Vec<Option<(usize, usize, usize)>> = rows
+        .iter()
+        .zip(&parts)
+        .map(|(r, v)| v.map(|v| (r.frames, r.joints, v.len())))
+        .collect();
+    frame_column(name, Arc::new(Float32Array::from(values)), &counts)
 }
 
 fn string_lists<'a>(rows: impl Iterator<Item = &'a [String]>) -> ArrayRef {
@@ -295,68 +496,73 @@ fn string_lists<'a>(rows: impl Iterator<Item = &'a [String]>) -> ArrayRef {
     Arc::new(b.finish())
 }
 
-fn optional_f32_lists<'a>(rows: impl Iterator<Item = Option<&'a [f32]>>) -> ArrayRef {
-    let mut b = ListBuilder::new(Float32Builder::new()).with_field(Arc::new(Field::new(
-        "item",
-        DataType::Float32,
-        false,
-    )));
+/// A fixed-size list per row (a goal, the six parts), null where a row has none: the slot of a
+/// null row holds `filler` values, as Arrow's fixed-size lists need.
+fn fixed_per_row<T: Copy>(
+    rows: &[Option<Vec<T>>],
+    n: usize,
+    filler: T,
+    leaf: impl Fn(Vec<T>) -> ArrayRef,
+) -> Result<ArrayRef, ArrowError> {
+    let mut values = Vec::with_capacity(rows.len() * n);
     for row in rows {
         match row {
-            Some(values) => {
-                b.values().append_slice(values);
-                b.append(true);
+            Some(v) if v.len() == n => values.extend_from_slice(v),
+            Some(v) => {
+                return Err(ArrowError::ComputeError(format!(
+                    "{} values where a fixed-size list holds {n}",
+                    v.len()
+                )));
             }
-            None => b.append(false),
+            None => values.extend(std::iter::repeat_n(filler, n)),
         }
     }
-    Arc::new(b.finish())
+    let values = leaf(values);
+    let field = Arc::new(Field::new("item", values.data_type().clone(), false));
+    let valid: Vec<bool> = rows.iter().map(Option::is_some).collect();
+    Ok(Arc::new(FixedSizeListArray::try_new(
+        field,
+        n as i32,
+        values,
+        validity(&valid),
+    )?))
+}
+
+fn bools(values: Vec<bool>) -> ArrayRef {
+    Arc::new(BooleanArray::from(values))
+}
+
+fn floats(values: Vec<f32>) -> ArrayRef {
+    Arc::new(Float32Array::from(values))
 }
 
 /// Six booleans per row in SINC's order: global, torso, left arm, right arm, left leg, right leg.
-fn part_lists(rows: impl Iterator<Item = Option<crate::parts::PartSet>>) -> ArrayRef {
-    let mut b = ListBuilder::new(BooleanBuilder::new()).with_field(Arc::new(Field::new(
-        "item",
-        DataType::Boolean,
-        false,
-    )));
-    for row in rows {
-        match row {
-            Some(parts) => {
-                for v in parts.to_vec6() {
-                    b.values().append_value(v);
-                }
-                b.append(true);
-            }
-            None => b.append(false),
-        }
-    }
-    Arc::new(b.finish())
+fn part_lists(
+    rows: impl Iterator<Item = Option<crate::parts::PartSet>>,
+) -> Result<ArrayRef, ArrowError> {
+    let rows: Vec<Option<Vec<bool>>> = rows.map(|p| p.map(|p| p.to_vec6().to_vec())).collect();
+    fixed_per_row(&rows, 6, false, bools)
 }
 
-/// A list of 6-boolean part lists per row (the parts each source of a synthetic pair gave).
-fn nested_part_lists<'a>(rows: impl Iterator<Item = &'a [crate::parts::PartSet]>) -> ArrayRef {
-    let inner = ListBuilder::new(BooleanBuilder::new()).with_field(Arc::new(Field::new(
-        "item",
-        DataType::Boolean,
-        false,
-    )));
-    let inner_field = Arc::new(Field::new(
-        "item",
-        DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
-        false,
-    ));
-    let mut b = ListBuilder::new(inner).with_field(inner_field);
-    for row in rows {
-        for parts in row {
-            for v in parts.to_vec6() {
-                b.values().values().append_value(v);
-            }
-            b.values().append(true);
+/// A list of six-boolean part vectors per row (the parts each source of a synthetic pair gave).
+fn nested_part_lists<'a>(
+    rows: impl Iterator<Item = &'a [crate::parts::PartSet]>,
+) -> Result<ArrayRef, ArrowError> {
+    let rows: Vec<&[crate::parts::PartSet]> = rows.collect();
+    let mut values = Vec::new();
+    for parts in &rows {
+        for p in *parts {
+            values.extend(p.to_vec6());
         }
-        b.append(true);
     }
-    Arc::new(b.finish())
+    let values = fixed_lists(bools(values), &[6])?;
+    let field = Arc::new(Field::new("item", values.data_type().clone(), false));
+    Ok(Arc::new(ListArray::try_new(
+        field,
+        checked_offsets(rows.iter().map(|p| p.len()))?,
+        values,
+        None,
+    )?))
 }
 
 /// One plausibility metric per row, null when not computed.
@@ -368,24 +574,23 @@ fn metric(rows: &[Row<'_>], f: impl Fn(&Plausibility) -> f64) -> ArrayRef {
     ))
 }
 
-fn optional_bool_lists<'a>(rows: impl Iterator<Item = Option<&'a [bool]>>) -> ArrayRef {
-    let mut b = ListBuilder::new(BooleanBuilder::new()).with_field(Arc::new(Field::new(
-        "item",
-        DataType::Boolean,
-        false,
-    )));
-    for row in rows {
-        match row {
-            Some(values) => {
-                for v in values {
-                    b.values().append_value(*v);
-                }
-                b.append(true);
-            }
-            None => b.append(false),
-        }
-    }
-    Arc::new(b.finish())
+/// `foot_contacts`: four booleans per frame, null when the feature is off.
+fn contact_column(rows: &[Row<'_>]) -> Result<ArrayRef, ArrowError> {
+    let parts: Vec<Option<&[bool]>> = rows
+        .iter()
+        .map(|r| r.features.foot_contacts.as_deref())
+        .collect();
+    let values: Vec<bool> = parts
+        .iter()
+        .flatten()
+        .flat_map(|v| v.iter().copied())
+        .collect();
+    let counts: Vec<Option<(usize, usize, usize)>> = rows
+        .iter()
+        .zip(&parts)
+        .map(|(r, v)| v.map(|v| (r.frames, r.joints, v.len())))
+        .collect();
+    frame_column("foot_contacts", bools(values), &counts)
 }
 
 /// Builds one record batch (a row group) from rows.
@@ -401,20 +606,9 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             clips.iter().map(|c| f(c)).collect::<Vec<_>>(),
         ))
     };
-    let motion_list = |part: fn(&DatasetMotion) -> &[f32]| -> Result<ArrayRef, ArrowError> {
-        let lengths: Vec<usize> = rows.iter().map(|r| part(&r.motion).len()).collect();
-        let mut values = Vec::with_capacity(lengths.iter().sum());
-        for r in rows {
-            values.extend_from_slice(part(&r.motion));
-        }
-        list(values, lengths)
-    };
-    let derived = |part: fn(&Features) -> Option<&[f32]>| -> ArrayRef {
-        optional_f32_lists(rows.iter().map(|r| part(&r.features)))
-    };
-    let goals = |goal: fn(&Clip) -> Option<Vec<f32>>| -> ArrayRef {
+    let goals = |goal: fn(&Clip) -> Option<Vec<f32>>, n: usize| {
         let values: Vec<Option<Vec<f32>>> = clips.iter().map(|c| goal(c)).collect();
-        optional_f32_lists(values.iter().map(Option::as_deref))
+        fixed_per_row(&values, n, 0.0, floats)
     };
     let frame_range = StructArray::try_new(
         Fields::from(vec![
@@ -496,13 +690,13 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
         ("object", optional_strings(&|c| c.object.as_deref())),
         (
             "goal_pelvis",
-            goals(|c| c.goal_pelvis.map(|g| g.map(|x| x as f32).to_vec())),
+            goals(|c| c.goal_pelvis.map(|g| g.map(|x| x as f32).to_vec()), 2)?,
         ),
         (
             "goal_hand",
-            goals(|c| c.goal_hand.map(|g| g.map(|x| x as f32).to_vec())),
+            goals(|c| c.goal_hand.map(|g| g.map(|x| x as f32).to_vec()), 3)?,
         ),
-        ("parts", part_lists(clips.iter().map(|c| c.parts))),
+        ("parts", part_lists(clips.iter().map(|c| c.parts))?),
         (
             "label_source",
             Arc::new(StringArray::from(
@@ -522,7 +716,7 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
         ),
         (
             "composed_parts",
-            nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice())),
+            nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice()))?,
         ),
         ("foot_skate", metric(rows, |p| p.foot_skate)),
         ("ground_penetration", metric(rows, |p| p.ground_penetration)),
@@ -551,24 +745,37 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
                 rows.iter().map(|r| r.joints as i32),
             )),
         ),
-        ("joint_positions", motion_list(|m| &m.positions)?),
-        ("local_rotations", motion_list(|m| &m.rotations)?),
-        ("root_translation", motion_list(|m| &m.root)?),
-        ("rotations_6d", derived(|f| f.rotations_6d.as_deref())),
-        ("joint_velocities", derived(|f| f.velocities.as_deref())),
         (
-            "foot_contacts",
-            optional_bool_lists(rows.iter().map(|r| r.features.foot_contacts.as_deref())),
+            "joint_positions",
+            f32_frames("joint_positions", rows, |r| Some(&r.motion.positions))?,
         ),
-        ("future_root", derived(|f| f.future_root.as_deref())),
-        ("canonical_positions", {
-            let lengths: Vec<usize> = rows.iter().map(|r| r.canonical.len()).collect();
-            let mut values = Vec::with_capacity(lengths.iter().sum());
-            for r in rows {
-                values.extend_from_slice(&r.canonical);
-            }
-            list(values, lengths)?
-        }),
+        (
+            "local_rotations",
+            f32_frames("local_rotations", rows, |r| Some(&r.motion.rotations))?,
+        ),
+        (
+            "root_translation",
+            f32_frames("root_translation", rows, |r| Some(&r.motion.root))?,
+        ),
+        (
+            "rotations_6d",
+            f32_frames("rotations_6d", rows, |r| r.features.rotations_6d.as_deref())?,
+        ),
+        (
+            "joint_velocities",
+            f32_frames("joint_velocities", rows, |r| {
+                r.features.velocities.as_deref()
+            })?,
+        ),
+        ("foot_contacts", contact_column(rows)?),
+        (
+            "future_root",
+            f32_frames("future_root", rows, |r| r.features.future_root.as_deref())?,
+        ),
+        (
+            "canonical_positions",
+            f32_frames("canonical_positions", rows, |r| Some(&r.canonical))?,
+        ),
     ];
     let columns = crate::io::schema::in_schema_order(&schema, named)?;
     let batch = RecordBatch::try_new(schema, columns)?;
@@ -762,34 +969,93 @@ pub fn write_plans(
 #[cfg(test)]
 mod frame_values_tests {
     use super::*;
-    use arrow_array::{Array, FixedSizeListArray};
+    use arrow_array::Array;
 
-    #[test]
-    fn flat_and_nested_layouts_give_the_same_values() {
-        // Two rows: 2 frames x 1 joint x 3, then 1 frame x 1 joint x 3.
-        let values: Vec<f32> = (0..9).map(|v| v as f32).collect();
-        let flat = list(values.clone(), vec![6, 3]).unwrap();
-        let item = Arc::new(Field::new("item", DataType::Float32, false));
-        let triples = FixedSizeListArray::try_new(
-            Arc::clone(&item),
-            3,
-            Arc::new(Float32Array::from(values.clone())),
-            None,
+    /// Two rows of `joint_positions`: 2 frames × 2 joints × 3, then 1 frame × 1 joint × 3.
+    fn two_rows() -> (Vec<f32>, ArrayRef) {
+        let values: Vec<f32> = (0..15).map(|v| v as f32).collect();
+        let column = frame_column(
+            "joint_positions",
+            floats(values.clone()),
+            &[Some((2, 2, 12)), Some((1, 1, 3))],
         )
         .unwrap();
-        let nested: ArrayRef = Arc::new(
+        (values, column)
+    }
+
+    #[test]
+    fn nested_rows_read_back_in_frame_joint_component_order() {
+        let (values, column) = two_rows();
+        assert_eq!(
+            column.data_type(),
+            &crate::io::schema::frame_shape("joint_positions")
+                .unwrap()
+                .data_type()
+        );
+        let read =
+            |row, frames, joints| frame_values(&column, "joint_positions", row, frames, joints);
+        assert_eq!(read(0, 2, 2).unwrap(), Some(values[..12].to_vec()));
+        assert_eq!(read(1, 1, 1).unwrap(), Some(values[12..].to_vec()));
+        // Counts that disagree with the nesting are refused, not reinterpreted.
+        assert!(matches!(read(0, 2, 3), Err(FrameColumnError::Shape { .. })));
+        assert!(matches!(read(0, 1, 2), Err(FrameColumnError::Shape { .. })));
+        assert!(matches!(read(2, 1, 1), Err(FrameColumnError::Shape { .. })));
+        // The same column sliced (as a reader's batch may be) reads the same.
+        let sliced = column.slice(1, 1);
+        assert_eq!(
+            frame_values(&sliced, "joint_positions", 0, 1, 1).unwrap(),
+            Some(values[12..].to_vec())
+        );
+    }
+
+    #[test]
+    fn null_rows_and_per_frame_shapes() {
+        let values: Vec<f32> = (0..18).map(|v| v as f32).collect();
+        let column = frame_column(
+            "future_root",
+            floats(values.clone()),
+            &[None, Some((2, 5, 18))],
+        )
+        .unwrap();
+        assert_eq!(frame_values(&column, "future_root", 0, 3, 5).unwrap(), None);
+        assert_eq!(
+            frame_values(&column, "future_root", 1, 2, 5).unwrap(),
+            Some(values)
+        );
+        assert!(column.is_null(0));
+        // Values that do not fill the frames are a bug caught at the writer.
+        assert!(frame_column("future_root", floats(vec![0.0; 9]), &[Some((2, 1, 9))]).is_err());
+    }
+
+    #[test]
+    fn a_version_8_flat_column_reads_and_any_other_layout_is_refused() {
+        let values: Vec<f32> = (0..12).map(|v| v as f32).collect();
+        let flat: ArrayRef = Arc::new(
             ListArray::try_new(
-                Arc::new(Field::new("item", triples.data_type().clone(), false)),
-                checked_offsets(&[2, 1]).unwrap(),
-                Arc::new(triples),
+                Arc::new(Field::new("item", DataType::Float32, false)),
+                checked_offsets([12usize].into_iter()).unwrap(),
+                floats(values.clone()),
                 None,
             )
             .unwrap(),
         );
-        for row in 0..2 {
-            assert_eq!(frame_values(&flat, row), frame_values(&nested, row));
-        }
-        assert_eq!(frame_values(&nested, 1), Some(vec![6.0, 7.0, 8.0]));
-        assert_eq!(frame_values(&flat, 2), None);
+        assert_eq!(
+            frame_values(&flat, "joint_positions", 0, 2, 2).unwrap(),
+            Some(values.clone())
+        );
+        assert!(matches!(
+            frame_values(&flat, "joint_positions", 0, 3, 2),
+            Err(FrameColumnError::Shape { .. })
+        ));
+        // Rotations stored where positions belong: four per joint, not three.
+        let (_, positions) = two_rows();
+        let err = frame_values(&positions, "local_rotations", 0, 2, 2).unwrap_err();
+        assert!(matches!(err, FrameColumnError::Layout { .. }), "{err}");
+        assert!(err.to_string().contains("`local_rotations`"), "{err}");
+        let float64: ArrayRef = Arc::new(Float64Array::from(vec![1.0]));
+        assert!(matches!(
+            frame_values(&float64, "joint_positions", 0, 1, 1),
+            Err(FrameColumnError::Layout { .. })
+        ));
     }
 }

@@ -7,30 +7,125 @@ use arrow_array::ArrayRef;
 use arrow_schema::{ArrowError, DataType, Field, Fields, Schema};
 
 /// Version of the clip table layout; bump on any change to columns or their meaning.
-pub const SCHEMA_VERSION: u32 = 8;
+pub const SCHEMA_VERSION: u32 = 9;
 
-fn list_f32(name: &str) -> Field {
-    Field::new(
-        name,
-        DataType::List(Arc::new(Field::new("item", DataType::Float32, false))),
-        false,
-    )
+/// How one row of a per-frame array column nests: frames, then joints when `per_joint`, then the
+/// fixed-size `inner` dimensions (`[3]` for a position, `[3, 3]` for `future_root`'s three
+/// offsets of three numbers). Stored as lists of lists of fixed-size lists, so that pyarrow,
+/// polars and Hugging Face `datasets` give (frames, joints, 3) etc. without a reshape; the joint
+/// count is a list rather than fixed because skeletons with different counts share a table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameShape {
+    /// A list of joints per frame.
+    pub per_joint: bool,
+    /// The fixed-size dimensions of each joint (or frame), outermost first.
+    pub inner: &'static [i32],
+    /// Booleans rather than Float32 (`foot_contacts`).
+    pub boolean: bool,
+}
+
+impl FrameShape {
+    /// Numbers per joint (or per frame when not `per_joint`).
+    pub fn width(&self) -> usize {
+        self.inner.iter().map(|&n| n as usize).product()
+    }
+
+    /// The Arrow type of the column.
+    pub fn data_type(&self) -> DataType {
+        let mut t = if self.boolean {
+            DataType::Boolean
+        } else {
+            DataType::Float32
+        };
+        for &n in self.inner.iter().rev() {
+            t = DataType::FixedSizeList(item(t), n);
+        }
+        if self.per_joint {
+            t = DataType::List(item(t));
+        }
+        DataType::List(item(t))
+    }
+}
+
+const PER_JOINT_3: FrameShape = FrameShape {
+    per_joint: true,
+    inner: &[3],
+    boolean: false,
+};
+
+/// The per-frame array columns and their shapes, in schema order.
+pub const FRAME_COLUMNS: [(&str, FrameShape); 8] = [
+    ("joint_positions", PER_JOINT_3),
+    (
+        "local_rotations",
+        FrameShape {
+            per_joint: true,
+            inner: &[4],
+            boolean: false,
+        },
+    ),
+    (
+        "root_translation",
+        FrameShape {
+            per_joint: false,
+            inner: &[3],
+            boolean: false,
+        },
+    ),
+    (
+        "rotations_6d",
+        FrameShape {
+            per_joint: true,
+            inner: &[6],
+            boolean: false,
+        },
+    ),
+    ("joint_velocities", PER_JOINT_3),
+    (
+        "foot_contacts",
+        FrameShape {
+            per_joint: false,
+            inner: &[4],
+            boolean: true,
+        },
+    ),
+    (
+        "future_root",
+        FrameShape {
+            per_joint: false,
+            inner: &[3, 3],
+            boolean: false,
+        },
+    ),
+    ("canonical_positions", PER_JOINT_3),
+];
+
+/// The shape of per-frame column `name`, `None` for any other column.
+pub fn frame_shape(name: &str) -> Option<FrameShape> {
+    FRAME_COLUMNS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, shape)| *shape)
+}
+
+/// A list's (or fixed-size list's) element: named `item` as pyarrow names it, never null.
+fn item(data_type: DataType) -> Arc<Field> {
+    Arc::new(Field::new("item", data_type, false))
+}
+
+/// A per-frame column; nullable for the opt-in features.
+fn frames(name: &str, nullable: bool) -> Field {
+    let shape = frame_shape(name).unwrap_or(PER_JOINT_3);
+    Field::new(name, shape.data_type(), nullable)
 }
 
 fn list_utf8(name: &str) -> Field {
-    Field::new(
-        name,
-        DataType::List(Arc::new(Field::new("item", DataType::Utf8, false))),
-        false,
-    )
+    Field::new(name, DataType::List(item(DataType::Utf8)), false)
 }
 
-fn goal(name: &str) -> Field {
-    Field::new(
-        name,
-        DataType::List(Arc::new(Field::new("item", DataType::Float32, false))),
-        true,
-    )
+/// A small fixed-length vector of a clip (a goal, the six parts), null when the clip has none.
+fn fixed(name: &str, data_type: DataType, n: i32) -> Field {
+    Field::new(name, DataType::FixedSizeList(item(data_type), n), true)
 }
 
 /// The fields of one `attributes` entry.
@@ -73,23 +168,15 @@ pub fn clip_schema() -> Schema {
         Field::new("motion_type", DataType::Utf8, true),
         Field::new("hand", DataType::Utf8, true),
         Field::new("object", DataType::Utf8, true),
-        goal("goal_pelvis"),
-        goal("goal_hand"),
-        Field::new(
-            "parts",
-            DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
-            true,
-        ),
+        fixed("goal_pelvis", DataType::Float32, 2),
+        fixed("goal_hand", DataType::Float32, 3),
+        fixed("parts", DataType::Boolean, 6),
         Field::new("label_source", DataType::Utf8, true),
         list_utf8("paraphrases"),
         list_utf8("composed_from"),
         Field::new(
             "composed_parts",
-            DataType::List(Arc::new(Field::new(
-                "item",
-                DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
-                false,
-            ))),
+            DataType::List(item(DataType::FixedSizeList(item(DataType::Boolean), 6))),
             false,
         ),
         Field::new("foot_skate", DataType::Float32, true),
@@ -101,18 +188,14 @@ pub fn clip_schema() -> Schema {
         Field::new("fps", DataType::Float64, false),
         Field::new("num_frames", DataType::Int32, false),
         Field::new("num_joints", DataType::Int32, false),
-        list_f32("joint_positions"),
-        list_f32("local_rotations"),
-        list_f32("root_translation"),
-        goal("rotations_6d"),
-        goal("joint_velocities"),
-        Field::new(
-            "foot_contacts",
-            DataType::List(Arc::new(Field::new("item", DataType::Boolean, false))),
-            true,
-        ),
-        goal("future_root"),
-        list_f32("canonical_positions"),
+        frames("joint_positions", false),
+        frames("local_rotations", false),
+        frames("root_translation", false),
+        frames("rotations_6d", true),
+        frames("joint_velocities", true),
+        frames("foot_contacts", true),
+        frames("future_root", true),
+        frames("canonical_positions", false),
     ])
 }
 
@@ -237,6 +320,28 @@ mod order_tests {
         assert!(
             in_schema_order(&schema, vec![("a", col(1)), ("a", col(1)), ("b", col(2))]).is_err()
         );
+    }
+
+    #[test]
+    fn every_per_frame_column_has_its_shapes_type_in_the_schema() {
+        let schema = clip_schema();
+        for (name, shape) in FRAME_COLUMNS {
+            let field = schema.field_with_name(name).unwrap();
+            assert_eq!(field.data_type(), &shape.data_type(), "{name}");
+        }
+        assert_eq!(
+            frame_shape("joint_positions")
+                .unwrap()
+                .data_type()
+                .to_string(),
+            DataType::List(item(DataType::List(item(DataType::FixedSizeList(
+                item(DataType::Float32),
+                3
+            )))))
+            .to_string()
+        );
+        assert_eq!(frame_shape("future_root").unwrap().width(), 9);
+        assert_eq!(frame_shape("clip_id"), None);
     }
 
     #[test]

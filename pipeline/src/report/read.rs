@@ -182,44 +182,18 @@ impl<'a> Columns<'a> {
         let items = |item: ArrayRef| -> Option<Vec<f64>> {
             float_values(&item).map(|v| v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
         };
-        let mut out = Vec::with_capacity(column.len());
-        if let Some(list) = column.as_list_opt::<i32>() {
-            for i in 0..list.len() {
-                out.push(if list.is_null(i) {
-                    None
-                } else {
-                    Some(
-                        items(list.value(i))
-                            .ok_or_else(|| self.type_error(name, column, "List<Float32>"))?,
-                    )
-                });
-            }
-        } else if let Some(list) = column.as_list_opt::<i64>() {
-            for i in 0..list.len() {
-                out.push(if list.is_null(i) {
-                    None
-                } else {
-                    Some(
-                        items(list.value(i))
-                            .ok_or_else(|| self.type_error(name, column, "List<Float32>"))?,
-                    )
-                });
-            }
-        } else if let Some(list) = column.as_fixed_size_list_opt() {
-            for i in 0..list.len() {
-                out.push(if list.is_null(i) {
-                    None
-                } else {
-                    Some(
-                        items(list.value(i))
-                            .ok_or_else(|| self.type_error(name, column, "List<Float32>"))?,
-                    )
-                });
-            }
-        } else {
-            return Err(self.type_error(name, column, "List<Float32>"));
-        }
-        Ok(Some(out))
+        // List, large list or fixed-size list (a goal is fixed-size from version 9 on).
+        let rows = crate::io::parquet::list_rows(column)
+            .ok_or_else(|| self.type_error(name, column, "a list of Float32"))?;
+        rows.into_iter()
+            .map(|row| {
+                row.map(|item| {
+                    items(item).ok_or_else(|| self.type_error(name, column, "a list of Float32"))
+                })
+                .transpose()
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Some)
     }
 }
 
