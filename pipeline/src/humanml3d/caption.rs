@@ -18,7 +18,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::str::FromStr;
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use serde::Deserialize;
 
@@ -188,6 +188,26 @@ pub enum CaptionError {
 /// The caption's words and tags as HumanML3D's `process_text` gives them: tags from spaCy's
 /// tagger network mapped as spaCy 2.3.4 maps them, lemmas from the lexicon.
 pub fn tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
+    // The network costs about 0.3 ms a caption; datasets repeat captions (every take of an
+    // action from its file name, a caption and its paraphrases' sources), so results are kept.
+    static SEEN: OnceLock<Mutex<HashMap<String, Vec<Token>>>> = OnceLock::new();
+    let seen = SEEN.get_or_init(Mutex::default);
+    if let Some(hit) = seen.lock().ok().and_then(|m| m.get(caption).cloned()) {
+        return Ok(hit);
+    }
+    let out = tag_caption(caption)?;
+    if let Ok(mut m) = seen.lock()
+        && m.len() < MEMO_CAPTIONS
+    {
+        m.insert(caption.to_string(), out.clone());
+    }
+    Ok(out)
+}
+
+/// How many captions [`tokens`] remembers (a few MB at most).
+const MEMO_CAPTIONS: usize = 1 << 16;
+
+fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let tagger = tagger()?;
     let net = spacy()?;
     let pieces = split_words(&caption.replace('-', ""));
