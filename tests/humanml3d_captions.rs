@@ -583,9 +583,7 @@ fn times_are_written_as_python_writes_floats() {
 /// tagger reads, as `Doc.to_array` gives them.
 const ATTRIBUTES: &str = r##"
 import json, sys
-import spacy
 from spacy.attrs import NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE
-nlp = spacy.blank("en")
 try:
     import en_core_web_sm as model
 except ImportError:

@@ -37,8 +37,9 @@ pub(crate) struct SpacyToken<'a> {
 #[serde(deny_unknown_fields)]
 struct Header {
     format: String,
-    #[allow(dead_code)]
-    source: String,
+    /// Which model the weights came from; for people reading the file.
+    #[serde(rename = "source")]
+    _source: String,
     labels: Vec<String>,
     attrs: Vec<String>,
     seeds: Vec<u32>,
