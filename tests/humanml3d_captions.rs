@@ -138,6 +138,20 @@ fn caption_sources() -> Vec<(&'static str, Vec<String>)> {
         ("sinc/gpt3-labels-list.json", gpt3),
         ("fixtures (demo.toml)", fixture_captions()),
     ];
+    let mut sources = sources;
+    // More real captions to measure on, one a line (KIT-ML's, for instance:
+    // docs/humanml3d-captions.md shows how to extract them); not in ../shared, so optional.
+    if let Some(path) = std::env::var_os("MOTIONFORGE_EXTRA_CAPTIONS") {
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("MOTIONFORGE_EXTRA_CAPTIONS {}: {e}", path.display()));
+        sources.push((
+            "extra (MOTIONFORGE_EXTRA_CAPTIONS)",
+            text.lines()
+                .filter(|l| !l.trim().is_empty() && !l.contains('#'))
+                .map(str::to_string)
+                .collect(),
+        ));
+    }
     sources
         .into_iter()
         .map(|(name, list)| {
