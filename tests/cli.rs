@@ -949,3 +949,34 @@ fn bench_build_json_lists_the_copies_and_keeps_the_folder() {
     );
     assert!(foreign.path().join("notes.txt").is_file());
 }
+
+#[test]
+fn bench_captions_tags_each_distinct_caption_of_the_file() {
+    let file = common::shared_data().join("sinc/clean_labels.txt");
+    let distinct: std::collections::BTreeSet<String> = std::fs::read_to_string(&file)
+        .unwrap()
+        .lines()
+        .map(|l| l.trim().to_string())
+        .filter(|l| !l.is_empty())
+        .collect();
+    let out = run(
+        &["bench", "--captions", &file.display().to_string()],
+        &repo(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    // Timings are not asserted: the count, nothing refused, both passes reported.
+    assert_eq!(
+        number_after(&stdout, "") as usize,
+        distinct.len(),
+        "{stdout}"
+    );
+    assert!(stdout.contains("0 refused"), "{stdout}");
+    assert!(
+        stdout.contains("first pass") && stdout.contains("(remembered)"),
+        "{stdout}"
+    );
+    let missing = run(&["bench", "--captions", "no/such/file.txt"], &repo());
+    assert!(!missing.status.success());
+    assert!(text(&missing.stderr).contains("no/such/file.txt"));
+}

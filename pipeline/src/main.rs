@@ -465,7 +465,8 @@ enum Command {
     /// to the scan, frames/s per core, peak memory, and the stage cache and shard bytes.
     #[command(after_help = examples!(
         "  motionforge bench --repeat 1
-  motionforge bench --build --data ../shared/data/bandai-namco-1/data --repeat 1"
+  motionforge bench --build --data ../shared/data/bandai-namco-1/data --repeat 1
+  motionforge bench --captions ../shared/data/sinc/clean_labels.txt"
     ))]
     Bench {
         /// Folder of BVH files (all must share one skeleton profile).
@@ -503,6 +504,10 @@ enum Command {
         /// clips of this built dataset folder, written to a temporary folder: previews per second.
         #[arg(long, value_name = "DATASET", conflicts_with_all = ["build", "write_frames"])]
         previews: Option<PathBuf>,
+        /// Instead, time the HumanML3D caption tagger (spaCy's network) on the distinct captions
+        /// of this text file, one a line, on one thread: captions per second.
+        #[arg(long, value_name = "FILE", conflicts_with_all = ["build", "write_frames", "previews"])]
+        captions: Option<PathBuf>,
     },
 }
 
@@ -929,7 +934,11 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             keep,
             pattern,
             previews,
+            captions,
         } => match write_frames {
+            _ if captions.is_some() => {
+                cli::tools::bench_captions(captions.as_deref().unwrap_or(Path::new(".")))?
+            }
             _ if previews.is_some() => {
                 cli::browse::bench_previews(previews.as_deref().unwrap_or(Path::new(".")))?
             }

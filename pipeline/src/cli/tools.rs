@@ -304,3 +304,45 @@ pub(crate) fn bench_write(data: &Path, profile: &str, target_frames: usize) -> R
     }
     Ok(())
 }
+
+/// `bench --captions FILE`: tags each distinct caption of the file (one a line) for a HumanML3D
+/// caption line, once on one thread, then all of them again (remembered by `caption::tokens`).
+pub(crate) fn bench_captions(path: &Path) -> Result<()> {
+    use motionforge::humanml3d::caption::tokens;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let captions: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let start = std::time::Instant::now();
+    tokens("walk").context("loading the caption tagger")?;
+    let load = start.elapsed().as_secs_f64();
+    let start = std::time::Instant::now();
+    let (mut words, mut refused) = (0usize, 0usize);
+    for caption in &captions {
+        match tokens(caption) {
+            Ok(t) => words += t.len(),
+            Err(_) => refused += 1,
+        }
+    }
+    let first = start.elapsed().as_secs_f64();
+    let start = std::time::Instant::now();
+    for caption in &captions {
+        let _ = tokens(caption);
+    }
+    let again = start.elapsed().as_secs_f64();
+    writeln!(
+        std::io::stdout(),
+        "{} distinct captions ({words} words kept, {refused} refused), one thread: tagger load {:.0} ms; \
+         first pass {first:.3} s, {:.0} captions/s; again {again:.3} s, {:.0} captions/s (remembered)",
+        captions.len(),
+        load * 1e3,
+        captions.len() as f64 / first.max(1e-9),
+        captions.len() as f64 / again.max(1e-9)
+    )?;
+    Ok(())
+}

@@ -6,26 +6,27 @@
 //! MoMask read those pairs back (GloVe vector of the word, one-hot class of the tag), so a
 //! caption line made here has to carry the words and tags spaCy would have given.
 //!
-//! This module does it without spaCy: an averaged-perceptron tagger whose weights were trained
-//! at development time on spaCy's tags of real captions (`schemas/caption-tagger-weights.tsv`,
-//! written by `tools/train-caption-tagger.py`), with the lexicon's word classes among its
-//! features, and a lemmatiser over data files compiled into the crate
-//! (`schemas/caption-tagger.toml`, WordNet 3.0 for open-class words and irregular forms). The
-//! earlier rule-based tagger stays available as [`rule_tokens`] for comparison.
-//! `docs/humanml3d-captions.md` describes the method, the data's provenance and how often the
-//! result agrees with spaCy on held-out real captions.
+//! This module does it without Python: the tags come from spaCy `en_core_web_sm`'s own tagger
+//! network, run by `humanml3d::spacy_tagger` on weights exported from the model
+//! (`schemas/caption-tagger-spacy.bin`, written by `tools/export-caption-tagger.py`), its Penn
+//! Treebank tags turned into coarse tags by spaCy 2.3.4's table ([`pos234`]); lemmas come from a
+//! lemmatiser over data files compiled into the crate (`schemas/caption-tagger.toml`, WordNet 3.0
+//! for open-class words and irregular forms). The earlier rule-based tagger stays available as
+//! [`rule_tokens`] for comparison. `docs/humanml3d-captions.md` describes the method, the data's
+//! provenance and how often the result agrees with spaCy on real captions.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::str::FromStr;
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use serde::Deserialize;
+
+use super::spacy_tagger::{SpacyTagger, SpacyToken};
 
 const RULES_TOML: &str = include_str!("../../../schemas/caption-tagger.toml");
 const LEXICON_TSV: &str = include_str!("../../../schemas/pos-lexicon.tsv");
 const EXCEPTIONS_TSV: &str = include_str!("../../../schemas/pos-exceptions.tsv");
-const WEIGHTS_TSV: &str = include_str!("../../../schemas/caption-tagger-weights.tsv");
 
 /// A Universal POS tag as spaCy assigns them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -184,48 +185,170 @@ pub enum CaptionError {
     Data(String),
 }
 
-/// The caption's words and tags as HumanML3D's `process_text` gives them: tags from the
-/// averaged perceptron, lemmas from the lexicon.
+/// The caption's words and tags as HumanML3D's `process_text` gives them: tags from spaCy's
+/// tagger network mapped as spaCy 2.3.4 maps them, lemmas from the lexicon.
 pub fn tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
+    // The network costs about 0.3 ms a caption; datasets repeat captions (every take of an
+    // action from its file name, a caption and its paraphrases' sources), so results are kept.
+    static SEEN: OnceLock<Mutex<HashMap<String, Vec<Token>>>> = OnceLock::new();
+    let seen = SEEN.get_or_init(Mutex::default);
+    if let Some(hit) = seen.lock().ok().and_then(|m| m.get(caption).cloned()) {
+        return Ok(hit);
+    }
+    let out = tag_caption(caption)?;
+    if let Ok(mut m) = seen.lock()
+        && m.len() < MEMO_CAPTIONS
+    {
+        m.insert(caption.to_string(), out.clone());
+    }
+    Ok(out)
+}
+
+/// How many captions [`tokens`] remembers (a few MB at most).
+const MEMO_CAPTIONS: usize = 1 << 16;
+
+fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let tagger = tagger()?;
-    let model = perceptron()?;
-    let words = split_words(&caption.replace('-', ""));
-    let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
-    let seen = tagger.seen(&analysed);
-    let tags = model.tag(&seen);
+    let net = spacy()?;
+    let pieces = split_words(&caption.replace('-', ""));
+    let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
+    let input = spacy_input(&pieces, net);
+    let tags = net
+        .tag(&input)
+        .into_iter()
+        .zip(&pieces)
+        .map(|(penn, p)| pos234(penn, &p.text))
+        .collect();
     finish(caption, &analysed, tags, tagger)
 }
 
-/// One token of a caption as the perceptron sees it: the token, the rule-based tagger's tag,
-/// its closed-class tags (`-` for none) and the open classes the lexicon reads it as (letters
-/// N, V, A, R; `-` for none). `tools/train-caption-tagger.py` trains on exactly this.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
-pub struct TokenAnalysis {
-    /// The token as written (punctuation and numbers included).
-    pub text: String,
-    /// The rule-based tagger's tag.
-    pub rule: String,
-    /// Closed-class tags, space-separated, or `-`.
-    pub closed: String,
-    /// Open-class readings as letters, or `-`.
-    pub open: String,
+/// The pieces as the network reads them, with the norms of the tokenizer exceptions they come from.
+fn spacy_input<'a>(pieces: &'a [Piece], net: &'a SpacyTagger) -> Vec<SpacyToken<'a>> {
+    pieces
+        .iter()
+        .map(|p| SpacyToken {
+            text: &p.text,
+            norm: net
+                .special_norms(&p.chunk)
+                .filter(|n| n.len() == p.parts)
+                .and_then(|n| n.get(p.part))
+                .map(String::as_str),
+            space_after: p.space_after,
+            is_space: p.text.chars().all(char::is_whitespace),
+        })
+        .collect()
 }
 
-/// Every token of a caption (hyphens removed, as for [`tokens`]) with what the perceptron's
-/// features are made of; for the training script (`cargo run --example caption_analysis`).
-pub fn analyse(caption: &str) -> Result<Vec<TokenAnalysis>, CaptionError> {
-    let tagger = tagger()?;
-    let words = split_words(&caption.replace('-', ""));
-    let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
-    Ok(tagger.seen(&analysed))
+/// Every token of the caption (hyphens removed, as for [`tokens`]) with the six attributes
+/// spaCy's tagger reads (NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE, as `Doc.to_array` gives
+/// them): what the tests compare with spaCy's own, so the inputs are checked, not just the tags.
+pub fn spacy_attributes(caption: &str) -> Result<Vec<(String, [u64; 6])>, CaptionError> {
+    let net = spacy()?;
+    let pieces = split_words(&caption.replace('-', ""));
+    Ok(spacy_input(&pieces, net)
+        .iter()
+        .map(|t| (t.text.to_string(), net.attributes(t)))
+        .collect())
+}
+
+fn spacy() -> Result<&'static SpacyTagger, CaptionError> {
+    static MODEL: OnceLock<Result<SpacyTagger, String>> = OnceLock::new();
+    MODEL
+        .get_or_init(SpacyTagger::bundled)
+        .as_ref()
+        .map_err(|e| CaptionError::Data(e.clone()))
+}
+
+/// A Penn Treebank tag as spaCy 2.3.4 turns it into a coarse tag: its morphology rules for
+/// particular words first (`spacy/lang/en/morph_rules.py`), then its tag map
+/// (`spacy/lang/en/tag_map.py`). Possessives come out DET, modals VERB, as in HumanML3D's files.
+pub fn pos234(penn: &str, word: &str) -> Upos {
+    use Upos::*;
+    // morph_rules.py lists each word lower-case and title-case; nothing else matches.
+    let lower = word.to_lowercase();
+    let mut rest = lower.chars();
+    let title: String = rest
+        .next()
+        .map(|f| f.to_uppercase().chain(rest).collect())
+        .unwrap_or_default();
+    if word == lower || word == title {
+        let w = lower.as_str();
+        let rule = match penn {
+            "IN" if [
+                "that", "if", "as", "because", "while", "since", "like", "so", "than", "whether",
+                "although", "though", "unless", "once", "cause", "upon", "till", "whereas",
+                "whilst", "except", "despite", "wether", "but", "becuse", "whie", "it", "w/out",
+                "albeit", "save", "besides", "becouse", "coz", "til", "ask", "i'd", "out", "near",
+                "seince", "tho", "sice", "will",
+            ]
+            .contains(&w) =>
+            {
+                Some(Sconj)
+            }
+            "NN" if [
+                "something",
+                "anyone",
+                "anything",
+                "nothing",
+                "someone",
+                "everything",
+                "everyone",
+                "everybody",
+                "nobody",
+                "somebody",
+                "anybody",
+                "any1",
+            ]
+            .contains(&w) =>
+            {
+                Some(Pron)
+            }
+            "RB" if ["not", "n't", "nt", "n\u{2019}t"].contains(&w) => Some(Part),
+            "VB" if ["be", "have", "do", "get", "of", "am", "are", "'ve"].contains(&w) => Some(Aux),
+            "VBN" if w == "been" => Some(Aux),
+            "VBG" if w == "being" => Some(Aux),
+            "VBZ" if ["am", "are", "is", "'re", "'s", "has", "does"].contains(&w) => Some(Aux),
+            "VBP"
+                if [
+                    "are", "'re", "am", "do", "have", "'m", "'ve", "'s", "is", "'d",
+                ]
+                .contains(&w) =>
+            {
+                Some(Aux)
+            }
+            "VBD" if ["was", "were", "did", "had", "'d"].contains(&w) => Some(Aux),
+            _ => None,
+        };
+        if let Some(t) = rule {
+            return t;
+        }
+    }
+    match penn {
+        "." | "," | "-LRB-" | "-RRB-" | "``" | "\"\"" | "''" | ":" | "HYPH" | "NFP" => Punct,
+        "$" | "#" | "SYM" => Sym,
+        "AFX" | "JJ" | "JJR" | "JJS" => Adj,
+        "CC" => Cconj,
+        "CD" => Num,
+        "DT" | "PDT" | "PRP$" | "WDT" | "WP$" => Det,
+        "EX" | "PRP" | "WP" => Pron,
+        "IN" | "RP" => Adp,
+        "MD" | "VB" | "VBD" | "VBG" | "VBN" | "VBP" | "VBZ" | "BES" | "HVS" => Verb,
+        "NN" | "NNS" => Noun,
+        "NNP" | "NNPS" => Propn,
+        "POS" | "TO" => Part,
+        "RB" | "RBR" | "RBS" | "WRB" => Adv,
+        "UH" => Intj,
+        "SP" | "_SP" => Space,
+        _ => X,
+    }
 }
 
 /// [`tokens`] as the rule-based tagger that preceded the perceptron tags them (context rules
 /// over the lexicon's readings; `docs/humanml3d-captions.md`), kept to compare the two.
 pub fn rule_tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let tagger = tagger()?;
-    let words = split_words(&caption.replace('-', ""));
-    let analysed: Vec<Word> = words.iter().map(|w| tagger.analyse(w)).collect();
+    let pieces = split_words(&caption.replace('-', ""));
+    let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
     let tags = tagger.tag(&analysed);
     finish(caption, &analysed, tags, tagger)
 }
@@ -337,12 +460,57 @@ pub fn python_float(x: f64) -> String {
     }
 }
 
-/// spaCy's English tokenizer as far as it matters for alphabetic tokens: whitespace splits,
-/// punctuation comes off both ends, `,` `/` `:` `<` `>` `=` between letters split, and clitics
-/// ("n't", "'s", "'re", ...) come off the end.
-fn split_words(sentence: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    for chunk in sentence.split_whitespace() {
+/// One token of spaCy's tokenisation of a caption.
+struct Piece {
+    text: String,
+    /// Whitespace follows it (spaCy's `whitespace_`, one of the tagger's inputs).
+    space_after: bool,
+    /// The string spaCy's tokenizer exceptions would match (`doesn't` for `does` and `n't`),
+    /// with this token's place among the `parts` it splits into.
+    chunk: String,
+    part: usize,
+    parts: usize,
+}
+
+impl Piece {
+    fn whole(text: &str) -> Piece {
+        Piece {
+            text: text.to_string(),
+            space_after: false,
+            chunk: text.to_string(),
+            part: 0,
+            parts: 1,
+        }
+    }
+}
+
+/// spaCy's English tokenizer as far as it matters for these captions: whitespace splits,
+/// punctuation comes off both ends, `,` `/` `:` `<` `>` `=` between letters split off as their
+/// own tokens, and clitics ("n't", "'s", "'re", ...) come off the end.
+fn split_words(sentence: &str) -> Vec<Piece> {
+    let mut out: Vec<Piece> = Vec::new();
+    // Text and whitespace alternate; one space after a token is its `space_after`, any other
+    // whitespace becomes a whitespace token of its own, as spaCy's tokenizer does.
+    let mut rest = sentence;
+    while !rest.is_empty() {
+        let ws = rest.len() - rest.trim_start().len();
+        if ws > 0 {
+            let mut run = &rest[..ws];
+            if !out.is_empty() && run.starts_with(' ') {
+                if let Some(last) = out.last_mut() {
+                    last.space_after = true;
+                }
+                run = &run[1..];
+            }
+            if !run.is_empty() {
+                out.push(Piece::whole(run));
+            }
+            rest = &rest[ws..];
+            continue;
+        }
+        let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+        let chunk = &rest[..end];
+        rest = &rest[end..];
         let core = chunk.trim_matches(|c: char| !c.is_alphanumeric() && c != '\'');
         let lead = &chunk[..chunk.find(core).unwrap_or(0)];
         // A single letter keeps its period ("t.") as one token, as spaCy's exceptions do.
@@ -351,25 +519,67 @@ fn split_words(sentence: &str) -> Vec<String> {
             && chunk[tail_start..].starts_with('.')
             && core.chars().all(char::is_alphabetic);
         if !lead.is_empty() {
-            out.push(lead.to_string());
+            out.push(Piece::whole(lead));
         }
-        for piece in core.split([',', '/', ':', '<', '>', '=']) {
+        let first = out.len();
+        let mut pieces = Vec::new();
+        let mut from = 0;
+        for (at, sep) in core.match_indices([',', '/', ':', '<', '>', '=']) {
+            pieces.push(&core[from..at]);
+            pieces.push(sep);
+            from = at + sep.len();
+        }
+        pieces.push(&core[from..]);
+        let mut last_was_word = false;
+        for piece in pieces {
+            if piece.len() == 1 && ",/:<>=".contains(piece) {
+                if last_was_word {
+                    out.push(Piece::whole(piece));
+                }
+                last_was_word = false;
+                continue;
+            }
             let piece = piece.trim_matches('\'');
             if piece.is_empty() {
                 continue;
             }
+            last_was_word = true;
             let (base, clitic) = split_clitic(piece);
-            if keeps_period {
-                out.push(format!("{base}."));
-            } else if !base.is_empty() {
-                out.push(base.to_string());
-            }
-            if let Some(c) = clitic {
-                out.push(c.to_string());
+            let base = if keeps_period {
+                format!("{base}.")
+            } else {
+                base.to_string()
+            };
+            let chunk_text = if keeps_period {
+                base.clone()
+            } else {
+                piece.to_string()
+            };
+            let parts = usize::from(!base.is_empty()) + usize::from(clitic.is_some());
+            for (part, text) in [Some(base.as_str()).filter(|b| !b.is_empty()), clitic]
+                .into_iter()
+                .flatten()
+                .enumerate()
+            {
+                out.push(Piece {
+                    text: text.to_string(),
+                    space_after: false,
+                    chunk: chunk_text.clone(),
+                    part,
+                    parts,
+                });
             }
         }
+        // A separator with no word after it was not between letters: spaCy leaves it attached.
+        if out.len() > first
+            && out
+                .last()
+                .is_some_and(|p| p.text.len() == 1 && ",/:<>=".contains(&p.text))
+        {
+            out.pop();
+        }
         if tail_start < chunk.len() && !keeps_period {
-            out.push(chunk[tail_start..].to_string());
+            out.push(Piece::whole(&chunk[tail_start..]));
         }
     }
     out
@@ -893,236 +1103,6 @@ fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<(Upos, String)>>, 
     Ok(map)
 }
 
-/// The averaged perceptron: weights per feature and tag (Collins 2002; the feature set of
-/// Honnibal's "A good part-of-speech tagger in about 200 lines of Python" plus the lexicon's word
-/// classes). Trained by `tools/train-caption-tagger.py`; this side only loads and applies it, and
-/// must compute the same feature strings as that script's `features`.
-struct Perceptron {
-    /// The tags it chooses from, ordered by name (ties go to the first).
-    classes: Vec<Upos>,
-    /// Feature -> (index into `classes`, weight).
-    weights: HashMap<String, Vec<(usize, f64)>>,
-}
-
-fn perceptron() -> Result<&'static Perceptron, CaptionError> {
-    static MODEL: OnceLock<Result<Perceptron, String>> = OnceLock::new();
-    MODEL
-        .get_or_init(|| Perceptron::load(WEIGHTS_TSV))
-        .as_ref()
-        .map_err(|e| CaptionError::Data(e.clone()))
-}
-
-/// Last three characters (the script's `w[-3:]`).
-fn suffix3(word: &str) -> &str {
-    let start = word.char_indices().rev().nth(2).map_or(0, |(i, _)| i);
-    &word[start..]
-}
-
-impl Perceptron {
-    fn load(text: &str) -> Result<Perceptron, String> {
-        const FILE: &str = "schemas/caption-tagger-weights.tsv";
-        let mut classes: Vec<Upos> = Vec::new();
-        let mut weights = HashMap::with_capacity(16_384);
-        for (n, line) in text.lines().enumerate() {
-            if let Some(list) = line.strip_prefix("# Classes: ") {
-                let list = list.split_once('.').map_or(list, |(l, _)| l);
-                classes = list
-                    .split_whitespace()
-                    .map(Upos::from_str)
-                    .collect::<Result<_, _>>()
-                    .map_err(|e| format!("{FILE} line {}: {e}", n + 1))?;
-                classes.sort_by_key(|t| t.as_str());
-                continue;
-            }
-            if line.starts_with('#') || line.is_empty() {
-                continue;
-            }
-            let bad = |why: &str| format!("{FILE} line {}: {why}: {line:?}", n + 1);
-            let (feature, list) = line
-                .split_once('\t')
-                .ok_or_else(|| bad("expected feature<TAB>TAG=weight ..."))?;
-            let mut row = Vec::new();
-            for pair in list.split(' ') {
-                let (tag, w) = pair
-                    .split_once('=')
-                    .ok_or_else(|| bad("expected TAG=weight"))?;
-                let tag = Upos::from_str(tag).map_err(|e| bad(&e))?;
-                let class = classes
-                    .iter()
-                    .position(|&c| c == tag)
-                    .ok_or_else(|| bad("a tag the `# Classes:` line does not list"))?;
-                let w: f64 = w
-                    .parse()
-                    .ok()
-                    .filter(|w: &f64| w.is_finite())
-                    .ok_or_else(|| bad("a weight is not a finite number"))?;
-                row.push((class, w));
-            }
-            weights.insert(feature.to_string(), row);
-        }
-        if classes.is_empty() || weights.is_empty() {
-            return Err(format!("{FILE}: no `# Classes:` line or no weights"));
-        }
-        Ok(Perceptron { classes, weights })
-    }
-
-    /// Tags words left to right, each decision seeing the two tags before it.
-    fn tag(&self, seen: &[TokenAnalysis]) -> Vec<Upos> {
-        let lowers: Vec<String> = seen.iter().map(|t| t.text.to_lowercase()).collect();
-        let mut out = Vec::with_capacity(seen.len());
-        let (mut prev, mut prev2) = ("-START-", "-START2-");
-        let mut scores = vec![0.0; self.classes.len()];
-        for i in 0..seen.len() {
-            // A word the closed-class list gives one tag only takes it, in training too.
-            if !seen[i].closed.contains([' ', '-'])
-                && let Ok(tag) = Upos::from_str(&seen[i].closed)
-            {
-                out.push(tag);
-                prev2 = prev;
-                prev = tag.as_str();
-                continue;
-            }
-            // A word training never saw takes the rule-based tag: the perceptron learned its
-            // context from short labels, the rules know sentences.
-            if !self.weights.contains_key(&format!("w {}", lowers[i])) {
-                let tag = Upos::from_str(&seen[i].rule).unwrap_or(Upos::X);
-                out.push(tag);
-                prev2 = prev;
-                prev = tag.as_str();
-                continue;
-            }
-            scores.iter_mut().for_each(|s| *s = 0.0);
-            for f in features(seen, &lowers, i, prev, prev2) {
-                if let Some(row) = self.weights.get(&f) {
-                    for &(c, w) in row {
-                        scores[c] += w;
-                    }
-                }
-            }
-            let mut best = 0;
-            for c in 1..scores.len() {
-                if scores[c] > scores[best] {
-                    best = c;
-                }
-            }
-            let tag = self.classes[best];
-            out.push(tag);
-            prev2 = prev;
-            prev = tag.as_str();
-        }
-        out
-    }
-}
-
-/// The features of token `i` given the two tags before it (the training script's `features`).
-fn features(
-    seen: &[TokenAnalysis],
-    lowers: &[String],
-    i: usize,
-    prev: &str,
-    prev2: &str,
-) -> Vec<String> {
-    let w = |k: isize| -> &str {
-        let j = i as isize + k;
-        if j < 0 {
-            if j == -1 { "-START-" } else { "-START2-" }
-        } else if j as usize >= seen.len() {
-            if j as usize == seen.len() {
-                "-END-"
-            } else {
-                "-END2-"
-            }
-        } else {
-            &lowers[j as usize]
-        }
-    };
-    let at = |k: isize, f: fn(&TokenAnalysis) -> &str| -> &str {
-        let j = i as isize + k;
-        if j < 0 {
-            "-START-"
-        } else {
-            seen.get(j as usize).map_or("-END-", f)
-        }
-    };
-    let word = lowers[i].as_str();
-    let t = &seen[i];
-    let first = t.text.chars().next();
-    let shape = if first.is_some_and(char::is_uppercase) {
-        "X"
-    } else if first.is_some_and(|c| c.is_ascii_digit()) {
-        "d"
-    } else {
-        "x"
-    };
-    let first_char: String = word.chars().take(1).collect();
-    vec![
-        "b".to_string(),
-        format!("s {}", suffix3(word)),
-        format!("p {first_char}"),
-        format!("t1 {prev}"),
-        format!("t2 {prev2}"),
-        format!("tt {prev} {prev2}"),
-        format!("w {word}"),
-        format!("tw {prev} {word}"),
-        format!("w-1 {}", w(-1)),
-        format!("s-1 {}", suffix3(w(-1))),
-        format!("w-2 {}", w(-2)),
-        format!("w+1 {}", w(1)),
-        format!("s+1 {}", suffix3(w(1))),
-        format!("w+2 {}", w(2)),
-        format!("ww {} {word}", w(-1)),
-        format!("wn {word} {}", w(1)),
-        format!("sh {shape}"),
-        format!("cl {}", t.closed),
-        format!("lx {}", t.open),
-        format!("lx+1 {}", at(1, |t| t.open.as_str())),
-        format!("cl+1 {}", at(1, |t| t.closed.as_str())),
-        format!("lxt {prev} {}", t.open),
-        format!("r {}", t.rule),
-        format!("rw {} {word}", t.rule),
-        format!("r-1 {}", at(-1, |t| t.rule.as_str())),
-        format!("r+1 {}", at(1, |t| t.rule.as_str())),
-        format!("rt {} {prev}", t.rule),
-    ]
-}
-
-impl Tagger {
-    /// The tokens as the perceptron sees them: the rule-based tags and each word's classes.
-    fn seen(&self, words: &[Word]) -> Vec<TokenAnalysis> {
-        let rules = self.tag(words);
-        words
-            .iter()
-            .zip(rules)
-            .map(|(w, rule)| {
-                let closed = if w.closed.is_empty() {
-                    "-".to_string()
-                } else {
-                    w.closed
-                        .iter()
-                        .map(|t| t.as_str())
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                };
-                let mut open: String = OPEN
-                    .iter()
-                    .zip(['N', 'V', 'A', 'R'])
-                    .filter(|(t, _)| w.reading(**t).is_some())
-                    .map(|(_, letter)| letter)
-                    .collect();
-                if open.is_empty() {
-                    open.push('-');
-                }
-                TokenAnalysis {
-                    text: w.text.clone(),
-                    rule: rule.as_str().to_string(),
-                    closed,
-                    open,
-                }
-            })
-            .collect()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1155,18 +1135,37 @@ mod tests {
     }
 
     #[test]
-    fn bundled_weights_load_and_bad_lines_are_refused_with_their_line() {
-        let m = perceptron().map_err(|e| e.to_string()).unwrap();
-        assert!(m.weights.len() > 5_000);
-        assert!(m.classes.contains(&Upos::Det) && m.classes.contains(&Upos::Verb));
-        let err = Perceptron::load("# Classes: NOUN VERB. x\nb\tNOUN=abc\n")
-            .err()
-            .unwrap();
-        assert!(err.contains("line 2"), "{err}");
-        let err = Perceptron::load("# Classes: NOUN VERB. x\nb\tADJ=1\n")
-            .err()
-            .unwrap();
-        assert!(err.contains("does not list"), "{err}");
-        assert!(Perceptron::load("b\tNOUN=1\n").is_err());
+    fn penn_tags_map_as_spacy_2_3_4_maps_them() {
+        assert_eq!(pos234("PRP$", "his"), Upos::Det);
+        assert_eq!(pos234("MD", "can"), Upos::Verb);
+        assert_eq!(pos234("VBZ", "is"), Upos::Aux);
+        assert_eq!(pos234("VBZ", "Is"), Upos::Aux);
+        assert_eq!(pos234("VBZ", "IS"), Upos::Verb);
+        assert_eq!(pos234("IN", "while"), Upos::Sconj);
+        assert_eq!(pos234("NN", "someone"), Upos::Pron);
+        assert_eq!(pos234("RB", "n't"), Upos::Part);
+        assert_eq!(pos234("RP", "up"), Upos::Adp);
+        assert_eq!(pos234("no such tag", "walk"), Upos::X);
+    }
+
+    #[test]
+    fn pieces_carry_spacing_and_the_exception_they_come_from() {
+        let p = split_words("he  doesn't\tstop, a,b ");
+        let texts: Vec<&str> = p.iter().map(|p| p.text.as_str()).collect();
+        assert_eq!(
+            texts,
+            ["he", " ", "does", "n't", "\t", "stop", ",", "a", ",", "b"]
+        );
+        let spaced: Vec<bool> = p.iter().map(|p| p.space_after).collect();
+        assert_eq!(
+            spaced,
+            [
+                true, false, false, false, false, false, true, false, false, true
+            ]
+        );
+        assert_eq!(
+            (p[3].chunk.as_str(), p[3].part, p[3].parts),
+            ("doesn't", 1, 2)
+        );
     }
 }

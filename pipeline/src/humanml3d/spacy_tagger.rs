@@ -1,0 +1,511 @@
+//! spaCy `en_core_web_sm`'s part-of-speech tagger, run without Python.
+//!
+//! HumanML3D's caption tags are what `en_core_web_sm` predicted, so the caption writer runs
+//! that model's own network on weights exported from it (`tools/export-caption-tagger.py`,
+//! `schemas/caption-tagger-spacy.bin`; `docs/humanml3d-captions.md`): each token's NORM,
+//! PREFIX, SUFFIX, SHAPE, SPACY and IS_SPACE attributes are hashed into six embedding tables
+//! (thinc's `HashEmbed`: spaCy's 64-bit string hash, then MurmurHash3 x86-128 of that number
+//! gives four rows per table, summed); a maxout layer with layer normalisation mixes them; four
+//! residual layers each see a token and its two neighbours (window 1, maxout with three
+//! pieces, layer normalisation), over the caption padded with four zero rows at each end as
+//! thinc pads a document; a linear layer scores the 50 Penn Treebank tags and the best wins.
+
+use std::collections::HashMap;
+
+use serde::Deserialize;
+
+const MODEL: &[u8] = include_bytes!("../../../schemas/caption-tagger-spacy.bin");
+const FILE: &str = "schemas/caption-tagger-spacy.bin";
+const FORMAT: &str = "motionforge-caption-tagger 1";
+const ATTRS: [&str; 6] = ["NORM", "PREFIX", "SUFFIX", "SHAPE", "SPACY", "IS_SPACE"];
+/// Pieces per maxout unit, as the model was trained.
+const PIECES: usize = 3;
+
+/// One token as spaCy's tokenizer gives it.
+pub(crate) struct SpacyToken<'a> {
+    /// The token's text.
+    pub text: &'a str,
+    /// Its norm when a tokenizer exception sets one (`n't` -> `not`).
+    pub norm: Option<&'a str>,
+    /// Whether one space follows it (spaCy's `whitespace_`).
+    pub space_after: bool,
+    /// Whether it is whitespace itself (spaCy's `is_space`: runs beyond one space).
+    pub is_space: bool,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Header {
+    format: String,
+    /// Which model the weights came from; for people reading the file.
+    #[serde(rename = "source")]
+    _source: String,
+    labels: Vec<String>,
+    attrs: Vec<String>,
+    seeds: Vec<u32>,
+    pad: usize,
+    dtype: String,
+    tensors: Vec<(String, Vec<usize>)>,
+    lexeme_norm: HashMap<String, String>,
+    special_norms: HashMap<String, Vec<String>>,
+    symbols: HashMap<String, u64>,
+}
+
+/// A maxout layer followed by layer normalisation.
+struct Maxout {
+    /// (outputs * pieces) rows of `inputs` weights; row `o * PIECES + p` is piece p of output o.
+    w: Vec<f32>,
+    b: Vec<f32>,
+    gain: Vec<f32>,
+    shift: Vec<f32>,
+    inputs: usize,
+}
+
+/// The loaded network.
+pub(crate) struct SpacyTagger {
+    labels: Vec<String>,
+    /// Embedding tables (rows x width) with their hash seeds, in [`ATTRS`] order.
+    embed: Vec<(Vec<f32>, usize, u32)>,
+    /// The embedding mixer, then the residual window layers.
+    layers: Vec<Maxout>,
+    out_w: Vec<f32>,
+    out_b: Vec<f32>,
+    width: usize,
+    pad: usize,
+    lexeme_norm: HashMap<u64, String>,
+    special_norms: HashMap<String, Vec<String>>,
+    /// spaCy's symbol table: these strings get their symbol number instead of their hash.
+    symbols: HashMap<String, u64>,
+}
+
+/// spaCy's string hash: MurmurHash64A of the UTF-8 bytes with seed 1 (`murmurhash.mrmr.hash64`).
+pub(crate) fn hash_string(s: &str) -> u64 {
+    const M: u64 = 0xc6a4_a793_5bd1_e995;
+    const R: u32 = 47;
+    let data = s.as_bytes();
+    let mut h: u64 = 1 ^ (data.len() as u64).wrapping_mul(M);
+    let mut chunks = data.chunks_exact(8);
+    for c in &mut chunks {
+        let mut k = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+        k = k.wrapping_mul(M);
+        k ^= k >> R;
+        k = k.wrapping_mul(M);
+        h ^= k;
+        h = h.wrapping_mul(M);
+    }
+    let rest = chunks.remainder();
+    if !rest.is_empty() {
+        for (j, &b) in rest.iter().enumerate() {
+            h ^= u64::from(b) << (8 * j);
+        }
+        h = h.wrapping_mul(M);
+    }
+    h ^= h >> R;
+    h = h.wrapping_mul(M);
+    h ^ (h >> R)
+}
+
+/// thinc's `MurmurHash3_x86_128_uint64`: four 32-bit keys from one 64-bit id.
+fn hash_id(val: u64, seed: u32) -> [u32; 4] {
+    fn fmix(mut h: u64) -> u64 {
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^ (h >> 33)
+    }
+    let mut h1 = val.wrapping_mul(0x87c3_7b91_1142_53d5);
+    h1 = h1.rotate_left(31);
+    h1 = h1.wrapping_mul(0x4cf5_ad43_2745_937f);
+    h1 ^= u64::from(seed);
+    h1 ^= 8;
+    let mut h2 = u64::from(seed) ^ 8;
+    h1 = h1.wrapping_add(h2);
+    h2 = h2.wrapping_add(h1);
+    h1 = fmix(h1);
+    h2 = fmix(h2);
+    h1 = h1.wrapping_add(h2);
+    h2 = h2.wrapping_add(h1);
+    [h1 as u32, (h1 >> 32) as u32, h2 as u32, (h2 >> 32) as u32]
+}
+
+/// spaCy's `word_shape`: letters as `X`/`x`, digits as `d`, other characters kept, runs cut
+/// after four.
+fn word_shape(text: &str) -> String {
+    if text.chars().count() >= 100 {
+        return "LONG".into();
+    }
+    let mut out = String::new();
+    let (mut last, mut run) = ('\0', 0);
+    for c in text.chars() {
+        let s = if c.is_alphabetic() {
+            if c.is_uppercase() { 'X' } else { 'x' }
+        } else if c.is_ascii_digit() {
+            'd'
+        } else {
+            c
+        };
+        if s == last {
+            run += 1;
+        } else {
+            run = 0;
+            last = s;
+        }
+        if run < 4 {
+            out.push(s);
+        }
+    }
+    out
+}
+
+/// `out` (m x n) = `a` (m x k) times the transpose of `w` (n x k), all row-major: every layer
+/// of the network is one such product, done by `matrixmultiply` (an optimised dependency, so
+/// debug-build tests stay quick too).
+fn matmul_t(a: &[f32], m: usize, k: usize, w: &[f32], n: usize, out: &mut [f32]) {
+    assert!(
+        a.len() == m * k && w.len() == n * k && out.len() == m * n,
+        "matrix sizes are fixed when the model loads"
+    );
+    if m == 0 || n == 0 {
+        return;
+    }
+    // SAFETY: the assertion above keeps every index sgemm reads or writes inside the slices:
+    // a is m x k with strides (k, 1), w read as k x n with strides (1, k), out m x n with (n, 1).
+    unsafe {
+        matrixmultiply::sgemm(
+            m,
+            k,
+            n,
+            1.0,
+            a.as_ptr(),
+            k as isize,
+            1,
+            w.as_ptr(),
+            1,
+            k as isize,
+            0.0,
+            out.as_mut_ptr(),
+            n as isize,
+            1,
+        );
+    }
+}
+
+impl Maxout {
+    /// Each row of `out` (m x width) = layernorm(maxout(row of `x`)), `x` being m x inputs.
+    fn apply(&self, x: &[f32], m: usize, out: &mut [f32]) {
+        let width = self.gain.len();
+        let mut y = vec![0.0f32; m * width * PIECES];
+        matmul_t(x, m, self.inputs, &self.w, width * PIECES, &mut y);
+        for (row, dst) in y
+            .chunks_exact(width * PIECES)
+            .zip(out.chunks_exact_mut(width))
+        {
+            for (o, slot) in dst.iter_mut().enumerate() {
+                let mut best = f32::NEG_INFINITY;
+                for p in 0..PIECES {
+                    best = best.max(row[o * PIECES + p] + self.b[o * PIECES + p]);
+                }
+                *slot = best;
+            }
+            let n = width as f32;
+            let mean = dst.iter().sum::<f32>() / n;
+            let var = dst.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / n + 1e-8;
+            let scale = 1.0 / var.sqrt();
+            for (i, v) in dst.iter_mut().enumerate() {
+                *v = (*v - mean) * scale * self.gain[i] + self.shift[i];
+            }
+        }
+    }
+}
+
+impl SpacyTagger {
+    /// The bundled model.
+    pub(crate) fn bundled() -> Result<SpacyTagger, String> {
+        SpacyTagger::load(MODEL)
+    }
+
+    /// Reads an exported model: a JSON header line, then half floats (`tools/export-caption-tagger.py`).
+    pub(crate) fn load(bytes: &[u8]) -> Result<SpacyTagger, String> {
+        let split = bytes
+            .iter()
+            .position(|&b| b == b'\n')
+            .ok_or_else(|| format!("{FILE}: no header line"))?;
+        let header: Header =
+            serde_json::from_slice(&bytes[..split]).map_err(|e| format!("{FILE}: header: {e}"))?;
+        if header.format != FORMAT || header.dtype != "f16le" {
+            return Err(format!(
+                "{FILE}: format {:?} / dtype {:?}, expected {FORMAT:?} / \"f16le\"",
+                header.format, header.dtype
+            ));
+        }
+        if header.attrs != ATTRS || header.seeds.len() != ATTRS.len() {
+            return Err(format!(
+                "{FILE}: attributes {:?}, expected {ATTRS:?} with one seed each",
+                header.attrs
+            ));
+        }
+        let body = &bytes[split + 1..];
+        // Check the sizes the header claims against the bytes there before allocating anything.
+        let mut need = 0usize;
+        for (name, shape) in &header.tensors {
+            let n = shape
+                .iter()
+                .try_fold(1usize, |a, &d| a.checked_mul(d))
+                .ok_or_else(|| format!("{FILE}: tensor {name}: shape {shape:?} overflows"))?;
+            need = need
+                .checked_add(n)
+                .ok_or_else(|| format!("{FILE}: tensor sizes overflow"))?;
+        }
+        if need.checked_mul(2) != Some(body.len()) {
+            return Err(format!(
+                "{FILE}: the header lists {need} weights, the file holds {} bytes of them",
+                body.len()
+            ));
+        }
+        let mut tensors: HashMap<&str, (&[usize], Vec<f32>)> = HashMap::new();
+        let mut at = 0;
+        for (name, shape) in &header.tensors {
+            let n: usize = shape.iter().product();
+            let values = body[at..at + 2 * n]
+                .chunks_exact(2)
+                .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+                .collect::<Vec<f32>>();
+            if values.iter().any(|v| !v.is_finite()) {
+                return Err(format!("{FILE}: tensor {name} holds a non-finite weight"));
+            }
+            at += 2 * n;
+            tensors.insert(name.as_str(), (shape.as_slice(), values));
+        }
+        let mut take = |name: &str, want: &[usize]| -> Result<Vec<f32>, String> {
+            let (shape, v) = tensors
+                .remove(name)
+                .ok_or_else(|| format!("{FILE}: no tensor {name}"))?;
+            if shape != want {
+                return Err(format!(
+                    "{FILE}: tensor {name} has shape {shape:?}, expected {want:?}"
+                ));
+            }
+            Ok(v)
+        };
+        let width = header
+            .tensors
+            .iter()
+            .find(|(n, _)| n == "layernorm0.G")
+            .and_then(|(_, s)| s.first().copied())
+            .filter(|&w| w > 0)
+            .ok_or_else(|| format!("{FILE}: no layernorm0.G to give the width"))?;
+        let mut embed = Vec::new();
+        for (attr, &seed) in ATTRS.iter().zip(&header.seeds) {
+            let name = format!("embed.{attr}");
+            let rows = header
+                .tensors
+                .iter()
+                .find(|(n, _)| *n == name)
+                .and_then(|(_, s)| s.first().copied())
+                .filter(|&r| r > 0)
+                .ok_or_else(|| format!("{FILE}: no tensor {name}"))?;
+            embed.push((take(&name, &[rows, width])?, rows, seed));
+        }
+        let mut layers = Vec::new();
+        for i in 0..5 {
+            let inputs = if i == 0 {
+                ATTRS.len() * width
+            } else {
+                3 * width
+            };
+            layers.push(Maxout {
+                w: take(&format!("maxout{i}.W"), &[width * PIECES, inputs])?,
+                b: take(&format!("maxout{i}.b"), &[width * PIECES])?,
+                gain: take(&format!("layernorm{i}.G"), &[width])?,
+                shift: take(&format!("layernorm{i}.b"), &[width])?,
+                inputs,
+            });
+        }
+        let n_labels = header.labels.len();
+        let out_w = take("softmax.W", &[n_labels, width])?;
+        let out_b = take("softmax.b", &[n_labels])?;
+        let mut lexeme_norm = HashMap::with_capacity(header.lexeme_norm.len());
+        for (k, v) in header.lexeme_norm {
+            let key: u64 = k
+                .parse()
+                .map_err(|_| format!("{FILE}: lexeme_norm key {k:?} is not a 64-bit hash"))?;
+            lexeme_norm.insert(key, v);
+        }
+        Ok(SpacyTagger {
+            labels: header.labels,
+            embed,
+            layers,
+            out_w,
+            out_b,
+            width,
+            pad: header.pad,
+            lexeme_norm,
+            special_norms: header.special_norms,
+            symbols: header.symbols,
+        })
+    }
+
+    /// The norms spaCy's tokenizer exceptions give the pieces of `chunk` (`doesn't` -> `does`,
+    /// `not`), when it has an exception for it.
+    pub(crate) fn special_norms(&self, chunk: &str) -> Option<&[String]> {
+        self.special_norms.get(chunk).map(Vec::as_slice)
+    }
+
+    fn norm(&self, t: &SpacyToken) -> String {
+        if let Some(n) = t.norm {
+            return n.to_string();
+        }
+        self.lexeme_norm
+            .get(&hash_string(t.text))
+            .cloned()
+            .unwrap_or_else(|| t.text.to_lowercase())
+    }
+
+    /// A token's NORM, PREFIX, SUFFIX, SHAPE, SPACY and IS_SPACE as spaCy's `Doc.to_array`
+    /// gives them: strings as their 64-bit hashes, flags as 0 or 1.
+    pub(crate) fn attributes(&self, t: &SpacyToken) -> [u64; 6] {
+        let suffix_start = t.text.char_indices().rev().nth(2).map_or(0, |(j, _)| j);
+        let prefix_end = t.text.chars().next().map_or(0, char::len_utf8);
+        let id = |s: &str| {
+            self.symbols
+                .get(s)
+                .copied()
+                .unwrap_or_else(|| hash_string(s))
+        };
+        [
+            id(&self.norm(t)),
+            id(&t.text[..prefix_end]),
+            id(&t.text[suffix_start..]),
+            id(&word_shape(t.text)),
+            u64::from(t.space_after),
+            u64::from(t.is_space),
+        ]
+    }
+
+    /// The Penn Treebank tag of each token.
+    pub(crate) fn tag(&self, tokens: &[SpacyToken]) -> Vec<&str> {
+        let (w, pad, n) = (self.width, self.pad, tokens.len());
+        let mut features = vec![0.0f32; n * ATTRS.len() * w];
+        for (t, row) in tokens
+            .iter()
+            .zip(features.chunks_exact_mut(ATTRS.len() * w))
+        {
+            let ids = self.attributes(t);
+            for (((table, rows, seed), id), slot) in
+                self.embed.iter().zip(ids).zip(row.chunks_exact_mut(w))
+            {
+                for key in hash_id(id, *seed) {
+                    let r = key as usize % rows;
+                    for (s, e) in slot.iter_mut().zip(&table[r * w..(r + 1) * w]) {
+                        *s += e;
+                    }
+                }
+            }
+        }
+        // The encoder runs over the caption with `pad` zero rows at each end, as thinc pads a
+        // document; layer l needs only the rows within (depth - l) of a token.
+        let total = n + 2 * pad;
+        let mut x = vec![0.0f32; total * w];
+        self.layers[0].apply(&features, n, &mut x[pad * w..(pad + n) * w]);
+        let depth = self.layers.len() - 1;
+        for (l, layer) in self.layers[1..].iter().enumerate() {
+            let margin = depth - (l + 1);
+            let lo = pad.saturating_sub(margin);
+            let hi = (pad + n + margin).min(total);
+            let m = hi - lo;
+            let mut window = vec![0.0f32; m * 3 * w];
+            for (i, win) in window.chunks_exact_mut(3 * w).enumerate() {
+                let r = lo + i;
+                if r > 0 {
+                    win[..w].copy_from_slice(&x[(r - 1) * w..r * w]);
+                }
+                win[w..2 * w].copy_from_slice(&x[r * w..(r + 1) * w]);
+                if r + 1 < total {
+                    win[2 * w..].copy_from_slice(&x[(r + 1) * w..(r + 2) * w]);
+                }
+            }
+            let mut out = vec![0.0f32; m * w];
+            layer.apply(&window, m, &mut out);
+            for (dst, add) in x[lo * w..hi * w].iter_mut().zip(&out) {
+                *dst += add;
+            }
+        }
+        let labels = self.out_b.len();
+        let mut scores = vec![0.0f32; n * labels];
+        matmul_t(
+            &x[pad * w..(pad + n) * w],
+            n,
+            w,
+            &self.out_w,
+            labels,
+            &mut scores,
+        );
+        scores
+            .chunks_exact(labels)
+            .map(|row| {
+                let mut best = (0, f32::NEG_INFINITY);
+                for (c, (s, b)) in row.iter().zip(&self.out_b).enumerate() {
+                    if s + b > best.1 {
+                        best = (c, s + b);
+                    }
+                }
+                self.labels[best.0].as_str()
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hashes_match_spacy_and_thinc() {
+        // Values printed by spaCy 3.8's `spacy.strings.hash_string` and thinc's `NumpyOps.hash`.
+        assert_eq!(hash_string("adjust"), 12254408354648292678);
+        assert_eq!(
+            hash_id(12254408354648292678, 8),
+            [83421806, 2734496466, 125132709, 1954261051]
+        );
+        assert_eq!(word_shape("Walk"), "Xxxx");
+        assert_eq!(word_shape("walking"), "xxxx");
+        assert_eq!(word_shape("90s"), "ddx");
+    }
+
+    #[test]
+    fn tags_do_not_depend_on_what_was_tagged_before() {
+        let m = SpacyTagger::bundled().unwrap();
+        let words = ["raise", "left", "arm"];
+        let caption: Vec<SpacyToken> = words
+            .iter()
+            .enumerate()
+            .map(|(i, text)| SpacyToken {
+                text,
+                norm: None,
+                space_after: i + 1 < words.len(),
+                is_space: false,
+            })
+            .collect();
+        let first = m.tag(&caption);
+        let other = [SpacyToken {
+            text: "walk",
+            norm: None,
+            space_after: false,
+            is_space: false,
+        }];
+        m.tag(&other);
+        assert_eq!(m.tag(&caption), first);
+        assert_eq!(first, ["VB", "JJ", "NN"]);
+    }
+
+    #[test]
+    fn bundled_model_loads_and_damaged_files_are_refused() {
+        let m = SpacyTagger::bundled().unwrap();
+        assert_eq!(m.labels.len(), 50);
+        assert!(SpacyTagger::load(b"no header").is_err());
+        let cut = &MODEL[..MODEL.len() - 2];
+        let err = SpacyTagger::load(cut).err().unwrap();
+        assert!(err.contains("weights"), "{err}");
+    }
+}
