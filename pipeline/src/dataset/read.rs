@@ -9,35 +9,36 @@ use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
 
 use super::{ClipInfo, DatasetError, Plausibility};
+use crate::io::schema::Column;
 use crate::motion::BodyPart;
 
 /// Metadata columns a listing decodes (never the frames).
-const INFO_COLUMNS: [&str; 25] = [
-    "clip_id",
-    "split",
-    "source_kind",
-    "mirrored",
-    "motion_type",
-    "action",
-    "text",
-    "texts",
-    "labels",
-    "paraphrases",
-    "hand",
-    "parts",
-    "label_source",
-    "composed_from",
-    "composed_parts",
-    "goal_pelvis",
-    "goal_hand",
-    "foot_skate",
-    "ground_penetration",
-    "self_distance",
-    "lean",
-    "skeleton",
-    "fps",
-    "num_frames",
-    "num_joints",
+const INFO_COLUMNS: [Column; 25] = [
+    Column::ClipId,
+    Column::Split,
+    Column::SourceKind,
+    Column::Mirrored,
+    Column::MotionType,
+    Column::Action,
+    Column::Text,
+    Column::Texts,
+    Column::Labels,
+    Column::Paraphrases,
+    Column::Hand,
+    Column::Parts,
+    Column::LabelSource,
+    Column::ComposedFrom,
+    Column::ComposedParts,
+    Column::GoalPelvis,
+    Column::GoalHand,
+    Column::FootSkate,
+    Column::GroundPenetration,
+    Column::SelfDistance,
+    Column::Lean,
+    Column::Skeleton,
+    Column::Fps,
+    Column::NumFrames,
+    Column::NumJoints,
 ];
 
 /// One clip's metadata and its frames in the dataset frame (x right, y forward, z up, metres).
@@ -72,8 +73,8 @@ fn table_err(path: &Path, message: impl std::fmt::Display) -> DatasetError {
 /// A reader of `columns` (those the shard has; `required` must all be there).
 fn reader(
     path: &Path,
-    columns: &[&str],
-    required: &[&str],
+    columns: &[Column],
+    required: &[Column],
     selection: Option<RowSelection>,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReader, DatasetError> {
     let file = std::fs::File::open(path).map_err(|source| DatasetError::Io {
@@ -83,13 +84,13 @@ fn reader(
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
     let schema = builder.schema().clone();
     for c in required {
-        if schema.column_with_name(c).is_none() {
-            return Err(table_err(path, format!("no `{c}` column")));
+        if schema.column_with_name(c.name()).is_none() {
+            return Err(table_err(path, format!("no `{}` column", c.name())));
         }
     }
     let indices: Vec<usize> = columns
         .iter()
-        .filter_map(|c| schema.index_of(c).ok())
+        .filter_map(|c| schema.index_of(c.name()).ok())
         .collect();
     let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
     let mut builder = builder.with_projection(mask).with_batch_size(256);
@@ -106,13 +107,14 @@ struct Batch<'a> {
 }
 
 impl<'a> Batch<'a> {
-    fn column(&self, name: &str) -> Option<&'a ArrayRef> {
-        self.batch.column_by_name(name)
+    fn column(&self, column: Column) -> Option<&'a ArrayRef> {
+        self.batch.column_by_name(column.name())
     }
 
-    fn wrong(&self, name: &str, expected: &str) -> DatasetError {
+    fn wrong(&self, column: Column, expected: &str) -> DatasetError {
+        let name = column.name();
         let found = self
-            .column(name)
+            .column(column)
             .map(|c| c.data_type().to_string())
             .unwrap_or_else(|| "no column".into());
         table_err(
@@ -122,23 +124,23 @@ impl<'a> Batch<'a> {
     }
 
     /// A string column's values (`None` per null row); an absent column is all nulls.
-    fn strings(&self, name: &str) -> Result<Vec<Option<String>>, DatasetError> {
-        let Some(c) = self.column(name) else {
+    fn strings(&self, column: Column) -> Result<Vec<Option<String>>, DatasetError> {
+        let Some(c) = self.column(column) else {
             return Ok(vec![None; self.batch.num_rows()]);
         };
         let a = c
             .as_string_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "Utf8"))?;
+            .ok_or_else(|| self.wrong(column, "Utf8"))?;
         Ok(a.iter().map(|v| v.map(str::to_string)).collect())
     }
 
-    fn string_lists(&self, name: &str) -> Result<Vec<Vec<String>>, DatasetError> {
-        let Some(c) = self.column(name) else {
+    fn string_lists(&self, column: Column) -> Result<Vec<Vec<String>>, DatasetError> {
+        let Some(c) = self.column(column) else {
             return Ok(vec![Vec::new(); self.batch.num_rows()]);
         };
         let list = c
             .as_list_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "List<Utf8>"))?;
+            .ok_or_else(|| self.wrong(column, "List<Utf8>"))?;
         (0..list.len())
             .map(|i| {
                 if list.is_null(i) {
@@ -147,43 +149,43 @@ impl<'a> Batch<'a> {
                 let v = list.value(i);
                 let s = v
                     .as_string_opt::<i32>()
-                    .ok_or_else(|| self.wrong(name, "List<Utf8>"))?;
+                    .ok_or_else(|| self.wrong(column, "List<Utf8>"))?;
                 Ok(s.iter().flatten().map(str::to_string).collect())
             })
             .collect()
     }
 
     /// A small vector per row (a goal), as a list or a fixed-size list of Float32.
-    fn f32_lists(&self, name: &str) -> Result<Vec<Option<Vec<f32>>>, DatasetError> {
-        let Some(c) = self.column(name) else {
+    fn f32_lists(&self, column: Column) -> Result<Vec<Option<Vec<f32>>>, DatasetError> {
+        let Some(c) = self.column(column) else {
             return Ok(vec![None; self.batch.num_rows()]);
         };
         let rows = crate::io::parquet::list_rows(c)
-            .ok_or_else(|| self.wrong(name, "a list of Float32"))?;
+            .ok_or_else(|| self.wrong(column, "a list of Float32"))?;
         rows.into_iter()
             .map(|row| {
                 row.map(|v| {
                     v.as_primitive_opt::<Float32Type>()
                         .map(|f| f.values().to_vec())
-                        .ok_or_else(|| self.wrong(name, "a list of Float32"))
+                        .ok_or_else(|| self.wrong(column, "a list of Float32"))
                 })
                 .transpose()
             })
             .collect()
     }
 
-    fn bool_lists(&self, name: &str) -> Result<Vec<Option<Vec<bool>>>, DatasetError> {
-        let Some(c) = self.column(name) else {
+    fn bool_lists(&self, column: Column) -> Result<Vec<Option<Vec<bool>>>, DatasetError> {
+        let Some(c) = self.column(column) else {
             return Ok(vec![None; self.batch.num_rows()]);
         };
         let rows = crate::io::parquet::list_rows(c)
-            .ok_or_else(|| self.wrong(name, "a list of Boolean"))?;
+            .ok_or_else(|| self.wrong(column, "a list of Boolean"))?;
         rows.into_iter()
             .map(|row| {
                 row.map(|v| {
                     v.as_boolean_opt()
                         .map(|b| b.iter().map(|x| x.unwrap_or(false)).collect())
-                        .ok_or_else(|| self.wrong(name, "a list of Boolean"))
+                        .ok_or_else(|| self.wrong(column, "a list of Boolean"))
                 })
                 .transpose()
             })
@@ -191,26 +193,26 @@ impl<'a> Batch<'a> {
     }
 
     /// `composed_parts`: a list of part vectors per row.
-    fn bool_list_lists(&self, name: &str) -> Result<Vec<Vec<Vec<bool>>>, DatasetError> {
-        let Some(c) = self.column(name) else {
+    fn bool_list_lists(&self, column: Column) -> Result<Vec<Vec<Vec<bool>>>, DatasetError> {
+        let Some(c) = self.column(column) else {
             return Ok(vec![Vec::new(); self.batch.num_rows()]);
         };
         let expected = "a list of lists of Boolean";
-        let rows = crate::io::parquet::list_rows(c).ok_or_else(|| self.wrong(name, expected))?;
+        let rows = crate::io::parquet::list_rows(c).ok_or_else(|| self.wrong(column, expected))?;
         rows.into_iter()
             .map(|row| {
                 let Some(inner) = row else {
                     return Ok(Vec::new());
                 };
                 let inner = crate::io::parquet::list_rows(&inner)
-                    .ok_or_else(|| self.wrong(name, expected))?;
+                    .ok_or_else(|| self.wrong(column, expected))?;
                 inner
                     .into_iter()
                     .map(|v| {
                         v.as_ref()
                             .and_then(|v| v.as_boolean_opt())
                             .map(|b| b.iter().map(|x| x.unwrap_or(false)).collect())
-                            .ok_or_else(|| self.wrong(name, expected))
+                            .ok_or_else(|| self.wrong(column, expected))
                     })
                     .collect()
             })
@@ -218,7 +220,7 @@ impl<'a> Batch<'a> {
     }
 
     /// Row 0's per-frame values of `name` (`io::parquet::frame_values`: the layout lives there).
-    fn frames0(&self, name: &str, info: &ClipInfo) -> Result<Option<Vec<f32>>, DatasetError> {
+    fn frames0(&self, name: Column, info: &ClipInfo) -> Result<Option<Vec<f32>>, DatasetError> {
         let column = self
             .column(name)
             .ok_or_else(|| self.wrong(name, "a per-frame column"))?;
@@ -231,17 +233,18 @@ impl<'a> Batch<'a> {
         })
     }
 
-    fn f32s(&self, name: &str) -> Result<Vec<Option<f32>>, DatasetError> {
-        let Some(c) = self.column(name) else {
+    fn f32s(&self, column: Column) -> Result<Vec<Option<f32>>, DatasetError> {
+        let Some(c) = self.column(column) else {
             return Ok(vec![None; self.batch.num_rows()]);
         };
         let a = c
             .as_primitive_opt::<Float32Type>()
-            .ok_or_else(|| self.wrong(name, "Float32"))?;
+            .ok_or_else(|| self.wrong(column, "Float32"))?;
         Ok(a.iter().collect())
     }
 
-    fn required<T>(&self, name: &str, v: Vec<Option<T>>) -> Result<Vec<T>, DatasetError> {
+    fn required<T>(&self, column: Column, v: Vec<Option<T>>) -> Result<Vec<T>, DatasetError> {
+        let name = column.name();
         v.into_iter()
             .enumerate()
             .map(|(i, x)| {
@@ -267,55 +270,58 @@ fn infos_of(
     batch: &RecordBatch,
 ) -> Result<Vec<ClipInfo>, DatasetError> {
     let b = Batch { path, batch };
-    let ids = b.required("clip_id", b.strings("clip_id")?)?;
-    let kinds = b.required("source_kind", b.strings("source_kind")?)?;
-    let splits = b.strings("split")?;
-    let mirrored = match b.column("mirrored") {
+    let ids = b.required(Column::ClipId, b.strings(Column::ClipId)?)?;
+    let kinds = b.required(Column::SourceKind, b.strings(Column::SourceKind)?)?;
+    let splits = b.strings(Column::Split)?;
+    let mirrored = match b.column(Column::Mirrored) {
         Some(c) => c
             .as_boolean_opt()
-            .ok_or_else(|| b.wrong("mirrored", "Boolean"))?
+            .ok_or_else(|| b.wrong(Column::Mirrored, "Boolean"))?
             .iter()
             .map(|v| v.unwrap_or(false))
             .collect(),
         None => vec![false; batch.num_rows()],
     };
     let fps: Vec<f64> = b
-        .column("fps")
+        .column(Column::Fps)
         .and_then(|c| c.as_primitive_opt::<Float64Type>())
-        .ok_or_else(|| b.wrong("fps", "Float64"))?
+        .ok_or_else(|| b.wrong(Column::Fps, "Float64"))?
         .iter()
         .map(|v| v.unwrap_or(f64::NAN))
         .collect();
-    let ints = |name: &str| -> Result<Vec<usize>, DatasetError> {
-        Ok(b.column(name)
+    let ints = |column: Column| -> Result<Vec<usize>, DatasetError> {
+        Ok(b.column(column)
             .and_then(|c| c.as_primitive_opt::<Int32Type>())
-            .ok_or_else(|| b.wrong(name, "Int32"))?
+            .ok_or_else(|| b.wrong(column, "Int32"))?
             .iter()
             .map(|v| v.and_then(|v| usize::try_from(v).ok()).unwrap_or(0))
             .collect())
     };
-    let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
-    let skeleton = b.strings("skeleton")?;
+    let (frames, joints) = (ints(Column::NumFrames)?, ints(Column::NumJoints)?);
+    let skeleton = b.strings(Column::Skeleton)?;
     let (motion_type, action, text) = (
-        b.strings("motion_type")?,
-        b.strings("action")?,
-        b.strings("text")?,
+        b.strings(Column::MotionType)?,
+        b.strings(Column::Action)?,
+        b.strings(Column::Text)?,
     );
-    let (hand, label_source) = (b.strings("hand")?, b.strings("label_source")?);
+    let (hand, label_source) = (b.strings(Column::Hand)?, b.strings(Column::LabelSource)?);
     let (texts, labels, paraphrases, composed_from) = (
-        b.string_lists("texts")?,
-        b.string_lists("labels")?,
-        b.string_lists("paraphrases")?,
-        b.string_lists("composed_from")?,
+        b.string_lists(Column::Texts)?,
+        b.string_lists(Column::Labels)?,
+        b.string_lists(Column::Paraphrases)?,
+        b.string_lists(Column::ComposedFrom)?,
     );
-    let parts = b.bool_lists("parts")?;
-    let composed_parts = b.bool_list_lists("composed_parts")?;
-    let (goal_pelvis, goal_hand) = (b.f32_lists("goal_pelvis")?, b.f32_lists("goal_hand")?);
+    let parts = b.bool_lists(Column::Parts)?;
+    let composed_parts = b.bool_list_lists(Column::ComposedParts)?;
+    let (goal_pelvis, goal_hand) = (
+        b.f32_lists(Column::GoalPelvis)?,
+        b.f32_lists(Column::GoalHand)?,
+    );
     let (skate, ground, distance, lean) = (
-        b.f32s("foot_skate")?,
-        b.f32s("ground_penetration")?,
-        b.f32s("self_distance")?,
-        b.f32s("lean")?,
+        b.f32s(Column::FootSkate)?,
+        b.f32s(Column::GroundPenetration)?,
+        b.f32s(Column::SelfDistance)?,
+        b.f32s(Column::Lean)?,
     );
     let shard = path
         .strip_prefix(dataset)
@@ -364,7 +370,13 @@ pub(super) fn read_infos(
     path: &Path,
     out: &mut Vec<ClipInfo>,
 ) -> Result<(), DatasetError> {
-    let required = ["clip_id", "source_kind", "fps", "num_frames", "num_joints"];
+    let required = [
+        Column::ClipId,
+        Column::SourceKind,
+        Column::Fps,
+        Column::NumFrames,
+        Column::NumJoints,
+    ];
     for batch in reader(path, &INFO_COLUMNS, &required, None)? {
         let batch = batch.map_err(|e| table_err(path, e))?;
         out.extend(infos_of(dataset, path, &batch)?);
@@ -377,10 +389,10 @@ pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFra
     let path = dataset.join(&info.shard);
     let selection = RowSelection::from(vec![RowSelector::skip(row), RowSelector::select(1)]);
     let columns = [
-        "clip_id",
-        "joint_positions",
-        "local_rotations",
-        "root_translation",
+        Column::ClipId,
+        Column::JointPositions,
+        Column::LocalRotations,
+        Column::RootTranslation,
     ];
     let mut found = None;
     for batch in reader(&path, &columns, &columns, Some(selection))? {
@@ -389,14 +401,14 @@ pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFra
             path: &path,
             batch: &batch,
         };
-        let ids = b.strings("clip_id")?;
+        let ids = b.strings(Column::ClipId)?;
         if ids.first().and_then(|id| id.as_deref()) != Some(info.clip_id.as_str()) {
             continue;
         }
         found = Some((
-            b.frames0("joint_positions", &info)?,
-            b.frames0("local_rotations", &info)?,
-            b.frames0("root_translation", &info)?,
+            b.frames0(Column::JointPositions, &info)?,
+            b.frames0(Column::LocalRotations, &info)?,
+            b.frames0(Column::RootTranslation, &info)?,
         ));
     }
     let bad = |message: String| DatasetError::BadRow {

@@ -30,6 +30,7 @@ use serde::Serialize;
 
 use crate::clip::Split;
 use crate::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
+use crate::io::schema::Column;
 use crate::motion::profile::SmplPlacement;
 use crate::motion::{Motion, ProfileSpec};
 
@@ -345,7 +346,7 @@ fn table_err(path: &Path, e: impl std::fmt::Display) -> ExportError {
 /// The shard's rows with only `columns` decoded, [`BATCH_ROWS`] at a time.
 fn batches<'p>(
     path: &'p Path,
-    columns: &[&str],
+    columns: &[Column],
 ) -> Result<impl Iterator<Item = Result<RecordBatch, ExportError>> + use<'p>, ExportError> {
     let file = fs::File::open(path).map_err(io_err(path))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
@@ -353,8 +354,8 @@ fn batches<'p>(
     let mut indices = Vec::new();
     for c in columns {
         let i = schema
-            .index_of(c)
-            .map_err(|_| table_err(path, format!("no `{c}` column")))?;
+            .index_of(c.name())
+            .map_err(|_| table_err(path, format!("no `{}` column", c.name())))?;
         indices.push(i);
     }
     let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
@@ -368,37 +369,39 @@ fn batches<'p>(
 
 fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), ExportError> {
     let columns = [
-        "clip_id",
-        "split",
-        "mirrored",
-        "source_kind",
-        "text",
-        "texts",
-        "paraphrases",
+        Column::ClipId,
+        Column::Split,
+        Column::Mirrored,
+        Column::SourceKind,
+        Column::Text,
+        Column::Texts,
+        Column::Paraphrases,
     ];
     for batch in batches(path, &columns)? {
         let batch = batch?;
-        let lists = |name: &str| {
+        let lists = |column: Column| {
+            let name = column.name();
             batch
                 .column_by_name(name)
                 .and_then(|c| c.as_list_opt::<i32>())
                 .ok_or_else(|| table_err(path, format!("`{name}` is not a list column")))
         };
-        let (texts, paraphrases) = (lists("texts")?, lists("paraphrases")?);
-        let strings = |name: &str| {
+        let (texts, paraphrases) = (lists(Column::Texts)?, lists(Column::Paraphrases)?);
+        let strings = |column: Column| {
+            let name = column.name();
             batch
                 .column_by_name(name)
                 .and_then(|c| c.as_string_opt::<i32>())
                 .ok_or_else(|| table_err(path, format!("`{name}` is not a string column")))
         };
         let (ids, splits, kinds) = (
-            strings("clip_id")?,
-            strings("split")?,
-            strings("source_kind")?,
+            strings(Column::ClipId)?,
+            strings(Column::Split)?,
+            strings(Column::SourceKind)?,
         );
-        let text = strings("text")?;
+        let text = strings(Column::Text)?;
         let mirrored = batch
-            .column_by_name("mirrored")
+            .column_by_name(Column::Mirrored.name())
             .and_then(|c| c.as_boolean_opt())
             .ok_or_else(|| table_err(path, "`mirrored` is not a boolean column"))?;
         for i in 0..batch.num_rows() {
@@ -448,35 +451,36 @@ fn read_frames(
     path: &Path,
 ) -> Result<impl Iterator<Item = Result<Vec<Frames>, ExportError>> + '_, ExportError> {
     let columns = [
-        "skeleton",
-        "fps",
-        "num_frames",
-        "num_joints",
-        "joint_positions",
+        Column::Skeleton,
+        Column::Fps,
+        Column::NumFrames,
+        Column::NumJoints,
+        Column::JointPositions,
     ];
     Ok(batches(path, &columns)?.map(move |batch| frames_of(path, &batch?)))
 }
 
 fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportError> {
-    let missing = |name: &str| table_err(path, format!("`{name}` has an unexpected type"));
+    let missing =
+        |column: Column| table_err(path, format!("`{}` has an unexpected type", column.name()));
     let skeleton = batch
-        .column_by_name("skeleton")
+        .column_by_name(Column::Skeleton.name())
         .and_then(|c| c.as_string_opt::<i32>())
-        .ok_or_else(|| missing("skeleton"))?;
+        .ok_or_else(|| missing(Column::Skeleton))?;
     let fps = batch
-        .column_by_name("fps")
+        .column_by_name(Column::Fps.name())
         .and_then(|c| c.as_primitive_opt::<Float64Type>())
-        .ok_or_else(|| missing("fps"))?;
-    let ints = |name: &str| {
+        .ok_or_else(|| missing(Column::Fps))?;
+    let ints = |column: Column| {
         batch
-            .column_by_name(name)
+            .column_by_name(column.name())
             .and_then(|c| c.as_primitive_opt::<Int32Type>())
-            .ok_or_else(|| missing(name))
+            .ok_or_else(|| missing(column))
     };
-    let (frames, joints) = (ints("num_frames")?, ints("num_joints")?);
+    let (frames, joints) = (ints(Column::NumFrames)?, ints(Column::NumJoints)?);
     let positions = batch
-        .column_by_name("joint_positions")
-        .ok_or_else(|| missing("joint_positions"))?;
+        .column_by_name(Column::JointPositions.name())
+        .ok_or_else(|| missing(Column::JointPositions))?;
     let mut out = Vec::with_capacity(batch.num_rows());
     for i in 0..batch.num_rows() {
         let (n, j) = (
@@ -485,12 +489,13 @@ fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportErro
         );
         // A row whose frames do not match its counts is skipped with the reason (the export goes
         // on); a column of another layout fails the shard.
-        let values = match crate::io::parquet::frame_values(positions, "joint_positions", i, n, j) {
-            Ok(Some(v)) => Ok(v),
-            Ok(None) => Err("joint_positions is null".to_string()),
-            Err(e @ crate::io::parquet::FrameColumnError::Shape { .. }) => Err(e.to_string()),
-            Err(e) => return Err(table_err(path, e)),
-        };
+        let values =
+            match crate::io::parquet::frame_values(positions, Column::JointPositions, i, n, j) {
+                Ok(Some(v)) => Ok(v),
+                Ok(None) => Err("joint_positions is null".to_string()),
+                Err(e @ crate::io::parquet::FrameColumnError::Shape { .. }) => Err(e.to_string()),
+                Err(e) => return Err(table_err(path, e)),
+            };
         out.push(Frames {
             skeleton: skeleton.value(i).to_string(),
             fps: fps.value(i),

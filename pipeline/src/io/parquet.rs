@@ -23,7 +23,7 @@ use parquet::errors::ParquetError;
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 
-use super::schema::{SCHEMA_VERSION, clip_schema};
+use super::schema::{Column, SCHEMA_VERSION, clip_schema};
 pub use crate::clip::skeleton_name;
 use crate::clip::{Clip, LoadedClip};
 use crate::features::{FeatureConfig, Features};
@@ -266,7 +266,7 @@ fn same_nesting(a: &DataType, b: &DataType) -> bool {
 /// `Ok(None)` for a null row (an opt-in feature that is off).
 pub fn frame_values(
     column: &ArrayRef,
-    name: &str,
+    name: Column,
     row: usize,
     frames: usize,
     joints: usize,
@@ -275,18 +275,19 @@ pub fn frame_values(
     use arrow_array::cast::AsArray;
     use arrow_array::types::Float32Type;
     let shape = |message: String| FrameColumnError::Shape {
-        column: name.to_string(),
+        column: name.name().to_string(),
         row,
         message,
     };
     let layout = || FrameColumnError::Layout {
-        column: name.to_string(),
+        column: name.name().to_string(),
         found: column.data_type().to_string(),
-        expected: super::schema::frame_shape(name)
+        expected: name
+            .frame_shape()
             .map(|s| s.data_type().to_string())
             .unwrap_or_else(|| "a per-frame column".into()),
     };
-    let Some(expected) = super::schema::frame_shape(name).filter(|s| !s.boolean) else {
+    let Some(expected) = name.frame_shape().filter(|s| !s.boolean) else {
         return Err(layout());
     };
     let flat = DataType::List(Arc::new(Field::new("item", DataType::Float32, true)));
@@ -414,11 +415,13 @@ fn fixed_lists(mut values: ArrayRef, inner: &[i32]) -> Result<ArrayRef, ArrowErr
 /// flat values and counts (`None` for a null row). The leaf values go into one buffer and the
 /// nesting is offsets over it (no element-by-element builder): frames per row, joints per frame.
 fn frame_column(
-    name: &str,
+    column: Column,
     leaf: ArrayRef,
     rows: &[Option<(usize, usize, usize)>],
 ) -> Result<ArrayRef, ArrowError> {
-    let shape = super::schema::frame_shape(name)
+    let name = column.name();
+    let shape = column
+        .frame_shape()
         .ok_or_else(|| ArrowError::SchemaError(format!("`{name}` is not a per-frame column")))?;
     // Each row's values must fill its frames exactly: a mismatch here is a bug, not bad input.
     let mut total = 0usize;
@@ -464,7 +467,7 @@ fn frame_column(
 
 /// A Float32 per-frame column from each row's values (`None`: a null row).
 fn f32_frames<'r, 'c>(
-    name: &str,
+    name: Column,
     rows: &'r [Row<'c>],
     part: impl Fn(&'r Row<'c>) -> Option<&'r [f32]>,
 ) -> Result<ArrayRef, ArrowError> {
@@ -590,7 +593,7 @@ fn contact_column(rows: &[Row<'_>]) -> Result<ArrayRef, ArrowError> {
         .zip(&parts)
         .map(|(r, v)| v.map(|v| (r.frames, r.joints, v.len())))
         .collect();
-    frame_column("foot_contacts", bools(values), &counts)
+    frame_column(Column::FootContacts, bools(values), &counts)
 }
 
 /// Builds one record batch (a row group) from rows.
@@ -650,55 +653,58 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
         attributes.append(true);
     }
     // Columns by name: the schema decides their order, so writer and schema cannot drift apart.
-    let named: Vec<(&str, ArrayRef)> = vec![
-        ("clip_id", strings(&|c| &c.clip_id)),
-        ("source_kind", strings(&|c| c.kind.as_str())),
-        ("source_name", strings(&|c| &c.capture.source)),
-        ("source_path", strings(&|c| &c.capture.path)),
-        ("source_sha256", strings(&|c| &c.capture.sha256)),
+    let named: Vec<(Column, ArrayRef)> = vec![
+        (Column::ClipId, strings(&|c| &c.clip_id)),
+        (Column::SourceKind, strings(&|c| c.kind.as_str())),
+        (Column::SourceName, strings(&|c| &c.capture.source)),
+        (Column::SourcePath, strings(&|c| &c.capture.path)),
+        (Column::SourceSha256, strings(&|c| &c.capture.sha256)),
         (
-            "source_fps",
+            Column::SourceFps,
             Arc::new(Float64Array::from_iter_values(
                 clips.iter().map(|c| c.capture.fps),
             )),
         ),
-        ("frame_range", Arc::new(frame_range)),
+        (Column::FrameRange, Arc::new(frame_range)),
         (
-            "mirrored",
+            Column::Mirrored,
             Arc::new(BooleanArray::from(
                 clips.iter().map(|c| c.mirrored).collect::<Vec<_>>(),
             )),
         ),
-        ("split", strings(&|c| c.split.as_str())),
-        ("action", strings(&|c| &c.action)),
-        ("text", strings(&|c| &c.text)),
+        (Column::Split, strings(&|c| c.split.as_str())),
+        (Column::Action, strings(&|c| &c.action)),
+        (Column::Text, strings(&|c| &c.text)),
         (
-            "texts",
+            Column::Texts,
             string_lists(clips.iter().map(|c| c.texts.as_slice())),
         ),
         (
-            "labels",
+            Column::Labels,
             string_lists(clips.iter().map(|c| c.labels.as_slice())),
         ),
-        ("annotation_source", strings(&|c| &c.annotation)),
-        ("annotation_origin", strings(&|c| &c.annotation_origin)),
+        (Column::AnnotationSource, strings(&|c| &c.annotation)),
+        (Column::AnnotationOrigin, strings(&|c| &c.annotation_origin)),
         (
-            "motion_type",
+            Column::MotionType,
             optional_strings(&|c| c.motion_type.as_deref()),
         ),
-        ("hand", optional_strings(&|c| c.hand.map(|h| h.as_str()))),
-        ("object", optional_strings(&|c| c.object.as_deref())),
         (
-            "goal_pelvis",
+            Column::Hand,
+            optional_strings(&|c| c.hand.map(|h| h.as_str())),
+        ),
+        (Column::Object, optional_strings(&|c| c.object.as_deref())),
+        (
+            Column::GoalPelvis,
             goals(|c| c.goal_pelvis.map(|g| g.map(|x| x as f32).to_vec()), 2)?,
         ),
         (
-            "goal_hand",
+            Column::GoalHand,
             goals(|c| c.goal_hand.map(|g| g.map(|x| x as f32).to_vec()), 3)?,
         ),
-        ("parts", part_lists(clips.iter().map(|c| c.parts))?),
+        (Column::Parts, part_lists(clips.iter().map(|c| c.parts))?),
         (
-            "label_source",
+            Column::LabelSource,
             Arc::new(StringArray::from(
                 clips
                     .iter()
@@ -707,77 +713,87 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             )),
         ),
         (
-            "paraphrases",
+            Column::Paraphrases,
             string_lists(clips.iter().map(|c| c.paraphrases.as_slice())),
         ),
         (
-            "composed_from",
+            Column::ComposedFrom,
             string_lists(clips.iter().map(|c| c.composed_from.as_slice())),
         ),
         (
-            "composed_parts",
+            Column::ComposedParts,
             nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice()))?,
         ),
-        ("foot_skate", metric(rows, |p| p.foot_skate)),
-        ("ground_penetration", metric(rows, |p| p.ground_penetration)),
-        ("self_distance", metric(rows, |p| p.self_distance)),
-        ("lean", metric(rows, |p| p.lean)),
-        ("attributes", Arc::new(attributes.finish())),
+        (Column::FootSkate, metric(rows, |p| p.foot_skate)),
         (
-            "skeleton",
+            Column::GroundPenetration,
+            metric(rows, |p| p.ground_penetration),
+        ),
+        (Column::SelfDistance, metric(rows, |p| p.self_distance)),
+        (Column::Lean, metric(rows, |p| p.lean)),
+        (Column::Attributes, Arc::new(attributes.finish())),
+        (
+            Column::Skeleton,
             Arc::new(StringArray::from_iter_values(
                 rows.iter().map(|r| r.skeleton.as_str()),
             )),
         ),
         (
-            "fps",
+            Column::Fps,
             Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.fps))),
         ),
         (
-            "num_frames",
+            Column::NumFrames,
             Arc::new(Int32Array::from_iter_values(
                 rows.iter().map(|r| r.frames as i32),
             )),
         ),
         (
-            "num_joints",
+            Column::NumJoints,
             Arc::new(Int32Array::from_iter_values(
                 rows.iter().map(|r| r.joints as i32),
             )),
         ),
         (
-            "joint_positions",
-            f32_frames("joint_positions", rows, |r| Some(&r.motion.positions))?,
+            Column::JointPositions,
+            f32_frames(Column::JointPositions, rows, |r| Some(&r.motion.positions))?,
         ),
         (
-            "local_rotations",
-            f32_frames("local_rotations", rows, |r| Some(&r.motion.rotations))?,
+            Column::LocalRotations,
+            f32_frames(Column::LocalRotations, rows, |r| Some(&r.motion.rotations))?,
         ),
         (
-            "root_translation",
-            f32_frames("root_translation", rows, |r| Some(&r.motion.root))?,
+            Column::RootTranslation,
+            f32_frames(Column::RootTranslation, rows, |r| Some(&r.motion.root))?,
         ),
         (
-            "rotations_6d",
-            f32_frames("rotations_6d", rows, |r| r.features.rotations_6d.as_deref())?,
+            Column::Rotations6d,
+            f32_frames(Column::Rotations6d, rows, |r| {
+                r.features.rotations_6d.as_deref()
+            })?,
         ),
         (
-            "joint_velocities",
-            f32_frames("joint_velocities", rows, |r| {
+            Column::JointVelocities,
+            f32_frames(Column::JointVelocities, rows, |r| {
                 r.features.velocities.as_deref()
             })?,
         ),
-        ("foot_contacts", contact_column(rows)?),
+        (Column::FootContacts, contact_column(rows)?),
         (
-            "future_root",
-            f32_frames("future_root", rows, |r| r.features.future_root.as_deref())?,
+            Column::FutureRoot,
+            f32_frames(Column::FutureRoot, rows, |r| {
+                r.features.future_root.as_deref()
+            })?,
         ),
         (
-            "canonical_positions",
-            f32_frames("canonical_positions", rows, |r| Some(&r.canonical))?,
+            Column::CanonicalPositions,
+            f32_frames(Column::CanonicalPositions, rows, |r| Some(&r.canonical))?,
         ),
     ];
-    let columns = crate::io::schema::in_schema_order(&schema, named)?;
+    let columns = crate::io::schema::in_schema_order(
+        &schema,
+        named.into_iter().map(|(c, a)| (c.name(), a)).collect(),
+    )?;
     let batch = RecordBatch::try_new(schema, columns)?;
     // Upstream checks (value bounds at ingest) keep every number finite; this is the last guard,
     // so that a missed case fails the write instead of putting NaN or infinity in a dataset.
@@ -975,7 +991,7 @@ mod frame_values_tests {
     fn two_rows() -> (Vec<f32>, ArrayRef) {
         let values: Vec<f32> = (0..15).map(|v| v as f32).collect();
         let column = frame_column(
-            "joint_positions",
+            Column::JointPositions,
             floats(values.clone()),
             &[Some((2, 2, 12)), Some((1, 1, 3))],
         )
@@ -988,12 +1004,11 @@ mod frame_values_tests {
         let (values, column) = two_rows();
         assert_eq!(
             column.data_type(),
-            &crate::io::schema::frame_shape("joint_positions")
-                .unwrap()
-                .data_type()
+            &Column::JointPositions.frame_shape().unwrap().data_type()
         );
-        let read =
-            |row, frames, joints| frame_values(&column, "joint_positions", row, frames, joints);
+        let read = |row, frames, joints| {
+            frame_values(&column, Column::JointPositions, row, frames, joints)
+        };
         assert_eq!(read(0, 2, 2).unwrap(), Some(values[..12].to_vec()));
         assert_eq!(read(1, 1, 1).unwrap(), Some(values[12..].to_vec()));
         // Counts that disagree with the nesting are refused, not reinterpreted.
@@ -1003,7 +1018,7 @@ mod frame_values_tests {
         // The same column sliced (as a reader's batch may be) reads the same.
         let sliced = column.slice(1, 1);
         assert_eq!(
-            frame_values(&sliced, "joint_positions", 0, 1, 1).unwrap(),
+            frame_values(&sliced, Column::JointPositions, 0, 1, 1).unwrap(),
             Some(values[12..].to_vec())
         );
     }
@@ -1012,19 +1027,24 @@ mod frame_values_tests {
     fn null_rows_and_per_frame_shapes() {
         let values: Vec<f32> = (0..18).map(|v| v as f32).collect();
         let column = frame_column(
-            "future_root",
+            Column::FutureRoot,
             floats(values.clone()),
             &[None, Some((2, 5, 18))],
         )
         .unwrap();
-        assert_eq!(frame_values(&column, "future_root", 0, 3, 5).unwrap(), None);
         assert_eq!(
-            frame_values(&column, "future_root", 1, 2, 5).unwrap(),
+            frame_values(&column, Column::FutureRoot, 0, 3, 5).unwrap(),
+            None
+        );
+        assert_eq!(
+            frame_values(&column, Column::FutureRoot, 1, 2, 5).unwrap(),
             Some(values)
         );
         assert!(column.is_null(0));
         // Values that do not fill the frames are a bug caught at the writer.
-        assert!(frame_column("future_root", floats(vec![0.0; 9]), &[Some((2, 1, 9))]).is_err());
+        assert!(
+            frame_column(Column::FutureRoot, floats(vec![0.0; 9]), &[Some((2, 1, 9))]).is_err()
+        );
     }
 
     #[test]
@@ -1040,21 +1060,21 @@ mod frame_values_tests {
             .unwrap(),
         );
         assert_eq!(
-            frame_values(&flat, "joint_positions", 0, 2, 2).unwrap(),
+            frame_values(&flat, Column::JointPositions, 0, 2, 2).unwrap(),
             Some(values.clone())
         );
         assert!(matches!(
-            frame_values(&flat, "joint_positions", 0, 3, 2),
+            frame_values(&flat, Column::JointPositions, 0, 3, 2),
             Err(FrameColumnError::Shape { .. })
         ));
         // Rotations stored where positions belong: four per joint, not three.
         let (_, positions) = two_rows();
-        let err = frame_values(&positions, "local_rotations", 0, 2, 2).unwrap_err();
+        let err = frame_values(&positions, Column::LocalRotations, 0, 2, 2).unwrap_err();
         assert!(matches!(err, FrameColumnError::Layout { .. }), "{err}");
         assert!(err.to_string().contains("`local_rotations`"), "{err}");
         let float64: ArrayRef = Arc::new(Float64Array::from(vec![1.0]));
         assert!(matches!(
-            frame_values(&float64, "joint_positions", 0, 1, 1),
+            frame_values(&float64, Column::JointPositions, 0, 1, 1),
             Err(FrameColumnError::Layout { .. })
         ));
     }

@@ -53,11 +53,334 @@ const PER_JOINT_3: FrameShape = FrameShape {
     boolean: false,
 };
 
+/// A column of the clip table. The schema is built from these, the writer names its arrays with
+/// them and every reader (dataset, report, exports) asks for columns through them, so a column
+/// cannot be misspelt on one side only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Column {
+    /// `clip_id`: unique id: source, capture, frame range, `:m` when mirrored.
+    ClipId,
+    /// `source_kind`: `real_single`, `real_pair` or `synthetic` (composed by body part).
+    SourceKind,
+    /// `source_name`: the build config's source the capture came from.
+    SourceName,
+    /// `source_path`: capture file, relative to the build config.
+    SourcePath,
+    /// `source_sha256`: SHA-256 of the capture file.
+    SourceSha256,
+    /// `source_fps`: the capture's frame rate.
+    SourceFps,
+    /// `frame_range`: [start, end) in the capture's own frames.
+    FrameRange,
+    /// `mirrored`: left/right mirrored copy of another row.
+    Mirrored,
+    /// `split`: train, validation or test, by capture.
+    Split,
+    /// `action`: the action label.
+    Action,
+    /// `text`: the caption.
+    Text,
+    /// `texts`: every caption of the clip.
+    Texts,
+    /// `labels`: every action label of the clip.
+    Labels,
+    /// `annotation_source`: annotation format (filename, babel, event_log, frame_index).
+    AnnotationSource,
+    /// `annotation_origin`: annotation file and span the clip was cut by.
+    AnnotationOrigin,
+    /// `motion_type`: LINGO motion type of the label.
+    MotionType,
+    /// `hand`: hand the annotation names (left, right, both).
+    Hand,
+    /// `object`: object the annotation names.
+    Object,
+    /// `goal_pelvis`: [x, y] where the pelvis ends, metres, first-frame canonical frame.
+    GoalPelvis,
+    /// `goal_hand`: [x, y, z] where the hand reaches, metres, first-frame canonical frame.
+    GoalHand,
+    /// `parts`: body parts used: global, torso, left arm, right arm, left leg, right leg.
+    Parts,
+    /// `label_source`: which labeller gave `parts`.
+    LabelSource,
+    /// `paraphrases`: LLM paraphrases of `text`.
+    Paraphrases,
+    /// `composed_from`: synthetic pairs: the two source clip ids.
+    ComposedFrom,
+    /// `composed_parts`: synthetic pairs: the parts taken from each source.
+    ComposedParts,
+    /// `foot_skate`: plausibility: planted-foot speed, m/s.
+    FootSkate,
+    /// `ground_penetration`: plausibility: deepest joint below the floor, metres.
+    GroundPenetration,
+    /// `self_distance`: plausibility: closest limb to spine bone distance, metres.
+    SelfDistance,
+    /// `lean`: plausibility: largest sustained lean, degrees.
+    Lean,
+    /// `attributes`: capture-level annotation fields (key, value).
+    Attributes,
+    /// `skeleton`: skeleton id `<profile>:<digest>`, key into skeletons.json.
+    Skeleton,
+    /// `fps`: the dataset's frame rate.
+    Fps,
+    /// `num_frames`: frames.
+    NumFrames,
+    /// `num_joints`: joints (end sites not counted).
+    NumJoints,
+    /// `joint_positions`: frames x joints x 3 positions, metres (x right, y forward, z up).
+    JointPositions,
+    /// `local_rotations`: frames x joints x 4 local rotations, quaternions (x, y, z, w).
+    LocalRotations,
+    /// `root_translation`: frames x 3 root positions, metres.
+    RootTranslation,
+    /// `rotations_6d`: frames x joints x 6: first two rotation-matrix columns (opt-in).
+    Rotations6d,
+    /// `joint_velocities`: frames x joints x 3 velocities, m/s (opt-in).
+    JointVelocities,
+    /// `foot_contacts`: frames x 4 contacts: left ankle, left toe, right ankle, right toe.
+    FootContacts,
+    /// `future_root`: frames x 3 x 3: root displacement and heading change at +10, +20, +30 frames.
+    FutureRoot,
+    /// `canonical_positions`: frames x joints x 3 positions in the first frame's canonical frame: pelvis over the origin, facing +y.
+    CanonicalPositions,
+}
+
+impl Column {
+    /// Every column, in the table's order.
+    pub const ALL: [Column; 42] = [
+        Column::ClipId,
+        Column::SourceKind,
+        Column::SourceName,
+        Column::SourcePath,
+        Column::SourceSha256,
+        Column::SourceFps,
+        Column::FrameRange,
+        Column::Mirrored,
+        Column::Split,
+        Column::Action,
+        Column::Text,
+        Column::Texts,
+        Column::Labels,
+        Column::AnnotationSource,
+        Column::AnnotationOrigin,
+        Column::MotionType,
+        Column::Hand,
+        Column::Object,
+        Column::GoalPelvis,
+        Column::GoalHand,
+        Column::Parts,
+        Column::LabelSource,
+        Column::Paraphrases,
+        Column::ComposedFrom,
+        Column::ComposedParts,
+        Column::FootSkate,
+        Column::GroundPenetration,
+        Column::SelfDistance,
+        Column::Lean,
+        Column::Attributes,
+        Column::Skeleton,
+        Column::Fps,
+        Column::NumFrames,
+        Column::NumJoints,
+        Column::JointPositions,
+        Column::LocalRotations,
+        Column::RootTranslation,
+        Column::Rotations6d,
+        Column::JointVelocities,
+        Column::FootContacts,
+        Column::FutureRoot,
+        Column::CanonicalPositions,
+    ];
+
+    /// The column's name in the table.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Column::ClipId => "clip_id",
+            Column::SourceKind => "source_kind",
+            Column::SourceName => "source_name",
+            Column::SourcePath => "source_path",
+            Column::SourceSha256 => "source_sha256",
+            Column::SourceFps => "source_fps",
+            Column::FrameRange => "frame_range",
+            Column::Mirrored => "mirrored",
+            Column::Split => "split",
+            Column::Action => "action",
+            Column::Text => "text",
+            Column::Texts => "texts",
+            Column::Labels => "labels",
+            Column::AnnotationSource => "annotation_source",
+            Column::AnnotationOrigin => "annotation_origin",
+            Column::MotionType => "motion_type",
+            Column::Hand => "hand",
+            Column::Object => "object",
+            Column::GoalPelvis => "goal_pelvis",
+            Column::GoalHand => "goal_hand",
+            Column::Parts => "parts",
+            Column::LabelSource => "label_source",
+            Column::Paraphrases => "paraphrases",
+            Column::ComposedFrom => "composed_from",
+            Column::ComposedParts => "composed_parts",
+            Column::FootSkate => "foot_skate",
+            Column::GroundPenetration => "ground_penetration",
+            Column::SelfDistance => "self_distance",
+            Column::Lean => "lean",
+            Column::Attributes => "attributes",
+            Column::Skeleton => "skeleton",
+            Column::Fps => "fps",
+            Column::NumFrames => "num_frames",
+            Column::NumJoints => "num_joints",
+            Column::JointPositions => "joint_positions",
+            Column::LocalRotations => "local_rotations",
+            Column::RootTranslation => "root_translation",
+            Column::Rotations6d => "rotations_6d",
+            Column::JointVelocities => "joint_velocities",
+            Column::FootContacts => "foot_contacts",
+            Column::FutureRoot => "future_root",
+            Column::CanonicalPositions => "canonical_positions",
+        }
+    }
+
+    /// The column called `name`, if the table has one.
+    pub fn from_name(name: &str) -> Option<Column> {
+        Column::ALL.into_iter().find(|c| c.name() == name)
+    }
+
+    /// What the column holds, in a phrase for the dataset card (`schemas/clips.md` has the details).
+    pub const fn meaning(self) -> &'static str {
+        match self {
+            Column::ClipId => "unique id: source, capture, frame range, `:m` when mirrored",
+            Column::SourceKind => {
+                "`real_single`, `real_pair` or `synthetic` (composed by body part)"
+            }
+            Column::SourceName => "the build config's source the capture came from",
+            Column::SourcePath => "capture file, relative to the build config",
+            Column::SourceSha256 => "SHA-256 of the capture file",
+            Column::SourceFps => "the capture's frame rate",
+            Column::FrameRange => "[start, end) in the capture's own frames",
+            Column::Mirrored => "left/right mirrored copy of another row",
+            Column::Split => "train, validation or test, by capture",
+            Column::Action => "the action label",
+            Column::Text => "the caption",
+            Column::Texts => "every caption of the clip",
+            Column::Labels => "every action label of the clip",
+            Column::AnnotationSource => {
+                "annotation format (filename, babel, event_log, frame_index)"
+            }
+            Column::AnnotationOrigin => "annotation file and span the clip was cut by",
+            Column::MotionType => "LINGO motion type of the label",
+            Column::Hand => "hand the annotation names (left, right, both)",
+            Column::Object => "object the annotation names",
+            Column::GoalPelvis => {
+                "[x, y] where the pelvis ends, metres, first-frame canonical frame"
+            }
+            Column::GoalHand => {
+                "[x, y, z] where the hand reaches, metres, first-frame canonical frame"
+            }
+            Column::Parts => {
+                "body parts used: global, torso, left arm, right arm, left leg, right leg"
+            }
+            Column::LabelSource => "which labeller gave `parts`",
+            Column::Paraphrases => "LLM paraphrases of `text`",
+            Column::ComposedFrom => "synthetic pairs: the two source clip ids",
+            Column::ComposedParts => "synthetic pairs: the parts taken from each source",
+            Column::FootSkate => "plausibility: planted-foot speed, m/s",
+            Column::GroundPenetration => "plausibility: deepest joint below the floor, metres",
+            Column::SelfDistance => "plausibility: closest limb to spine bone distance, metres",
+            Column::Lean => "plausibility: largest sustained lean, degrees",
+            Column::Attributes => "capture-level annotation fields (key, value)",
+            Column::Skeleton => "skeleton id `<profile>:<digest>`, key into skeletons.json",
+            Column::Fps => "the dataset's frame rate",
+            Column::NumFrames => "frames",
+            Column::NumJoints => "joints (end sites not counted)",
+            Column::JointPositions => {
+                "frames x joints x 3 positions, metres (x right, y forward, z up)"
+            }
+            Column::LocalRotations => {
+                "frames x joints x 4 local rotations, quaternions (x, y, z, w)"
+            }
+            Column::RootTranslation => "frames x 3 root positions, metres",
+            Column::Rotations6d => {
+                "frames x joints x 6: first two rotation-matrix columns (opt-in)"
+            }
+            Column::JointVelocities => "frames x joints x 3 velocities, m/s (opt-in)",
+            Column::FootContacts => {
+                "frames x 4 contacts: left ankle, left toe, right ankle, right toe"
+            }
+            Column::FutureRoot => {
+                "frames x 3 x 3: root displacement and heading change at +10, +20, +30 frames"
+            }
+            Column::CanonicalPositions => {
+                "frames x joints x 3 positions in the first frame's canonical frame: pelvis over the origin, facing +y"
+            }
+        }
+    }
+
+    /// The shape of a per-frame array column, `None` for the others.
+    pub fn frame_shape(self) -> Option<FrameShape> {
+        FRAME_COLUMNS
+            .iter()
+            .find(|(c, _)| *c == self)
+            .map(|(_, shape)| *shape)
+    }
+
+    /// The column's Arrow field: name, type and nullability.
+    pub fn field(self) -> Field {
+        let name = self.name();
+        match self {
+            Column::ClipId => Field::new(name, DataType::Utf8, false),
+            Column::SourceKind => Field::new(name, DataType::Utf8, false),
+            Column::SourceName => Field::new(name, DataType::Utf8, false),
+            Column::SourcePath => Field::new(name, DataType::Utf8, false),
+            Column::SourceSha256 => Field::new(name, DataType::Utf8, false),
+            Column::SourceFps => Field::new(name, DataType::Float64, false),
+            Column::FrameRange => Field::new(name, DataType::Struct(frame_range_fields()), false),
+            Column::Mirrored => Field::new(name, DataType::Boolean, false),
+            Column::Split => Field::new(name, DataType::Utf8, false),
+            Column::Action => Field::new(name, DataType::Utf8, false),
+            Column::Text => Field::new(name, DataType::Utf8, false),
+            Column::Texts => list_utf8(name),
+            Column::Labels => list_utf8(name),
+            Column::AnnotationSource => Field::new(name, DataType::Utf8, false),
+            Column::AnnotationOrigin => Field::new(name, DataType::Utf8, false),
+            Column::MotionType => Field::new(name, DataType::Utf8, true),
+            Column::Hand => Field::new(name, DataType::Utf8, true),
+            Column::Object => Field::new(name, DataType::Utf8, true),
+            Column::GoalPelvis => fixed(name, DataType::Float32, 2),
+            Column::GoalHand => fixed(name, DataType::Float32, 3),
+            Column::Parts => fixed(name, DataType::Boolean, 6),
+            Column::LabelSource => Field::new(name, DataType::Utf8, true),
+            Column::Paraphrases => list_utf8(name),
+            Column::ComposedFrom => list_utf8(name),
+            Column::ComposedParts => Field::new(
+                name,
+                DataType::List(item(DataType::FixedSizeList(item(DataType::Boolean), 6))),
+                false,
+            ),
+            Column::FootSkate => Field::new(name, DataType::Float32, true),
+            Column::GroundPenetration => Field::new(name, DataType::Float32, true),
+            Column::SelfDistance => Field::new(name, DataType::Float32, true),
+            Column::Lean => Field::new(name, DataType::Float32, true),
+            Column::Attributes => Field::new(name, attributes_type(), false),
+            Column::Skeleton => Field::new(name, DataType::Utf8, false),
+            Column::Fps => Field::new(name, DataType::Float64, false),
+            Column::NumFrames => Field::new(name, DataType::Int32, false),
+            Column::NumJoints => Field::new(name, DataType::Int32, false),
+            Column::JointPositions => frames(self, false),
+            Column::LocalRotations => frames(self, false),
+            Column::RootTranslation => frames(self, false),
+            Column::Rotations6d => frames(self, true),
+            Column::JointVelocities => frames(self, true),
+            Column::FootContacts => frames(self, true),
+            Column::FutureRoot => frames(self, true),
+            Column::CanonicalPositions => frames(self, false),
+        }
+    }
+}
+
 /// The per-frame array columns and their shapes, in schema order.
-pub const FRAME_COLUMNS: [(&str, FrameShape); 8] = [
-    ("joint_positions", PER_JOINT_3),
+pub const FRAME_COLUMNS: [(Column, FrameShape); 8] = [
+    (Column::JointPositions, PER_JOINT_3),
     (
-        "local_rotations",
+        Column::LocalRotations,
         FrameShape {
             per_joint: true,
             inner: &[4],
@@ -65,7 +388,7 @@ pub const FRAME_COLUMNS: [(&str, FrameShape); 8] = [
         },
     ),
     (
-        "root_translation",
+        Column::RootTranslation,
         FrameShape {
             per_joint: false,
             inner: &[3],
@@ -73,16 +396,16 @@ pub const FRAME_COLUMNS: [(&str, FrameShape); 8] = [
         },
     ),
     (
-        "rotations_6d",
+        Column::Rotations6d,
         FrameShape {
             per_joint: true,
             inner: &[6],
             boolean: false,
         },
     ),
-    ("joint_velocities", PER_JOINT_3),
+    (Column::JointVelocities, PER_JOINT_3),
     (
-        "foot_contacts",
+        Column::FootContacts,
         FrameShape {
             per_joint: false,
             inner: &[4],
@@ -90,22 +413,20 @@ pub const FRAME_COLUMNS: [(&str, FrameShape); 8] = [
         },
     ),
     (
-        "future_root",
+        Column::FutureRoot,
         FrameShape {
             per_joint: false,
             inner: &[3, 3],
             boolean: false,
         },
     ),
-    ("canonical_positions", PER_JOINT_3),
+    (Column::CanonicalPositions, PER_JOINT_3),
 ];
 
-/// The shape of per-frame column `name`, `None` for any other column.
+/// The shape of per-frame column `name`, `None` for any other column (readers of a table whose
+/// columns are known only by name).
 pub fn frame_shape(name: &str) -> Option<FrameShape> {
-    FRAME_COLUMNS
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map(|(_, shape)| *shape)
+    Column::from_name(name).and_then(Column::frame_shape)
 }
 
 /// A list's (or fixed-size list's) element: named `item` as pyarrow names it, never null.
@@ -114,9 +435,9 @@ fn item(data_type: DataType) -> Arc<Field> {
 }
 
 /// A per-frame column; nullable for the opt-in features.
-fn frames(name: &str, nullable: bool) -> Field {
-    let shape = frame_shape(name).unwrap_or(PER_JOINT_3);
-    Field::new(name, shape.data_type(), nullable)
+fn frames(column: Column, nullable: bool) -> Field {
+    let shape = column.frame_shape().unwrap_or(PER_JOINT_3);
+    Field::new(column.name(), shape.data_type(), nullable)
 }
 
 fn list_utf8(name: &str) -> Field {
@@ -136,120 +457,28 @@ pub fn attribute_fields() -> Fields {
     ])
 }
 
-/// The Arrow schema of a clip table.
-pub fn clip_schema() -> Schema {
-    let frame_range = Fields::from(vec![
+/// The fields of `frame_range`.
+pub fn frame_range_fields() -> Fields {
+    Fields::from(vec![
         Field::new("start", DataType::Int64, false),
         Field::new("end", DataType::Int64, false),
-    ]);
-    // A list of key/value structs rather than an Arrow map: the same bytes on disk, and readers
-    // without map support (Hugging Face `datasets`) open it.
-    let attributes = DataType::List(Arc::new(Field::new(
-        "item",
-        DataType::Struct(attribute_fields()),
-        false,
-    )));
-    Schema::new(vec![
-        Field::new("clip_id", DataType::Utf8, false),
-        Field::new("source_kind", DataType::Utf8, false),
-        Field::new("source_name", DataType::Utf8, false),
-        Field::new("source_path", DataType::Utf8, false),
-        Field::new("source_sha256", DataType::Utf8, false),
-        Field::new("source_fps", DataType::Float64, false),
-        Field::new("frame_range", DataType::Struct(frame_range), false),
-        Field::new("mirrored", DataType::Boolean, false),
-        Field::new("split", DataType::Utf8, false),
-        Field::new("action", DataType::Utf8, false),
-        Field::new("text", DataType::Utf8, false),
-        list_utf8("texts"),
-        list_utf8("labels"),
-        Field::new("annotation_source", DataType::Utf8, false),
-        Field::new("annotation_origin", DataType::Utf8, false),
-        Field::new("motion_type", DataType::Utf8, true),
-        Field::new("hand", DataType::Utf8, true),
-        Field::new("object", DataType::Utf8, true),
-        fixed("goal_pelvis", DataType::Float32, 2),
-        fixed("goal_hand", DataType::Float32, 3),
-        fixed("parts", DataType::Boolean, 6),
-        Field::new("label_source", DataType::Utf8, true),
-        list_utf8("paraphrases"),
-        list_utf8("composed_from"),
-        Field::new(
-            "composed_parts",
-            DataType::List(item(DataType::FixedSizeList(item(DataType::Boolean), 6))),
-            false,
-        ),
-        Field::new("foot_skate", DataType::Float32, true),
-        Field::new("ground_penetration", DataType::Float32, true),
-        Field::new("self_distance", DataType::Float32, true),
-        Field::new("lean", DataType::Float32, true),
-        Field::new("attributes", attributes, false),
-        Field::new("skeleton", DataType::Utf8, false),
-        Field::new("fps", DataType::Float64, false),
-        Field::new("num_frames", DataType::Int32, false),
-        Field::new("num_joints", DataType::Int32, false),
-        frames("joint_positions", false),
-        frames("local_rotations", false),
-        frames("root_translation", false),
-        frames("rotations_6d", true),
-        frames("joint_velocities", true),
-        frames("foot_contacts", true),
-        frames("future_root", true),
-        frames("canonical_positions", false),
     ])
 }
 
-/// What a column holds, in a phrase for the dataset card (`schemas/clips.md` has the details).
+/// `attributes`: a list of key/value structs rather than an Arrow map: the same bytes on disk,
+/// and readers without map support (Hugging Face `datasets`) open it.
+fn attributes_type() -> DataType {
+    DataType::List(item(DataType::Struct(attribute_fields())))
+}
+
+/// The Arrow schema of a clip table: every [`Column`]'s field, in order.
+pub fn clip_schema() -> Schema {
+    Schema::new(Column::ALL.map(Column::field).to_vec())
+}
+
+/// What column `name` holds, in a phrase for the dataset card; empty for a name the table lacks.
 pub fn column_meaning(name: &str) -> &'static str {
-    match name {
-        "clip_id" => "unique id: source, capture, frame range, `:m` when mirrored",
-        "source_kind" => "`real_single`, `real_pair` or `synthetic` (composed by body part)",
-        "source_name" => "the build config's source the capture came from",
-        "source_path" => "capture file, relative to the build config",
-        "source_sha256" => "SHA-256 of the capture file",
-        "source_fps" => "the capture's frame rate",
-        "frame_range" => "[start, end) in the capture's own frames",
-        "mirrored" => "left/right mirrored copy of another row",
-        "split" => "train, validation or test, by capture",
-        "action" => "the action label",
-        "text" => "the caption",
-        "texts" => "every caption of the clip",
-        "labels" => "every action label of the clip",
-        "annotation_source" => "annotation format (filename, babel, event_log, frame_index)",
-        "annotation_origin" => "annotation file and span the clip was cut by",
-        "motion_type" => "LINGO motion type of the label",
-        "hand" => "hand the annotation names (left, right, both)",
-        "object" => "object the annotation names",
-        "goal_pelvis" => "[x, y] where the pelvis ends, metres, first-frame canonical frame",
-        "goal_hand" => "[x, y, z] where the hand reaches, metres, first-frame canonical frame",
-        "parts" => "body parts used: global, torso, left arm, right arm, left leg, right leg",
-        "label_source" => "which labeller gave `parts`",
-        "paraphrases" => "LLM paraphrases of `text`",
-        "composed_from" => "synthetic pairs: the two source clip ids",
-        "composed_parts" => "synthetic pairs: the parts taken from each source",
-        "foot_skate" => "plausibility: planted-foot speed, m/s",
-        "ground_penetration" => "plausibility: deepest joint below the floor, metres",
-        "self_distance" => "plausibility: closest limb to spine bone distance, metres",
-        "lean" => "plausibility: largest sustained lean, degrees",
-        "attributes" => "capture-level annotation fields (key, value)",
-        "skeleton" => "skeleton id `<profile>:<digest>`, key into skeletons.json",
-        "fps" => "the dataset's frame rate",
-        "num_frames" => "frames",
-        "num_joints" => "joints (end sites not counted)",
-        "joint_positions" => "frames x joints x 3 positions, metres (x right, y forward, z up)",
-        "local_rotations" => "frames x joints x 4 local rotations, quaternions (x, y, z, w)",
-        "root_translation" => "frames x 3 root positions, metres",
-        "rotations_6d" => "frames x joints x 6: first two rotation-matrix columns (opt-in)",
-        "joint_velocities" => "frames x joints x 3 velocities, m/s (opt-in)",
-        "foot_contacts" => "frames x 4 contacts: left ankle, left toe, right ankle, right toe",
-        "future_root" => {
-            "frames x 3 x 3: root displacement and heading change at +10, +20, +30 frames"
-        }
-        "canonical_positions" => {
-            "frames x joints x 3 positions in the first frame's canonical frame: pelvis over the origin, facing +y"
-        }
-        _ => "",
-    }
+    Column::from_name(name).map_or("", Column::meaning)
 }
 
 /// The schema as JSON (name, type, nullable per column), for docs and checks.
@@ -325,9 +554,9 @@ mod order_tests {
     #[test]
     fn every_per_frame_column_has_its_shapes_type_in_the_schema() {
         let schema = clip_schema();
-        for (name, shape) in FRAME_COLUMNS {
-            let field = schema.field_with_name(name).unwrap();
-            assert_eq!(field.data_type(), &shape.data_type(), "{name}");
+        for (column, shape) in FRAME_COLUMNS {
+            let field = schema.field_with_name(column.name()).unwrap();
+            assert_eq!(field.data_type(), &shape.data_type(), "{column:?}");
         }
         assert_eq!(
             frame_shape("joint_positions")
@@ -342,6 +571,17 @@ mod order_tests {
         );
         assert_eq!(frame_shape("future_root").unwrap().width(), 9);
         assert_eq!(frame_shape("clip_id"), None);
+    }
+
+    #[test]
+    fn every_column_is_one_schema_field_in_order_and_found_by_its_name() {
+        let schema = clip_schema();
+        assert_eq!(schema.fields().len(), Column::ALL.len());
+        for (field, column) in schema.fields().iter().zip(Column::ALL) {
+            assert_eq!(field.name(), column.name());
+            assert_eq!(Column::from_name(field.name()), Some(column));
+        }
+        assert_eq!(Column::from_name("joint_position"), None);
     }
 
     #[test]

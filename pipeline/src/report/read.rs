@@ -13,23 +13,35 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
 use super::stats::{NO_SPLIT, NULL_SPLIT};
 use super::{ClipRow, ReportError};
+use crate::io::schema::Column;
 
 /// Columns without which a table is not a clip table.
-const REQUIRED: [&str; 5] = ["clip_id", "source_kind", "mirrored", "fps", "num_frames"];
+const REQUIRED: [Column; 5] = [
+    Column::ClipId,
+    Column::SourceKind,
+    Column::Mirrored,
+    Column::Fps,
+    Column::NumFrames,
+];
 /// Columns read when present: older layouts lack some, and `split` comes with sharded outputs.
-const OPTIONAL: [&str; 9] = [
-    "split",
-    "texts",
-    "motion_type",
-    "goal_pelvis",
-    "label_source",
-    "foot_skate",
-    "ground_penetration",
-    "self_distance",
-    "lean",
+const OPTIONAL: [Column; 9] = [
+    Column::Split,
+    Column::Texts,
+    Column::MotionType,
+    Column::GoalPelvis,
+    Column::LabelSource,
+    Column::FootSkate,
+    Column::GroundPenetration,
+    Column::SelfDistance,
+    Column::Lean,
 ];
 /// The plausibility columns, in the order of [`ClipRow::plausibility`].
-const METRIC_COLUMNS: [&str; 4] = ["foot_skate", "ground_penetration", "self_distance", "lean"];
+const METRIC_COLUMNS: [Column; 4] = [
+    Column::FootSkate,
+    Column::GroundPenetration,
+    Column::SelfDistance,
+    Column::Lean,
+];
 
 /// Reads every table's clip rows, in the order of `tables` and then of the rows in each file.
 /// Only the needed columns are decoded. Tables without a `split` column give rows of split
@@ -54,10 +66,10 @@ fn read_table(path: &Path, rows: &mut Vec<ClipRow>) -> Result<(), ReportError> {
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(pq)?;
     let schema = builder.schema().clone();
     for column in REQUIRED {
-        if schema.column_with_name(column).is_none() {
+        if schema.column_with_name(column.name()).is_none() {
             return Err(ReportError::MissingColumn {
                 path: path.to_path_buf(),
-                column: column.to_string(),
+                column: column.name().to_string(),
             });
         }
     }
@@ -66,7 +78,7 @@ fn read_table(path: &Path, rows: &mut Vec<ClipRow>) -> Result<(), ReportError> {
     let indices: Vec<usize> = REQUIRED
         .iter()
         .chain(OPTIONAL.iter())
-        .filter_map(|name| schema.index_of(name).ok())
+        .filter_map(|column| schema.index_of(column.name()).ok())
         .collect();
     let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
     let reader = builder.with_projection(mask).build().map_err(pq)?;
@@ -89,39 +101,39 @@ struct Columns<'a> {
 }
 
 impl<'a> Columns<'a> {
-    fn get(&self, name: &str) -> Option<&'a ArrayRef> {
-        self.batch.column_by_name(name)
+    fn get(&self, column_name: Column) -> Option<&'a ArrayRef> {
+        self.batch.column_by_name(column_name.name())
     }
 
-    fn type_error(&self, name: &str, column: &ArrayRef, expected: &str) -> ReportError {
+    fn type_error(&self, column_name: Column, column: &ArrayRef, expected: &str) -> ReportError {
         ReportError::ColumnType {
             path: self.path.to_path_buf(),
-            column: name.to_string(),
+            column: column_name.name().to_string(),
             found: column.data_type().to_string(),
             expected: expected.to_string(),
         }
     }
 
-    fn strings(&self, name: &str) -> Result<Option<Vec<Option<String>>>, ReportError> {
-        let Some(column) = self.get(name) else {
+    fn strings(&self, column_name: Column) -> Result<Option<Vec<Option<String>>>, ReportError> {
+        let Some(column) = self.get(column_name) else {
             return Ok(None);
         };
         string_values(column)
             .map(Some)
-            .ok_or_else(|| self.type_error(name, column, "Utf8"))
+            .ok_or_else(|| self.type_error(column_name, column, "Utf8"))
     }
 
-    fn floats(&self, name: &str) -> Result<Option<Vec<Option<f64>>>, ReportError> {
-        let Some(column) = self.get(name) else {
+    fn floats(&self, column_name: Column) -> Result<Option<Vec<Option<f64>>>, ReportError> {
+        let Some(column) = self.get(column_name) else {
             return Ok(None);
         };
         float_values(column)
             .map(Some)
-            .ok_or_else(|| self.type_error(name, column, "Float32 or Float64"))
+            .ok_or_else(|| self.type_error(column_name, column, "Float32 or Float64"))
     }
 
-    fn ints(&self, name: &str) -> Result<Option<Vec<Option<i64>>>, ReportError> {
-        let Some(column) = self.get(name) else {
+    fn ints(&self, column_name: Column) -> Result<Option<Vec<Option<i64>>>, ReportError> {
+        let Some(column) = self.get(column_name) else {
             return Ok(None);
         };
         let values = if let Some(a) = column.as_primitive_opt::<Int32Type>() {
@@ -129,24 +141,24 @@ impl<'a> Columns<'a> {
         } else if let Some(a) = column.as_primitive_opt::<Int64Type>() {
             a.iter().collect()
         } else {
-            return Err(self.type_error(name, column, "Int32 or Int64"));
+            return Err(self.type_error(column_name, column, "Int32 or Int64"));
         };
         Ok(Some(values))
     }
 
-    fn bools(&self, name: &str) -> Result<Option<Vec<Option<bool>>>, ReportError> {
-        let Some(column) = self.get(name) else {
+    fn bools(&self, column_name: Column) -> Result<Option<Vec<Option<bool>>>, ReportError> {
+        let Some(column) = self.get(column_name) else {
             return Ok(None);
         };
         column
             .as_boolean_opt()
             .map(|a| Some(a.iter().collect()))
-            .ok_or_else(|| self.type_error(name, column, "Boolean"))
+            .ok_or_else(|| self.type_error(column_name, column, "Boolean"))
     }
 
     /// A list-of-floats column as one `Vec<f64>` per row.
-    fn string_lists(&self, name: &str) -> Result<Option<Vec<Vec<String>>>, ReportError> {
-        let Some(column) = self.get(name) else {
+    fn string_lists(&self, column_name: Column) -> Result<Option<Vec<Vec<String>>>, ReportError> {
+        let Some(column) = self.get(column_name) else {
             return Ok(None);
         };
         let items = |item: ArrayRef| -> Option<Vec<String>> {
@@ -161,22 +173,25 @@ impl<'a> Columns<'a> {
                 .map(|i| (!list.is_null(i)).then(|| list.value(i)))
                 .collect()
         } else {
-            return Err(self.type_error(name, column, "List<Utf8>"));
+            return Err(self.type_error(column_name, column, "List<Utf8>"));
         };
         lists
             .into_iter()
             .map(|item| match item {
                 None => Ok(Vec::new()),
                 Some(item) => {
-                    items(item).ok_or_else(|| self.type_error(name, column, "List<Utf8>"))
+                    items(item).ok_or_else(|| self.type_error(column_name, column, "List<Utf8>"))
                 }
             })
             .collect::<Result<Vec<_>, _>>()
             .map(Some)
     }
 
-    fn float_lists(&self, name: &str) -> Result<Option<Vec<Option<Vec<f64>>>>, ReportError> {
-        let Some(column) = self.get(name) else {
+    fn float_lists(
+        &self,
+        column_name: Column,
+    ) -> Result<Option<Vec<Option<Vec<f64>>>>, ReportError> {
+        let Some(column) = self.get(column_name) else {
             return Ok(None);
         };
         let items = |item: ArrayRef| -> Option<Vec<f64>> {
@@ -184,11 +199,12 @@ impl<'a> Columns<'a> {
         };
         // List, large list or fixed-size list (a goal is fixed-size from version 9 on).
         let rows = crate::io::parquet::list_rows(column)
-            .ok_or_else(|| self.type_error(name, column, "a list of Float32"))?;
+            .ok_or_else(|| self.type_error(column_name, column, "a list of Float32"))?;
         rows.into_iter()
             .map(|row| {
                 row.map(|item| {
-                    items(item).ok_or_else(|| self.type_error(name, column, "a list of Float32"))
+                    items(item)
+                        .ok_or_else(|| self.type_error(column_name, column, "a list of Float32"))
                 })
                 .transpose()
             })
@@ -247,25 +263,31 @@ fn read_batch(
     rows: &mut Vec<ClipRow>,
 ) -> Result<(), ReportError> {
     let c = Columns { path, batch };
-    let missing = |column: &str| ReportError::MissingColumn {
+    let missing = |column: Column| ReportError::MissingColumn {
         path: path.to_path_buf(),
-        column: column.to_string(),
+        column: column.name().to_string(),
     };
-    let clip_ids = c.strings("clip_id")?.ok_or_else(|| missing("clip_id"))?;
+    let clip_ids = c
+        .strings(Column::ClipId)?
+        .ok_or_else(|| missing(Column::ClipId))?;
     let kinds = c
-        .strings("source_kind")?
-        .ok_or_else(|| missing("source_kind"))?;
-    let mirrored = c.bools("mirrored")?.ok_or_else(|| missing("mirrored"))?;
-    let fps = c.floats("fps")?.ok_or_else(|| missing("fps"))?;
-    let frames = c.ints("num_frames")?.ok_or_else(|| missing("num_frames"))?;
-    let splits = c.strings("split")?;
-    let motion_types = c.strings("motion_type")?;
-    let goals = c.float_lists("goal_pelvis")?;
-    let label_sources = c.strings("label_source")?;
-    let texts = c.string_lists("texts")?;
+        .strings(Column::SourceKind)?
+        .ok_or_else(|| missing(Column::SourceKind))?;
+    let mirrored = c
+        .bools(Column::Mirrored)?
+        .ok_or_else(|| missing(Column::Mirrored))?;
+    let fps = c.floats(Column::Fps)?.ok_or_else(|| missing(Column::Fps))?;
+    let frames = c
+        .ints(Column::NumFrames)?
+        .ok_or_else(|| missing(Column::NumFrames))?;
+    let splits = c.strings(Column::Split)?;
+    let motion_types = c.strings(Column::MotionType)?;
+    let goals = c.float_lists(Column::GoalPelvis)?;
+    let label_sources = c.strings(Column::LabelSource)?;
+    let texts = c.string_lists(Column::Texts)?;
     let metrics: Vec<Option<Vec<Option<f64>>>> = METRIC_COLUMNS
         .iter()
-        .map(|name| c.floats(name))
+        .map(|column| c.floats(*column))
         .collect::<Result<_, _>>()?;
 
     for i in 0..batch.num_rows() {
@@ -372,7 +394,10 @@ fn has_clip_id(path: &Path) -> Result<bool, ReportError> {
             path: path.to_path_buf(),
             source,
         })?;
-    Ok(builder.schema().column_with_name("clip_id").is_some())
+    Ok(builder
+        .schema()
+        .column_with_name(Column::ClipId.name())
+        .is_some())
 }
 
 /// Drop and reject counts by reason from a build's `build-report.json` (`drops_by_reason`,
