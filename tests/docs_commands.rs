@@ -111,24 +111,11 @@ struct Sandbox {
     bin: PathBuf,
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), &target).unwrap();
-        }
-    }
-}
-
 fn sandbox() -> Sandbox {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("motionforge");
     for folder in ["fixtures", "schemas", "prompts"] {
-        copy_dir(&common::repo().join(folder), &root.join(folder));
+        common::copy_dir(&common::repo().join(folder), &root.join(folder));
     }
     let bin = dir.path().join("bin");
     std::fs::create_dir_all(&bin).unwrap();
@@ -284,12 +271,9 @@ fn run_python(sandbox: &Sandbox, body: &str, at: &str) -> String {
     let script = sandbox.root.join(".block.py");
     std::fs::write(&script, body).unwrap();
     let hf = sandbox.root.join(".hf-cache");
-    let out = Command::new(common::python())
+    let out = common::offline_python(&hf)
         .arg(&script)
         .current_dir(&sandbox.root)
-        .env("HF_HOME", &hf)
-        .env("HF_DATASETS_OFFLINE", "1")
-        .env("HF_HUB_OFFLINE", "1")
         .output()
         .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
     assert!(

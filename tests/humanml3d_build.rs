@@ -68,7 +68,7 @@ fn fixture_copy() -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let src = common::repo().join("fixtures/humanml3d-joints");
     let dst = dir.path().join("humanml3d-joints");
-    copy_dir(&src, &dst);
+    common::copy_dir(&src, &dst);
     let config = dst.join("build.toml");
     let text = std::fs::read_to_string(&config).unwrap();
     std::fs::write(
@@ -77,19 +77,6 @@ fn fixture_copy() -> (tempfile::TempDir, PathBuf) {
     )
     .unwrap();
     (dir, config)
-}
-
-fn copy_dir(src: &Path, dst: &Path) {
-    std::fs::create_dir_all(dst).unwrap();
-    for entry in std::fs::read_dir(src).unwrap() {
-        let entry = entry.unwrap();
-        let to = dst.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &to);
-        } else {
-            std::fs::copy(entry.path(), &to).unwrap();
-        }
-    }
 }
 
 fn motionforge() -> Command {

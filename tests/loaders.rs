@@ -52,12 +52,9 @@ frames = con.execute(f"SELECT sum(num_frames) FROM read_parquet('{pattern}')").f
 assert frames > 0
 print(expected, frames)
 "#;
-    let run = Command::new(common::python())
+    let run = common::offline_python(hf_cache.path())
         .args(["-c", script])
         .arg(&dataset)
-        .env("HF_DATASETS_OFFLINE", "1")
-        .env("HF_HUB_OFFLINE", "1")
-        .env("HF_HOME", hf_cache.path())
         .output()
         .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
     assert!(
@@ -88,12 +85,9 @@ fn the_cards_snippet_runs_and_gives_frames_joints_3() {
         "{snippet}\nframes, joints = int(row['num_frames']), int(row['num_joints'])\nassert positions.shape == (frames, joints, 3) and frames > 1, positions.shape\nassert positions.dtype == np.float32 and normalised.shape == positions.shape\nassert np.isfinite(normalised).all()\nimport pyarrow.parquet as pq\nt = pq.read_table(root + '/data', filters=[('split', '=', 'train')])\nassert positions.shape == (t['num_frames'][0].as_py(), t['num_joints'][0].as_py(), 3)\nprint('shape', positions.shape)\n"
     );
     let hf_cache = tempfile::tempdir().unwrap();
-    let run = Command::new(common::python())
+    let run = common::offline_python(hf_cache.path())
         .args(["-c", &script])
         .current_dir(out.path())
-        .env("HF_DATASETS_OFFLINE", "1")
-        .env("HF_HUB_OFFLINE", "1")
-        .env("HF_HOME", hf_cache.path())
         .output()
         .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
     let stdout = String::from_utf8_lossy(&run.stdout);
@@ -204,12 +198,9 @@ assert floats > 0
 print(checked)
 "#;
     let hf_cache = tempfile::tempdir().unwrap();
-    let run = Command::new(common::python())
+    let run = common::offline_python(hf_cache.path())
         .args(["-c", script])
         .arg(&dataset)
-        .env("HF_DATASETS_OFFLINE", "1")
-        .env("HF_HUB_OFFLINE", "1")
-        .env("HF_HOME", hf_cache.path())
         .output()
         .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
     assert!(

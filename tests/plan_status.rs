@@ -3,8 +3,6 @@
 
 mod common;
 
-use std::path::Path;
-
 use motionforge::build::{BuildOptions, Plan, Stage, build, plan, status};
 use motionforge::config::Config;
 
@@ -12,26 +10,13 @@ use motionforge::config::Config;
 /// the copy.
 fn scratch() -> (tempfile::TempDir, Config) {
     let dir = tempfile::tempdir().unwrap();
-    copy_dir(
+    common::copy_dir(
         &common::repo().join("fixtures"),
         &dir.path().join("fixtures"),
     );
     let mut config = Config::load(&dir.path().join("fixtures/demo.toml")).unwrap();
     config.dataset.output = dir.path().join("out");
     (dir, config)
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
 }
 
 fn stage(plan: &Plan, stage: Stage) -> &motionforge::build::StagePlan {

@@ -166,3 +166,28 @@ pub fn run_python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> String
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
+
+/// Copies the folder `from` into `to`, recursively (a sandbox copy of fixtures or a dataset).
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
+
+/// The tests' Python ([`python`]) with Hugging Face offline and its cache in `hf_home`, so a test
+/// neither reaches the network nor reads or fills the user's cache.
+pub fn offline_python(hf_home: &Path) -> std::process::Command {
+    let mut command = std::process::Command::new(python());
+    command
+        .env("HF_DATASETS_OFFLINE", "1")
+        .env("HF_HUB_OFFLINE", "1")
+        .env("HF_HOME", hf_home);
+    command
+}
