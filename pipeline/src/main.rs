@@ -29,25 +29,6 @@ use cli::tools::{bench, bench_write, calibrate_mirror, export_bvh, mirror_text};
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-// mimalloc's C API (linked through the `mimalloc` crate, which does not bind the options). The
-// option numbers are the C enum's values, the same in mimalloc 2 and 3.
-unsafe extern "C" {
-    fn mi_option_set(option: std::ffi::c_int, value: std::ffi::c_long);
-}
-
-/// `mi_option_purge_delay` in mimalloc's `mi_option_t`.
-const MI_OPTION_PURGE_DELAY: std::ffi::c_int = 15;
-
-/// Tells mimalloc to keep the memory it has instead of handing freed pages back to the OS. A
-/// build frees and reallocates row groups, Parquet pages and decoded cache entries all the time:
-/// with purging, each reuse faulted in (and the kernel zeroed) fresh huge pages, about a tenth of
-/// a build's CPU time. The process's peak is about the same; it stays at its peak until it exits
-/// (`docs/decisions.md`, "Allocator").
-fn keep_freed_memory() {
-    // SAFETY: sets one integer option; called once, in `main`, before any other thread starts.
-    unsafe { mi_option_set(MI_OPTION_PURGE_DELAY, -1) };
-}
-
 /// Exit codes, shown after `--help` and documented in docs/user-guide.md (a macro so that
 /// commands can put their examples before it with `concat!`).
 macro_rules! exit_codes {
@@ -579,10 +560,6 @@ enum ConfigCommand {
 fn main() -> ExitCode {
     ignore_file_size_signal();
     let cli = Cli::parse();
-    // The service runs for days and should give memory back; every other command is one job.
-    if !matches!(cli.command, Command::Serve { .. }) {
-        keep_freed_memory();
-    }
     let ui = Ui::new(&cli);
     let result = run(cli, &ui);
     ui.clear_bars();
