@@ -889,7 +889,17 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    // Clips share their skeleton (`SkeletonPool`): its id, a digest of the whole skeleton, is
+    // taken once per shared copy and profile, not once per clip.
+    let mut named: std::collections::HashSet<(*const crate::motion::Skeleton, &str)> =
+        Default::default();
     for clip in &clips {
+        if !named.insert((
+            std::sync::Arc::as_ptr(&clip.skeleton),
+            clip.profile.as_str(),
+        )) {
+            continue;
+        }
         let id = clip.skeleton_id();
         if skeletons.contains_key(&id) {
             continue;
