@@ -35,6 +35,16 @@ for split, entry in manifest['splits'].items():
         t = pq.read_table(path)
         assert t.num_rows == shard['rows'], path
         assert set(t.column('split').to_pylist()) == {split}, path
+        # Writer properties (`docs/decisions.md`, "Shard writer"): per-frame float lists carry no
+        # min/max statistics, scalar columns keep theirs.
+        meta = pq.ParquetFile(path).metadata
+        for g in range(meta.num_row_groups):
+            group = meta.row_group(g)
+            chunks = {group.column(c).path_in_schema: group.column(c) for c in range(group.num_columns)}
+            frame_lists = [n for n in chunks if n.split('.')[0] in ('joint_positions', 'local_rotations', 'canonical_positions', 'root_translation')]
+            assert len(frame_lists) == 4, sorted(chunks)
+            assert not any(chunks[n].is_stats_set for n in frame_lists), path
+            assert chunks['num_frames'].is_stats_set, path
         for p in t.column('source_path').to_pylist():
             captures.setdefault(p, set()).add(split)
         rows += t.num_rows

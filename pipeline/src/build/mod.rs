@@ -657,6 +657,8 @@ fn compose(
     for clip in &mut composed_clips {
         shared.skeletons.share(&mut clip.skeleton);
     }
+    // Exactly: growing by doubling left up to half the clip list (about 1 KB per clip) unused.
+    clips.reserve_exact(composed_clips.len());
     clips.extend(composed_clips);
     clips.sort_by(|a, b| {
         a.clip_id
@@ -749,37 +751,76 @@ pub fn find_clip(
     Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
 }
 
+/// Stage-cache folder of the label check's findings, one entry per capture with claiming clips.
+const LABEL_CHECK: &str = "label-check";
+/// Version of the label check's cached findings (bump when `quality::contradictions` changes).
+const LABEL_CHECK_VERSION: u32 = 1;
+
 /// The real single clips (mirrors included) whose motion contradicts what their text says
 /// (`quality::contradictions`), in `clip_id` order. Only clips whose text makes a claim the
-/// motion can be measured for are read.
+/// motion can be measured for are read. The findings are cached per capture, keyed by those
+/// clips (texts, skeletons, where their frames are) and the mirror's offset policy, so a rebuild
+/// reads no frames; captures are checked on all cores.
 fn contradicting_labels(
     shared: &Shared<'_>,
     motions: &MotionSource,
     clips: &[Clip],
     index: &MotionIndex,
 ) -> Result<Vec<crate::quality::Contradiction>, BuildError> {
-    let mut out = Vec::new();
-    for clip in clips
-        .iter()
-        .filter(|c| c.kind == crate::clip::SourceKind::RealSingle)
-    {
-        if crate::quality::claims(&clip.text) == crate::quality::Claims::default() {
-            continue;
-        }
-        let Some(profile) = shared.profile_of(clip) else {
-            continue;
-        };
-        let motion = motions.motion_of(clip, index)?;
-        let positions = crate::motion::canonical::dataset_positions(&motion, &profile);
-        out.extend(crate::quality::contradictions(
-            &clip.clip_id,
-            &clip.text,
-            &positions,
-            motion.num_joints(),
-            motion.fps,
-            &profile,
-        ));
+    let mut by_capture: BTreeMap<(&str, &str), Vec<&Clip>> = BTreeMap::new();
+    for clip in clips.iter().filter(|c| {
+        c.kind == crate::clip::SourceKind::RealSingle
+            && crate::quality::claims(&c.text) != crate::quality::Claims::default()
+    }) {
+        by_capture
+            .entry((clip.capture.source.as_str(), clip.capture.path.as_str()))
+            .or_default()
+            .push(clip);
     }
+    // The skeleton profiles the clips are measured with.
+    let profiles = sha256_hex(&serde_json::to_vec(&shared.specs).unwrap_or_default());
+    let checked = by_capture
+        .par_iter()
+        // Each thread reads with its own memory of recent chunks.
+        .map_init(
+            || motions.sibling(),
+            |motions, ((_, path), held)| {
+                let refs: Vec<Option<&motions::MotionRef>> =
+                    held.iter().map(|c| index.get(&motions::key(c))).collect();
+                let encoded = crate::base::encoded_sha256(&(held, &refs), "clips to check")?;
+                let stamp = Fingerprint::new(LABEL_CHECK, LABEL_CHECK_VERSION)
+                    .text("clips", &encoded)
+                    .json("config mirror.offsets", &shared.config.mirror.offsets)
+                    .text("skeleton profiles", &profiles)
+                    .stamp();
+                let found = shared.workspace.try_item(LABEL_CHECK, path, &stamp, || {
+                    let mut out = Vec::new();
+                    for clip in held {
+                        let Some(profile) = shared.profile_of(clip) else {
+                            continue;
+                        };
+                        let motion = motions.motion_of(clip, index)?;
+                        let positions =
+                            crate::motion::canonical::dataset_positions(&motion, &profile);
+                        out.extend(crate::quality::contradictions(
+                            &clip.clip_id,
+                            &clip.text,
+                            &positions,
+                            motion.num_joints(),
+                            motion.fps,
+                            &profile,
+                        ));
+                    }
+                    Ok::<_, BuildError>(out)
+                })?;
+                Ok::<_, BuildError>((stamp.fingerprint, found.map(|(f, _)| f).unwrap_or_default()))
+            },
+        )
+        .collect::<Result<Vec<_>, BuildError>>()?;
+    let live: BTreeSet<String> = checked.iter().map(|(f, _)| f.clone()).collect();
+    shared.workspace.prune(LABEL_CHECK, &live);
+    let mut out: Vec<crate::quality::Contradiction> =
+        checked.into_iter().flat_map(|(_, found)| found).collect();
     out.sort_by(|a, b| {
         a.clip_id
             .cmp(&b.clip_id)
@@ -850,7 +891,17 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let specs = &shared.specs;
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    // Clips share their skeleton (`SkeletonPool`): its id, a digest of the whole skeleton, is
+    // taken once per shared copy and profile, not once per clip.
+    let mut named: std::collections::HashSet<(*const crate::motion::Skeleton, &str)> =
+        Default::default();
     for clip in &clips {
+        if !named.insert((
+            std::sync::Arc::as_ptr(&clip.skeleton),
+            clip.profile.as_str(),
+        )) {
+            continue;
+        }
         let id = clip.skeleton_id();
         if skeletons.contains_key(&id) {
             continue;
@@ -904,7 +955,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         features: config.features,
     };
     let through = options.through.unwrap_or(Stage::Report);
-    let mut stamps = workspace.seen();
+    let mut stamps = workspace.take_seen();
     if through >= Stage::Write {
         options.progress.stage_started(Stage::Write.name(), 1);
         let write_ran = write_outputs(

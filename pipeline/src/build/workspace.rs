@@ -118,9 +118,14 @@ impl Workspace {
         self.probe
     }
 
-    /// Every item stamp seen in this run (hits and misses), for the ledger.
-    pub fn seen(&self) -> Vec<Miss> {
-        self.seen.lock().map(|v| v.clone()).unwrap_or_default()
+    /// Every item stamp seen in this run so far (hits and misses), for the ledger, handed over
+    /// rather than copied (one stamp per capture and stage: a copy was tens of MB at a few times
+    /// Bandai Namco 2); a later call returns only what was seen since.
+    pub fn take_seen(&self) -> Vec<Miss> {
+        self.seen
+            .lock()
+            .map(|mut v| std::mem::take(&mut *v))
+            .unwrap_or_default()
     }
 
     /// The cached output of `stage` for item `key`, or computes and stores it; the flag says

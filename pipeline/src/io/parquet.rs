@@ -842,7 +842,8 @@ fn all_finite(array: &dyn arrow_array::Array) -> bool {
     }
 }
 
-/// Every float leaf column of `schema` encoded BYTE_STREAM_SPLIT, without a dictionary. Motion
+/// Every float leaf column of `schema` encoded BYTE_STREAM_SPLIT, without a dictionary, and
+/// without statistics when it is a list (per-frame values). Motion
 /// floats are nearly unique, so dictionaries only cost time; splitting each value's bytes into
 /// separate streams puts the slowly varying exponent and high mantissa bytes together, where zstd
 /// finds the redundancy that plain encoding hides (`docs/decisions.md`, "Float encoding").
@@ -857,6 +858,14 @@ fn float_encoding(
             parquet::basic::Type::FLOAT | parquet::basic::Type::DOUBLE
         ) {
             let path = column.path().clone();
+            // Min and max of a list of frames select nothing (no reader filters on them) and
+            // cost a pass over every value; scalar floats (metrics) keep theirs.
+            if column.max_rep_level() > 0 {
+                props = props.set_column_statistics_enabled(
+                    path.clone(),
+                    parquet::file::properties::EnabledStatistics::None,
+                );
+            }
             props = props
                 .set_column_dictionary_enabled(path.clone(), false)
                 .set_column_encoding(path, parquet::basic::Encoding::BYTE_STREAM_SPLIT);
@@ -866,6 +875,12 @@ fn float_encoding(
 }
 
 pub use crate::config::DEFAULT_ZSTD_LEVEL;
+
+/// Largest data page before compression. A row group's per-frame column is a few MB, which
+/// parquet's default (1 MB) cut into several pages, each compressed on its own: one page per
+/// column chunk writes faster and compresses a little better (`docs/decisions.md`, "Shard
+/// writer: no statistics on frame lists, 8 MB pages").
+const PAGE_BYTES: usize = 8 * 1024 * 1024;
 
 /// Clips per row group: large enough for efficient scans, small enough that one group's buffers
 /// stay a few tens of MB for long captures.
@@ -888,6 +903,7 @@ impl<W: Write + Send> ShardWriter<W> {
         let props = float_encoding(&clip_schema(), WriterProperties::builder())?
             .set_compression(Compression::ZSTD(ZstdLevel::try_new(zstd_level)?))
             .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
+            .set_data_page_size_limit(PAGE_BYTES)
             .set_key_value_metadata(Some(vec![
                 KeyValue::new(
                     "motionforge.schema_version".to_string(),
