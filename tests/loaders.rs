@@ -11,7 +11,6 @@ fn hugging_face_datasets_and_duckdb_open_the_demo() {
     let out = tempfile::tempdir().unwrap();
     common::build_demo(out.path());
     let dataset = out.path().join("demo");
-    let hf_cache = tempfile::tempdir().unwrap();
     let script = r#"
 import json, os, sys
 import numpy as np
@@ -52,16 +51,7 @@ frames = con.execute(f"SELECT sum(num_frames) FROM read_parquet('{pattern}')").f
 assert frames > 0
 print(expected, frames)
 "#;
-    let run = common::offline_python(hf_cache.path())
-        .args(["-c", script])
-        .arg(&dataset)
-        .output()
-        .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    python_ok(script, &[&dataset], None);
 }
 
 /// The dataset card's usage snippet, taken from the demo's `README.md` as a user would copy it,
@@ -84,19 +74,30 @@ fn the_cards_snippet_runs_and_gives_frames_joints_3() {
     let script = format!(
         "{snippet}\nframes, joints = int(row['num_frames']), int(row['num_joints'])\nassert positions.shape == (frames, joints, 3) and frames > 1, positions.shape\nassert positions.dtype == np.float32 and normalised.shape == positions.shape\nassert np.isfinite(normalised).all()\nimport pyarrow.parquet as pq\nt = pq.read_table(root + '/data', filters=[('split', '=', 'train')])\nassert positions.shape == (t['num_frames'][0].as_py(), t['num_joints'][0].as_py(), 3)\nprint('shape', positions.shape)\n"
     );
+    let stdout = python_ok(&script, &[], Some(out.path()));
+    assert!(stdout.contains("shape ("), "{stdout}");
+}
+
+/// Runs `script` with the tests' Python, Hugging Face offline and a cache of its own, `args`
+/// after it, from `dir` (the current folder when `None`); fails with its output unless it
+/// succeeds, and gives its standard output.
+fn python_ok(script: &str, args: &[&Path], dir: Option<&Path>) -> String {
     let hf_cache = tempfile::tempdir().unwrap();
-    let run = common::offline_python(hf_cache.path())
-        .args(["-c", &script])
-        .current_dir(out.path())
+    let mut command = common::offline_python(hf_cache.path());
+    command.args(["-c", script]).args(args);
+    if let Some(dir) = dir {
+        command.current_dir(dir);
+    }
+    let run = command
         .output()
         .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
     assert!(
         run.status.success(),
         "{}\n{stdout}",
         String::from_utf8_lossy(&run.stderr)
     );
-    assert!(stdout.contains("shape ("), "{stdout}");
+    stdout
 }
 
 /// The demo's config in `dir` with every derived feature switched on (`rotations_6d` and
@@ -197,16 +198,5 @@ for shard in sorted(os.listdir(os.path.join(root, 'data'))):
 assert floats > 0
 print(checked)
 "#;
-    let hf_cache = tempfile::tempdir().unwrap();
-    let run = common::offline_python(hf_cache.path())
-        .args(["-c", script])
-        .arg(&dataset)
-        .output()
-        .unwrap_or_else(|e| panic!("{:?}: {e}; {}", common::python(), common::PYTHON_SETUP));
-    assert!(
-        run.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&run.stderr),
-        String::from_utf8_lossy(&run.stdout)
-    );
+    python_ok(script, &[&dataset], None);
 }
