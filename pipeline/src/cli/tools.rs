@@ -179,17 +179,7 @@ pub(crate) fn export_bvh(
         clip_id,
     )?;
     let Some((clip, profile)) = found else {
-        let near: Vec<&str> = ids
-            .iter()
-            .map(String::as_str)
-            .filter(|id| id.contains(clip_id) || clip_id.contains(*id))
-            .take(5)
-            .collect();
-        let hint = if near.is_empty() {
-            String::new()
-        } else {
-            format!("; did you mean {}", near.join(", "))
-        };
+        let hint = motionforge::dataset::near_clip_ids(clip_id, &ids);
         bail!(
             "no clip `{clip_id}` in this build ({} clips){hint}",
             ids.len()

@@ -247,21 +247,27 @@ pub fn find_clips(
 
 /// `NoClip` for `clip_id`, with up to five ids that contain it (or that it contains) as a hint.
 pub(crate) fn no_clip(dataset: &Path, clip_id: &str, ids: &[String]) -> DatasetError {
+    DatasetError::NoClip {
+        path: dataset.to_path_buf(),
+        clip_id: clip_id.to_string(),
+        count: ids.len(),
+        hint: near_clip_ids(clip_id, ids),
+    }
+}
+
+/// `; did you mean a, b` with up to five of `ids` that contain `clip_id` (or that it contains),
+/// or empty when none does: the hint after a clip id that is not in a dataset.
+pub fn near_clip_ids(clip_id: &str, ids: &[String]) -> String {
     let near: Vec<&str> = ids
         .iter()
         .map(String::as_str)
         .filter(|id| id.contains(clip_id) || clip_id.contains(*id))
         .take(5)
         .collect();
-    DatasetError::NoClip {
-        path: dataset.to_path_buf(),
-        clip_id: clip_id.to_string(),
-        count: ids.len(),
-        hint: if near.is_empty() {
-            String::new()
-        } else {
-            format!("; did you mean {}", near.join(", "))
-        },
+    if near.is_empty() {
+        String::new()
+    } else {
+        format!("; did you mean {}", near.join(", "))
     }
 }
 
