@@ -112,30 +112,59 @@ pub(super) fn run(
         .stamp();
     let n_clips = clips.len();
     let assigned = shared.workspace.try_item(label::NAME, "*", &stamp, || {
-        // One capture's frames at a time: the velocity evidence needs the motions.
+        // One capture's frames at a time (the velocity evidence needs the motions), captures on
+        // all cores; the per-capture results are summed afterwards in capture order, so the
+        // figures do not depend on scheduling.
+        use rayon::prelude::*;
+        type Labelled = (
+            Vec<(
+                String,
+                (
+                    Option<crate::parts::PartSet>,
+                    Option<crate::parts::LabelSources>,
+                ),
+            )>,
+            BTreeMap<String, usize>,
+            (f64, usize),
+        );
+        let per_capture: Vec<Labelled> = items
+            .par_iter()
+            .map_init(
+                || motions.sibling(),
+                |motions, item| {
+                    let mut labelled = Vec::with_capacity(item.clips.len());
+                    let mut sources = BTreeMap::new();
+                    // Per capture, summed in clip order as one call over the capture would.
+                    let mut capture_agreement = (0.0, 0usize);
+                    for (clip, at) in item.clips.iter().zip(&item.refs) {
+                        let mut full = LoadedClip {
+                            clip: clip.clone(),
+                            motion: motions.motion(at, &clip.profile)?,
+                        };
+                        let mut part = LabelReport::default();
+                        let one = std::slice::from_mut(&mut full);
+                        label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);
+                        let full = full.clip;
+                        for (source, n) in part.sources {
+                            *sources.entry(source).or_insert(0) += n;
+                        }
+                        if let Some((value, n)) = part.velocity_agreement {
+                            capture_agreement.0 += value * n as f64;
+                            capture_agreement.1 += n;
+                        }
+                        labelled.push((full.clip_id, (full.parts, full.label_source)));
+                    }
+                    Ok::<_, BuildError>((labelled, sources, capture_agreement))
+                },
+            )
+            .collect::<Result<_, _>>()?;
         let mut report = report.clone();
         let mut by_clip = BTreeMap::new();
         let mut agreement = (0.0, 0usize);
-        for item in items.iter() {
-            // Per capture, summed in clip order as one call over the capture would.
-            let mut capture_agreement = (0.0, 0usize);
-            for (clip, at) in item.clips.iter().zip(&item.refs) {
-                let mut full = LoadedClip {
-                    clip: clip.clone(),
-                    motion: motions.motion(at, &clip.profile)?,
-                };
-                let mut part = LabelReport::default();
-                let one = std::slice::from_mut(&mut full);
-                label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);
-                let full = full.clip;
-                for (source, n) in part.sources {
-                    *report.sources.entry(source).or_insert(0) += n;
-                }
-                if let Some((value, n)) = part.velocity_agreement {
-                    capture_agreement.0 += value * n as f64;
-                    capture_agreement.1 += n;
-                }
-                by_clip.insert(full.clip_id, (full.parts, full.label_source));
+        for (labelled, sources, capture_agreement) in per_capture {
+            by_clip.extend(labelled);
+            for (source, n) in sources {
+                *report.sources.entry(source).or_insert(0) += n;
             }
             if capture_agreement.1 > 0 {
                 let mean = capture_agreement.0 / capture_agreement.1 as f64;
