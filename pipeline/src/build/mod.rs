@@ -4,6 +4,7 @@
 mod capture;
 pub mod clean;
 mod digests;
+mod held;
 mod motions;
 mod output;
 mod pack;
@@ -928,11 +929,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let table_fingerprint = table_stamp.fingerprint.clone();
     let table = Table {
         plans: &text.plans,
-        clips: &clips,
         profiles: &profiles,
         skeletons: &skeletons,
         rejects: &rejects,
-        index: &index,
         motions: &motions,
     };
     let counts = crate::io::manifest::Counts::of(&clips, &rejects, drops_by_reason.clone());
@@ -956,6 +955,10 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     };
     let through = options.through.unwrap_or(Stage::Report);
     let mut stamps = workspace.take_seen();
+    // What the build report says of the clips, taken before the write stage takes them.
+    let n_clips = clips.len();
+    let n_mirrored = clips.iter().filter(|c| c.mirrored).count();
+    let actions = crate::io::manifest::action_counts(&clips);
     if through >= Stage::Write {
         options.progress.stage_started(Stage::Write.name(), 1);
         let write_ran = write_outputs(
@@ -965,6 +968,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             &table_fingerprint,
             &table,
             &companions,
+            output::Rows { clips, index },
         )?;
         stages.push(single_run(options, Stage::Write, write_ran));
         stamps.push(Miss {
@@ -972,7 +976,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             key: "*".into(),
             stamp: table_stamp,
         });
-        if through >= Stage::Report && clips.is_empty() {
+        if through >= Stage::Report && n_clips == 0 {
             // Nothing to describe: a report of an earlier build would describe rows that are gone.
             let stale = output.join("report");
             if stale.exists() {
@@ -1014,10 +1018,10 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         output: output.clone(),
         stages,
         captures: files,
-        clips: clips.len(),
-        mirrored: clips.iter().filter(|c| c.mirrored).count(),
+        clips: n_clips,
+        mirrored: n_mirrored,
         kinds: counts.source_kind,
-        actions: crate::io::manifest::action_counts(&clips),
+        actions,
         motion_types: counts.motion_type,
         unmapped_labels,
         drops_by_reason,

@@ -6,7 +6,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::motions::{MotionIndex, MotionSource, key};
+use super::held::{HeldClips, Summary};
+use super::motions::{MotionIndex, MotionRef, MotionSource, key};
 use super::{
     BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE,
     Reject, SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
@@ -129,14 +130,19 @@ pub(super) fn skeleton_json(
 /// What the write stage writes.
 pub(super) struct Table<'a> {
     pub(super) plans: &'a BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
-    pub(super) clips: &'a [Clip],
     pub(super) profiles: &'a BTreeMap<String, Profile>,
     pub(super) skeletons: &'a BTreeMap<String, serde_json::Value>,
     pub(super) rejects: &'a [Reject],
-    /// Where the frames of `clips` are.
-    pub(super) index: &'a MotionIndex,
     /// Reads them back.
     pub(super) motions: &'a MotionSource,
+}
+
+/// The table's rows before they are written: the clips in row order and where their frames are.
+pub(super) struct Rows {
+    /// The clips, sorted by id.
+    pub(super) clips: Vec<Clip>,
+    /// Where each one's frames are.
+    pub(super) index: MotionIndex,
 }
 
 /// One planned shard: its file and the clips (indices into the sorted clip list) it holds.
@@ -149,21 +155,25 @@ struct ShardPlan {
 /// Rough uncompressed size of a clip's row: the per-joint arrays dominate (positions 3, rotations
 /// 4, 6D rotations 6, velocities 3 floats per joint and frame; root, contacts and future root per
 /// frame), whether or not every feature column is switched on.
-fn row_bytes(clip: &Clip, index: &MotionIndex) -> u64 {
-    let frames = index.get(&key(clip)).map_or(0, |at| u64::from(at.frames()));
-    let joints = clip.skeleton.len() as u64;
+fn row_bytes(clip: Summary) -> u64 {
+    let frames = u64::from(clip.frames);
+    let joints = u64::from(clip.joints);
     frames * joints * (3 + 4 + 6 + 3) * 4 + frames * (3 + 9) * 4 + frames * 4 + 2048
 }
 
 /// Shards per split, in split order, each filled up to `target` bytes (at least one clip).
-fn plan_shards(clips: &[Clip], index: &MotionIndex, target: u64) -> Vec<ShardPlan> {
-    let splits = crate::stages::split::split_order(clips.iter().map(|c| c.split.clone()));
+fn plan_shards(clips: &HeldClips, target: u64) -> Vec<ShardPlan> {
+    let splits = crate::stages::split::split_order(clips.summaries().map(|(s, _)| s.clone()));
     let mut plans = Vec::new();
     for split in splits {
         let mut groups: Vec<Vec<usize>> = vec![Vec::new()];
         let mut size = 0u64;
-        for (i, c) in clips.iter().enumerate().filter(|(_, c)| c.split == split) {
-            let b = row_bytes(c, index);
+        for (i, (_, c)) in clips
+            .summaries()
+            .enumerate()
+            .filter(|(_, (s, _))| **s == split)
+        {
+            let b = row_bytes(c);
             if size + b > target && groups.last().is_some_and(|g| !g.is_empty()) {
                 groups.push(Vec::new());
                 size = 0;
@@ -554,6 +564,8 @@ fn switch(
 /// What one shard needs to be written or checked.
 struct ShardJob<'a> {
     table: &'a Table<'a>,
+    /// The rows' clips, in row order, each with where its frames are.
+    clips: &'a HeldClips,
     companions: &'a Companions,
     skeletons_json: &'a str,
     recorded: Option<&'a Recorded>,
@@ -576,10 +588,13 @@ struct ShardDone {
 impl ShardJob<'_> {
     /// The shard's content fingerprint: its rows without frames, where the frames are, and what
     /// the writer adds (skeletons, schema, features).
-    fn fingerprint(&self, plan: &ShardPlan) -> Result<String, BuildError> {
-        let held: Vec<&Clip> = plan.clips.iter().map(|&i| &self.table.clips[i]).collect();
-        let refs: Vec<Option<&super::motions::MotionRef>> =
-            held.iter().map(|c| self.table.index.get(&key(c))).collect();
+    fn fingerprint(
+        &self,
+        plan: &ShardPlan,
+        rows: &[(Clip, MotionRef)],
+    ) -> Result<String, BuildError> {
+        let held: Vec<&Clip> = rows.iter().map(|(c, _)| c).collect();
+        let refs: Vec<Option<&MotionRef>> = rows.iter().map(|(_, at)| Some(at)).collect();
         let encoded = crate::base::encoded_sha256(&(&held, &refs), &plan.file)?;
         Ok(super::Fingerprint::new("shard", 1)
             .text("rows", &encoded)
@@ -593,7 +608,9 @@ impl ShardJob<'_> {
     /// Writes the shard into the staging folder, or keeps the one in place when the last build
     /// wrote the same; gathers the normalisation statistics of its rows either way.
     fn run(&self, plan: &ShardPlan) -> Result<ShardDone, BuildError> {
-        let fingerprint = self.fingerprint(plan)?;
+        // The shard's clips, decoded once for its fingerprint and its rows.
+        let rows = self.clips.get(&plan.clips)?;
+        let fingerprint = self.fingerprint(plan, &rows)?;
         let kept = match self.recorded {
             Some(recorded)
                 if !self.force
@@ -610,7 +627,7 @@ impl ShardJob<'_> {
         let (sha256, bytes) = match kept {
             Some(kept) => {
                 if let Some(stats) = &mut stats {
-                    self.each_row_group(plan, |rows| {
+                    self.each_row_group(&rows, |rows| {
                         rows.iter().for_each(|r| stats.add_row(r));
                         Ok(())
                     })
@@ -618,7 +635,7 @@ impl ShardJob<'_> {
                 }
                 kept
             }
-            None => self.write(plan, stats.as_mut())?,
+            None => self.write(plan, &rows, stats.as_mut())?,
         };
         Ok(ShardDone {
             entry: crate::io::manifest::Shard {
@@ -636,6 +653,7 @@ impl ShardJob<'_> {
     fn write(
         &self,
         plan: &ShardPlan,
+        clips: &[(Clip, MotionRef)],
         mut stats: Option<&mut NormalizationStats>,
     ) -> Result<(String, u64), BuildError> {
         let path = self.staging.join(&plan.file);
@@ -649,7 +667,7 @@ impl ShardJob<'_> {
                     self.skeletons_json,
                     self.companions.zstd_level,
                 )?;
-                self.each_row_group(plan, |rows| {
+                self.each_row_group(clips, |rows| {
                     if let Some(stats) = stats.as_deref_mut() {
                         rows.iter().for_each(|r| stats.add_row(r));
                     }
@@ -682,28 +700,25 @@ impl ShardJob<'_> {
     /// all cores.
     fn each_row_group(
         &self,
-        plan: &ShardPlan,
+        clips: &[(Clip, MotionRef)],
         mut each: impl FnMut(&[Row<'_>]) -> Result<(), TableOrBuild>,
     ) -> Result<(), TableOrBuild> {
         let Table {
-            clips,
-            profiles,
-            index,
-            motions,
-            ..
+            profiles, motions, ..
         } = *self.table;
         // Each shard reads with its own recent-entry memory, so parallel shards do not evict
         // each other's chunks.
         let motions = motions.sibling();
-        for group in plan.clips.chunks(ROWS_PER_GROUP) {
-            let held: Vec<&Clip> = group.iter().map(|&i| &clips[i]).collect();
-            let mut order: Vec<usize> = (0..held.len()).collect();
-            order.sort_by_key(|&i| index.get(&key(held[i])));
-            let mut frames: Vec<Option<crate::motion::Motion>> = vec![None; held.len()];
+        for group in clips.chunks(ROWS_PER_GROUP) {
+            let held: Vec<&Clip> = group.iter().map(|(c, _)| c).collect();
+            let mut order: Vec<usize> = (0..group.len()).collect();
+            order.sort_by_key(|&i| &group[i].1);
+            let mut frames: Vec<Option<crate::motion::Motion>> = vec![None; group.len()];
             for i in order {
+                let (clip, at) = &group[i];
                 frames[i] = Some(
                     motions
-                        .motion_of(held[i], index)
+                        .motion(at, &clip.profile)
                         .map_err(TableOrBuild::Build)?,
                 );
             }
@@ -759,13 +774,13 @@ pub(super) fn write_outputs(
     fingerprint: &str,
     table: &Table<'_>,
     companions: &Companions,
+    rows: Rows,
 ) -> Result<bool, BuildError> {
+    let Rows { clips, index } = rows;
     let Table {
         plans,
-        clips,
         skeletons,
         rejects,
-        index,
         ..
     } = *table;
     let state_path = workspace.root().join(STATE_FILE);
@@ -778,7 +793,11 @@ pub(super) fn write_outputs(
         return Ok(false);
     }
     let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
-    let plans_for_shards = plan_shards(clips, index, companions.shard_bytes);
+    // From here on the clips are read a shard at a time: held compressed, they no longer grow
+    // the build's memory with the dataset.
+    let clips = HeldClips::new(clips, |c| index.get(&key(c)).cloned())?;
+    drop(index);
+    let plans_for_shards = plan_shards(&clips, companions.shard_bytes);
     // Normalisation statistics per split, gathered shard by shard as the rows pass; each
     // profile takes the training split's, or the first split's holding it (CMU in the demo).
     let with_stats = !plans_for_shards.is_empty();
@@ -793,6 +812,7 @@ pub(super) fn write_outputs(
     std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
     let job = ShardJob {
         table,
+        clips: &clips,
         companions,
         skeletons_json: &skeletons_json,
         recorded: recorded.as_ref(),
