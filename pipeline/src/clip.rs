@@ -235,3 +235,71 @@ impl Clip {
 pub fn skeleton_name(profile: &str, skeleton: &Skeleton) -> String {
     format!("{profile}:{}", skeleton.digest())
 }
+
+/// Skeletons kept once each for many clips stored together (a cache entry, a compressed block):
+/// each clip's `skeleton` is swapped for an empty placeholder before the clips are encoded and
+/// given back after they are decoded, so a few distinct skeletons are not repeated in every
+/// clip's bytes (about 3 KB each for Bandai Namco's) and decoded clips share them.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SkeletonTable {
+    skeletons: Vec<Arc<Skeleton>>,
+    /// Per clip taken, the index of its skeleton.
+    of: Vec<u32>,
+}
+
+impl SkeletonTable {
+    /// Takes the skeleton of each of `clips`, in order, leaving an empty one in its place.
+    pub fn take_all(clips: &mut [Clip]) -> SkeletonTable {
+        let mut table = SkeletonTable::default();
+        let empty = Arc::new(Skeleton { joints: Vec::new() });
+        for clip in clips {
+            table.take(clip, &empty);
+        }
+        table
+    }
+
+    /// Takes `clip`'s skeleton, leaving `empty` in its place; returns its index in the table.
+    pub fn take(&mut self, clip: &mut Clip, empty: &Arc<Skeleton>) -> u32 {
+        let skeleton = std::mem::replace(&mut clip.skeleton, Arc::clone(empty));
+        let found = self
+            .skeletons
+            .iter()
+            .position(|s| Arc::ptr_eq(s, &skeleton) || **s == *skeleton);
+        let index = match found {
+            Some(i) => i,
+            None => {
+                self.skeletons.push(skeleton);
+                self.skeletons.len() - 1
+            }
+        } as u32;
+        self.of.push(index);
+        index
+    }
+
+    /// The skeleton of the `n`-th clip taken.
+    pub fn skeleton_of(&self, n: usize) -> Option<&Arc<Skeleton>> {
+        let index = *self.of.get(n)?;
+        self.skeletons.get(index as usize)
+    }
+
+    /// Distinct skeletons held.
+    pub fn distinct(&self) -> usize {
+        self.skeletons.len()
+    }
+
+    /// Gives `clips` (the ones taken by [`SkeletonTable::take_all`], in the same order) their
+    /// skeletons back; `false` when the counts do not match (a damaged entry), clips unchanged.
+    pub fn give_all(&self, clips: &mut [Clip]) -> bool {
+        if clips.len() != self.of.len()
+            || self.of.iter().any(|&i| i as usize >= self.skeletons.len())
+        {
+            return false;
+        }
+        for (n, clip) in clips.iter_mut().enumerate() {
+            if let Some(skeleton) = self.skeleton_of(n) {
+                clip.skeleton = Arc::clone(skeleton);
+            }
+        }
+        true
+    }
+}

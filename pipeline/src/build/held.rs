@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use super::BuildError;
 use super::motions::MotionRef;
-use crate::clip::{Clip, Split};
+use crate::clip::{Clip, SkeletonTable, Split};
 use crate::motion::Skeleton;
 
 /// Clips per compressed block: large enough for zstd to find the texts' repetitions, small
@@ -39,8 +39,7 @@ pub(super) struct HeldClips {
     blocks: Vec<Box<[u8]>>,
     summaries: Vec<Summary>,
     splits: Vec<Split>,
-    skeleton_of: Vec<u32>,
-    skeletons: Vec<Arc<Skeleton>>,
+    skeletons: SkeletonTable,
 }
 
 /// What a block stores per clip: the clip with an empty skeleton, and its frames' location.
@@ -57,8 +56,7 @@ impl HeldClips {
             blocks: Vec::with_capacity(clips.len().div_ceil(BLOCK)),
             summaries: Vec::with_capacity(clips.len()),
             splits: Vec::new(),
-            skeleton_of: Vec::with_capacity(clips.len()),
-            skeletons: Vec::new(),
+            skeletons: SkeletonTable::default(),
         };
         let mut pending: Vec<Entry> = Vec::with_capacity(BLOCK);
         for mut clip in clips {
@@ -72,25 +70,13 @@ impl HeldClips {
                     held.splits.len() - 1
                 }
             };
-            let skeleton = std::mem::replace(&mut clip.skeleton, Arc::clone(&empty));
-            let joints = skeleton.len() as u32;
-            let shared = held
-                .skeletons
-                .iter()
-                .position(|s| Arc::ptr_eq(s, &skeleton) || **s == *skeleton);
-            let skeleton = match shared {
-                Some(i) => i,
-                None => {
-                    held.skeletons.push(skeleton);
-                    held.skeletons.len() - 1
-                }
-            };
+            let joints = clip.skeleton.len() as u32;
+            held.skeletons.take(&mut clip, &empty);
             held.summaries.push(Summary {
                 split: split as u16,
                 frames: motion.frames(),
                 joints,
             });
-            held.skeleton_of.push(skeleton as u32);
             pending.push((clip, motion));
             if pending.len() == BLOCK {
                 held.seal(&mut pending)?;
@@ -157,9 +143,8 @@ impl HeldClips {
             postcard::from_bytes(&bytes).map_err(|e| undecodable(block, &e.to_string()))?;
         for (i, (clip, _)) in entries.iter_mut().enumerate() {
             let skeleton = self
-                .skeleton_of
-                .get(block * BLOCK + i)
-                .and_then(|&s| self.skeletons.get(s as usize))
+                .skeletons
+                .skeleton_of(block * BLOCK + i)
                 .ok_or_else(|| undecodable(block, "a clip without its skeleton"))?;
             clip.skeleton = Arc::clone(skeleton);
         }
@@ -225,14 +210,14 @@ mod tests {
         }
         let distinct: std::collections::BTreeSet<*const Skeleton> =
             back.iter().map(|(c, _)| Arc::as_ptr(&c.skeleton)).collect();
-        assert_eq!(distinct.len(), held.skeletons.len());
+        assert_eq!(distinct.len(), held.skeletons.distinct());
         let mut values: Vec<&Skeleton> = Vec::new();
         for c in &many {
             if !values.contains(&&*c.skeleton) {
                 values.push(&c.skeleton);
             }
         }
-        assert_eq!(held.skeletons.len(), values.len());
+        assert_eq!(held.skeletons.distinct(), values.len());
         let frames: Vec<u32> = held.summaries().map(|(_, s)| s.frames).collect();
         assert_eq!(
             frames,
@@ -245,5 +230,28 @@ mod tests {
         assert_eq!(subset[2].0, many[many.len() - 1]);
         assert!(held.get(&[2, 2]).is_err());
         assert!(held.get(&[many.len()]).is_err());
+    }
+
+    #[test]
+    fn a_skeleton_table_gives_back_what_it_took_and_refuses_a_count_mismatch() {
+        let clips = fixture_clips();
+        let mut taken = clips.clone();
+        let table = SkeletonTable::take_all(&mut taken);
+        assert!(taken.iter().all(|c| c.skeleton.is_empty()));
+        let bytes = postcard::to_stdvec(&(&taken, &table)).expect("encoded");
+        let whole = postcard::to_stdvec(&clips).expect("encoded");
+        assert!(
+            bytes.len() < whole.len(),
+            "{} vs {}",
+            bytes.len(),
+            whole.len()
+        );
+        let (mut back, table): (Vec<Clip>, SkeletonTable) =
+            postcard::from_bytes(&bytes).expect("decoded");
+        let mut short = back[1..].to_vec();
+        assert!(!table.give_all(&mut short));
+        assert!(short.iter().all(|c| c.skeleton.is_empty()));
+        assert!(table.give_all(&mut back));
+        assert_eq!(back, clips);
     }
 }

@@ -559,6 +559,14 @@ fn items_pending_stage(items: &[Item]) -> Option<Stage> {
 
 /// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
 /// `None` in probe mode when its output is not cached.
+/// The compose stage's cache entry: the synthetic clips (their skeletons in the table), where
+/// their frames come from, and each distinct skeleton once.
+type ComposeEntry = (
+    crate::stages::compose::ComposeOutput,
+    Vec<motions::MotionRef>,
+    crate::clip::SkeletonTable,
+);
+
 fn compose(
     shared: &Shared<'_>,
     motions: &MotionSource,
@@ -606,7 +614,10 @@ fn compose(
                     );
                     vetoed.0.contains(&key).then_some("llm_incompatible")
                 },
-                |_, recipe| {
+                |clip, recipe| {
+                    // The composite's skeleton is a copy made when its source was read (a
+                    // mirror's); held clips share one copy of each.
+                    shared.skeletons.share(&mut clip.skeleton);
                     let source = |c: &Clip| {
                         index.get(&motions::key(c)).cloned().ok_or_else(|| {
                             BuildError::Motion(format!(
@@ -629,18 +640,21 @@ fn compose(
                     Ok::<(), BuildError>(())
                 },
             )?;
-            Ok::<_, BuildError>((out, refs))
+            let mut out = out;
+            // Stored with each distinct skeleton once, not once per synthetic clip.
+            let skeletons = crate::clip::SkeletonTable::take_all(&mut out.clips);
+            Ok::<_, BuildError>((out, refs, skeletons))
         })?;
-    let Some(((composed, refs), ran)): Option<(
-        (
-            crate::stages::compose::ComposeOutput,
-            Vec<motions::MotionRef>,
-        ),
-        bool,
-    )> = composed
+    let Some(((mut composed, refs, skeletons), ran)): Option<(ComposeEntry, bool)> = composed
     else {
         return Ok(None);
     };
+    if !skeletons.give_all(&mut composed.clips) || refs.len() != composed.clips.len() {
+        return Err(BuildError::Motion(format!(
+            "the {} cache entry is inconsistent; run the build again with --force",
+            crate::stages::compose::NAME
+        )));
+    }
     shared.workspace.prune(
         crate::stages::compose::NAME,
         &BTreeSet::from([stamp.fingerprint]),

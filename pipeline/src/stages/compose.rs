@@ -19,7 +19,7 @@ use crate::quality::{Plausibility, plausibility};
 /// Stage name.
 pub const NAME: &str = "compose";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 6;
+pub const VERSION: u32 = 7;
 
 pub use crate::config::SyntheticConfig;
 
