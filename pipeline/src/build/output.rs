@@ -15,7 +15,7 @@ use super::{
 use crate::base::HashingWriter;
 use crate::clip::{Clip, Split};
 use crate::io::normalization::NormalizationStats;
-use crate::io::parquet::{ROWS_PER_GROUP, Row, ShardWriter, TableError};
+use crate::io::parquet::{ROWS_PER_GROUP, Row, ShardWriter, TableError, rows_to_batch};
 use crate::motion::Profile;
 use rayon::prelude::*;
 
@@ -671,7 +671,10 @@ impl ShardJob<'_> {
                     if let Some(stats) = stats.as_deref_mut() {
                         rows.iter().for_each(|r| stats.add_row(r));
                     }
-                    Ok(writer.write(rows)?)
+                    // The rows' arrays are copied into the batch: let them go before encoding.
+                    let batch = rows_to_batch(&rows)?;
+                    drop(rows);
+                    Ok(writer.write_batch(&batch)?)
                 })?;
                 let (_, sha256, bytes) = writer.finish()?.finish();
                 Ok::<_, TableOrBuild>((sha256, bytes))
@@ -701,7 +704,7 @@ impl ShardJob<'_> {
     fn each_row_group(
         &self,
         clips: &[(Clip, MotionRef)],
-        mut each: impl FnMut(&[Row<'_>]) -> Result<(), TableOrBuild>,
+        mut each: impl FnMut(Vec<Row<'_>>) -> Result<(), TableOrBuild>,
     ) -> Result<(), TableOrBuild> {
         let Table {
             profiles, motions, ..
@@ -739,7 +742,9 @@ impl ShardJob<'_> {
                         Ok(Row::new(clip, motion, profile, &self.companions.features))
                     })
                     .collect::<Result<Vec<Row<'_>>, TableOrBuild>>()?;
-            each(&rows)?;
+            // The rows hold what they need of the frames.
+            drop(frames);
+            each(rows)?;
         }
         Ok(())
     }

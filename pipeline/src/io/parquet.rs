@@ -922,7 +922,13 @@ impl<W: Write + Send> ShardWriter<W> {
 
     /// Encodes `rows` (at most [`ROWS_PER_GROUP`]) as one row group.
     pub fn write(&mut self, rows: &[Row<'_>]) -> Result<(), TableError> {
-        self.writer.write(&rows_to_batch(rows)?)?;
+        self.write_batch(&rows_to_batch(rows)?)
+    }
+
+    /// Encodes `batch` (from [`rows_to_batch`], at most [`ROWS_PER_GROUP`] rows) as one row
+    /// group: the caller can let the rows go before the encoder's buffers grow.
+    pub fn write_batch(&mut self, batch: &RecordBatch) -> Result<(), TableError> {
+        self.writer.write(batch)?;
         self.writer.flush()?;
         Ok(())
     }
