@@ -715,7 +715,10 @@ impl ShardJob<'_> {
         for group in clips.chunks(ROWS_PER_GROUP) {
             let held: Vec<&Clip> = group.iter().map(|(c, _)| c).collect();
             let mut order: Vec<usize> = (0..group.len()).collect();
-            order.sort_by_key(|&i| &group[i].1);
+            // By the chunk a motion is made from first: a mirror (or a composite) is read right
+            // after its original, while the original's chunk is still decoded in the source's
+            // memory of recent entries, instead of decoding the chunk a second time.
+            order.sort_by_cached_key(|&i| (group[i].1.chunks().first().copied(), &group[i].1));
             let mut frames: Vec<Option<crate::motion::Motion>> = vec![None; group.len()];
             for i in order {
                 let (clip, at) = &group[i];

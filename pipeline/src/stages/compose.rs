@@ -179,50 +179,6 @@ pub fn sample<'c>(
     )
 }
 
-/// The draw as it was first written, scanning the whole group for each candidate: the oracle
-/// [`draw_pairs`] is tested against.
-#[cfg(test)]
-fn draw_pairs_by_scanning(
-    members: &[Vec<usize>],
-    group_of: &[usize],
-    capture_of: &[usize],
-    parts_of: &[u8],
-    cap: usize,
-    probability: f64,
-    mut rng_of: impl FnMut(usize) -> Rng,
-) -> Vec<(usize, usize)> {
-    let n = group_of.len();
-    let compatible =
-        |i: usize, j: usize| capture_of[i] != capture_of[j] && parts_of[i] & parts_of[j] == 0;
-    let mut count = vec![0usize; n];
-    let mut pairs = Vec::new();
-    // The partner each candidate chose on its turn: the pair {i, j} is taken when an
-    // earlier candidate j chose i (a candidate chooses once, on its own turn).
-    let mut chose: Vec<Option<usize>> = vec![None; n];
-    for i in 0..n {
-        let mut rng = rng_of(i);
-        if rng.unit() >= probability || count[i] >= cap {
-            continue;
-        }
-        let open: Vec<usize> = members[group_of[i]]
-            .iter()
-            .copied()
-            .filter(|&j| {
-                j != i && compatible(i, j) && count[j] < cap && !(j < i && chose[j] == Some(i))
-            })
-            .collect();
-        if open.is_empty() {
-            continue;
-        }
-        let j = open[rng.below(open.len())];
-        chose[i] = Some(j);
-        count[i] += 1;
-        count[j] += 1;
-        pairs.push((i, j));
-    }
-    pairs
-}
-
 /// 0/1 flags over positions `0..n` in a Fenwick tree: how many are set up to a position, and
 /// where the k-th set one is, in O(log n).
 struct Flags {
@@ -670,8 +626,51 @@ pub fn run<E: Send>(
 
 #[cfg(test)]
 mod tests {
-    use super::{Rng, draw_pairs, draw_pairs_by_scanning};
+    use super::{Rng, draw_pairs};
     use proptest::prelude::*;
+
+    /// The draw as it was first written, scanning the whole group for each candidate: the oracle
+    /// [`draw_pairs`] is tested against.
+    fn draw_pairs_by_scanning(
+        members: &[Vec<usize>],
+        group_of: &[usize],
+        capture_of: &[usize],
+        parts_of: &[u8],
+        cap: usize,
+        probability: f64,
+        mut rng_of: impl FnMut(usize) -> Rng,
+    ) -> Vec<(usize, usize)> {
+        let n = group_of.len();
+        let compatible =
+            |i: usize, j: usize| capture_of[i] != capture_of[j] && parts_of[i] & parts_of[j] == 0;
+        let mut count = vec![0usize; n];
+        let mut pairs = Vec::new();
+        // The partner each candidate chose on its turn: the pair {i, j} is taken when an
+        // earlier candidate j chose i (a candidate chooses once, on its own turn).
+        let mut chose: Vec<Option<usize>> = vec![None; n];
+        for i in 0..n {
+            let mut rng = rng_of(i);
+            if rng.unit() >= probability || count[i] >= cap {
+                continue;
+            }
+            let open: Vec<usize> = members[group_of[i]]
+                .iter()
+                .copied()
+                .filter(|&j| {
+                    j != i && compatible(i, j) && count[j] < cap && !(j < i && chose[j] == Some(i))
+                })
+                .collect();
+            if open.is_empty() {
+                continue;
+            }
+            let j = open[rng.below(open.len())];
+            chose[i] = Some(j);
+            count[i] += 1;
+            count[j] += 1;
+            pairs.push((i, j));
+        }
+        pairs
+    }
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(300))]
