@@ -258,8 +258,8 @@ impl SkeletonTable {
         table
     }
 
-    /// Takes `clip`'s skeleton, leaving `empty` in its place; returns its index in the table.
-    pub fn take(&mut self, clip: &mut Clip, empty: &Arc<Skeleton>) -> u32 {
+    /// Takes `clip`'s skeleton, leaving `empty` in its place.
+    pub fn take(&mut self, clip: &mut Clip, empty: &Arc<Skeleton>) {
         let skeleton = std::mem::replace(&mut clip.skeleton, Arc::clone(empty));
         let found = self
             .skeletons
@@ -273,7 +273,6 @@ impl SkeletonTable {
             }
         } as u32;
         self.of.push(index);
-        index
     }
 
     /// The skeleton of the `n`-th clip taken.

@@ -557,8 +557,6 @@ fn items_pending_stage(items: &[Item]) -> Option<Stage> {
     items.iter().filter_map(|i| i.pending).min()
 }
 
-/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
-/// `None` in probe mode when its output is not cached.
 /// The compose stage's cache entry: the synthetic clips (their skeletons in the table), where
 /// their frames come from, and each distinct skeleton once.
 type ComposeEntry = (
@@ -567,6 +565,8 @@ type ComposeEntry = (
     crate::clip::SkeletonTable,
 );
 
+/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
+/// `None` in probe mode when its output is not cached.
 fn compose(
     shared: &Shared<'_>,
     motions: &MotionSource,
