@@ -25,7 +25,7 @@ pub use crate::base::{
     write_atomic_with,
 };
 pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
-pub use workspace::{Ledger, Miss, StageLedger, Workspace};
+pub use workspace::{Ledger, Miss, SeenStamps, StageLedger, Workspace};
 
 use capture::{Item, Shared};
 use motions::{MotionIndex, MotionSource};
@@ -1056,7 +1056,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
         write_atomic(&output.join(REPORT_FILE), &json)?;
     }
-    save_ledger(workspace, &report.stages, &stamps)?;
+    save_ledger(workspace, &report.stages, stamps)?;
     Ok(report)
 }
 
@@ -1110,8 +1110,9 @@ fn table_stamp(
 fn save_ledger(
     workspace: &Workspace,
     runs: &[StageRun],
-    stamps: &[Miss],
+    stamps: SeenStamps,
 ) -> Result<(), BuildError> {
+    let stamps = stamps.into_vec()?;
     let mut ledger = Ledger::load(workspace);
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)

@@ -85,7 +85,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
     let staged = run_stages(config, &options, true)?;
     let workspace: &Workspace = &staged.shared.workspace;
     let ledger = Ledger::load(workspace);
-    let seen = workspace.take_seen();
+    let seen = workspace.take_seen().into_vec()?;
     let mut plans: BTreeMap<Stage, StagePlan> = Stage::ALL
         .into_iter()
         .filter(|s| *s <= through)

@@ -73,7 +73,7 @@ impl Ledger {
 }
 
 /// A stage item the probe found missing from the cache.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct Miss {
     /// Stage name.
     pub stage: String,
@@ -83,6 +83,54 @@ pub struct Miss {
     pub stamp: Stamp,
 }
 
+/// Stamps per compressed block of [`SeenStamps`].
+const SEEN_BLOCK: usize = 512;
+
+/// The item stamps a run has seen, for the ledger and `plan`: held as zstd-compressed postcard
+/// blocks, since one stamp per capture and stage (a path, a digest and each named part's digest:
+/// about 1.4 KB in the heap) grew a build's memory with the dataset, about 12 MB per 2,902
+/// captures of Bandai Namco 2, held to the end of the build.
+#[derive(Debug, Default)]
+pub struct SeenStamps {
+    /// Sealed blocks: the encoded length and the compressed bytes.
+    blocks: Vec<(usize, Vec<u8>)>,
+    pending: Vec<Miss>,
+}
+
+impl SeenStamps {
+    /// Adds a stamp.
+    pub fn push(&mut self, miss: Miss) {
+        self.pending.push(miss);
+        if self.pending.len() >= SEEN_BLOCK {
+            // A block that cannot be encoded stays pending: nothing is dropped.
+            if let Ok(encoded) = postcard::to_stdvec(&self.pending)
+                && let Ok(packed) = zstd::bulk::compress(&encoded, 1)
+            {
+                self.blocks.push((encoded.len(), packed));
+                self.pending.clear();
+            }
+        }
+    }
+
+    /// Every stamp, in the order added.
+    pub fn into_vec(self) -> Result<Vec<Miss>, WorkspaceError> {
+        let damaged = |e: String| WorkspaceError::Encode {
+            what: "the stamps seen in this build, read back".to_string(),
+            message: e,
+        };
+        let mut all = Vec::with_capacity(self.blocks.len() * SEEN_BLOCK + self.pending.len());
+        for (len, packed) in &self.blocks {
+            let encoded =
+                zstd::bulk::decompress(packed, *len).map_err(|e| damaged(e.to_string()))?;
+            let block: Vec<Miss> =
+                postcard::from_bytes(&encoded).map_err(|e| damaged(e.to_string()))?;
+            all.extend(block);
+        }
+        all.extend(self.pending);
+        Ok(all)
+    }
+}
+
 /// The per-item stage cache under `<output>/.motionforge/cache/<stage>/`, entries named by
 /// fingerprint and packed into a few files per stage ([`super::pack`]). In probe mode (for
 /// `plan`) nothing is computed or stored: misses are collected instead.
@@ -90,7 +138,7 @@ pub struct Miss {
 pub struct Workspace {
     root: PathBuf,
     probe: bool,
-    seen: std::sync::Arc<std::sync::Mutex<Vec<Miss>>>,
+    seen: std::sync::Arc<std::sync::Mutex<SeenStamps>>,
     packs: std::sync::Arc<super::pack::Packs>,
 }
 
@@ -119,9 +167,8 @@ impl Workspace {
     }
 
     /// Every item stamp seen in this run so far (hits and misses), for the ledger, handed over
-    /// rather than copied (one stamp per capture and stage: a copy was tens of MB at a few times
-    /// Bandai Namco 2); a later call returns only what was seen since.
-    pub fn take_seen(&self) -> Vec<Miss> {
+    /// rather than copied; a later call returns only what was seen since.
+    pub fn take_seen(&self) -> SeenStamps {
         self.seen
             .lock()
             .map(|mut v| std::mem::take(&mut *v))
@@ -227,6 +274,36 @@ impl Workspace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn seen_stamps_come_back_whole_and_in_order_across_blocks() {
+        // Two sealed blocks and a pending part, with the parts a real stamp has.
+        let stamps: Vec<Miss> = (0..SEEN_BLOCK * 2 + 7)
+            .map(|i| Miss {
+                stage: ["ingest", "segment", "mirror"][i % 3].to_string(),
+                key: format!("data/dataset-2_walk_normal_{i:03}.bvh"),
+                stamp: crate::base::Fingerprint::new("ingest", 4)
+                    .text("file content", &i.to_string())
+                    .text("file path", "data")
+                    .stamp(),
+            })
+            .collect();
+        let mut seen = SeenStamps::default();
+        for m in stamps.clone() {
+            seen.push(m);
+        }
+        assert_eq!(seen.blocks.len(), 2);
+        assert_eq!(seen.pending.len(), 7);
+        assert_eq!(seen.into_vec().unwrap(), stamps);
+        // A damaged block is an error, not a silently shorter ledger.
+        let mut seen = SeenStamps::default();
+        for m in stamps {
+            seen.push(m);
+        }
+        seen.blocks[1].1.truncate(10);
+        let err = seen.into_vec().unwrap_err().to_string();
+        assert!(err.contains("stamps seen in this build"), "{err}");
+    }
 
     #[test]
     fn entries_are_found_again_by_a_new_workspace() {
