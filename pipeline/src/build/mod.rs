@@ -427,7 +427,10 @@ fn run_stages<'a>(
         stages.push(capture_run(&items, Stage::Mirror, progress));
     }
 
-    let mut clips: Vec<Clip> = Vec::new();
+    // Exactly: grown by doubling, the list kept up to a third of its capacity (a `Clip` is a few
+    // hundred bytes before its strings) unused until the synthetic pairs are added.
+    let mut clips: Vec<Clip> =
+        Vec::with_capacity(items.iter().map(|i| i.clips.len() + i.mirrored.len()).sum());
     let mut index = MotionIndex::new();
     let mut rejects: Vec<Reject> = Vec::new();
     let mut drops_by_reason = BTreeMap::new();
