@@ -150,10 +150,8 @@ pub fn excerpt(text: &str) -> String {
     }
 }
 
-/// Lines of `text` split at LF, CRLF or a lone CR (classic Mac exports end lines with CR only),
-/// each with the byte offset where it starts.
-/// The whitespace-separated words of `line`: `split_ascii_whitespace` with a byte loop, which the
-/// frame lines (most of a capture's bytes) go through several times faster.
+/// The whitespace-separated words of `line`, as `split_ascii_whitespace` gives them, found with a
+/// plain byte loop: the frame lines, most of a capture's bytes, all pass through here.
 fn words(line: &str) -> impl Iterator<Item = &str> {
     let bytes = line.as_bytes();
     let mut at = 0usize;
@@ -170,6 +168,8 @@ fn words(line: &str) -> impl Iterator<Item = &str> {
     })
 }
 
+/// Lines of `text` split at LF, CRLF or a lone CR (classic Mac exports end lines with CR only),
+/// each with the byte offset where it starts.
 fn split_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     let bytes = text.as_bytes();
     let mut start = 0usize;
