@@ -162,8 +162,8 @@ pub struct Clip {
     pub clip_id: String,
     /// Real single, real pair or synthetic.
     pub kind: SourceKind,
-    /// The capture.
-    pub capture: CaptureRef,
+    /// The capture, shared by the clips cut from it and their mirrors.
+    pub capture: Arc<CaptureRef>,
     /// Half-open frame range `[start, end)` in the capture's own frames.
     pub frame_range: (u64, u64),
     /// True for the mirrored copy.
@@ -206,11 +206,67 @@ pub struct Clip {
     /// Plausibility metrics (foot skating, ground and self penetration, lean).
     pub plausibility: Option<crate::quality::Plausibility>,
     /// Extra fields from the annotation (file-name groups, sidecar keys).
-    pub attributes: BTreeMap<String, String>,
+    pub attributes: Attributes,
     /// Skeleton profile name.
     pub profile: String,
     /// The skeleton the clip's motion is on (the capture's).
     pub skeleton: Arc<Skeleton>,
+}
+
+/// A clip's extra fields (file-name groups, sidecar keys, a synthetic pair's offsets): a map
+/// from key to value, held as a list sorted by key and shared by the copies of a clip (its
+/// mirror), since every clip carries one and a `BTreeMap` of a few entries allocates a whole node
+/// (about 540 bytes) besides its strings. Encoded as the map it is.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Attributes(Arc<[(String, String)]>);
+
+impl Attributes {
+    /// The value of `key`.
+    pub fn get(&self, key: &str) -> Option<&str> {
+        self.0
+            .binary_search_by(|(k, _)| k.as_str().cmp(key))
+            .ok()
+            .map(|i| self.0[i].1.as_str())
+    }
+
+    /// Every key and value, by key.
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = (&str, &str)> {
+        self.0.iter().map(|(k, v)| (k.as_str(), v.as_str()))
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// True when there is no entry.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+impl From<BTreeMap<String, String>> for Attributes {
+    fn from(map: BTreeMap<String, String>) -> Attributes {
+        Attributes(map.into_iter().collect())
+    }
+}
+
+impl<const N: usize> From<[(String, String); N]> for Attributes {
+    fn from(entries: [(String, String); N]) -> Attributes {
+        Attributes::from(BTreeMap::from(entries))
+    }
+}
+
+impl Serialize for Attributes {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_map(self.0.iter().map(|(k, v)| (k, v)))
+    }
+}
+
+impl<'de> Deserialize<'de> for Attributes {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Attributes, D::Error> {
+        BTreeMap::<String, String>::deserialize(deserializer).map(Attributes::from)
+    }
 }
 
 /// A clip with its frames: its motion resampled to the dataset rate, in the capture's units and
@@ -300,5 +356,74 @@ impl SkeletonTable {
             }
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parts::{LabelSource, LabelSources};
+    use std::collections::BTreeSet;
+
+    /// Attributes and label sources are held as sorted lists but must encode exactly as the map
+    /// and set they replaced: cache fingerprints, the table fingerprint and JSON readers see them.
+    #[test]
+    fn compact_attributes_and_label_sources_encode_as_the_map_and_set_they_replace() {
+        let map = BTreeMap::from([
+            ("take".to_string(), "001".to_string()),
+            ("content".to_string(), "raise-up-both-hands".to_string()),
+            ("sidecar.style".to_string(), "0".to_string()),
+        ]);
+        let attributes = Attributes::from(map.clone());
+        assert_eq!(
+            postcard::to_stdvec(&attributes).unwrap(),
+            postcard::to_stdvec(&map).unwrap()
+        );
+        assert_eq!(
+            serde_json::to_string(&attributes).unwrap(),
+            serde_json::to_string(&map).unwrap()
+        );
+        let back: Attributes = postcard::from_bytes(&postcard::to_stdvec(&map).unwrap()).unwrap();
+        assert_eq!(back, attributes);
+        assert_eq!(attributes.get("take"), Some("001"));
+        assert_eq!(attributes.get("style"), None);
+        assert_eq!(
+            attributes.iter().map(|(k, _)| k).collect::<Vec<_>>(),
+            map.keys().map(String::as_str).collect::<Vec<_>>()
+        );
+
+        let set = BTreeSet::from([
+            LabelSource::Velocity,
+            LabelSource::Llm {
+                model: "gpt-3".into(),
+            },
+            LabelSource::Lexicon,
+        ]);
+        // Given out of order and with a repeat, held as the set would be.
+        let sources: LabelSources = [
+            LabelSource::Velocity,
+            LabelSource::Lexicon,
+            LabelSource::Llm {
+                model: "gpt-3".into(),
+            },
+            LabelSource::Lexicon,
+        ]
+        .into_iter()
+        .collect();
+        assert_eq!(
+            postcard::to_stdvec(&sources).unwrap(),
+            postcard::to_stdvec(&set).unwrap()
+        );
+        assert_eq!(
+            serde_json::to_string(&sources).unwrap(),
+            serde_json::to_string(&set).unwrap()
+        );
+        let back: LabelSources =
+            serde_json::from_str(&serde_json::to_string(&set).unwrap()).unwrap();
+        assert_eq!(back, sources);
+        assert_eq!(
+            sources.to_string(),
+            "embedded:lexicon+embedded:velocity+llm:gpt-3"
+        );
     }
 }

@@ -123,6 +123,22 @@ impl Packs {
         fingerprint: &str,
         body: &[u8],
     ) -> Result<(), WorkspaceError> {
+        self.write_with(cache, stage, fingerprint, body.len() as u64, |out| {
+            out.write_all(body)
+        })
+    }
+
+    /// Like [`Packs::write`], for a body of `len` bytes that `fill` writes straight into the
+    /// pack, so a large entry is never held whole in memory. A body of another length is an
+    /// error and leaves a record the scan stops at, as a torn one.
+    pub(super) fn write_with(
+        &self,
+        cache: &Path,
+        stage: &str,
+        fingerprint: &str,
+        len: u64,
+        fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+    ) -> Result<(), WorkspaceError> {
         let mut stages = self.lock();
         let packs = scanned(&mut stages, cache, stage);
         // The writer is taken out while appending: after a failed append it is not put back
@@ -155,14 +171,13 @@ impl Packs {
             }
         };
         let (start, pack) = (writer.len, writer.pack);
-        append_record(&mut writer.file, fingerprint, body).map_err(|source| {
+        append_record(&mut writer.file, fingerprint, len, fill).map_err(|source| {
             WorkspaceError::Io {
                 path: packs.packs[pack].path.clone(),
                 source,
             }
         })?;
         let offset = start + HEADER + fingerprint.len() as u64;
-        let len = body.len() as u64;
         writer.len = offset + len + FOOTER;
         packs.writer = Some(writer);
         packs.packs[pack]
@@ -360,18 +375,56 @@ fn scan_pack(file: &File) -> Vec<(String, u64, u64, u64)> {
     records
 }
 
-fn append_record(file: &mut File, fingerprint: &str, body: &[u8]) -> std::io::Result<()> {
+fn append_record(
+    file: &mut File,
+    fingerprint: &str,
+    len: u64,
+    fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let mut header = Vec::with_capacity(HEADER as usize + fingerprint.len());
     header.extend_from_slice(MAGIC);
     header.extend_from_slice(&(fingerprint.len() as u32).to_le_bytes());
-    header.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    header.extend_from_slice(&len.to_le_bytes());
     header.extend_from_slice(fingerprint.as_bytes());
     file.write_all(&header)?;
-    file.write_all(body)?;
+    let mut body = Counted {
+        inner: std::io::BufWriter::with_capacity(BODY_BUFFER, &mut *file),
+        written: 0,
+    };
+    fill(&mut body)?;
+    body.inner.flush()?;
+    if body.written != len {
+        return Err(std::io::Error::other(format!(
+            "a cache entry of {} bytes where {len} were announced",
+            body.written
+        )));
+    }
+    drop(body);
     let mut footer = [0u8; FOOTER as usize];
-    footer[..8].copy_from_slice(&(body.len() as u64).to_le_bytes());
+    footer[..8].copy_from_slice(&len.to_le_bytes());
     footer[8..].copy_from_slice(ENTRY_MARK);
     file.write_all(&footer)
+}
+
+/// Write buffer of a record's body: a large entry reaches the file in pieces of this size.
+const BODY_BUFFER: usize = 256 * 1024;
+
+/// A writer that counts what passes through it.
+struct Counted<W: Write> {
+    inner: W,
+    written: u64,
+}
+
+impl<W: Write> Write for Counted<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.written += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 /// Copies the `live` records of `from` into a new pack at `to`; their places there.
@@ -389,7 +442,7 @@ fn rewrite(
         for (fp, _, offset, len) in live {
             let mut body = vec![0u8; usize::try_from(*len).map_err(std::io::Error::other)?];
             source.read_exact_at(&mut body, *offset)?;
-            append_record(&mut out, fp, &body)?;
+            append_record(&mut out, fp, body.len() as u64, |w| w.write_all(&body))?;
             let body_at = pos + HEADER + fp.len() as u64;
             records.push((fp.clone(), pos, body_at, *len));
             pos = body_at + len + FOOTER;
@@ -450,6 +503,32 @@ mod tests {
         zeroed[first_end - 8..first_end].fill(0);
         fs::write(&path, &zeroed).unwrap();
         assert_eq!(Packs::default().read(cache, "s", "a"), None);
+    }
+
+    #[test]
+    fn a_streamed_body_reads_back_and_one_of_the_wrong_length_is_refused_not_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = dir.path();
+        let packs = Packs::default();
+        // Larger than the write buffer, written in uneven pieces.
+        let big = body(3, 3 * BODY_BUFFER + 17);
+        packs
+            .write_with(cache, "s", "big", big.len() as u64, |out| {
+                for piece in big.chunks(100_003) {
+                    out.write_all(piece)?;
+                }
+                Ok(())
+            })
+            .unwrap();
+        // One byte short of what was announced: an error, and the record is not found.
+        let short = packs.write_with(cache, "s", "short", 10, |out| out.write_all(&[7u8; 9]));
+        assert!(short.is_err());
+        packs.write(cache, "s", "after", &body(4, 20)).unwrap();
+        for fresh in [&packs, &Packs::default()] {
+            assert_eq!(fresh.read(cache, "s", "big"), Some(big.clone()));
+            assert_eq!(fresh.read(cache, "s", "short"), None);
+            assert_eq!(fresh.read(cache, "s", "after"), Some(body(4, 20)));
+        }
     }
 
     #[test]

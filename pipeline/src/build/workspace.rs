@@ -86,6 +86,10 @@ pub struct Miss {
 /// Stamps per compressed block of [`SeenStamps`].
 const SEEN_BLOCK: usize = 512;
 
+/// Entries larger than this are encoded straight into their pack rather than into a buffer
+/// first; smaller ones are encoded outside the packs' lock, so the cores do not wait on it.
+const STREAMED_ENTRY: usize = 1 << 20;
+
 /// The item stamps a run has seen, for the ledger and `plan`: held as zstd-compressed postcard
 /// blocks, since one stamp per capture and stage (a path, a digest and each named part's digest:
 /// about 1.4 KB in the heap) grew a build's memory with the dataset, about 12 MB per 2,902
@@ -248,6 +252,17 @@ impl Workspace {
         // Sized first: grown by doubling, the buffer of a large entry (the compose stage's, 21 MB
         // at four times Bandai Namco 2) held up to twice its size at the build's peak.
         let size = postcard::experimental::serialized_size(value).map_err(encode)?;
+        if size > STREAMED_ENTRY {
+            // Encoded straight into the pack: held whole, the compose stage's entry was the
+            // largest single allocation at the build's peak.
+            return self
+                .packs
+                .write_with(&self.cache(), stage, fingerprint, size as u64, |out| {
+                    postcard::to_io(value, out)
+                        .map(drop)
+                        .map_err(std::io::Error::other)
+                });
+        }
         let mut bytes = vec![0u8; size];
         let used = postcard::to_slice(value, &mut bytes).map_err(encode)?.len();
         bytes.truncate(used);

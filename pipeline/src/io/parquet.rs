@@ -642,7 +642,7 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
     )));
     for clip in clips {
         let entries = attributes.values();
-        for (k, v) in &clip.attributes {
+        for (k, v) in clip.attributes.iter() {
             for (i, text) in [k, v].into_iter().enumerate() {
                 if let Some(b) = entries.field_builder::<StringBuilder>(i) {
                     b.append_value(text);

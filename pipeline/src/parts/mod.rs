@@ -71,19 +71,43 @@ impl fmt::Display for LabelSource {
 }
 
 /// The labellers of a clip's parts: one, or for a real pair of two texts, each text's (written
-/// joined by `+`).
+/// joined by `+`). A set, held as a sorted list without repeats: every clip carries one, and a
+/// `BTreeSet` of one element allocates a whole node (about 370 bytes). It is encoded as the set
+/// was (a sequence in order), and decoding sorts and removes repeats again.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub struct LabelSources(pub std::collections::BTreeSet<LabelSource>);
+#[serde(from = "std::collections::BTreeSet<LabelSource>")]
+pub struct LabelSources(Vec<LabelSource>);
+
+impl From<std::collections::BTreeSet<LabelSource>> for LabelSources {
+    fn from(set: std::collections::BTreeSet<LabelSource>) -> LabelSources {
+        LabelSources(set.into_iter().collect())
+    }
+}
+
+impl FromIterator<LabelSource> for LabelSources {
+    fn from_iter<I: IntoIterator<Item = LabelSource>>(sources: I) -> LabelSources {
+        let mut all: Vec<LabelSource> = sources.into_iter().collect();
+        all.sort();
+        all.dedup();
+        all.shrink_to_fit();
+        LabelSources(all)
+    }
+}
 
 impl LabelSources {
     /// A single source.
     pub fn one(source: LabelSource) -> LabelSources {
-        LabelSources(std::collections::BTreeSet::from([source]))
+        LabelSources(vec![source])
     }
 
     /// True when `source` is the only one.
     pub fn is_only(&self, source: &LabelSource) -> bool {
-        self.0.len() == 1 && self.0.contains(source)
+        self.0.len() == 1 && self.0[0] == *source
+    }
+
+    /// The sources, in order.
+    pub fn iter(&self) -> impl Iterator<Item = &LabelSource> {
+        self.0.iter()
     }
 }
 

@@ -471,6 +471,9 @@ pub fn run<E: Send>(
         |c: &Clip| -> Option<&Profile> { profiles.get(&c.skeleton_id()).and_then(Option::as_ref) };
     let (pairs, report) = sample(clips, config, seed, split_of);
     out.report = report;
+    // At most one composite per pair: grown by doubling, the list (a few hundred bytes per clip
+    // before its strings) kept up to half its capacity unused while the stage's entry is stored.
+    out.clips.reserve_exact(pairs.len());
     // Composed and measured in parallel a batch at a time (memory stays a batch of composites),
     // then kept in sampling order.
     for batch in pairs.chunks(PAIR_BATCH) {
@@ -584,7 +587,7 @@ pub fn run<E: Send>(
                 labels: a.labels.iter().chain(&b.labels).cloned().collect(),
                 annotation: "synthetic".into(),
                 annotation_origin: format!("{} + {}", a.annotation_origin, b.annotation_origin),
-                attributes: BTreeMap::from([
+                attributes: crate::clip::Attributes::from([
                     ("start_a".to_string(), composite.starts[0].to_string()),
                     ("start_b".to_string(), composite.starts[1].to_string()),
                     ("action_kept".to_string(), format!("{kept:.3}")),

@@ -341,10 +341,8 @@ pub fn apply_labels(
                 .flatten()
                 .filter_map(|l| l.parts)
                 .fold(PartSet::default(), |a, b| a | b);
-            let sources: BTreeSet<LabelSource> =
-                found.iter().flatten().map(|l| l.source.clone()).collect();
+            let sources: LabelSources = found.iter().flatten().map(|l| l.source.clone()).collect();
             clip.parts = Some(parts);
-            let sources = LabelSources(sources);
             let lexicon_only = sources.is_only(&LabelSource::Lexicon);
             clip.label_source = Some(sources);
             if clip.kind == SourceKind::RealSingle

@@ -250,7 +250,10 @@ pub fn run_with<E>(
         }
     }
 
-    let positions_cache = ClipMaker { input };
+    let positions_cache = ClipMaker {
+        input,
+        capture: std::sync::Arc::new(input.capture.capture.clone()),
+    };
     let mut clips: Vec<Clip> = Vec::new();
     for k in &kept {
         match positions_cache.single(k) {
@@ -327,6 +330,8 @@ pub fn run_with<E>(
 
 struct ClipMaker<'a, 'b> {
     input: &'a SegmentInput<'b>,
+    /// The capture's reference, shared by every clip cut from it.
+    capture: std::sync::Arc<crate::clip::CaptureRef>,
 }
 
 impl ClipMaker<'_, '_> {
@@ -351,7 +356,7 @@ impl ClipMaker<'_, '_> {
         let clip = Clip {
             clip_id: format!("{}/{}:{start}-{end}", capture.capture.source, capture.stem),
             kind: SourceKind::RealSingle,
-            capture: capture.capture.clone(),
+            capture: std::sync::Arc::clone(&self.capture),
             frame_range: (start, end),
             mirrored: false,
             split: Split::default(),
@@ -361,7 +366,7 @@ impl ClipMaker<'_, '_> {
             labels: Vec::new(),
             annotation: input.kind.to_string(),
             annotation_origin: input.annotation.origin.clone(),
-            attributes: input.annotation.attributes.clone(),
+            attributes: input.annotation.attributes.clone().into(),
             profile: capture.profile.clone(),
             motion_type: None,
             hand: None,
