@@ -90,18 +90,43 @@ const SEEN_BLOCK: usize = 512;
 /// first; smaller ones are encoded outside the packs' lock, so the cores do not wait on it.
 const STREAMED_ENTRY: usize = 1 << 20;
 
-/// The item stamps a run has seen, for the ledger and `plan`: held as zstd-compressed postcard
-/// blocks, since one stamp per capture and stage (a path, a digest and each named part's digest:
-/// about 1.4 KB in the heap) grew a build's memory with the dataset, about 12 MB per 2,902
-/// captures of Bandai Namco 2, held to the end of the build.
+/// The item stamps a run has seen, for the ledger and `plan`: encoded with postcard and
+/// compressed with zstd in blocks, which go to a temporary file in the workspace (removed from
+/// the folder as soon as it is opened) as they are sealed.
+/// One stamp per capture and stage (a path, a digest and each named part's digest: about 1.4 KB
+/// in the heap, about 250 bytes compressed) grew a build's memory with the dataset, and the
+/// compressed blocks still did (11 MB at four times Bandai Namco 2) until the end of the build.
+/// A block the file cannot take stays in memory: nothing is dropped.
 #[derive(Debug, Default)]
 pub struct SeenStamps {
-    /// Sealed blocks: the encoded length and the compressed bytes.
-    blocks: Vec<(usize, Vec<u8>)>,
+    /// Sealed blocks, in order.
+    blocks: Vec<SeenBlock>,
     pending: Vec<Miss>,
+    /// The folder of the spill file; `None` keeps every block in memory (probe mode, which
+    /// writes nothing).
+    dir: Option<PathBuf>,
+    /// Where sealed blocks go, opened with the first one (`None` also when it could not be).
+    spill: Option<std::fs::File>,
+    /// Bytes written to `spill`.
+    spilled: u64,
+}
+
+/// A sealed block of stamps: its encoded length, and the compressed bytes or where they are.
+#[derive(Debug)]
+enum SeenBlock {
+    Held { len: usize, packed: Vec<u8> },
+    Spilled { len: usize, at: u64, packed: usize },
 }
 
 impl SeenStamps {
+    /// Stamps whose sealed blocks go to a file in `dir` (created when missing).
+    pub fn spilling_in(dir: &Path) -> SeenStamps {
+        SeenStamps {
+            dir: Some(dir.to_path_buf()),
+            ..SeenStamps::default()
+        }
+    }
+
     /// Adds a stamp.
     pub fn push(&mut self, miss: Miss) {
         self.pending.push(miss);
@@ -110,22 +135,58 @@ impl SeenStamps {
             if let Ok(encoded) = postcard::to_stdvec(&self.pending)
                 && let Ok(packed) = zstd::bulk::compress(&encoded, 1)
             {
-                self.blocks.push((encoded.len(), packed));
+                let block = self.spill(encoded.len(), packed);
+                self.blocks.push(block);
                 self.pending.clear();
             }
         }
     }
 
+    fn spill(&mut self, len: usize, packed: Vec<u8>) -> SeenBlock {
+        use std::os::unix::fs::FileExt;
+        if self.blocks.is_empty()
+            && let Some(dir) = &self.dir
+        {
+            self.spill = open_unlinked(dir);
+        }
+        if let Some(file) = &self.spill
+            && file.write_all_at(&packed, self.spilled).is_ok()
+        {
+            let at = self.spilled;
+            self.spilled += packed.len() as u64;
+            return SeenBlock::Spilled {
+                len,
+                at,
+                packed: packed.len(),
+            };
+        }
+        SeenBlock::Held { len, packed }
+    }
+
     /// Every stamp, in the order added.
     pub fn into_vec(self) -> Result<Vec<Miss>, WorkspaceError> {
+        use std::os::unix::fs::FileExt;
         let damaged = |e: String| WorkspaceError::Encode {
             what: "the stamps seen in this build, read back".to_string(),
             message: e,
         };
         let mut all = Vec::with_capacity(self.blocks.len() * SEEN_BLOCK + self.pending.len());
-        for (len, packed) in &self.blocks {
+        for block in &self.blocks {
+            let (len, packed) = match block {
+                SeenBlock::Held { len, packed } => (*len, std::borrow::Cow::Borrowed(packed)),
+                SeenBlock::Spilled { len, at, packed } => {
+                    let file = self
+                        .spill
+                        .as_ref()
+                        .ok_or_else(|| damaged("the spill file is gone".into()))?;
+                    let mut bytes = vec![0u8; *packed];
+                    file.read_exact_at(&mut bytes, *at)
+                        .map_err(|e| damaged(e.to_string()))?;
+                    (*len, std::borrow::Cow::Owned(bytes))
+                }
+            };
             let encoded =
-                zstd::bulk::decompress(packed, *len).map_err(|e| damaged(e.to_string()))?;
+                zstd::bulk::decompress(&packed, len).map_err(|e| damaged(e.to_string()))?;
             let block: Vec<Miss> =
                 postcard::from_bytes(&encoded).map_err(|e| damaged(e.to_string()))?;
             all.extend(block);
@@ -134,6 +195,28 @@ impl SeenStamps {
         Ok(all)
     }
 }
+
+/// A new file in `dir`, open for reading and writing and already removed from the folder, so
+/// the system deletes it when it is closed, however the build ends.
+fn open_unlinked(dir: &Path) -> Option<std::fs::File> {
+    std::fs::create_dir_all(dir).ok()?;
+    let path = dir.join(format!(
+        "seen-{}-{}.tmp",
+        std::process::id(),
+        SPILLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    ));
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create_new(true)
+        .open(&path)
+        .ok()?;
+    std::fs::remove_file(&path).ok()?;
+    Some(file)
+}
+
+/// Spill files opened by this process, for unique names.
+static SPILLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// The per-item stage cache under `<output>/.motionforge/cache/<stage>/`, entries named by
 /// fingerprint and packed into a few files per stage ([`super::pack`]). In probe mode (for
@@ -149,10 +232,11 @@ pub struct Workspace {
 impl Workspace {
     /// The workspace of an output folder.
     pub fn new(output: &Path) -> Workspace {
+        let root = output.join(".motionforge");
         Workspace {
-            root: output.join(".motionforge"),
+            seen: std::sync::Arc::new(std::sync::Mutex::new(SeenStamps::spilling_in(&root))),
+            root,
             probe: false,
-            seen: Default::default(),
             packs: Default::default(),
         }
     }
@@ -161,6 +245,7 @@ impl Workspace {
     pub fn probing(output: &Path) -> Workspace {
         Workspace {
             probe: true,
+            seen: Default::default(),
             ..Workspace::new(output)
         }
     }
@@ -309,21 +394,61 @@ mod tests {
                     .stamp(),
             })
             .collect();
-        let mut seen = SeenStamps::default();
+        let dir = tempfile::tempdir().unwrap();
+        let mut seen = SeenStamps::spilling_in(dir.path());
         for m in stamps.clone() {
             seen.push(m);
         }
         assert_eq!(seen.blocks.len(), 2);
+        assert!(
+            seen.blocks
+                .iter()
+                .all(|b| matches!(b, SeenBlock::Spilled { .. })),
+            "sealed blocks leave memory"
+        );
         assert_eq!(seen.pending.len(), 7);
         assert_eq!(seen.into_vec().unwrap(), stamps);
-        // A damaged block is an error, not a silently shorter ledger.
-        let mut seen = SeenStamps::default();
-        for m in stamps {
+        // A damaged block is an error, not a silently shorter ledger: held in memory, or cut
+        // short in the spill file.
+        let mut seen = SeenStamps::spilling_in(dir.path());
+        for m in stamps.clone() {
             seen.push(m);
         }
-        seen.blocks[1].1.truncate(10);
+        let SeenBlock::Spilled { len, at, packed } = seen.blocks[1] else {
+            panic!("a spilled block");
+        };
+        seen.blocks[1] = SeenBlock::Held {
+            len,
+            packed: vec![0u8; 10],
+        };
         let err = seen.into_vec().unwrap_err().to_string();
         assert!(err.contains("stamps seen in this build"), "{err}");
+        let mut seen = SeenStamps::spilling_in(dir.path());
+        for m in stamps.clone() {
+            seen.push(m);
+        }
+        if let Some(file) = &seen.spill {
+            file.set_len(at + packed as u64 / 2).unwrap();
+        }
+        let err = seen.into_vec().unwrap_err().to_string();
+        assert!(err.contains("stamps seen in this build"), "{err}");
+        // The spill files are gone from the folder while open; without a folder, blocks stay
+        // in memory and come back the same.
+        assert_eq!(fs_entries(dir.path()), 0);
+        let mut held = SeenStamps::default();
+        for m in stamps.clone() {
+            held.push(m);
+        }
+        assert!(
+            held.blocks
+                .iter()
+                .all(|b| matches!(b, SeenBlock::Held { .. }))
+        );
+        assert_eq!(held.into_vec().unwrap(), stamps);
+    }
+
+    fn fs_entries(dir: &Path) -> usize {
+        std::fs::read_dir(dir).unwrap().count()
     }
 
     #[test]
