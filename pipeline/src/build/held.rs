@@ -194,7 +194,7 @@ mod tests {
         let refs: Vec<MotionRef> = (0..many.len())
             .map(|i| MotionRef::Stored {
                 stage: "segment-motions".into(),
-                fingerprint: format!("{i:064x}"),
+                fingerprint: format!("{i:064x}").into(),
                 index: i as u32,
                 frames: 10 + i as u32,
             })

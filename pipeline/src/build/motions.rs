@@ -29,10 +29,11 @@ const RECENT: usize = 4;
 pub(super) enum MotionRef {
     /// Frames stored in a chunk of the stage cache.
     Stored {
-        /// Stage-cache folder of the chunk (`segment-motions`).
-        stage: String,
-        /// The entry's fingerprint.
-        fingerprint: String,
+        /// Stage-cache folder of the chunk (`segment-motions`). Shared: every clip's reference,
+        /// its mirror's and its composites' name the same one.
+        stage: Arc<str>,
+        /// The entry's fingerprint, shared like `stage` (encoded as the string it is).
+        fingerprint: Arc<str>,
         /// The clip's index among the entry's motions.
         index: u32,
         /// Frames of the motion (the held clip has none).
@@ -71,7 +72,7 @@ impl MotionRef {
         match self {
             MotionRef::Stored {
                 stage, fingerprint, ..
-            } => vec![(stage.as_str(), fingerprint.as_str())],
+            } => vec![(&**stage, &**fingerprint)],
             MotionRef::Mirrored(of) => of.chunks(),
             MotionRef::Composed { first, second, .. } => {
                 let mut all = first.chunks();
@@ -341,6 +342,8 @@ pub(super) struct MotionSpill<'w> {
     workspace: &'w Workspace,
     pending: Vec<PackedMotion>,
     refs: Vec<MotionRef>,
+    /// The folder name every reference shares.
+    stage: Arc<str>,
 }
 
 impl<'w> MotionSpill<'w> {
@@ -350,14 +353,16 @@ impl<'w> MotionSpill<'w> {
             workspace,
             pending: Vec::new(),
             refs: Vec::new(),
+            stage: SEGMENT_CHUNKS.into(),
         }
     }
 
     /// Takes a clip's frames; they are stored with the chunk.
     pub(super) fn push(&mut self, motion: Motion) -> Result<(), BuildError> {
         self.refs.push(MotionRef::Stored {
-            stage: SEGMENT_CHUNKS.to_string(),
-            fingerprint: String::new(),
+            stage: Arc::clone(&self.stage),
+            // Named when its chunk is stored (`flush`).
+            fingerprint: Arc::from(""),
             index: self.pending.len() as u32,
             frames: motion.num_frames() as u32,
         });
@@ -376,12 +381,12 @@ impl<'w> MotionSpill<'w> {
             what: format!("{SEGMENT_CHUNKS} chunk"),
             message: e.to_string(),
         })?;
-        let name = sha256_hex(&bytes);
+        let name: Arc<str> = sha256_hex(&bytes).into();
         self.workspace.store_bytes(SEGMENT_CHUNKS, &name, &bytes)?;
         let start = self.refs.len() - self.pending.len();
         for r in &mut self.refs[start..] {
             if let MotionRef::Stored { fingerprint, .. } = r {
-                fingerprint.clone_from(&name);
+                *fingerprint = Arc::clone(&name);
             }
         }
         self.pending.clear();
