@@ -365,6 +365,18 @@ mod tests {
     use crate::parts::{LabelSource, LabelSources};
     use std::collections::BTreeSet;
 
+    /// `held` and `replaced` give the same postcard (cache, fingerprints) and JSON bytes.
+    fn assert_encodes_as<A: Serialize, B: Serialize>(held: &A, replaced: &B) {
+        assert_eq!(
+            postcard::to_stdvec(held).unwrap(),
+            postcard::to_stdvec(replaced).unwrap()
+        );
+        assert_eq!(
+            serde_json::to_string(held).unwrap(),
+            serde_json::to_string(replaced).unwrap()
+        );
+    }
+
     /// Attributes and label sources are held as sorted lists but must encode exactly as the map
     /// and set they replaced: cache fingerprints, the table fingerprint and JSON readers see them.
     #[test]
@@ -375,14 +387,7 @@ mod tests {
             ("sidecar.style".to_string(), "0".to_string()),
         ]);
         let attributes = Attributes::from(map.clone());
-        assert_eq!(
-            postcard::to_stdvec(&attributes).unwrap(),
-            postcard::to_stdvec(&map).unwrap()
-        );
-        assert_eq!(
-            serde_json::to_string(&attributes).unwrap(),
-            serde_json::to_string(&map).unwrap()
-        );
+        assert_encodes_as(&attributes, &map);
         let back: Attributes = postcard::from_bytes(&postcard::to_stdvec(&map).unwrap()).unwrap();
         assert_eq!(back, attributes);
         assert_eq!(attributes.get("take"), Some("001"));
@@ -410,14 +415,7 @@ mod tests {
         ]
         .into_iter()
         .collect();
-        assert_eq!(
-            postcard::to_stdvec(&sources).unwrap(),
-            postcard::to_stdvec(&set).unwrap()
-        );
-        assert_eq!(
-            serde_json::to_string(&sources).unwrap(),
-            serde_json::to_string(&set).unwrap()
-        );
+        assert_encodes_as(&sources, &set);
         let back: LabelSources =
             serde_json::from_str(&serde_json::to_string(&set).unwrap()).unwrap();
         assert_eq!(back, sources);
