@@ -91,8 +91,8 @@ const SEEN_BLOCK: usize = 512;
 const STREAMED_ENTRY: usize = 1 << 20;
 
 /// The item stamps a run has seen, for the ledger and `plan`: encoded with postcard and
-/// compressed with zstd in blocks, which go to a temporary file in the workspace (removed from
-/// the folder as soon as it is opened) as they are sealed.
+/// compressed with zstd in blocks, which go to a temporary file in the stage cache's folder
+/// (removed from the folder as soon as it is opened) as they are sealed.
 /// One stamp per capture and stage (a path, a digest and each named part's digest: about 1.4 KB
 /// in the heap, about 250 bytes compressed) grew a build's memory with the dataset, and the
 /// compressed blocks still did (11 MB at four times Bandai Namco 2) until the end of the build.
@@ -135,14 +135,15 @@ impl SeenStamps {
             if let Ok(encoded) = postcard::to_stdvec(&self.pending)
                 && let Ok(packed) = zstd::bulk::compress(&encoded, 1)
             {
-                let block = self.spill(encoded.len(), packed);
+                let block = self.seal(encoded.len(), packed);
                 self.blocks.push(block);
                 self.pending.clear();
             }
         }
     }
 
-    fn spill(&mut self, len: usize, packed: Vec<u8>) -> SeenBlock {
+    /// A sealed block, written to the spill file when there is one.
+    fn seal(&mut self, len: usize, packed: Vec<u8>) -> SeenBlock {
         use std::os::unix::fs::FileExt;
         if self.blocks.is_empty()
             && let Some(dir) = &self.dir
@@ -234,7 +235,11 @@ impl Workspace {
     pub fn new(output: &Path) -> Workspace {
         let root = output.join(".motionforge");
         Workspace {
-            seen: std::sync::Arc::new(std::sync::Mutex::new(SeenStamps::spilling_in(&root))),
+            // In the cache folder: `clean` and `--force` remove it with the cache, so even a
+            // file left by a build killed between creating and unlinking it does not stay.
+            seen: std::sync::Arc::new(std::sync::Mutex::new(SeenStamps::spilling_in(
+                &root.join("cache"),
+            ))),
             root,
             probe: false,
             packs: Default::default(),
