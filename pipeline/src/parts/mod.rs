@@ -104,11 +104,6 @@ impl LabelSources {
     pub fn is_only(&self, source: &LabelSource) -> bool {
         self.0.len() == 1 && self.0[0] == *source
     }
-
-    /// The sources, in order.
-    pub fn iter(&self) -> impl Iterator<Item = &LabelSource> {
-        self.0.iter()
-    }
 }
 
 impl fmt::Display for LabelSources {
