@@ -87,15 +87,16 @@ impl FileDigests {
     }
 
     /// Writes the digests seen by this build (files no longer found are forgotten), unless they
-    /// are those already remembered.
-    pub(super) fn save(&self, workspace: &Workspace) -> Result<(), WorkspaceError> {
-        let Ok(seen) = self.seen.lock() else {
+    /// are those already remembered. Taken by value: nothing reads them after the captures are
+    /// read, and a build of many captures would hold two maps of paths until it ends.
+    pub(super) fn save(self, workspace: &Workspace) -> Result<(), WorkspaceError> {
+        let Ok(seen) = self.seen.into_inner() else {
             return Ok(());
         };
-        if workspace.is_probe() || *seen == self.known {
+        if workspace.is_probe() || seen == self.known {
             return Ok(());
         }
-        let json = serde_json::to_vec(&*seen).unwrap_or_default();
+        let json = serde_json::to_vec(&seen).unwrap_or_default();
         write_atomic(&workspace.root().join(DIGESTS_FILE), &json)
     }
 }

@@ -326,7 +326,7 @@ fn run_stages<'a>(
     } else {
         digests::FileDigests::load(&workspace)
     };
-    let shared = Shared {
+    let mut shared = Shared {
         config,
         workspace,
         specs,
@@ -354,7 +354,7 @@ fn run_stages<'a>(
             item
         })
         .collect::<Result<_, _>>()?;
-    shared.digests.save(&shared.workspace)?;
+    std::mem::take(&mut shared.digests).save(&shared.workspace)?;
     // In probe mode, a capture whose ingest or segment output is not cached stops there: what
     // follows depends on outputs that do not exist yet.
     let upstream_pending = items.iter().any(|i| i.pending.is_some());

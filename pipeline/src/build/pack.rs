@@ -47,14 +47,19 @@ struct Location {
     len: u64,
 }
 
+/// A whole record of a pack: fingerprint, record start, body offset, body length. The
+/// fingerprint is shared with the stage's index of entries, since a build holds both until it
+/// ends (about 108,000 records over seven stages for ten times Bandai Namco 2).
+type Record = (Arc<str>, u64, u64, u64);
+
 /// One pack file and what it holds.
 #[derive(Debug)]
 struct Pack {
     path: PathBuf,
     /// Open for reading once read from (`None` after the pack was removed).
     file: Option<Arc<File>>,
-    /// Every whole record: fingerprint, record start, body offset, body length.
-    records: Vec<(String, u64, u64, u64)>,
+    /// Every whole record.
+    records: Vec<Record>,
 }
 
 /// The pack being appended to.
@@ -70,7 +75,7 @@ struct Writer {
 struct StagePacks {
     packs: Vec<Pack>,
     /// The newest record of each fingerprint.
-    entries: HashMap<String, Location>,
+    entries: HashMap<Arc<str>, Location>,
     writer: Option<Writer>,
 }
 
@@ -180,12 +185,11 @@ impl Packs {
         let offset = start + HEADER + fingerprint.len() as u64;
         writer.len = offset + len + FOOTER;
         packs.writer = Some(writer);
+        let name: Arc<str> = fingerprint.into();
         packs.packs[pack]
             .records
-            .push((fingerprint.to_string(), start, offset, len));
-        packs
-            .entries
-            .insert(fingerprint.to_string(), Location { pack, offset, len });
+            .push((Arc::clone(&name), start, offset, len));
+        packs.entries.insert(name, Location { pack, offset, len });
         Ok(())
     }
 
@@ -199,11 +203,11 @@ impl Packs {
         let dir = cache.join(stage);
         let mut next = 0u64;
         for p in 0..packs.packs.len() {
-            let live: Vec<(String, u64, u64, u64)> = packs.packs[p]
+            let live: Vec<Record> = packs.packs[p]
                 .records
                 .iter()
                 .filter(|(fp, _, offset, _)| {
-                    keep.contains(fp)
+                    keep.contains(&**fp)
                         && packs
                             .entries
                             .get(fp)
@@ -211,7 +215,7 @@ impl Packs {
                 })
                 .cloned()
                 .collect();
-            let size = |records: &[(String, u64, u64, u64)]| -> u64 {
+            let size = |records: &[Record]| -> u64 {
                 records
                     .iter()
                     .map(|(fp, _, _, len)| HEADER + fp.len() as u64 + len + FOOTER)
@@ -330,7 +334,7 @@ fn scan_stage(dir: &Path) -> StagePacks {
 }
 
 /// Every whole record of a pack, up to the first that is not.
-fn scan_pack(file: &File) -> Vec<(String, u64, u64, u64)> {
+fn scan_pack(file: &File) -> Vec<Record> {
     let mut records = Vec::new();
     let Ok(size) = file.metadata().map(|m| m.len()) else {
         return records;
@@ -369,7 +373,7 @@ fn scan_pack(file: &File) -> Vec<(String, u64, u64, u64)> {
         let Ok(fp) = String::from_utf8(fp) else {
             break;
         };
-        records.push((fp, pos, offset, len));
+        records.push((fp.into(), pos, offset, len));
         pos = end;
     }
     records
@@ -428,11 +432,7 @@ impl<W: Write> Write for Counted<W> {
 }
 
 /// Copies the `live` records of `from` into a new pack at `to`; their places there.
-fn rewrite(
-    from: &Path,
-    to: &Path,
-    live: &[(String, u64, u64, u64)],
-) -> std::io::Result<Vec<(String, u64, u64, u64)>> {
+fn rewrite(from: &Path, to: &Path, live: &[Record]) -> std::io::Result<Vec<Record>> {
     let source = File::open(from)?;
     let tmp = to.with_extension("tmp");
     let result = (|| {

@@ -1,7 +1,7 @@
 //! `manifest.json`: what a built dataset holds (shards with checksums, counts, sources,
 //! fingerprints), as one typed value that the writer writes and every reader reads.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -200,27 +200,42 @@ impl Counts {
 
 /// Rows by action, mirrors left out (a mirror repeats its original's action).
 pub fn action_counts(clips: &[Clip]) -> BTreeMap<String, usize> {
-    let mut actions = BTreeMap::new();
+    let mut actions: BTreeMap<&str, usize> = BTreeMap::new();
     for clip in clips.iter().filter(|c| !c.mirrored) {
-        *actions.entry(clip.action.clone()).or_insert(0) += 1;
+        *actions.entry(clip.action.as_str()).or_insert(0) += 1;
     }
     actions
+        .into_iter()
+        .map(|(action, n)| (action.to_string(), n))
+        .collect()
 }
 
 impl Manifest {
     /// The manifest of a dataset built from `config` with rows `clips`, before its shards are
     /// written (`splits` is filled in by the writer).
     pub fn new(config: &Config, clips: &[Clip], counts: Counts, table_fingerprint: &str) -> Self {
-        let mut sources: Vec<Source> = clips
+        // Distinct captures first, in `Source` order (path, digest, source name), then copied:
+        // a copy per clip, most of them dropped as repeats, left the survivors scattered over the
+        // allocator's pages (three clips per capture or more, and this runs on every build).
+        let distinct: BTreeSet<(&str, &str, &str)> = clips
             .iter()
-            .map(|c| Source {
-                path: c.capture.path.clone(),
-                sha256: c.capture.sha256.clone(),
-                source: c.capture.source.clone(),
+            .map(|c| {
+                let capture = &*c.capture;
+                (
+                    capture.path.as_str(),
+                    capture.sha256.as_str(),
+                    capture.source.as_str(),
+                )
             })
             .collect();
-        sources.sort();
-        sources.dedup();
+        let sources: Vec<Source> = distinct
+            .into_iter()
+            .map(|(path, sha256, source)| Source {
+                path: path.to_string(),
+                sha256: sha256.to_string(),
+                source: source.to_string(),
+            })
+            .collect();
         // Where the dataset is written is not part of what it is: the same config built into
         // another folder gives the same bytes.
         let mut content_config = config.clone();
