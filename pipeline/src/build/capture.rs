@@ -74,6 +74,16 @@ pub(super) struct Shared<'a> {
 }
 
 impl Shared<'_> {
+    /// Where the held clips' frames are read from: this build's stage cache, on its profiles.
+    pub(super) fn motions(&self) -> super::motions::MotionSource {
+        super::motions::MotionSource::new(
+            &self.workspace,
+            &self.specs,
+            &self.bound,
+            self.config.mirror.offsets,
+        )
+    }
+
     /// The bound profile of a clip's skeleton.
     pub(super) fn profile_of(&self, clip: &Clip) -> Option<crate::motion::Profile> {
         let spec = self.specs.iter().find(|s| s.name == clip.profile)?;

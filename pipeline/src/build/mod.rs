@@ -5,10 +5,13 @@ mod capture;
 pub mod clean;
 mod digests;
 mod held;
+mod label_check;
+mod lookup;
 mod motions;
 mod output;
 mod pack;
 mod plan;
+mod synthetic;
 mod text;
 pub mod workspace;
 
@@ -24,16 +27,17 @@ pub use crate::base::{
     Dropped, Fingerprint, Reject, Stamp, WorkspaceError, sha256_hex, temp_path, write_atomic,
     write_atomic_with,
 };
+pub use lookup::{ProfiledClip, collect_clips, find_clip, stored_motion};
 pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
 pub use workspace::{Ledger, Miss, SeenStamps, StageLedger, Workspace};
 
 use capture::{Item, Shared};
-use motions::{MotionIndex, MotionSource};
+use motions::MotionIndex;
 use output::{Table, skeleton_json, write_outputs};
 
 use crate::annotate::span::Note;
 use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
-use crate::clip::{Clip, LoadedClip};
+use crate::clip::Clip;
 use crate::config::Config;
 use crate::io::parquet::TableError;
 use crate::motion::{MirrorPlan, OffsetPolicy, Profile, ProfileSpec};
@@ -338,12 +342,7 @@ fn run_stages<'a>(
         types_digest,
         digests,
     };
-    let motions = MotionSource::new(
-        &shared.workspace,
-        &shared.specs,
-        &shared.bound,
-        config.mirror.offsets,
-    );
+    let motions = shared.motions();
 
     progress.stage_started(ingest::NAME, files.len() as u64);
     let mut items: Vec<Item> = files
@@ -506,7 +505,7 @@ fn run_stages<'a>(
     };
     if through >= Stage::Compose && blocked.is_none() {
         progress.stage_started(crate::stages::compose::NAME, clips.len() as u64);
-        match compose(
+        match synthetic::compose(
             &shared,
             &motions,
             &mut clips,
@@ -560,132 +559,6 @@ fn items_pending_stage(items: &[Item]) -> Option<Stage> {
     items.iter().filter_map(|i| i.pending).min()
 }
 
-/// The compose stage's cache entry: the synthetic clips (their skeletons in the table), where
-/// their frames come from, and each distinct skeleton once.
-type ComposeEntry = (
-    crate::stages::compose::ComposeOutput,
-    Vec<motions::MotionRef>,
-    crate::clip::SkeletonTable,
-);
-
-/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
-/// `None` in probe mode when its output is not cached.
-fn compose(
-    shared: &Shared<'_>,
-    motions: &MotionSource,
-    clips: &mut Vec<Clip>,
-    index: &mut MotionIndex,
-    offline: bool,
-    progress: &crate::progress::ProgressSink,
-) -> Result<
-    Option<(
-        crate::stages::compose::ComposeReport,
-        crate::stages::augment::AugmentReport,
-        StageRun,
-    )>,
-    BuildError,
-> {
-    let config = shared.config;
-    let all: Vec<&Clip> = clips.iter().collect();
-    // The clips without frames, and where their frames are: together, the stage's input.
-    let encoded = crate::base::encoded_sha256(&(&all, &*index), "clips to compose")?;
-    let vetoed = llm_vetoes(shared, &all, offline, progress)?;
-    let stamp = Fingerprint::new(
-        crate::stages::compose::NAME,
-        crate::stages::compose::VERSION,
-    )
-    .text("clips", &encoded)
-    .json("config synthetic", &config.synthetic)
-    .json("config dataset.seed", &config.dataset.seed)
-    .json("llm pair check", &vetoed.0)
-    .stamp();
-    let composed = shared
-        .workspace
-        .try_item(crate::stages::compose::NAME, "*", &stamp, || {
-            let mut refs: Vec<motions::MotionRef> = Vec::new();
-            let out = crate::stages::compose::run(
-                &all,
-                &config.synthetic,
-                config.dataset.seed,
-                |c| c.split.clone(),
-                |c| shared.profile_of(c),
-                |c| motions.motion_of(c, index),
-                |a, b| {
-                    let key = (
-                        label::normalize_text(&a.text),
-                        label::normalize_text(&b.text),
-                    );
-                    vetoed.0.contains(&key).then_some("llm_incompatible")
-                },
-                |clip, recipe| {
-                    // The composite's skeleton is a copy made when its source was read (a
-                    // mirror's); held clips share one copy of each.
-                    shared.skeletons.share(&mut clip.skeleton);
-                    let source = |c: &Clip| {
-                        index.get(&motions::key(c)).cloned().ok_or_else(|| {
-                            BuildError::Motion(format!(
-                                "no motion recorded for clip `{}`",
-                                c.clip_id
-                            ))
-                        })
-                    };
-                    refs.push(motions::MotionRef::Composed {
-                        first: Box::new(source(recipe.first)?),
-                        first_parts: recipe.first_parts,
-                        second: Box::new(source(recipe.second)?),
-                        second_parts: recipe.second_parts,
-                        start: match recipe.trim {
-                            crate::motion::compose::Trim::Start => None,
-                            crate::motion::compose::Trim::At(s) => Some(s as u32),
-                        },
-                        frames: recipe.frames as u32,
-                    });
-                    Ok::<(), BuildError>(())
-                },
-            )?;
-            let mut out = out;
-            // Stored with each distinct skeleton once, not once per synthetic clip.
-            let skeletons = crate::clip::SkeletonTable::take_all(&mut out.clips);
-            Ok::<_, BuildError>((out, refs, skeletons))
-        })?;
-    let Some(((mut composed, refs, skeletons), ran)): Option<(ComposeEntry, bool)> = composed
-    else {
-        return Ok(None);
-    };
-    if !skeletons.give_all(&mut composed.clips) || refs.len() != composed.clips.len() {
-        return Err(BuildError::Motion(format!(
-            "the {} cache entry is inconsistent; run the build again with --force",
-            crate::stages::compose::NAME
-        )));
-    }
-    shared.workspace.prune(
-        crate::stages::compose::NAME,
-        &BTreeSet::from([stamp.fingerprint]),
-    );
-    let run = StageRun {
-        stage: crate::stages::compose::NAME.into(),
-        items: composed.report.sampled,
-        ran: if ran { composed.report.sampled } else { 0 },
-        reused: if ran { 0 } else { composed.report.sampled },
-    };
-    for (clip, at) in composed.clips.iter().zip(refs) {
-        index.insert(motions::key(clip), at);
-    }
-    let mut composed_clips = composed.clips;
-    for clip in &mut composed_clips {
-        shared.skeletons.share(&mut clip.skeleton);
-    }
-    // Exactly: growing by doubling left up to half the clip list (about 1 KB per clip) unused.
-    clips.reserve_exact(composed_clips.len());
-    clips.extend(composed_clips);
-    clips.sort_by(|a, b| {
-        a.clip_id
-            .cmp(&b.clip_id)
-            .then(a.capture.path.cmp(&b.capture.path))
-    });
-    Ok(Some((composed.report, vetoed.1, run)))
-}
-
 /// What the stages produced, before anything is written.
 struct Staged<'a> {
     shared: Shared<'a>,
@@ -705,162 +578,6 @@ struct Staged<'a> {
     blocked: Option<Stage>,
     /// Where the frames of `clips` are (the clips are held without them).
     index: MotionIndex,
-}
-
-/// Every clip a build would write (synthetic pairs included), from cached stage outputs where
-/// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
-pub fn collect_clips(
-    config: &Config,
-    options: &BuildOptions,
-) -> Result<Vec<LoadedClip>, BuildError> {
-    let staged = run_stages(config, options, false)?;
-    let motions = MotionSource::new(
-        &staged.shared.workspace,
-        &staged.shared.specs,
-        &staged.shared.bound,
-        config.mirror.offsets,
-    );
-    staged
-        .clips
-        .iter()
-        .map(|c| motions.load(c, &staged.index))
-        .collect()
-}
-
-/// A clip with its frames and its profile bound to its skeleton.
-pub type ProfiledClip = (LoadedClip, Profile);
-
-/// The clip `clip_id` as a build would write it, frames included (see [`collect_clips`]), with
-/// its profile bound to its skeleton (what the write stage turns its frames into rows with), and
-/// the ids of every clip (to suggest one when `clip_id` is not there). Only that clip's frames
-/// are read.
-pub fn find_clip(
-    config: &Config,
-    options: &BuildOptions,
-    clip_id: &str,
-) -> Result<(Option<ProfiledClip>, Vec<String>), BuildError> {
-    let staged = run_stages(config, options, false)?;
-    let motions = MotionSource::new(
-        &staged.shared.workspace,
-        &staged.shared.specs,
-        &staged.shared.bound,
-        config.mirror.offsets,
-    );
-    let found = match staged.clips.iter().find(|c| c.clip_id == clip_id) {
-        None => None,
-        Some(c) => {
-            let spec = staged
-                .shared
-                .specs
-                .iter()
-                .find(|s| s.name == c.profile)
-                .ok_or_else(|| {
-                    BuildError::Motion(format!("clip `{clip_id}`: no profile `{}`", c.profile))
-                })?;
-            let profile = staged.shared.bound.bind(spec, &c.skeleton).map_err(|e| {
-                BuildError::Motion(format!(
-                    "clip `{clip_id}`: profile `{}` does not fit its skeleton: {e}",
-                    c.profile
-                ))
-            })?;
-            Some((motions.load(c, &staged.index)?, profile))
-        }
-    };
-    Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
-}
-
-/// Stage-cache folder of the label check's findings, one entry per capture with claiming clips.
-const LABEL_CHECK: &str = "label-check";
-/// Version of the label check's cached findings (bump when `quality::contradictions` changes).
-const LABEL_CHECK_VERSION: u32 = 1;
-
-/// The real single clips (mirrors included) whose motion contradicts what their text says
-/// (`quality::contradictions`), in `clip_id` order. Only clips whose text makes a claim the
-/// motion can be measured for are read. The findings are cached per capture, keyed by those
-/// clips (texts, skeletons, where their frames are) and the mirror's offset policy, so a rebuild
-/// reads no frames; captures are checked on all cores.
-fn contradicting_labels(
-    shared: &Shared<'_>,
-    motions: &MotionSource,
-    clips: &[Clip],
-    index: &MotionIndex,
-) -> Result<Vec<crate::quality::Contradiction>, BuildError> {
-    let mut by_capture: BTreeMap<(&str, &str), Vec<&Clip>> = BTreeMap::new();
-    for clip in clips.iter().filter(|c| {
-        c.kind == crate::clip::SourceKind::RealSingle
-            && crate::quality::claims(&c.text) != crate::quality::Claims::default()
-    }) {
-        by_capture
-            .entry((clip.capture.source.as_str(), clip.capture.path.as_str()))
-            .or_default()
-            .push(clip);
-    }
-    // The skeleton profiles the clips are measured with.
-    let profiles = sha256_hex(&serde_json::to_vec(&shared.specs).unwrap_or_default());
-    let checked = by_capture
-        .par_iter()
-        // Each thread reads with its own memory of recent chunks.
-        .map_init(
-            || motions.sibling(),
-            |motions, ((_, path), held)| {
-                let refs: Vec<Option<&motions::MotionRef>> =
-                    held.iter().map(|c| index.get(&motions::key(c))).collect();
-                let encoded = crate::base::encoded_sha256(&(held, &refs), "clips to check")?;
-                let stamp = Fingerprint::new(LABEL_CHECK, LABEL_CHECK_VERSION)
-                    .text("clips", &encoded)
-                    .json("config mirror.offsets", &shared.config.mirror.offsets)
-                    .text("skeleton profiles", &profiles)
-                    .stamp();
-                let found = shared.workspace.try_item(LABEL_CHECK, path, &stamp, || {
-                    let mut out = Vec::new();
-                    for clip in held {
-                        let Some(profile) = shared.profile_of(clip) else {
-                            continue;
-                        };
-                        let motion = motions.motion_of(clip, index)?;
-                        let positions =
-                            crate::motion::canonical::dataset_positions(&motion, &profile);
-                        out.extend(crate::quality::contradictions(
-                            &clip.clip_id,
-                            &clip.text,
-                            &positions,
-                            motion.num_joints(),
-                            motion.fps,
-                            &profile,
-                        ));
-                    }
-                    Ok::<_, BuildError>(out)
-                })?;
-                Ok::<_, BuildError>((stamp.fingerprint, found.map(|(f, _)| f).unwrap_or_default()))
-            },
-        )
-        .collect::<Result<Vec<_>, BuildError>>()?;
-    let live: BTreeSet<String> = checked.iter().map(|(f, _)| f.clone()).collect();
-    shared.workspace.prune(LABEL_CHECK, &live);
-    let mut out: Vec<crate::quality::Contradiction> =
-        checked.into_iter().flat_map(|(_, found)| found).collect();
-    out.sort_by(|a, b| {
-        a.clip_id
-            .cmp(&b.clip_id)
-            .then_with(|| a.claim.cmp(&b.claim))
-    });
-    Ok(out)
-}
-
-/// A clip's motion as the dataset stores it: its row's f32 rotations and positions
-/// (`io::parquet::dataset_motion`) read back on its own skeleton as `export-bvh <dataset>` reads
-/// them from the shards (`dataset::skeletons::motion_from_rows`), so a clip exported from the
-/// config and from the shards is the same file.
-pub fn stored_motion(clip: &LoadedClip, profile: &Profile) -> crate::motion::Motion {
-    let stored = crate::io::parquet::dataset_motion(&clip.motion, profile);
-    crate::dataset::skeletons::motion_from_rows(
-        (*clip.motion.skeleton).clone(),
-        profile.to_dataset_axes().inverse(),
-        profile.unit_scale,
-        clip.motion.fps,
-        &stored.positions,
-        &stored.rotations,
-    )
 }
 
 /// Runs every stage of the build described by `config` and writes the dataset.
@@ -885,13 +602,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         blocked: _,
         index,
     } = run_stages(config, options, false)?;
-    let motions = MotionSource::new(
-        &shared.workspace,
-        &shared.specs,
-        &shared.bound,
-        config.mirror.offsets,
-    );
-    let label_contradictions = contradicting_labels(&shared, &motions, &clips, &index)?;
+    let motions = shared.motions();
+    let label_contradictions =
+        label_check::contradicting_labels(&shared, &motions, &clips, &index)?;
     let mut clips = clips;
     let before = clips.len();
     if config.label_check.drop && !label_contradictions.is_empty() {
@@ -1141,45 +854,6 @@ fn save_ledger(
     let json = serde_json::to_vec_pretty(&ledger).unwrap_or_default();
     write_atomic(&workspace.root().join(workspace::LEDGER_FILE), &json)?;
     Ok(())
-}
-
-/// Text pairs the LLM says cannot be done at once, for the sampled pairs (when `llm_check` is on),
-/// and what asking did.
-fn llm_vetoes(
-    shared: &Shared<'_>,
-    clips: &[&Clip],
-    offline: bool,
-    progress: &crate::progress::ProgressSink,
-) -> Result<
-    (
-        BTreeSet<(String, String)>,
-        crate::stages::augment::AugmentReport,
-    ),
-    BuildError,
-> {
-    let config = shared.config;
-    let mut report = crate::stages::augment::AugmentReport::default();
-    if !config.synthetic.enabled || !config.synthetic.llm_check {
-        return Ok((BTreeSet::new(), report));
-    }
-    let texts =
-        crate::stages::compose::texts_to_check(clips, &config.synthetic, config.dataset.seed);
-    let prompts = config.prompts()?;
-    let mut cache = text::open_cache(shared)?;
-    let vetoed = crate::stages::augment::incompatible_pairs(
-        &texts,
-        &prompts,
-        config.llm.as_ref(),
-        offline,
-        cache.as_mut(),
-        &mut report,
-        crate::stages::augment::Asking {
-            stage: "pair_check",
-            progress,
-        },
-    )
-    .map_err(text::augment_error)?;
-    Ok((vetoed, report))
 }
 
 fn add_counts(into: &mut BTreeMap<String, usize>, from: BTreeMap<String, usize>) {
