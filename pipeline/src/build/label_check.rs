@@ -87,3 +87,21 @@ pub(super) fn contradicting_labels(
     });
     Ok(out)
 }
+
+/// Leaves out of `clips` the ones in `contradictions` and the synthetic pairs made from them;
+/// how many rows that removed.
+pub(super) fn drop_contradicting(
+    clips: &mut Vec<Clip>,
+    contradictions: &[crate::quality::Contradiction],
+) -> usize {
+    if contradictions.is_empty() {
+        return 0;
+    }
+    let wrong: BTreeSet<&str> = contradictions.iter().map(|c| c.clip_id.as_str()).collect();
+    let before = clips.len();
+    clips.retain(|c| {
+        !wrong.contains(c.clip_id.as_str())
+            && !c.composed_from.iter().any(|id| wrong.contains(id.as_str()))
+    });
+    before - clips.len()
+}

@@ -33,14 +33,14 @@ pub use workspace::{Ledger, Miss, SeenStamps, StageLedger, Workspace};
 
 use capture::{Item, Shared};
 use motions::MotionIndex;
-use output::{Table, skeleton_json, write_outputs};
+use output::{Table, write_outputs};
 
 use crate::annotate::span::Note;
 use crate::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
 use crate::clip::Clip;
 use crate::config::Config;
 use crate::io::parquet::TableError;
-use crate::motion::{MirrorPlan, OffsetPolicy, Profile, ProfileSpec};
+use crate::motion::ProfileSpec;
 use crate::source::{self, SourceAnnotations, SourceError};
 use crate::stages::{ingest, mirror};
 use crate::stages::{label, segment};
@@ -606,55 +606,13 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let label_contradictions =
         label_check::contradicting_labels(&shared, &motions, &clips, &index)?;
     let mut clips = clips;
-    let before = clips.len();
-    if config.label_check.drop && !label_contradictions.is_empty() {
-        let wrong: std::collections::BTreeSet<&str> = label_contradictions
-            .iter()
-            .map(|c| c.clip_id.as_str())
-            .collect();
-        clips.retain(|c| {
-            !wrong.contains(c.clip_id.as_str())
-                && !c.composed_from.iter().any(|id| wrong.contains(id.as_str()))
-        });
-    }
-    let label_contradictions_dropped = before - clips.len();
+    let label_contradictions_dropped = if config.label_check.drop {
+        label_check::drop_contradicting(&mut clips, &label_contradictions)
+    } else {
+        0
+    };
     let workspace = &shared.workspace;
-    let specs = &shared.specs;
-    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
-    let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
-    // Clips share their skeleton (`SkeletonPool`): its id, a digest of the whole skeleton, is
-    // taken once per shared copy and profile, not once per clip.
-    let mut named: std::collections::HashSet<(*const crate::motion::Skeleton, &str)> =
-        Default::default();
-    for clip in &clips {
-        if !named.insert((
-            std::sync::Arc::as_ptr(&clip.skeleton),
-            clip.profile.as_str(),
-        )) {
-            continue;
-        }
-        let id = clip.skeleton_id();
-        if skeletons.contains_key(&id) {
-            continue;
-        }
-        if let Some(spec) = specs.iter().find(|s| s.name == clip.profile)
-            && let Ok(bound) = shared.bound.bind(spec, &clip.skeleton)
-        {
-            // A mirror on its own skeleton names the skeleton it reflects (mirroring is an
-            // involution, so mirroring this one gives that one back).
-            let mirror_of = if clip.mirrored && config.mirror.offsets == OffsetPolicy::Mirror {
-                MirrorPlan::from_profile(&clip.skeleton, &bound)
-                    .ok()
-                    .map(|plan| plan.skeleton_of_mirror(&clip.skeleton, OffsetPolicy::Mirror))
-                    .map(|original| crate::clip::skeleton_name(&clip.profile, &original))
-                    .filter(|original| *original != id)
-            } else {
-                None
-            };
-            skeletons.insert(id, skeleton_json(&clip.skeleton, &bound, mirror_of));
-            profiles.entry(clip.profile.clone()).or_insert(bound);
-        }
-    }
+    let (profiles, skeletons) = output::skeletons_of(&shared, &clips);
     let table_stamp = table_stamp(config, &clips, &index, &text.plans)?;
     let table_fingerprint = table_stamp.fingerprint.clone();
     let table = Table {

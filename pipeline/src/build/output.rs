@@ -16,7 +16,7 @@ use crate::base::HashingWriter;
 use crate::clip::{Clip, Split};
 use crate::io::normalization::NormalizationStats;
 use crate::io::parquet::{ROWS_PER_GROUP, Row, ShardWriter, TableError, rows_to_batch};
-use crate::motion::Profile;
+use crate::motion::{MirrorPlan, OffsetPolicy, Profile};
 use rayon::prelude::*;
 
 /// What the last write recorded: its inputs' fingerprint, each shard's content fingerprint, and
@@ -84,6 +84,54 @@ impl Recorded {
                 .keys()
                 .all(|name| self.unchanged(output, name))
     }
+}
+
+/// The table's skeletons as `skeletons.json` lists them (by id), and each profile bound to the
+/// first skeleton of its clips (what the writer turns frames into rows with).
+pub(super) fn skeletons_of(
+    shared: &super::capture::Shared<'_>,
+    clips: &[Clip],
+) -> (
+    BTreeMap<String, Profile>,
+    BTreeMap<String, serde_json::Value>,
+) {
+    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
+    let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    // Clips share their skeleton (`SkeletonPool`): its id, a digest of the whole skeleton, is
+    // taken once per shared copy and profile, not once per clip.
+    let mut named: std::collections::HashSet<(*const crate::motion::Skeleton, &str)> =
+        Default::default();
+    for clip in clips {
+        if !named.insert((
+            std::sync::Arc::as_ptr(&clip.skeleton),
+            clip.profile.as_str(),
+        )) {
+            continue;
+        }
+        let id = clip.skeleton_id();
+        if skeletons.contains_key(&id) {
+            continue;
+        }
+        if let Some(spec) = shared.specs.iter().find(|s| s.name == clip.profile)
+            && let Ok(bound) = shared.bound.bind(spec, &clip.skeleton)
+        {
+            // A mirror on its own skeleton names the skeleton it reflects (mirroring is an
+            // involution, so mirroring this one gives that one back).
+            let mirror_of = if clip.mirrored && shared.config.mirror.offsets == OffsetPolicy::Mirror
+            {
+                MirrorPlan::from_profile(&clip.skeleton, &bound)
+                    .ok()
+                    .map(|plan| plan.skeleton_of_mirror(&clip.skeleton, OffsetPolicy::Mirror))
+                    .map(|original| crate::clip::skeleton_name(&clip.profile, &original))
+                    .filter(|original| *original != id)
+            } else {
+                None
+            };
+            skeletons.insert(id, skeleton_json(&clip.skeleton, &bound, mirror_of));
+            profiles.entry(clip.profile.clone()).or_insert(bound);
+        }
+    }
+    (profiles, skeletons)
 }
 
 /// A skeleton's entry in `skeletons.json`. `mirror_of` names the skeleton (by id) whose
