@@ -1,6 +1,6 @@
 //! Sources: finding capture files from the config's globs and resolving skeleton profiles.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use crate::annotate::event_log::{self, EventLogFormat};
@@ -187,6 +187,40 @@ pub fn load_fps_table(
         .filter(|(_, fps)| fps.is_finite() && *fps > 0.0)
         .map(|(path, fps)| (capture_key(&path, key_pattern.as_ref()), fps))
         .collect())
+}
+
+/// The quirks of the sources' annotation files: what their readers noted, and an
+/// `annotation_without_capture` note for every annotated capture key that no capture file of its
+/// source has (`files`, as discovered). `annotations` are the config's sources', in order.
+pub fn annotation_notes(
+    config: &Config,
+    annotations: &[SourceAnnotations],
+    files: &[CaptureFile],
+) -> Vec<Note> {
+    let matched: BTreeSet<(usize, String)> = files.iter().map(|f| (f.source, f.stem())).collect();
+    let mut notes = Vec::new();
+    for ((index, ann), source) in annotations.iter().enumerate().zip(&config.sources) {
+        if let SourceAnnotations::Indexed {
+            by_key,
+            notes: file_notes,
+        } = ann
+        {
+            notes.extend(file_notes.iter().cloned());
+            for key in by_key
+                .keys()
+                .filter(|k| !matched.contains(&(index, (*k).clone())))
+            {
+                notes.push(Note::new(
+                    "annotation_without_capture",
+                    format!(
+                        "source `{}`: annotations for `{key}` match no capture file",
+                        source.name
+                    ),
+                ));
+            }
+        }
+    }
+    notes
 }
 
 /// A source's annotations, loaded once before the per-capture stages.
@@ -396,4 +430,56 @@ pub fn load_annotations(
         }
     }
     Ok(SourceAnnotations::Indexed { by_key, notes })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn annotations_without_a_capture_are_noted_per_source_with_the_readers_notes() {
+        let text = "[dataset]\nname = \"notes\"\noutput = \"out\"\n\n\
+            [[sources]]\nname = \"first\"\ncaptures = [\"a/*.bvh\"]\nprofile = \"cmu\"\n\
+            [sources.labels]\nkind = \"filename\"\npattern = \"^(?P<name>.+)$\"\naction = \"{name}\"\ntext = \"{name}\"\n\n\
+            [[sources]]\nname = \"second\"\ncaptures = [\"b/*.bvh\"]\nprofile = \"cmu\"\n\
+            [sources.labels]\nkind = \"filename\"\npattern = \"^(?P<name>.+)$\"\naction = \"{name}\"\ntext = \"{name}\"\n";
+        let config = Config::parse(text, Path::new("notes.toml")).unwrap();
+        let indexed = |keys: &[&str], notes: Vec<Note>| SourceAnnotations::Indexed {
+            by_key: keys
+                .iter()
+                .map(|k| (k.to_string(), CaptureAnnotation::default()))
+                .collect(),
+            notes,
+        };
+        let annotations = [
+            indexed(&["walk", "jump"], vec![Note::new("null_label", "record 3")]),
+            // `walk` is captured under the first source only: the second's key has no capture.
+            indexed(&["walk"], Vec::new()),
+        ];
+        let file = |source: usize, path: &str| CaptureFile {
+            source,
+            path: PathBuf::from(path),
+            display: path.to_string(),
+        };
+        let files = [file(0, "a/walk.bvh"), file(1, "b/run.bvh")];
+        let notes = annotation_notes(&config, &annotations, &files);
+        let kinds: Vec<(&str, &str)> = notes
+            .iter()
+            .map(|n| (n.kind.as_str(), n.message.as_str()))
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                ("null_label", "record 3"),
+                (
+                    "annotation_without_capture",
+                    "source `first`: annotations for `jump` match no capture file"
+                ),
+                (
+                    "annotation_without_capture",
+                    "source `second`: annotations for `walk` match no capture file"
+                ),
+            ]
+        );
+    }
 }

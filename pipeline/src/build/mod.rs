@@ -453,31 +453,11 @@ fn run_stages<'a>(
         add_counts(&mut unmapped_labels, item.segment.unmapped);
         notes.extend(item.segment.notes);
     }
-    let mut matched: BTreeSet<(usize, String)> = BTreeSet::new();
-    for file in &files {
-        matched.insert((file.source, file.stem()));
-    }
-    for (index, ann) in shared.annotations.iter().enumerate() {
-        if let SourceAnnotations::Indexed {
-            by_key,
-            notes: file_notes,
-        } = ann
-        {
-            notes.extend(file_notes.iter().cloned());
-            for key in by_key
-                .keys()
-                .filter(|k| !matched.contains(&(index, (*k).clone())))
-            {
-                notes.push(Note::new(
-                    "annotation_without_capture",
-                    format!(
-                        "source `{}`: annotations for `{key}` match no capture file",
-                        config.sources[index].name
-                    ),
-                ));
-            }
-        }
-    }
+    notes.extend(source::annotation_notes(
+        config,
+        &shared.annotations,
+        &files,
+    ));
 
     rejects.extend(text.rejects.iter().cloned());
     let mut rejects: Vec<Reject> = rejects.into_iter().map(Reject::bounded).collect();
