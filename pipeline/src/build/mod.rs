@@ -602,25 +602,15 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         rejects: &rejects,
         motions: &motions,
     };
-    let counts = crate::io::manifest::Counts::of(&clips, &rejects, drops_by_reason.clone());
-    let mut manifest =
-        crate::io::manifest::Manifest::new(config, &clips, counts.clone(), &table_fingerprint);
-    // The statistics report reads them from the manifest, so a paper's tables list them too.
-    manifest.label_contradictions = label_contradictions.clone();
-    let licences: Vec<String> = config
-        .sources
-        .iter()
-        .filter(|s| !s.licence.is_empty())
-        .map(|s| format!("{}: {}", s.name, s.licence))
-        .collect();
-    let companions = output::Companions {
-        card_body: output::card_body(config, &clips, &licences, &counts.source_kind),
-        manifest,
-        licences,
-        shard_bytes: config.dataset.shard_bytes,
-        zstd_level: config.dataset.zstd_level,
-        features: config.features,
-    };
+    let companions = output::Companions::of(
+        config,
+        &clips,
+        &rejects,
+        drops_by_reason.clone(),
+        &label_contradictions,
+        &table_fingerprint,
+    );
+    let counts = companions.manifest.counts.clone();
     let through = options.through.unwrap_or(Stage::Report);
     let mut stamps = workspace.take_seen();
     // What the build report says of the clips, taken before the write stage takes them.

@@ -311,6 +311,40 @@ pub(super) struct Companions {
     pub(super) features: crate::features::FeatureConfig,
 }
 
+impl Companions {
+    /// What the write stage writes beside the shards of `clips`: the manifest with the dataset's
+    /// counts (made here, once, for the manifest, the card and the build report) and the card.
+    pub(super) fn of(
+        config: &crate::config::Config,
+        clips: &[Clip],
+        rejects: &[super::Reject],
+        drops_by_reason: BTreeMap<String, usize>,
+        label_contradictions: &[crate::quality::Contradiction],
+        table_fingerprint: &str,
+    ) -> Companions {
+        let counts = crate::io::manifest::Counts::of(clips, rejects, drops_by_reason);
+        let licences: Vec<String> = config
+            .sources
+            .iter()
+            .filter(|s| !s.licence.is_empty())
+            .map(|s| format!("{}: {}", s.name, s.licence))
+            .collect();
+        let card_body = card_body(config, clips, &licences, &counts.source_kind);
+        let mut manifest =
+            crate::io::manifest::Manifest::new(config, clips, counts, table_fingerprint);
+        // The statistics report reads them from the manifest, so a paper's tables list them too.
+        manifest.label_contradictions = label_contradictions.to_vec();
+        Companions {
+            manifest,
+            card_body,
+            licences,
+            shard_bytes: config.dataset.shard_bytes,
+            zstd_level: config.dataset.zstd_level,
+            features: config.features,
+        }
+    }
+}
+
 /// The card's Markdown body: what the dataset is, where it came from, its columns.
 pub(super) fn card_body(
     config: &crate::config::Config,
