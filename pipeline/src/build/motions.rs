@@ -84,11 +84,55 @@ impl MotionRef {
 }
 
 /// Every held clip's motion location, by clip id and capture path.
-pub(super) type MotionIndex = BTreeMap<(String, String), MotionRef>;
+pub(super) type MotionIndex = BTreeMap<ClipKey, MotionRef>;
+
+/// A clip's key in a [`MotionIndex`]: its id and its capture's path, ordered, compared and
+/// encoded as the pair of strings. The path is the clip's shared capture reference, not a copy:
+/// the index holds every clip of the table.
+#[derive(Debug, Clone)]
+pub(super) struct ClipKey {
+    clip_id: String,
+    capture: Arc<crate::clip::CaptureRef>,
+}
+
+impl ClipKey {
+    fn parts(&self) -> (&str, &str) {
+        (&self.clip_id, &self.capture.path)
+    }
+}
+
+impl PartialEq for ClipKey {
+    fn eq(&self, other: &Self) -> bool {
+        self.parts() == other.parts()
+    }
+}
+
+impl Eq for ClipKey {}
+
+impl PartialOrd for ClipKey {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for ClipKey {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.parts().cmp(&other.parts())
+    }
+}
+
+impl Serialize for ClipKey {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        self.parts().serialize(serializer)
+    }
+}
 
 /// The key of a clip in a [`MotionIndex`].
-pub(super) fn key(clip: &Clip) -> (String, String) {
-    (clip.clip_id.clone(), clip.capture.path.clone())
+pub(super) fn key(clip: &Clip) -> ClipKey {
+    ClipKey {
+        clip_id: clip.clip_id.clone(),
+        capture: Arc::clone(&clip.capture),
+    }
 }
 
 /// Reads motions back from the stage cache, keeping the last few entries decoded, and makes the
