@@ -203,8 +203,10 @@ pub struct Clip {
     pub composed_from: Vec<String>,
     /// For a synthetic pair: the parts taken from each source clip, in `composed_from` order.
     pub composed_parts: Vec<PartSet>,
-    /// Plausibility metrics (foot skating, ground and self penetration, lean).
-    pub plausibility: Option<crate::quality::Plausibility>,
+    /// Plausibility metrics (foot skating, ground and self penetration, lean). Boxed: only
+    /// synthetic pairs carry them (a real clip's are measured with its row), and inline they
+    /// would make every clip of the table about a hundred bytes larger.
+    pub plausibility: Option<Box<crate::quality::Plausibility>>,
     /// Extra fields from the annotation (file-name groups, sidecar keys).
     pub attributes: Attributes,
     /// Skeleton profile name.

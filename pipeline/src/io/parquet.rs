@@ -156,6 +156,8 @@ impl<'a> Row<'a> {
         let world = crate::motion::canonical::dataset_positions(motion, profile);
         let plausibility = clip
             .plausibility
+            .as_deref()
+            .copied()
             .or_else(|| Some(plausibility(&world, joints, motion.fps, profile)));
         let dataset = dataset_motion_at(motion, profile, &world);
         let canonical = canonical_positions(&dataset.positions, joints, profile);

@@ -608,7 +608,7 @@ pub fn run<E: Send>(
                     part_set(composite.parts_from_first),
                     part_set(composite.parts_from_second),
                 ],
-                plausibility: Some(metrics),
+                plausibility: Some(Box::new(metrics)),
                 skeleton: std::sync::Arc::clone(&composite.motion.skeleton),
             };
             let recipe = Recipe {
