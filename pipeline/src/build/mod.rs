@@ -3,6 +3,7 @@
 
 mod capture;
 pub mod clean;
+mod companions;
 mod digests;
 mod held;
 mod label_check;
@@ -592,7 +593,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         0
     };
     let workspace = &shared.workspace;
-    let (profiles, skeletons) = output::skeletons_of(&shared, &clips);
+    let (profiles, skeletons) = companions::skeletons_of(&shared, &clips);
     let table_stamp = table_stamp(config, &clips, &index, &text.plans)?;
     let table_fingerprint = table_stamp.fingerprint.clone();
     let table = Table {
@@ -602,7 +603,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         rejects: &rejects,
         motions: &motions,
     };
-    let companions = output::Companions::of(
+    let companions = companions::Companions::of(
         config,
         &clips,
         &rejects,
