@@ -388,3 +388,223 @@ fn caption_files_give_every_caption_and_their_sub_spans() {
         notes[1]
     );
 }
+
+/// Sets one float64 value of a C-order `.npy` file (version 1 header) in place.
+use npyz::WriterBuilder;
+
+fn set_f64(path: &Path, index: usize, value: f64) {
+    let mut bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..6], b"\x93NUMPY");
+    let header = 10 + usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
+    let at = header + index * 8;
+    bytes[at..at + 8].copy_from_slice(&value.to_le_bytes());
+    std::fs::write(path, bytes).unwrap();
+}
+
+const POSE_DATA: &str = "pose_data/KIT/4/WalkInCounterClockwiseCircle02_poses.npy";
+
+#[test]
+fn one_huge_value_in_a_joint_array_rejects_that_capture_at_ingest_and_the_build_goes_on() {
+    let (_dir, config) = fixture_copy();
+    let root = config.parent().unwrap();
+    // Frame 5, joint 3, x of the (180, 52, 3) float64 array: finite, and its square is not.
+    set_f64(&root.join(POSE_DATA), (5 * 52 + 3) * 3, 1e200);
+    let run = motionforge()
+        .args(["build", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let dataset = root.join("out/hml3d-joints");
+    let rejects: Vec<serde_json::Value> = lines(&dataset.join("rejects.jsonl"))
+        .iter()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rejects.len(), 1, "{rejects:?}");
+    let reject = &rejects[0];
+    assert_eq!(reject["reason"], "positions", "{reject}");
+    assert!(
+        reject["file"].as_str().unwrap().ends_with(POSE_DATA),
+        "{reject}"
+    );
+    assert_eq!(reject["frame"], 5, "{reject}");
+    let message = reject["message"].as_str().unwrap();
+    assert!(
+        message.contains("joint 3") && message.contains("1e200"),
+        "{message}"
+    );
+    // The other source's capture is built: it and its mirror.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dataset.join("build-report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["clips"], 2, "{report:#}");
+
+    // The same bound for the units that scale the values.
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, text.replacen("units = 1.0", "units = 1e160", 1)).unwrap();
+    let check = motionforge()
+        .args(["config", "check", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&check.stderr);
+    assert_eq!(check.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("units") && stderr.contains("1e160"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn an_index_changed_back_and_forth_never_leaves_the_cache_naming_a_removed_entry() {
+    let (_dir, config) = fixture_copy();
+    let root = config.parent().unwrap();
+    // Eight short captures beside the long one (20-frame pieces of the real 012314 array): the
+    // long capture's frames are most of the frame chunks' bytes while its clips are a small part
+    // of the segment outputs, so a changed cut makes pruning rewrite the chunks' pack (dropping
+    // its old chunk) and leave the segment pack, old output included, as it is.
+    let source = root.join("new_joints/012314.npy");
+    let bytes = std::fs::read(&source).unwrap();
+    let array = npyz::NpyFile::new(&bytes[..]).unwrap();
+    let values = array.into_vec::<f32>().unwrap();
+    for piece in 0..8 {
+        let frames = &values[piece * 20 * 66..(piece + 1) * 20 * 66];
+        let mut out = Vec::new();
+        let mut writer = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&[20, 22, 3])
+            .writer(&mut out)
+            .begin_nd()
+            .unwrap();
+        writer.extend(frames.iter().copied()).unwrap();
+        writer.finish().unwrap();
+        let name = format!("piece{piece}");
+        std::fs::write(root.join(format!("new_joints/{name}.npy")), out).unwrap();
+        std::fs::write(
+            root.join(format!("new_joints/{name}.json")),
+            format!(r#"{{"action": "tennis serve", "text": "part {piece} of a tennis serve"}}"#),
+        )
+        .unwrap();
+    }
+    std::fs::remove_file(&source).unwrap();
+    std::fs::remove_file(root.join("new_joints/012314.json")).unwrap();
+    let index = root.join("index.csv");
+    let header = "source_path,start_frame,end_frame,new_name\n";
+    let row = |start: u32, end: u32| format!("{header}./{POSE_DATA},{start},{end},000021.npy\n");
+    // Each build changes only the index; earlier cuts come back after others replaced them, so
+    // a still-findable old segment output names frame chunks a later build removed.
+    let cuts = [
+        (0, 180),
+        (10, 150),
+        (0, 180),
+        (20, 100),
+        (10, 150),
+        (0, 180),
+        (30, 170),
+        (20, 100),
+        (0, 180),
+    ];
+    let mut frames = Vec::new();
+    for (i, (start, end)) in cuts.into_iter().enumerate() {
+        std::fs::write(&index, row(start, end)).unwrap();
+        let run = motionforge()
+            .args(["build", "--config"])
+            .arg(&config)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "build {i} ({start}..{end}): {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let dataset = config.parent().unwrap().join("out/hml3d-joints");
+        frames.push(common::table_bytes(&dataset));
+    }
+    // And the same cut gives the same table every time it comes back.
+    assert_eq!(frames[0], frames[2]);
+    assert_eq!(frames[0], frames[8]);
+    assert_eq!(frames[1], frames[4]);
+    assert_eq!(frames[3], frames[7]);
+}
+
+#[test]
+fn an_index_of_bad_rows_gives_a_bounded_report_under_a_1_gb_address_space() {
+    let (_dir, config) = fixture_copy();
+    let root = config.parent().unwrap();
+    let mut text = std::fs::read_to_string(root.join("index.csv")).unwrap();
+    // About 27 MB of rows that cannot be read (a start after the end), as the audit's file.
+    let bad = format!("./{POSE_DATA},90,10,{}.npy\n", "x".repeat(40));
+    while text.len() < 27 << 20 {
+        text.push_str(&bad);
+    }
+    let rows = text.lines().count() - 2;
+    std::fs::write(root.join("index.csv"), &text).unwrap();
+    let run = Command::new("prlimit")
+        .arg(format!("--as={}", 1u64 << 30))
+        .arg(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(&config)
+        .output()
+        .expect("prlimit (util-linux) runs the binary");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let path = root.join("out/hml3d-joints/build-report.json");
+    let size = std::fs::metadata(&path).unwrap().len();
+    assert!(size < 1 << 20, "build-report.json is {size} bytes");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let notes = report["notes"].as_array().unwrap();
+    let bad_rows = notes.iter().filter(|n| n["kind"] == "bad_row").count();
+    assert_eq!(bad_rows, motionforge::annotate::span::NOTES_PER_KIND);
+    let rest = notes
+        .iter()
+        .find(|n| n["kind"] == motionforge::annotate::span::NOT_LISTED)
+        .unwrap_or_else(|| panic!("no count of the notes left out: {notes:?}"));
+    let expected = format!(
+        "{} more `bad_row` notes",
+        rows - motionforge::annotate::span::NOTES_PER_KIND
+    );
+    assert!(
+        rest["message"].as_str().unwrap().contains(&expected),
+        "{rest}: expected {expected}"
+    );
+    // The good row is still built.
+    assert!(report["clips"].as_u64().unwrap() >= 2, "{report:#}");
+}
+
+#[test]
+fn a_head_trim_with_the_largest_end_frame_clamps_instead_of_wrapping() {
+    let row = IndexRow {
+        source_path: "./pose_data/MPI_HDM05/dg/HDM_dg_01-01_01_120_poses.npy".into(),
+        start_frame: 0,
+        end_frame: i64::MAX,
+        new_name: "000001.npy".into(),
+        line: 2,
+    };
+    let options = IndexOptions {
+        fps: 20.0,
+        humanml3d_cuts: true,
+    };
+    let (start, end) = row_range(&row, &options);
+    assert_eq!(
+        start,
+        Time::Frame {
+            frame: 60,
+            fps: 20.0
+        }
+    );
+    assert_eq!(
+        end,
+        Time::Frame {
+            frame: i64::MAX,
+            fps: 20.0
+        }
+    );
+}

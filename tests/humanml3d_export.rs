@@ -168,6 +168,18 @@ fn an_existing_folder_is_kept_without_force_and_a_skeleton_without_a_map_is_skip
     assert!(matches!(err, ExportError::Exists { .. }), "{err}");
     assert!(err.to_string().contains("--force"));
     assert!(out.join("keep.txt").exists());
+    // Not an export: --force does not remove someone's folder either.
+    let forced = ExportOptions {
+        force: true,
+        ..ExportOptions::default()
+    };
+    let err = export_humanml3d(&dataset, &out, &forced).unwrap_err();
+    assert!(matches!(err, ExportError::NotAnExport { .. }), "{err}");
+    assert!(out.join("keep.txt").exists());
+    export_humanml3d(&dataset, &out.join("export"), &ExportOptions::default()).unwrap();
+    std::fs::remove_dir_all(&out).unwrap();
+    export_humanml3d(&dataset, &out, &ExportOptions::default()).unwrap();
+    std::fs::write(out.join("keep.txt"), "a file inside an export").unwrap();
 
     // The CMU profile without its [smpl22] table: its clips are skipped, naming what is missing,
     // and the rest is exported.
@@ -245,4 +257,246 @@ fn every_demo_clip_loads_the_way_text_to_motion_loads_humanml3d() {
     // Every clip loads except those the loader filters by length, as export.json lists.
     assert_eq!(kept, 24 - filtered);
     assert!(kept > 0);
+}
+
+/// Every file under `dir` by relative path, with its bytes.
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut files = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(folder) = stack.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let rel = path.strip_prefix(dir).unwrap().display().to_string();
+                files.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    files
+}
+
+fn export_cmd(dataset: &Path, out: &Path) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_motionforge"));
+    command
+        .args(["export", "humanml3d", "--force", "--dataset"])
+        .arg(dataset)
+        .arg("--out")
+        .arg(out);
+    command
+}
+
+#[test]
+fn force_never_removes_the_dataset_the_working_folder_or_a_folder_it_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let dataset = dir.path().join("demo");
+    let before = tree(&dataset);
+    let work = dir.path().join("work");
+    std::fs::create_dir_all(&work).unwrap();
+    std::fs::write(work.join("notes.txt"), "the user's own file").unwrap();
+    let work_before = tree(&work);
+    // Each is refused as a usage error (exit 2) naming why, and nothing is touched.
+    let cases: Vec<(std::path::PathBuf, &str)> = vec![
+        (dataset.clone(), "is the dataset folder"),
+        (dataset.join("."), "is the dataset folder"),
+        (dir.path().to_path_buf(), "holds the"),
+        (dataset.join("data"), "lies inside the dataset folder"),
+        (dataset.join("new"), "lies inside the dataset folder"),
+        (".".into(), "is the working folder"),
+        ("..".into(), "holds the working folder"),
+    ];
+    for (out, why) in cases {
+        let run = export_cmd(&dataset, &out)
+            .current_dir(&work)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(
+            run.status.code(),
+            Some(2),
+            "--out {}: {stderr}",
+            out.display()
+        );
+        assert!(stderr.contains(why), "--out {}: {stderr}", out.display());
+        assert_eq!(tree(&dataset), before, "--out {}", out.display());
+        assert_eq!(tree(&work), work_before, "--out {}", out.display());
+    }
+    // A folder of someone else's files is not replaced, even with --force.
+    let run = export_cmd(&dataset, &work)
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("not a finished HumanML3D export"),
+        "{stderr}"
+    );
+    assert_eq!(tree(&work), work_before);
+    // The export's own default folder inside the dataset is allowed.
+    common::run_ok(
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .args(["export", "humanml3d", "--dataset"])
+            .arg(&dataset),
+    );
+    assert!(dataset.join("humanml3d/export.json").is_file());
+    // The other commands that write or clear folders keep the same folders.
+    let report = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .arg("report")
+        .arg(&dataset)
+        .args(["-o", "."])
+        .current_dir(&work)
+        .output()
+        .unwrap();
+    assert_eq!(report.status.code(), Some(2), "{report:?}");
+    assert!(String::from_utf8_lossy(&report.stderr).contains("is the working folder"));
+    let preview = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .arg("preview")
+        .arg(&dataset)
+        .args(["--limit", "1", "-o"])
+        .arg(dataset.join("data"))
+        .output()
+        .unwrap();
+    assert_eq!(preview.status.code(), Some(2), "{preview:?}");
+    assert!(String::from_utf8_lossy(&preview.stderr).contains("lies inside the dataset folder"));
+    assert_eq!(tree(&work), work_before);
+    let clean = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["clean", "--config"])
+        .arg(common::repo().join("fixtures/demo.toml"))
+        .args(["--output", ".."])
+        .current_dir(&dataset)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&clean.stderr);
+    assert_eq!(clean.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("is the working folder"), "{stderr}");
+    assert!(dataset.join("manifest.json").is_file());
+}
+
+#[test]
+fn a_build_does_not_write_into_the_working_folder_or_a_folder_of_other_files() {
+    let dir = tempfile::tempdir().unwrap();
+    // A folder named like the dataset, holding someone's files.
+    let foreign = dir.path().join("demo");
+    std::fs::create_dir_all(&foreign).unwrap();
+    std::fs::write(foreign.join("README.md"), "someone's readme").unwrap();
+    for cwd in [dir.path(), foreign.as_path()] {
+        let output = if cwd == foreign { ".." } else { "." };
+        let run = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .args(["build", "--force", "--config"])
+            .arg(common::repo().join("fixtures/demo.toml"))
+            .args(["--output", output])
+            .current_dir(cwd)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains("did not write") || stderr.contains("is the working folder"),
+            "{stderr}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(foreign.join("README.md")).unwrap(),
+            "someone's readme"
+        );
+        assert!(!foreign.join(".motionforge").exists());
+    }
+}
+
+#[test]
+fn an_interrupted_forced_export_leaves_the_old_export_or_the_new_one() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let demo = dir.path().join("demo");
+    common::run_ok(
+        Command::new(env!("CARGO_BIN_EXE_motionforge"))
+            .args(["build", "--config"])
+            .arg(common::repo().join("fixtures/humanml3d-joints/build.toml"))
+            .arg("--output")
+            .arg(dir.path()),
+    );
+    let small = dir.path().join("hml3d-joints");
+    // The two exports a killed run may leave: the old one (of the small dataset) and the new one
+    // (of the demo), each made without interruption.
+    let old_ref = dir.path().join("old-ref");
+    let new_ref = dir.path().join("new-ref");
+    common::run_ok(&mut export_cmd(&small, &old_ref));
+    let started = std::time::Instant::now();
+    common::run_ok(&mut export_cmd(&demo, &new_ref));
+    let whole = started.elapsed();
+    let (old, new) = (tree(&old_ref), tree(&new_ref));
+    assert_ne!(old, new);
+
+    let out = dir.path().join("out");
+    let mut rng = fastrand::Rng::with_seed(30);
+    let (mut saw_old, mut saw_new) = (0, 0);
+    for attempt in 0..20 {
+        common::run_ok(&mut export_cmd(&small, &out));
+        let mut child = export_cmd(&demo, &out)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Anywhere from the start to a little past a whole run.
+        let delay = whole.mul_f64(rng.f64() * 1.2);
+        std::thread::sleep(delay);
+        let _ = child.kill();
+        child.wait().unwrap();
+        let found = tree(&out);
+        if found == old {
+            saw_old += 1;
+        } else if found == new {
+            saw_new += 1;
+        } else {
+            panic!(
+                "attempt {attempt} (killed after {delay:?}): {} holds {} files, neither export",
+                out.display(),
+                found.len()
+            );
+        }
+    }
+    // Kills landed on both sides of the swap, so the check saw both outcomes.
+    assert!(saw_old > 0 && saw_new > 0, "old {saw_old}, new {saw_new}");
+    // The next run finishes the job from whatever was left.
+    common::run_ok(&mut export_cmd(&demo, &out));
+    assert_eq!(tree(&out), new);
+}
+
+#[test]
+fn split_names_from_a_shard_never_make_paths_outside_the_export() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let dataset = dir.path().join("demo");
+    // A dataset received from someone: its shards name splits that are paths.
+    let escape = dir.path().join("escaped");
+    let script = r#"
+import sys, glob, pyarrow as pa, pyarrow.parquet as pq
+for i, path in enumerate(sorted(glob.glob(sys.argv[1] + '/data/*.parquet'))):
+    t = pq.read_table(path)
+    names = ['../../../x', sys.argv[2], 'all']
+    split = [names[(i + r) % 3] if r % 2 == 0 else s for r, s in enumerate(t.column('split').to_pylist())]
+    t = t.set_column(t.schema.get_field_index('split'), 'split', pa.array(split, pa.string()))
+    pq.write_table(t, path, compression='zstd')
+"#;
+    common::run_python(script, &[dataset.as_os_str(), escape.join("x").as_os_str()]);
+    let out = dir.path().join("hml3d");
+    let summary = export_humanml3d(&dataset, &out, &ExportOptions::default()).unwrap();
+    assert!(!escape.exists(), "wrote outside --out");
+    assert!(!dir.path().join("x.txt").exists() && !Path::new("/x.txt").exists());
+    let refused: Vec<&str> = summary
+        .skipped
+        .iter()
+        .map(|s| s.reason.as_str())
+        .filter(|r| r.contains("split"))
+        .collect();
+    assert!(refused.len() >= 3, "{:?}", summary.skipped);
+    assert!(refused.iter().any(|r| r.contains("not a plain file name")));
+    assert!(refused.iter().any(|r| r.contains("all.txt")));
+    // Every file the export wrote is inside it, and the clips with usable splits are listed.
+    assert_eq!(summary.exported + summary.skipped.len(), summary.clips);
+    assert!(summary.exported > 0);
+    let listed = lines(&out.join("all.txt"));
+    assert_eq!(listed.len(), summary.exported);
 }

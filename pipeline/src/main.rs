@@ -689,12 +689,30 @@ fn exit_code(err: &anyhow::Error) -> u8 {
                 .is_some()
             || matches!(
                 e.downcast_ref::<motionforge::build::clean::CleanError>(),
-                Some(motionforge::build::clean::CleanError::NotADataset { .. })
+                Some(
+                    motionforge::build::clean::CleanError::NotADataset { .. }
+                        | motionforge::build::clean::CleanError::Refused(_)
+                )
+            )
+            // An output that would replace or write into a folder the user keeps.
+            || e.downcast_ref::<motionforge::base::guard::Refused>()
+                .is_some()
+            || matches!(
+                e.downcast_ref::<motionforge::export::ExportError>(),
+                Some(
+                    motionforge::export::ExportError::Refused(_)
+                        | motionforge::export::ExportError::NotAnExport { .. }
+                )
+            )
+            || matches!(
+                e.downcast_ref::<motionforge::report::ReportError>(),
+                Some(motionforge::report::ReportError::Refused(_))
             )
             || matches!(
                 e.downcast_ref::<BuildError>(),
                 Some(
                     BuildError::Source(_)
+                        | BuildError::Refused(_)
                         | BuildError::Taxonomy(_)
                         | BuildError::Prompt(_)
                         | BuildError::Split(_)
@@ -860,7 +878,8 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
                     .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
                 profiles.push(ProfileSpec::from_toml(&path.display().to_string(), &text)?);
             }
-            let out = out.unwrap_or_else(|| dataset.join("humanml3d"));
+            let out =
+                out.unwrap_or_else(|| dataset.join(motionforge::export::humanml3d::DEFAULT_DIR));
             let options = motionforge::export::ExportOptions { force, profiles };
             let summary = motionforge::export::export_humanml3d(&dataset, &out, &options)?;
             if ui.status() {

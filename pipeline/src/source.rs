@@ -429,6 +429,8 @@ pub fn load_annotations(
             notes.extend(caption_notes.into_inner());
         }
     }
+    // Bounded per kind: one file's damage must not make the build's memory unbounded.
+    let notes = crate::annotate::span::cap_per_kind(notes, crate::annotate::span::NOTES_PER_KIND);
     Ok(SourceAnnotations::Indexed { by_key, notes })
 }
 

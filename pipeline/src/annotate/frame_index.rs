@@ -9,7 +9,9 @@
 
 use std::collections::BTreeMap;
 
-use super::span::{AnnotationError, CaptureAnnotation, Note, Span, Time};
+use super::span::{
+    AnnotationError, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note, Span, Time,
+};
 
 /// The header columns, in HumanML3D's order.
 pub const INDEX_COLUMNS: [&str; 4] = ["source_path", "start_frame", "end_frame", "new_name"];
@@ -150,11 +152,28 @@ pub fn read_frame_index(
     })?;
     let mut rows = Vec::new();
     let mut notes = Vec::new();
+    // Only the first bad rows are described: an index of nothing but bad rows must not grow a
+    // note per line (a 27 MB one made a 446 MB build report).
+    let mut bad = 0usize;
     for (line, text) in lines {
         match read_row(text, line, &columns) {
             Ok(row) => rows.push(row),
-            Err(why) => notes.push(Note::new("bad_row", format!("{file}:{line}: {why}"))),
+            Err(why) => {
+                bad += 1;
+                if bad <= NOTES_PER_KIND {
+                    notes.push(Note::new("bad_row", format!("{file}:{line}: {why}")));
+                }
+            }
         }
+    }
+    if bad > NOTES_PER_KIND {
+        notes.push(Note::new(
+            NOT_LISTED,
+            format!(
+                "{file}: {} more `bad_row` notes not listed (the first {NOTES_PER_KIND} are)",
+                bad - NOTES_PER_KIND
+            ),
+        ));
     }
     Ok((rows, notes))
 }
@@ -344,13 +363,15 @@ pub fn row_range(row: &IndexRow, options: &IndexOptions) -> (Time, Time) {
         Time::BeforeEnd { frames: 1, fps }
     } else {
         Time::Frame {
-            frame: trim + row.end_frame,
+            // Saturating, as rows without a trim are clamped: `end_frame` = i64::MAX means
+            // "to the end", not a wrap to a negative frame.
+            frame: trim.saturating_add(row.end_frame),
             fps,
         }
     };
     (
         Time::Frame {
-            frame: trim + row.start_frame,
+            frame: trim.saturating_add(row.start_frame),
             fps,
         },
         end,
@@ -436,8 +457,8 @@ pub fn index_annotations_with(
                         Time::Frame { frame, .. } => frame,
                         _ => 0,
                     };
-                    let sub_start = base + (from * fps) as i64;
-                    let mut sub_end = base + (to * fps) as i64;
+                    let sub_start = base.saturating_add((from * fps) as i64);
+                    let mut sub_end = base.saturating_add((to * fps) as i64);
                     if let Time::Frame { frame, .. } = end {
                         sub_end = sub_end.min(frame);
                     }

@@ -150,6 +150,39 @@ impl Note {
     }
 }
 
+/// Notes of one kind listed in a build report; the rest are counted in one [`NOT_LISTED`] note,
+/// so a file of a million bad rows gives a report of a few hundred lines, not a million.
+pub const NOTES_PER_KIND: usize = 200;
+
+/// Kind of the note that counts the notes of another kind left out of a list.
+pub const NOT_LISTED: &str = "notes_not_listed";
+
+/// `notes` with at most `limit` of each kind, in their order; for each kind with more, one
+/// [`NOT_LISTED`] note at the end says how many more there were.
+pub fn cap_per_kind(notes: Vec<Note>, limit: usize) -> Vec<Note> {
+    let mut seen: std::collections::BTreeMap<String, usize> = std::collections::BTreeMap::new();
+    let mut kept = Vec::with_capacity(notes.len().min(limit.saturating_mul(8)));
+    for note in notes {
+        let n = seen.entry(note.kind.clone()).or_insert(0);
+        *n += 1;
+        if *n <= limit || note.kind == NOT_LISTED {
+            kept.push(note);
+        }
+    }
+    for (kind, n) in seen {
+        if n > limit && kind != NOT_LISTED {
+            kept.push(Note::new(
+                NOT_LISTED,
+                format!(
+                    "{} more `{kind}` notes not listed (the first {limit} are)",
+                    n - limit
+                ),
+            ));
+        }
+    }
+    kept
+}
+
 /// Why an annotation file cannot be read at all (single bad records become notes or rejects).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{file}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]

@@ -18,3 +18,5 @@ pub const REPORT_FILE: &str = "build-report.json";
 pub const PLANS_FILE: &str = "plans.parquet";
 /// The report's statistics, inside the dataset folder.
 pub const REPORT_STATS: &str = "report/stats.json";
+/// The LLM response cache's default place inside the dataset folder (`[llm] cache`).
+pub const LLM_CACHE_FILE: &str = "llm-cache.jsonl";

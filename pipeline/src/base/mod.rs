@@ -1,7 +1,9 @@
 //! The leaf types every other module builds on: content fingerprints and digests, atomic writes
-//! and the workspace lock, what a build refuses and drops, and the names of a dataset's files.
+//! and the workspace lock, what a build refuses and drops, the names of a dataset's files, and what a
+//! command may replace.
 //! Depends on no other module of the crate.
 
+pub mod guard;
 pub mod layout;
 pub mod lock;
 mod reject;
@@ -11,7 +13,8 @@ mod write;
 pub use reject::{DropReason, Dropped, MAX_MESSAGE_CHARS, Reject, RejectReason};
 pub use write::{
     Fingerprint, HashingWriter, Stamp, WorkspaceError, encoded_sha256, hex, io_err, io_hint,
-    sha256_hex, temp_path, write_atomic, write_atomic_with, write_replaceable_with,
+    replace_dir, restore_replaced, sha256_hex, sibling, temp_path, write_atomic, write_atomic_with,
+    write_replaceable_with,
 };
 
 /// `path` with `.` removed and `dir/..` folded lexically (no file system access), so paths print

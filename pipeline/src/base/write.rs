@@ -252,6 +252,76 @@ fn replace(
     Ok(())
 }
 
+/// Puts the finished folder `staging` at `out`, replacing the folder `out` held: `out` is at every
+/// moment the old folder or the new one, never a mix or a half-removed one. On Linux the two are
+/// swapped in one `renameat2(RENAME_EXCHANGE)` and the old one is then removed from where the
+/// staging folder was; elsewhere the old folder is first moved aside to a sibling
+/// `.<name>.replaced`, which [`restore_replaced`] puts back if the swap was interrupted.
+pub fn replace_dir(staging: &Path, out: &Path) -> Result<(), WorkspaceError> {
+    if fs::symlink_metadata(out).is_err() {
+        return fs::rename(staging, out).map_err(io_err(out));
+    }
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    if exchange(staging, out).is_ok() {
+        // `staging` now holds the old folder; a failure to remove it leaves a hidden leftover
+        // the next run clears, never a damaged output.
+        let _ = fs::remove_dir_all(staging);
+        return Ok(());
+    }
+    let aside = sibling(out, "replaced");
+    if fs::symlink_metadata(&aside).is_ok() {
+        fs::remove_dir_all(&aside).map_err(io_err(&aside))?;
+    }
+    fs::rename(out, &aside).map_err(io_err(out))?;
+    fs::rename(staging, out).map_err(io_err(out))?;
+    let _ = fs::remove_dir_all(&aside);
+    Ok(())
+}
+
+/// Puts back an old folder [`replace_dir`] moved aside and did not get to replace (a run
+/// interrupted between its two renames), so `out` is never simply gone.
+pub fn restore_replaced(out: &Path) -> Result<(), WorkspaceError> {
+    let aside = sibling(out, "replaced");
+    if fs::symlink_metadata(out).is_err() && aside.is_dir() {
+        fs::rename(&aside, out).map_err(io_err(out))?;
+    }
+    Ok(())
+}
+
+/// `.<name>.<what>` beside `path`: the hidden working names of a folder being replaced.
+pub fn sibling(path: &Path, what: &str) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".into());
+    path.with_file_name(format!(".{name}.{what}"))
+}
+
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| {
+        std::ffi::CString::new(p.as_os_str().as_bytes())
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))
+    };
+    let (a, b) = (c(a)?, c(b)?);
+    // SAFETY: both paths are NUL-terminated C strings that live across the call.
+    let rc = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 /// A fresh temporary name for writing `path`: `.<name>.<n>.<pid>.tmp`, with `n` new at every
 /// call. Two threads may write the same path at once (content-named frame chunks of two identical
 /// captures): with one name per process, one thread's create would truncate the other's file and

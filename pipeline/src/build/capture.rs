@@ -230,9 +230,17 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         &shared.types_digest,
     );
     // The cached output is the clips without frames and where their frames went.
+    // A cached segment output names its frame chunks; pruning may have removed a chunk an
+    // older, still-findable output names (an annotation changed and changed back), so such an
+    // output is made again rather than trusted.
+    let chunks_present = |(_, refs): &(SegmentOutput, Vec<MotionRef>)| {
+        refs.iter()
+            .flat_map(MotionRef::chunks)
+            .all(|(stage, fingerprint)| shared.workspace.has(stage, fingerprint))
+    };
     let Some(((segmented, refs), ran)): Option<((SegmentOutput, Vec<MotionRef>), bool)> = shared
         .workspace
-        .try_item(segment::NAME, &item.key, &seg_fp, || {
+        .try_item_where(segment::NAME, &item.key, &seg_fp, chunks_present, || {
             let capture = match parsed.take() {
                 Some(out) => out.capture,
                 None => parse(&mut bytes)?.capture,

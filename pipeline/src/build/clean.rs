@@ -33,6 +33,9 @@ pub enum CleanError {
         /// The folder.
         dir: PathBuf,
     },
+    /// The folder is, or holds, the working or home folder.
+    #[error(transparent)]
+    Refused(#[from] crate::base::guard::Refused),
     /// Another process holds the dataset folder.
     #[error(transparent)]
     Lock(#[from] LockError),
@@ -75,6 +78,11 @@ pub fn clean(
             dir: dataset_dir.to_path_buf(),
         });
     }
+    crate::base::guard::check_replaceable(
+        dataset_dir,
+        &crate::base::guard::Kept::working_folder(),
+        "set --config or --output to the dataset's own folder",
+    )?;
     let _lock = WorkspaceLock::acquire(dataset_dir, wait)?;
     let names: Vec<&str> = if cache_only {
         vec![CACHE, DIGESTS]
@@ -123,6 +131,20 @@ pub fn clean(
         .filter(|n| n != ".motionforge")
         .collect();
     Ok(report)
+}
+
+/// True when the folder `dir` was made by a build: it has the workspace (`.motionforge/`) or a
+/// dataset manifest, or holds nothing but the LLM response cache (which `labels import` puts
+/// there before the first build) and leftovers of atomic writes.
+pub fn made_by_a_build(dir: &Path) -> bool {
+    if dir.join(".motionforge").is_dir()
+        || matches!(crate::io::manifest::Manifest::read(dir), Ok(Some(_)))
+    {
+        return true;
+    }
+    entry_names(dir)
+        .iter()
+        .all(|n| n == crate::base::layout::LLM_CACHE_FILE || is_temp(n))
 }
 
 fn is_temp(name: &str) -> bool {

@@ -180,6 +180,9 @@ pub enum BuildError {
     /// A held clip's motion cannot be found (internal bookkeeping; `--force` rebuilds it).
     #[error("{0}")]
     Motion(String),
+    /// The dataset folder is one the build must not write into.
+    #[error(transparent)]
+    Refused(#[from] crate::base::guard::Refused),
     /// The table cannot be written.
     #[error("{path}: {source}")]
     Table {
@@ -563,6 +566,13 @@ struct Staged<'a> {
 
 /// Runs every stage of the build described by `config` and writes the dataset.
 pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, BuildError> {
+    // Before the lock, which creates `.motionforge/`: a build writes README.md, data/ and more
+    // into the dataset folder, so it must not be the working folder or someone else's folder.
+    crate::base::guard::check_owned(
+        &config.dataset_dir(),
+        clean::made_by_a_build,
+        "set [dataset] output and name (or --output) to a folder of the dataset's own",
+    )?;
     // One build per dataset folder at a time; released when this function returns.
     let _lock = lock::WorkspaceLock::acquire(&config.dataset_dir(), options.lock_wait)
         .map_err(WorkspaceError::from)?;
@@ -670,6 +680,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     for n in &notes {
         *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;
     }
+    // Counted whole above, listed up to a bound: the report stays readable and its size bounded.
+    let notes = crate::annotate::span::cap_per_kind(notes, crate::annotate::span::NOTES_PER_KIND);
     let report = BuildReport {
         label_contradictions,
         label_contradictions_dropped,

@@ -289,6 +289,20 @@ impl Workspace {
         stamp: &Stamp,
         compute: impl FnOnce() -> Result<T, E>,
     ) -> Result<Option<(T, bool)>, E> {
+        self.try_item_where(stage, key, stamp, |_| true, compute)
+    }
+
+    /// Like [`Workspace::try_item`], using a cached output only when `usable` accepts it: an
+    /// output that names entries of another stage (a segment's frame chunks) is recomputed
+    /// when one of them is gone, instead of failing the build when it is read.
+    pub fn try_item_where<T: Serialize + DeserializeOwned, E: From<WorkspaceError>>(
+        &self,
+        stage: &str,
+        key: &str,
+        stamp: &Stamp,
+        usable: impl FnOnce(&T) -> bool,
+        compute: impl FnOnce() -> Result<T, E>,
+    ) -> Result<Option<(T, bool)>, E> {
         if let Ok(mut seen) = self.seen.lock() {
             seen.push(Miss {
                 stage: stage.to_string(),
@@ -296,7 +310,7 @@ impl Workspace {
                 stamp: stamp.clone(),
             });
         }
-        if let Some(v) = self.load(stage, &stamp.fingerprint) {
+        if let Some(v) = self.load(stage, &stamp.fingerprint).filter(|v| usable(v)) {
             return Ok(Some((v, false)));
         }
         if self.probe {

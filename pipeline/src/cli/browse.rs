@@ -4,6 +4,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use motionforge::base::guard::{Kept, check_replaceable};
 use motionforge::dataset::preview::{self, Panel, PreviewOptions};
 use motionforge::dataset::{self, ClipFilter, ClipInfo, Companions};
 
@@ -177,6 +178,8 @@ pub(crate) fn preview(
         WithArg::Mirror => Companions::Mirror,
         WithArg::Sources => Companions::Sources,
     };
+    let kept = Kept::working_folder().and(dir, "the dataset folder it previews", &[]);
+    check_replaceable(output, &kept, "pass another --output")?;
     let skeletons = dataset::read_skeletons(dir)?;
     let mut out = std::io::stdout().lock();
     for clip in chosen {

@@ -329,11 +329,20 @@ impl Config {
                         ),
                     );
                 }
-                if !(p.units.is_finite() && p.units > 0.0) {
+                if !crate::config::UNITS_RANGE.contains(&p.units) {
                     c.push(
                         &at(&[K("positions"), K("units")]),
-                        p.units.to_string(),
-                        "metres per unit of the arrays, above zero (HumanML3D: 1)",
+                        // `1e160` as written, not 161 digits.
+                        if p.units.abs() >= 1e15 || (p.units != 0.0 && p.units.abs() < 1e-4) {
+                            format!("{:e}", p.units)
+                        } else {
+                            p.units.to_string()
+                        },
+                        &format!(
+                            "metres per unit of the arrays, from {:e} to {:e} (HumanML3D: 1; millimetres: 0.001)",
+                            crate::config::UNITS_RANGE.start(),
+                            crate::config::UNITS_RANGE.end()
+                        ),
                     );
                 }
                 if !(p.bone_tolerance.is_finite()

@@ -501,6 +501,11 @@ fn default_positions_forward() -> crate::motion::SignedAxis {
     }
 }
 
+/// Metres per unit of a joint-position array accepted by `[sources.positions] units`: from
+/// micrometres to thousands of kilometres. With values bounded by `motion::bvh::MAX_MAGNITUDE`
+/// (as BVH values are), positions stay far from overflow in every feature.
+pub const UNITS_RANGE: std::ops::RangeInclusive<f64> = 1e-6..=1e6;
+
 fn default_positions_units() -> f64 {
     1.0
 }
@@ -783,7 +788,7 @@ impl Config {
     pub fn llm_cache_path(&self) -> PathBuf {
         match &self.llm_cache {
             Some(p) => self.resolve(p),
-            None => self.dataset_dir().join("llm-cache.jsonl"),
+            None => self.dataset_dir().join(crate::base::layout::LLM_CACHE_FILE),
         }
     }
 }

@@ -28,6 +28,7 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::base::guard::{Kept, check_replaceable, is_plain_name};
 use crate::clip::Split;
 use crate::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
 use crate::io::schema::Column;
@@ -112,7 +113,30 @@ pub enum ExportError {
         /// The folder.
         path: PathBuf,
     },
+    /// The output folder exists and is not an export, so `--force` will not remove it.
+    #[error(
+        "{} exists and is not a finished HumanML3D export (no {EXPORT_MARKER}); it is not replaced, even with --force: remove it yourself or choose another --out",
+        path.display()
+    )]
+    NotAnExport {
+        /// The folder.
+        path: PathBuf,
+    },
+    /// The output folder is, holds or lies inside a folder the export must keep.
+    #[error(transparent)]
+    Refused(#[from] crate::base::guard::Refused),
 }
+
+/// The export's folder inside the dataset when no `--out` is given: the one place inside the
+/// dataset folder it writes.
+pub const DEFAULT_DIR: &str = "humanml3d";
+
+/// Written last into an export: a folder without it is not a finished export (an interrupted run
+/// never leaves one, and `--force` replaces only folders that have it).
+pub const EXPORT_MARKER: &str = "export.json";
+
+/// Split names the export cannot use as list files: `all.txt` is its own list.
+const RESERVED_LISTS: [&str; 1] = ["all"];
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> ExportError + '_ {
     move |source| ExportError::Io {
@@ -140,10 +164,23 @@ pub fn export_humanml3d(
     out: &Path,
     options: &ExportOptions,
 ) -> Result<ExportSummary, ExportError> {
-    if out.exists() && !options.force {
-        return Err(ExportError::Exists {
-            path: out.to_path_buf(),
-        });
+    let kept = Kept::working_folder().and(dataset, "the dataset folder it exports", &[DEFAULT_DIR]);
+    check_replaceable(out, &kept, "pass another --out")?;
+    crate::base::restore_replaced(out).map_err(|e| ExportError::Io {
+        path: out.to_path_buf(),
+        source: std::io::Error::other(e.to_string()),
+    })?;
+    if out.exists() {
+        if !options.force {
+            return Err(ExportError::Exists {
+                path: out.to_path_buf(),
+            });
+        }
+        if !is_export(out) {
+            return Err(ExportError::NotAnExport {
+                path: out.to_path_buf(),
+            });
+        }
     }
     let shards =
         crate::report::find_clip_tables(dataset).map_err(|e| ExportError::NotADataset {
@@ -195,6 +232,12 @@ pub fn export_humanml3d(
                 .par_iter()
                 .zip(&frames)
                 .map(|(entry, frames)| {
+                    if let Err(why) = usable_split(&entry.split) {
+                        return Ok(Err(Skipped {
+                            clip_id: entry.clip_id.clone(),
+                            reason: why,
+                        }));
+                    }
                     let converted = match convert(entry, frames, &placements) {
                         Ok(c) => c,
                         Err(skipped) => return Ok(Err(skipped)),
@@ -238,21 +281,24 @@ pub fn export_humanml3d(
         write_npy(&staging.join("Std.npy"), &[DIM], &std)?;
     }
     let json = serde_json::to_vec_pretty(&summary).unwrap_or_default();
-    let path = staging.join("export.json");
+    // The marker last, then one swap: `out` is always the old export or the new one.
+    let path = staging.join(EXPORT_MARKER);
     fs::write(&path, json).map_err(io_err(&path))?;
-    if out.exists() {
-        fs::remove_dir_all(out).map_err(io_err(out))?;
-    }
-    fs::rename(&staging, out).map_err(io_err(out))?;
+    crate::base::replace_dir(&staging, out).map_err(|e| ExportError::Io {
+        path: out.to_path_buf(),
+        source: std::io::Error::other(e.to_string()),
+    })?;
     Ok(summary)
 }
 
+/// True when `dir` is a finished export (it has the marker) or an empty folder.
+pub fn is_export(dir: &Path) -> bool {
+    dir.join(EXPORT_MARKER).is_file()
+        || fs::read_dir(dir).is_ok_and(|mut entries| entries.next().is_none())
+}
+
 fn staging_path(out: &Path) -> PathBuf {
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "humanml3d".into());
-    out.with_file_name(format!(".{name}.partial"))
+    crate::base::sibling(out, "partial")
 }
 
 /// HumanML3D's order of names: originals by number, then mirrors by number.
@@ -645,6 +691,23 @@ fn write_captions(dir: &Path, name: &str, entry: &Entry) -> Result<Vec<Skipped>,
     let path = dir.join("texts").join(format!("{name}.txt"));
     fs::write(&path, text).map_err(io_err(&path))?;
     Ok(refused)
+}
+
+/// Whether a split's list file can be written: its name becomes `<out>/<split>.txt`, so a name
+/// from a shard (someone else's dataset, a shard written by hand) must stay a plain file name.
+fn usable_split(split: &Split) -> Result<(), String> {
+    let name = list_name(split);
+    if !is_plain_name(name) || name.starts_with('.') {
+        return Err(format!(
+            "split {name:?} is not a plain file name, so it cannot name a list file"
+        ));
+    }
+    if RESERVED_LISTS.contains(&name) {
+        return Err(format!(
+            "split {name:?} would overwrite the export's own {name}.txt"
+        ));
+    }
+    Ok(())
 }
 
 /// Split lists, `all.txt` and `names.csv`.

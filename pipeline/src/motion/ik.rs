@@ -222,7 +222,8 @@ pub fn motion_from_positions(
         for t in 0..frames {
             let l = bone(t, j).length();
             let change = (l - *mean).abs() / *mean;
-            if change > tolerance {
+            // NaN (an overflowing length or mean) fails the check too.
+            if change.is_nan() || change > tolerance {
                 return Err(IkError::BoneLength {
                     frame: t,
                     name: layout.names[j].clone(),

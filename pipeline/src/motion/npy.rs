@@ -5,6 +5,8 @@
 
 use glam::DVec3;
 
+use super::bvh::MAX_MAGNITUDE;
+
 /// A `frames × joints` array of positions, frame-major.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JointArray {
@@ -49,6 +51,19 @@ pub enum NpyError {
         frame: usize,
         /// The joint.
         joint: usize,
+    },
+    /// A value is finite but beyond what any capture holds, in any unit.
+    #[error(
+        "frame {frame}, joint {joint}: coordinate {value:e} is beyond ±{max:e}, the largest magnitude accepted in any capture (BVH too)",
+        max = MAX_MAGNITUDE
+    )]
+    OutOfRange {
+        /// The frame.
+        frame: usize,
+        /// The joint.
+        joint: usize,
+        /// The value.
+        value: f64,
     },
 }
 
@@ -103,6 +118,18 @@ pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
         return Err(NpyError::NotFinite {
             frame: i / joints.max(1),
             joint: i % joints.max(1),
+        });
+    }
+    // The same bound as BVH values: a huge finite value overflows bone lengths and features
+    // downstream (1e200 squared is infinite).
+    if let Some(i) = positions
+        .iter()
+        .position(|p| p.abs().max_element() > MAX_MAGNITUDE)
+    {
+        return Err(NpyError::OutOfRange {
+            frame: i / joints.max(1),
+            joint: i % joints.max(1),
+            value: positions[i].abs().max_element(),
         });
     }
     Ok(JointArray {

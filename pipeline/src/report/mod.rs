@@ -27,6 +27,7 @@ pub use stats::{
 pub use tables::{latex_escape, markdown_escape};
 
 use crate::base::WorkspaceError;
+use crate::base::guard::{Kept, check_replaceable};
 
 /// What a report is made from besides the clip rows.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -170,6 +171,9 @@ pub enum ReportError {
     /// An output file could not be written.
     #[error(transparent)]
     Write(#[from] WorkspaceError),
+    /// The output folder is, holds or lies inside a folder the report must keep.
+    #[error(transparent)]
+    Refused(#[from] crate::base::guard::Refused),
 }
 
 /// Writes the report of `rows` and `stats` into `out_dir` (created if needed): `stats.json`,
@@ -226,6 +230,11 @@ fn write_report_with(
 /// The report of a built dataset folder, from its shards (`data/`) and `manifest.json` alone,
 /// written to `out_dir` (default `<dataset>/report`). Returns the files written.
 pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<PathBuf>, ReportError> {
+    if let Some(out) = out_dir {
+        let kept =
+            Kept::working_folder().and(dataset, "the dataset folder it reports on", &["report"]);
+        check_replaceable(out, &kept, "pass another --output")?;
+    }
     // Without a manifest (a folder of shards from elsewhere) the counts are empty.
     let manifest = crate::io::manifest::Manifest::read(dataset)?;
     let counts = manifest

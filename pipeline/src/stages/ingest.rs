@@ -8,7 +8,7 @@ use crate::clip::{Capture, CaptureRef};
 use crate::config::PositionsConfig;
 use crate::motion::bvh::FPS_RANGE;
 use crate::motion::ik::{IkError, PositionLayout, motion_from_positions};
-use crate::motion::npy::read_joint_positions;
+use crate::motion::npy::{NpyError, read_joint_positions};
 use crate::motion::{Motion, ProfileSpec, read_bvh};
 use crate::source::CaptureFile;
 
@@ -241,7 +241,15 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
     };
     let array = match read_joint_positions(input.bytes) {
         Ok(a) => a,
-        Err(e) => return refuse(RejectReason::Positions, e.to_string(), None),
+        Err(e) => {
+            let frame = match &e {
+                NpyError::NotFinite { frame, .. } | NpyError::OutOfRange { frame, .. } => {
+                    Some(*frame as u64)
+                }
+                _ => None,
+            };
+            return refuse(RejectReason::Positions, e.to_string(), frame);
+        }
     };
     let want = config.layout.joints();
     if array.joints != want {
