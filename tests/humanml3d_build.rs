@@ -608,3 +608,203 @@ fn a_head_trim_with_the_largest_end_frame_clamps_instead_of_wrapping() {
         }
     );
 }
+
+/// A version-1 `.npy` file with this header and these value bytes.
+fn npy_file(descr: &str, fortran: bool, shape: &str, data: &[u8]) -> Vec<u8> {
+    let fortran = if fortran { "True" } else { "False" };
+    let mut header =
+        format!("{{'descr': '{descr}', 'fortran_order': {fortran}, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(data);
+    out
+}
+
+/// The real 012314 clip's (170, 22, 3) float32 values.
+fn real_values() -> Vec<f32> {
+    let bytes =
+        std::fs::read(common::repo().join("fixtures/humanml3d-joints/new_joints/012314.npy"))
+            .unwrap();
+    npyz::NpyFile::new(&bytes[..])
+        .unwrap()
+        .into_vec::<f32>()
+        .unwrap()
+}
+
+fn le(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+#[test]
+fn damaged_joint_arrays_cost_one_reject_each_under_a_1_gb_address_space() {
+    let (_dir, config) = fixture_copy();
+    let root = config.parent().unwrap();
+    let dir = root.join("new_joints");
+    let good = std::fs::read(dir.join("012314.npy")).unwrap();
+    let values = real_values();
+    let with = |frame: usize, v: f32| {
+        let mut copy = values.clone();
+        copy[frame * 66 + 4] = v;
+        le(&copy)
+    };
+    let be: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
+    let cases: Vec<(&str, Vec<u8>, Option<&str>)> = vec![
+        ("header-cut", good[..30].to_vec(), Some("not a NumPy")),
+        (
+            "data-cut",
+            good[..good.len() / 2].to_vec(),
+            Some("promises"),
+        ),
+        (
+            "int32",
+            npy_file("<i4", false, "(170, 22, 3)", &le(&values)),
+            Some("float32"),
+        ),
+        (
+            "joints21",
+            npy_file("<f4", false, "(170, 21, 3)", &le(&values[..170 * 63])),
+            Some("21 joints"),
+        ),
+        (
+            "flat22",
+            npy_file("<f4", false, "(170, 22)", &le(&values[..170 * 22])),
+            Some("shape"),
+        ),
+        (
+            "four-d",
+            npy_file("<f4", false, "(170, 22, 3, 1)", &le(&values)),
+            Some("shape"),
+        ),
+        (
+            "no-frames",
+            npy_file("<f4", false, "(0, 22, 3)", &[]),
+            Some("no frames"),
+        ),
+        (
+            "nan",
+            npy_file("<f4", false, "(170, 22, 3)", &with(3, f32::NAN)),
+            Some("frame 3"),
+        ),
+        (
+            "inf",
+            npy_file("<f4", false, "(170, 22, 3)", &with(4, f32::INFINITY)),
+            Some("frame 4"),
+        ),
+        (
+            "huge",
+            npy_file("<f4", false, "(170, 22, 3)", &with(5, 1e30)),
+            Some("frame 5"),
+        ),
+        (
+            "claims-1e12",
+            npy_file("<f4", false, "(1000000000000, 22, 3)", &le(&values)),
+            Some("promises"),
+        ),
+        (
+            "fortran",
+            npy_file("<f4", true, "(170, 22, 3)", &le(&values)),
+            Some("Fortran"),
+        ),
+        // Readable: big-endian values are the same numbers, and one frame is a capture.
+        (
+            "big-endian",
+            npy_file(">f4", false, "(170, 22, 3)", &be),
+            None,
+        ),
+        (
+            "one-frame",
+            npy_file("<f4", false, "(1, 22, 3)", &le(&values[..66])),
+            None,
+        ),
+    ];
+    for (name, bytes, _) in &cases {
+        std::fs::write(dir.join(format!("{name}.npy")), bytes).unwrap();
+        std::fs::write(
+            dir.join(format!("{name}.json")),
+            r#"{"action": "tennis serve", "text": "a person serves"}"#,
+        )
+        .unwrap();
+    }
+    let run = Command::new("prlimit")
+        .arg(format!("--as={}", 1u64 << 30))
+        .arg(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(&config)
+        .output()
+        .expect("prlimit (util-linux) runs the binary");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let dataset = root.join("out/hml3d-joints");
+    let rejects: Vec<serde_json::Value> = lines(&dataset.join("rejects.jsonl"))
+        .iter()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    for (name, _, why) in &cases {
+        let file = format!("new_joints/{name}.npy");
+        let found: Vec<&serde_json::Value> = rejects
+            .iter()
+            .filter(|r| r["file"].as_str().is_some_and(|f| f.ends_with(&file)))
+            .collect();
+        match why {
+            Some(why) => {
+                assert_eq!(found.len(), 1, "{name}: {rejects:?}");
+                let message = found[0]["message"].as_str().unwrap();
+                assert!(message.contains(why), "{name}: {message}");
+            }
+            None => assert!(found.is_empty(), "{name}: {found:?}"),
+        }
+    }
+    assert_eq!(rejects.len(), 12, "{rejects:?}");
+    // The big-endian copy is the real clip: its row holds the same positions as the original's.
+    let ids = common::pyarrow_rows(&dataset.join("data"), "clip_id");
+    assert!(ids.iter().any(|i| i.contains("big-endian")), "{ids:?}");
+}
+
+mod fuzz {
+    use super::*;
+    use motionforge::motion::npy::read_joint_positions;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 1000, ..ProptestConfig::default() })]
+
+        /// Any bytes (a real file with bytes changed, cut or appended): an error or an array
+        /// whose every value is finite and within range, never a panic or a huge allocation.
+        #[test]
+        fn the_joint_array_reader_never_panics_or_trusts_a_header(
+            edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..12),
+            cut in proptest::option::of(any::<prop::sample::Index>()),
+            extra in proptest::collection::vec(any::<u8>(), 0..64),
+            shape in prop_oneof![
+                Just("(170, 22, 3)".to_string()),
+                (0u64..u64::MAX, 0u64..100, 0u64..5).prop_map(|(a, b, c)| format!("({a}, {b}, {c})")),
+                (0u64..u64::MAX, 0u64..200).prop_map(|(a, b)| format!("({a}, {b})")),
+                Just("()".to_string()),
+            ],
+            descr in prop::sample::select(vec!["<f4", "<f8", ">f4", ">f8", "<i4", "|u1", "<f2", "<c8"]),
+        ) {
+            let values = real_values();
+            let mut bytes = npy_file(descr, false, &shape, &le(&values));
+            for (at, b) in edits {
+                let i = at.index(bytes.len());
+                bytes[i] = b;
+            }
+            if let Some(at) = cut {
+                bytes.truncate(at.index(bytes.len() + 1));
+            }
+            bytes.extend(extra);
+            if let Ok(array) = read_joint_positions(&bytes) {
+                prop_assert_eq!(array.positions.len(), array.frames * array.joints);
+                prop_assert!(array.positions.iter().all(|p| p.is_finite() && p.abs().max_element() <= 1e6));
+            }
+        }
+    }
+}

@@ -336,3 +336,36 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
     let after = dataset_files(&dataset);
     assert!(before == after, "the previous dataset changed");
 }
+
+#[test]
+fn a_full_disk_in_the_report_stage_names_the_figure_and_keeps_the_build_report() {
+    let out = tempfile::tempdir().unwrap();
+    let config = repo().join("fixtures/demo.toml");
+    common::run_ok(Command::new(BIN).args(build_args(&config, out.path())));
+    let dataset = out.path().join("demo");
+    let before: Vec<(PathBuf, Vec<u8>)> = dataset_files(&dataset.join("data"));
+    std::fs::remove_dir_all(dataset.join("report")).unwrap();
+    std::fs::remove_file(dataset.join("build-report.json")).unwrap();
+    // Only the report is made again; its largest figure (over 100 KB) passes the 64 KiB limit.
+    let run = with_size_limit(128, &build_args(&config, out.path()));
+    let err = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("report/figures/") && err.contains(".png") && err.contains("file size limit"),
+        "{err}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dataset.join("build-report.json")).unwrap()).unwrap();
+    let why = report["report_error"].as_str().unwrap_or_default();
+    assert!(
+        why.contains(".png") && why.contains("file size limit"),
+        "{report:#}"
+    );
+    // The dataset is untouched and nothing half-written looks finished.
+    assert_eq!(dataset_files(&dataset.join("data")), before);
+    assert!(!dataset.join("report/stats.json").exists());
+    assert_nothing_half_written_looks_complete(&dataset);
+    // With room again, the next build makes the report and succeeds.
+    common::run_ok(Command::new(BIN).args(build_args(&config, out.path())));
+    assert!(dataset.join("report/stats.json").exists());
+}

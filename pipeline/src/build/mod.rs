@@ -267,6 +267,10 @@ pub struct BuildReport {
     /// made from them.
     #[serde(default)]
     pub label_contradictions_dropped: usize,
+    /// Why the statistics report could not be written (the dataset was); the build then fails
+    /// after writing this file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub report_error: Option<String>,
 }
 
 impl BuildReport {
@@ -628,6 +632,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     let n_clips = clips.len();
     let n_mirrored = clips.iter().filter(|c| c.mirrored).count();
     let actions = crate::io::manifest::action_counts(&clips);
+    let mut report_error = None;
     if through >= Stage::Write {
         options.progress.stage_started(Stage::Write.name(), 1);
         let write_ran = write_outputs(
@@ -668,9 +673,12 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
             if report_ran {
                 let marker = workspace.root().join(REPORT_MARKER);
                 let _ = std::fs::remove_file(&marker);
-                crate::report::report_dataset(&output, None)
-                    .map_err(|e| BuildError::Report(e.to_string()))?;
-                write_atomic(&marker, table_fingerprint.as_bytes())?;
+                // The dataset is written by now: a failed report (a full disk) is recorded in
+                // build-report.json and fails the build after it, rather than losing both.
+                match crate::report::report_dataset(&output, None) {
+                    Ok(_) => write_atomic(&marker, table_fingerprint.as_bytes())?,
+                    Err(e) => report_error = Some(e.to_string()),
+                }
             }
             stages.push(single_run(options, Stage::Report, report_ran));
         }
@@ -707,6 +715,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         synthetic: compose,
         pair_check,
         table_fingerprint,
+        report_error,
     };
     // A partial run (`run <stage>`) leaves the last full build's report in place.
     if through == Stage::Report {
@@ -714,7 +723,10 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         write_atomic(&output.join(REPORT_FILE), &json)?;
     }
     save_ledger(workspace, &report.stages, stamps)?;
-    Ok(report)
+    match report.report_error {
+        Some(e) => Err(BuildError::Report(e)),
+        None => Ok(report),
+    }
 }
 
 /// The run of a stage with one item (write, report), reported as finished.

@@ -660,7 +660,21 @@ pub fn png_bytes(rgb: &[u8], (w, h): (u32, u32)) -> Result<Vec<u8>, DatasetError
 /// cut and given the id's SHA-256 prefix, so synthetic ids stay unique and within file-name
 /// limits.
 pub fn file_stem(clip_id: &str) -> String {
-    let stem = clip_id.replace(['/', ':', '+', '\\'], "_");
+    // Control characters and a leading dot too: the stem is always a plain, visible file name
+    // inside the output folder, whatever a shard from elsewhere calls its clips.
+    let mut stem: String = clip_id
+        .chars()
+        .map(|c| {
+            if matches!(c, '/' | ':' | '+' | '\\') || c.is_control() {
+                '_'
+            } else {
+                c
+            }
+        })
+        .collect();
+    if stem.is_empty() || stem.starts_with('.') {
+        stem.insert(0, '_');
+    }
     if stem.chars().count() <= 120 {
         stem
     } else {
@@ -689,4 +703,32 @@ pub fn write_preview(
         })?;
     }
     Ok([gif, png])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clip_id_from_elsewhere_always_gives_a_plain_visible_file_name() {
+        for id in [
+            "..",
+            ".",
+            "",
+            "../../etc/passwd",
+            "/tmp/x",
+            "a\0b",
+            "a\nb",
+            ".hidden",
+        ] {
+            let stem = file_stem(id);
+            assert!(
+                crate::base::guard::is_plain_name(&stem),
+                "{id:?} -> {stem:?}"
+            );
+            assert!(!stem.starts_with('.'), "{id:?} -> {stem:?}");
+        }
+        // Real ids keep their spelling.
+        assert_eq!(file_stem("cmu/01_01:0-120"), "cmu_01_01_0-120".to_string());
+    }
 }

@@ -69,6 +69,9 @@ pub enum NpyError {
 
 /// Reads a joint-position array from the bytes of a `.npy` file.
 pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
+    if let Some(shape) = overflowing_shape(bytes) {
+        return Err(NpyError::Shape { shape });
+    }
     let file = npyz::NpyFile::new(bytes).map_err(|e| NpyError::Header(e.to_string()))?;
     if file.order() == npyz::Order::Fortran {
         return Err(NpyError::FortranOrder);
@@ -137,4 +140,34 @@ pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
         joints,
         positions,
     })
+}
+
+/// The shape of a header whose element count does not fit in 64 bits. `npyz` multiplies the
+/// dimensions unchecked (a panic in debug builds, a wrapped count in release), so such a header is
+/// refused before it is handed over. `None` for any other header, readable or not.
+fn overflowing_shape(bytes: &[u8]) -> Option<Vec<u64>> {
+    let (major, rest) = match bytes.strip_prefix(b"\x93NUMPY")? {
+        [major, _minor, rest @ ..] => (*major, rest),
+        _ => return None,
+    };
+    let (len, rest) = match (major, rest) {
+        (1, [a, b, rest @ ..]) => (usize::from(u16::from_le_bytes([*a, *b])), rest),
+        (_, [a, b, c, d, rest @ ..]) => (u32::from_le_bytes([*a, *b, *c, *d]) as usize, rest),
+        _ => return None,
+    };
+    let header = std::str::from_utf8(rest.get(..len.min(rest.len()))?).ok()?;
+    let after = &header[header.find("'shape'")? + "'shape'".len()..];
+    let open = after.find('(')?;
+    let close = open + after[open..].find(')')?;
+    let dims: Vec<u64> = after[open + 1..close]
+        .split(',')
+        .map(str::trim)
+        .filter(|d| !d.is_empty())
+        .map(|d| d.trim_end_matches(['L', 'l']).parse::<u64>().ok())
+        .collect::<Option<_>>()?;
+    let fits = dims
+        .iter()
+        .try_fold(1u64, |n, &d| n.checked_mul(d))
+        .is_some();
+    (!fits).then_some(dims)
 }

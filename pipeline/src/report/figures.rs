@@ -16,7 +16,7 @@ use super::stats::{
     type_order, whiskers,
 };
 use super::{ClipRow, ReportError};
-use crate::base::{temp_path, write_atomic};
+use crate::base::write_atomic;
 use crate::clip::SourceKind;
 
 /// A figure of the report: its file stem under `figures/`, caption and pixel size.
@@ -189,27 +189,22 @@ pub(crate) fn write_figures(
         written.push(svg_path);
 
         let png_path = dir.join(format!("{}.png", spec.stem));
-        // The bitmap backend writes a path and picks the encoder from its extension, so the
-        // temporary file keeps `.png` at the end; the rename makes the write atomic.
-        let tmp = PathBuf::from(format!("{}.png", temp_path(&png_path).display()));
-        let drawn = {
-            let root = BitMapBackend::new(&tmp, (spec.width, spec.height)).into_drawing_area();
-            render(spec, &root, rows, stats).and_then(|()| root.present().map_err(Into::into))
-        };
-        let finished = drawn.map_err(fail).and_then(|()| {
-            let io = |source| ReportError::Io {
-                path: png_path.clone(),
-                source,
-            };
-            fs::File::open(&tmp)
-                .and_then(|f| f.sync_all())
-                .map_err(io)?;
-            fs::rename(&tmp, &png_path).map_err(io)
-        });
-        if let Err(e) = finished {
-            let _ = fs::remove_file(&tmp);
-            return Err(e);
+        // Drawn in memory and written like every other file (temporary file, then rename), so a
+        // full disk is reported with the file's path and what to do, not the encoder's message.
+        let (w, h) = (spec.width, spec.height);
+        let mut rgb = vec![0u8; w as usize * h as usize * 3];
+        {
+            let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+            render(spec, &root, rows, stats)
+                .and_then(|()| root.present().map_err(Into::into))
+                .map_err(fail)?;
         }
+        let png =
+            crate::dataset::preview::png_bytes(&rgb, (w, h)).map_err(|e| ReportError::Figure {
+                figure: spec.stem.to_string(),
+                message: e.to_string(),
+            })?;
+        write_atomic(&png_path, &png)?;
         written.push(png_path);
     }
     Ok(written)
