@@ -500,3 +500,62 @@ for i, path in enumerate(sorted(glob.glob(sys.argv[1] + '/data/*.parquet'))):
     let listed = lines(&out.join("all.txt"));
     assert_eq!(listed.len(), summary.exported);
 }
+
+#[test]
+fn a_clip_without_a_usable_caption_is_left_out_and_every_split_gets_its_list() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let dataset = dir.path().join("demo");
+    // One row whose every caption has a `#` (a caption line cannot hold one), and no test split.
+    let script = r#"
+import sys, glob, pyarrow as pa, pyarrow.parquet as pq
+for path in sorted(glob.glob(sys.argv[1] + '/data/*.parquet')):
+    t = pq.read_table(path)
+    if path.split('/')[-1].startswith('test'):
+        import os; os.remove(path); continue
+    ids = t.column('clip_id').to_pylist()
+    if 'train' in path.split('/')[-1]:
+        first = ids[0]
+        def fix(name, values):
+            return pa.array([v if i != first else ('# ' + v if isinstance(v, str) else ['#' + x for x in v]) for i, v in zip(ids, values)], t.schema.field(name).type)
+        for name in ['text', 'texts', 'paraphrases']:
+            t = t.set_column(t.schema.get_field_index(name), name, fix(name, t.column(name).to_pylist()))
+        print(first)
+    pq.write_table(t, path, compression='zstd')
+"#;
+    let uncaptioned = common::run_python(script, &[dataset.as_os_str()]);
+    let uncaptioned = uncaptioned.trim();
+    let out = dir.path().join("hml3d");
+    let summary = export_humanml3d(&dataset, &out, &ExportOptions::default()).unwrap();
+    let skipped = summary
+        .skipped
+        .iter()
+        .find(|s| s.clip_id == uncaptioned)
+        .unwrap_or_else(|| panic!("{uncaptioned} not skipped: {:?}", summary.skipped));
+    assert!(
+        skipped.reason.contains("no caption could be written"),
+        "{skipped:?}"
+    );
+    // No empty texts file anywhere, and the clip is in no list.
+    for entry in std::fs::read_dir(out.join("texts")).unwrap() {
+        let path = entry.unwrap().path();
+        assert!(
+            std::fs::metadata(&path).unwrap().len() > 0,
+            "{}",
+            path.display()
+        );
+    }
+    let names = std::fs::read_to_string(out.join("names.csv")).unwrap();
+    assert!(
+        names
+            .lines()
+            .all(|l| l.split(',').nth(1) != Some(uncaptioned)),
+        "{names}"
+    );
+    // The test split is empty, and its list is there, empty, as T2M-GPT's loader needs.
+    for list in ["train.txt", "val.txt", "test.txt", "all.txt"] {
+        assert!(out.join(list).is_file(), "{list}");
+    }
+    assert_eq!(std::fs::read_to_string(out.join("test.txt")).unwrap(), "");
+    assert_eq!(lines(&out.join("all.txt")).len(), summary.exported);
+}

@@ -135,6 +135,9 @@ pub const DEFAULT_DIR: &str = "humanml3d";
 /// never leaves one, and `--force` replaces only folders that have it).
 pub const EXPORT_MARKER: &str = "export.json";
 
+/// Split lists HumanML3D's loaders open (T2M-GPT's evaluation fails on a missing `val.txt`).
+const STANDARD_LISTS: [&str; 3] = ["train", "val", "test"];
+
 /// Split names the export cannot use as list files: `all.txt` is its own list.
 const RESERVED_LISTS: [&str; 1] = ["all"];
 
@@ -242,9 +245,19 @@ pub fn export_humanml3d(
                         Ok(c) => c,
                         Err(skipped) => return Ok(Err(skipped)),
                     };
+                    let (text, refused) = caption_lines(entry);
+                    if text.is_empty() {
+                        // An empty texts file makes every loader drop the clip without a word.
+                        let why: Vec<String> = refused.into_iter().map(|r| r.reason).collect();
+                        return Ok(Err(Skipped {
+                            clip_id: entry.clip_id.clone(),
+                            reason: format!("no caption could be written: {}", why.join("; ")),
+                        }));
+                    }
                     let name = names.get(&entry.clip_id).cloned().unwrap_or_default();
                     write_clip(&staging, &name, &converted)?;
-                    let refused = write_captions(&staging, &name, entry)?;
+                    let path = staging.join("texts").join(format!("{name}.txt"));
+                    fs::write(&path, text).map_err(io_err(&path))?;
                     Ok(Ok(Done {
                         refused,
                         name,
@@ -671,9 +684,9 @@ fn write_clip(dir: &Path, name: &str, clip: &Converted) -> Result<(), ExportErro
     )
 }
 
-/// `texts/<name>.txt`: one HumanML3D caption line per caption of the clip (the whole clip:
-/// `0.0#0.0`); the captions that cannot be tagged, with why.
-fn write_captions(dir: &Path, name: &str, entry: &Entry) -> Result<Vec<Skipped>, ExportError> {
+/// The lines of `texts/<name>.txt`: one HumanML3D caption line per caption of the clip (the
+/// whole clip: `0.0#0.0`); the captions that cannot be tagged, with why.
+fn caption_lines(entry: &Entry) -> (String, Vec<Skipped>) {
     let mut text = String::new();
     let mut refused = Vec::new();
     for caption in &entry.captions {
@@ -688,9 +701,7 @@ fn write_captions(dir: &Path, name: &str, entry: &Entry) -> Result<Vec<Skipped>,
             }),
         }
     }
-    let path = dir.join("texts").join(format!("{name}.txt"));
-    fs::write(&path, text).map_err(io_err(&path))?;
-    Ok(refused)
+    (text, refused)
 }
 
 /// Whether a split's list file can be written: its name becomes `<out>/<split>.txt`, so a name
@@ -746,8 +757,16 @@ fn write_lists(
             .entry(list_name(&entry.split).to_string())
             .or_insert(0) += 1;
     }
+    // Every loader opens train, val and test: an empty split still gets its (empty) list.
+    let mut lists: BTreeMap<&str, String> = STANDARD_LISTS
+        .iter()
+        .map(|&name| (name, String::new()))
+        .collect();
     for (split, names) in by_split {
-        let path = dir.join(format!("{}.txt", list_name(split)));
+        lists.insert(list_name(split), names);
+    }
+    for (name, names) in lists {
+        let path = dir.join(format!("{name}.txt"));
         fs::write(&path, names).map_err(io_err(&path))?;
     }
     for (file, text) in [("all.txt", all), ("names.csv", csv)] {
