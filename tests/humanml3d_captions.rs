@@ -13,8 +13,12 @@ mod common;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
+use motionforge::annotate::frame_index::{
+    MAX_CAPTION_LINE_BYTES, read_caption_file, read_captions,
+};
 use motionforge::humanml3d::caption::{
-    CaptionError, Token, Upos, caption_line, python_float, rule_tokens, spacy_attributes, tokens,
+    CaptionError, MAX_CAPTION_CHARS, Token, Upos, caption_line, over_length, python_float,
+    rule_tokens, spacy_attributes, tokens,
 };
 
 const PIP: &str = common::PYTHON_SETUP;
@@ -668,5 +672,277 @@ fn the_tagger_reads_the_attributes_spacy_reads() {
         "{same_all} of {} captions read as spaCy reads them:\n{}",
         all.len(),
         first_miss.join("\n")
+    );
+}
+
+// Captions beyond the limit, and caption files that are not UTF-8 (issue 30, items 9 and 10).
+
+const BIN: &str = env!("CARGO_BIN_EXE_motionforge");
+
+/// `fixtures/humanml3d-joints` copied into `dir/fx`, its caption file of clip 000021 changed by
+/// `edit`.
+fn joints_fixture(dir: &std::path::Path, edit: impl FnOnce(&mut Vec<u8>)) -> std::path::PathBuf {
+    let fx = dir.join("fx");
+    common::copy_dir(&common::repo().join("fixtures/humanml3d-joints"), &fx);
+    let captions = fx.join("texts/000021.txt");
+    let mut bytes = std::fs::read(&captions).unwrap();
+    edit(&mut bytes);
+    std::fs::write(&captions, bytes).unwrap();
+    fx
+}
+
+/// Builds `fx/build.toml` into `fx/out` under an address-space limit of 1.5 GiB (a tagger or
+/// reader whose memory follows a caption's length fails there); the build report and the
+/// clips' metadata (`clips --json`).
+fn build_limited(fx: &std::path::Path) -> (serde_json::Value, serde_json::Value) {
+    let out = fx.join("out");
+    let run = std::process::Command::new("prlimit")
+        .arg(format!("--as={}", 3u64 << 29))
+        .arg(BIN)
+        .arg("build")
+        .arg("-q")
+        .arg("-c")
+        .arg(fx.join("build.toml"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .expect("prlimit (util-linux) runs the binary");
+    assert!(
+        run.status.success(),
+        "build failed ({}): {}",
+        run.status,
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let dataset = out.join("hml3d-joints");
+    let report = std::fs::read(dataset.join("build-report.json")).unwrap();
+    let clips = common::run_ok(
+        std::process::Command::new(BIN)
+            .arg("clips")
+            .arg("--json")
+            .arg(&dataset),
+    );
+    (
+        serde_json::from_slice(&report).unwrap(),
+        serde_json::from_slice(&clips.stdout).unwrap(),
+    )
+}
+
+/// The build report's notes of `kind`, as messages.
+fn notes_of(report: &serde_json::Value, kind: &str) -> Vec<String> {
+    report["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|n| n["kind"] == kind)
+        .map(|n| n["message"].as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn captions_beyond_the_limit_are_skipped_at_read_and_the_build_keeps_the_rest() {
+    let plain = tempfile::tempdir().unwrap();
+    let (plain_report, plain_clips) = build_limited(&joints_fixture(plain.path(), |_| {}));
+    let dir = tempfile::tempdir().unwrap();
+    let words = "a person walks forward and waves the left hand ";
+    let long = |bytes: usize| words.repeat(bytes / words.len() + 1)[..bytes].to_string();
+    let fx = joints_fixture(dir.path(), |b| {
+        // Lines 4 and 5: 3 MB and 20 MB single-line captions, one of the whole clip, one of a
+        // part of it (which would make a clip of its own).
+        b.extend_from_slice(format!("{}#a/DET#0.0#0.0\n", long(3_000_000)).as_bytes());
+        b.extend_from_slice(format!("{}#a/DET#1.0#2.0\n", long(20_000_000)).as_bytes());
+    });
+    let (report, clips) = build_limited(&fx);
+    let long_notes = notes_of(&report, "long_caption");
+    assert_eq!(long_notes.len(), 2, "{long_notes:?}");
+    for (line, chars) in [(4, 3_000_000), (5, 20_000_000)] {
+        assert!(
+            long_notes.iter().any(|n| n.starts_with(&format!(
+                "texts/000021.txt:{line}: caption of {chars} characters"
+            )) && n.contains(&MAX_CAPTION_CHARS.to_string())),
+            "line {line}: {long_notes:?}"
+        );
+    }
+    assert!(long_notes.iter().all(|n| n.len() < 200), "{long_notes:?}");
+    // Every other caption and clip is as without the long lines.
+    assert_eq!(clips, plain_clips);
+    assert_eq!(report["clips"], plain_report["clips"]);
+    assert!(notes_of(&report, "no_caption").is_empty());
+}
+
+#[test]
+fn a_caption_file_with_a_byte_that_is_not_utf8_keeps_its_other_captions() {
+    let plain = tempfile::tempdir().unwrap();
+    let (_, plain_clips) = build_limited(&joints_fixture(plain.path(), |_| {}));
+    let dir = tempfile::tempdir().unwrap();
+    let (mut bad_at, mut bad_caption) = (0, String::new());
+    let fx = joints_fixture(dir.path(), |b| {
+        // Line 2 (a second caption of the whole clip): its fourth byte becomes 0xff.
+        let line2 = b.iter().position(|&c| c == b'\n').unwrap() + 1;
+        let end = line2 + b[line2..].iter().position(|&c| c == b'#').unwrap();
+        bad_caption = String::from_utf8(b[line2..end].to_vec()).unwrap();
+        bad_at = line2 + 3;
+        b[bad_at] = 0xff;
+    });
+    let (report, clips) = build_limited(&fx);
+    let notes = notes_of(&report, "caption_encoding");
+    assert_eq!(
+        notes,
+        [format!(
+            "texts/000021.txt:2: byte {bad_at} (0xff) is not UTF-8; caption skipped"
+        )]
+    );
+    assert!(notes_of(&report, "no_caption").is_empty(), "{report}");
+    // The same clips, with the same captions but the damaged one.
+    let texts = |clips: &serde_json::Value| -> Vec<(String, Vec<String>)> {
+        clips
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| {
+                let texts = c["texts"].as_array().unwrap();
+                let texts = texts.iter().map(|t| t.as_str().unwrap().to_string());
+                (c["clip_id"].as_str().unwrap().to_string(), texts.collect())
+            })
+            .collect()
+    };
+    let mut expected = texts(&plain_clips);
+    let (clip, at) = expected
+        .iter()
+        .find_map(|(id, t)| Some((id.clone(), t.iter().position(|c| c == &bad_caption)?)))
+        .unwrap_or_else(|| panic!("{bad_caption:?} is not among {expected:?}"));
+    // The clip and its mirror (whose captions are mirrored, in the same order) lose it.
+    for (id, t) in &mut expected {
+        if id.strip_suffix(":m").unwrap_or(id) == clip {
+            t.remove(at);
+        }
+    }
+    assert_eq!(texts(&clips), expected);
+}
+
+#[test]
+fn caption_file_lines_are_read_one_at_a_time_with_their_faults_named() {
+    let file = "texts/000009.txt";
+    let at_limit = "w".repeat(MAX_CAPTION_CHARS);
+    let over = "w".repeat(MAX_CAPTION_CHARS + 1);
+    let mut bytes = Vec::new();
+    bytes.extend_from_slice("\u{feff}\u{fe}walk\u{ff}".as_bytes());
+    let bom_bad = bytes.len();
+    bytes.extend_from_slice(b"\xc3(#walk/VERB#0#0\r\n");
+    bytes.extend_from_slice(format!("{at_limit}#w/NOUN#0.0#0.0\n").as_bytes());
+    bytes.extend_from_slice(format!("{over}#w/NOUN#0.0#0.0\n").as_bytes());
+    // A short caption on a line beyond the line limit (its tokens field is huge).
+    bytes.extend_from_slice(format!("jump#{}#0#0\n", "x".repeat(70_000)).as_bytes());
+    // A byte that is not UTF-8 in the tagged tokens, which are not read.
+    bytes.extend_from_slice(b"kick#kick/\xffVERB#1.5#2.5\n");
+    let time_bad = bytes.len() + "spin#spin/VERB#1.0#2".len();
+    bytes.extend_from_slice(b"spin#spin/VERB#1.0#2\xe9\n");
+    bytes.extend_from_slice(b"last line, no line end");
+    // Read through a small buffer, so lines arrive in pieces.
+    let reader = std::io::BufReader::with_capacity(7, bytes.as_slice());
+    let (lines, notes) = read_caption_file(reader, file);
+    let got: Vec<(&str, f64, f64)> = lines
+        .iter()
+        .map(|l| (l.caption.as_str(), l.start, l.end))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            (at_limit.as_str(), 0.0, 0.0),
+            ("kick", 1.5, 2.5),
+            ("last line, no line end", 0.0, 0.0)
+        ]
+    );
+    let notes: Vec<(&str, &str)> = notes
+        .iter()
+        .map(|n| (n.kind.as_str(), n.message.as_str()))
+        .collect();
+    let over_note = format!(
+        "{file}:3: caption of {} characters is longer than the {MAX_CAPTION_CHARS} a caption may \
+         have; caption skipped",
+        MAX_CAPTION_CHARS + 1
+    );
+    let line_note = format!(
+        "{file}:4: line of {} bytes is longer than the {MAX_CAPTION_LINE_BYTES} a caption line \
+         may have; caption skipped",
+        "jump#".len() + 70_000 + "#0#0".len()
+    );
+    assert_eq!(
+        notes,
+        [
+            (
+                "caption_encoding",
+                format!("{file}:1: byte {bom_bad} (0xc3) is not UTF-8; caption skipped").as_str()
+            ),
+            ("long_caption", over_note.as_str()),
+            ("long_caption", line_note.as_str()),
+            (
+                "caption_encoding",
+                format!("{file}:6: byte {time_bad} (0xe9) is not UTF-8; caption skipped").as_str()
+            ),
+        ]
+    );
+    // The same text through `read_captions` gives the same.
+    let text = "a man walks.#a/DET man/NOUN walk/VERB#0.0#0.0\r\nhe waves.#x#1.5#3.0\n";
+    let (lines, notes) = read_captions(text, file);
+    assert_eq!(
+        (lines, notes),
+        read_caption_file(std::io::BufReader::with_capacity(3, text.as_bytes()), file)
+    );
+}
+
+#[test]
+fn captions_beyond_the_limit_are_refused_by_the_tagger_with_a_short_message() {
+    let words = "a person walks forward and turns around ";
+    let at_limit =
+        words.repeat(MAX_CAPTION_CHARS / words.len() + 1)[..MAX_CAPTION_CHARS].to_string();
+    assert_eq!(over_length(&at_limit), None);
+    let tagged = tokens(&at_limit).unwrap();
+    assert!(tagged.len() > 600, "{}", tagged.len());
+    // Each piece of a long caption tagged as it is alone: the words around a cut are seen.
+    let alone = tokens(words.trim()).unwrap();
+    assert_eq!(tagged[..alone.len()], alone[..]);
+    // Multi-byte characters count as one.
+    assert_eq!(over_length(&"é".repeat(MAX_CAPTION_CHARS)), None);
+    let over = format!("{at_limit}s#");
+    assert_eq!(over_length(&over), Some(MAX_CAPTION_CHARS + 2));
+    for err in [
+        tokens(&over).unwrap_err(),
+        caption_line(&over, 0.0, 0.0).unwrap_err(),
+        rule_tokens(&over).unwrap_err(),
+        spacy_attributes(&over).unwrap_err(),
+    ] {
+        assert!(
+            matches!(err, CaptionError::TooLong { chars, .. } if chars == MAX_CAPTION_CHARS + 2),
+            "{err:?}"
+        );
+        assert!(err.to_string().len() < 200, "{err}");
+    }
+}
+
+#[test]
+fn sidecars_that_are_not_json_or_hold_an_overlong_text_are_refused_saying_why() {
+    use motionforge::annotate::filename::filename_annotation;
+    let template = |sidecar: &[u8]| {
+        filename_annotation(
+            "{clip}",
+            "clip {clip}",
+            "clip {clip}",
+            "012314",
+            Some(sidecar),
+        )
+    };
+    let ok = template(br#"{"text": "a person serves"}"#).unwrap();
+    assert_eq!(ok.spans[0].raw_text, "a person serves");
+    let bad = template(b"{\"text\": \"a person \xffserves\"}").unwrap_err();
+    assert!(bad.message.contains("line 1 column"), "{}", bad.message);
+    let long = format!(r#"{{"text": "{}"}}"#, "w".repeat(MAX_CAPTION_CHARS + 1));
+    let refused = template(long.as_bytes()).unwrap_err();
+    assert_eq!(refused.reason.as_str(), "sidecar");
+    assert!(
+        refused
+            .message
+            .contains(&format!("{} characters", MAX_CAPTION_CHARS + 1)),
+        "{}",
+        refused.message
     );
 }

@@ -265,7 +265,17 @@ impl SourceAnnotations {
                 sidecar,
             } => {
                 let side = if *sidecar {
-                    std::fs::read(path.with_extension("json")).ok()
+                    let file = path.with_extension("json");
+                    match std::fs::read(&file) {
+                        Ok(bytes) => Some(bytes),
+                        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+                        Err(e) => {
+                            return Err(LabelRefusal {
+                                reason: RejectReason::Sidecar,
+                                message: format!("sidecar `{stem}.json`: {e}"),
+                            });
+                        }
+                    }
                 } else {
                     None
                 };
@@ -406,14 +416,26 @@ pub fn load_annotations(
             let texts_dir = texts.as_ref().map(|t| config.resolve(Path::new(t)));
             // Quirks of caption files, gathered while the index asks for them.
             let caption_notes = std::cell::RefCell::new(Vec::new());
+            // A missing file is no caption; one that cannot be opened or read is said so.
             let captions = |name: &str| {
                 let dir = texts_dir.as_ref()?;
                 let path = dir.join(format!("{}.txt", stem_of(name)));
-                let text = std::fs::read_to_string(&path).ok()?;
-                let (lines, found) =
-                    frame_index::read_captions(&text, &display_path(&config.base_dir, &path));
-                caption_notes.borrow_mut().extend(found);
-                Some(lines)
+                let shown = display_path(&config.base_dir, &path);
+                match std::fs::File::open(&path) {
+                    Ok(f) => {
+                        let (lines, found) =
+                            frame_index::read_caption_file(std::io::BufReader::new(f), &shown);
+                        caption_notes.borrow_mut().extend(found);
+                        Some(lines)
+                    }
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+                    Err(e) => {
+                        caption_notes
+                            .borrow_mut()
+                            .push(Note::new("caption_unreadable", format!("{shown}: {e}")));
+                        Some(Vec::new())
+                    }
+                }
             };
             by_key = frame_index::index_annotations_with(
                 &rows,

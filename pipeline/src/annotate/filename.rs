@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use regex::Regex;
 
 use crate::base::RejectReason;
+use crate::humanml3d::caption::{MAX_CAPTION_CHARS, over_length};
 
 use super::span::{CaptureAnnotation, Span, Time};
 
@@ -178,16 +179,20 @@ pub fn compiled_filename_annotation(
     })?;
     let mut overrides: BTreeMap<String, String> = BTreeMap::new();
     if let Some(bytes) = sidecar {
-        let side = serde_json::from_slice::<serde_json::Value>(bytes)
-            .ok()
-            .as_ref()
-            .and_then(sidecar_fields)
-            .ok_or_else(|| {
-                refuse(
-                    RejectReason::Sidecar,
-                    format!("sidecar `{stem}.json` is not a JSON object"),
-                )
-            })?;
+        // serde_json names the line and column of what it cannot read, a byte that is not UTF-8
+        // included.
+        let json = serde_json::from_slice::<serde_json::Value>(bytes).map_err(|e| {
+            refuse(
+                RejectReason::Sidecar,
+                format!("sidecar `{stem}.json` is not a JSON object: {e}"),
+            )
+        })?;
+        let side = sidecar_fields(&json).ok_or_else(|| {
+            refuse(
+                RejectReason::Sidecar,
+                format!("sidecar `{stem}.json` is not a JSON object"),
+            )
+        })?;
         for (k, v) in side {
             if k == "action" || k == "text" {
                 overrides.insert(k, v);
@@ -203,6 +208,24 @@ pub fn compiled_filename_annotation(
     };
     let label = fill(action, false, "action")?;
     let caption = fill(text, true, "text")?;
+    // A sidecar can make any text a caption; the tagger and the readers take captions up to a
+    // bound (docs/formats.md, "Caption files").
+    for (what, value) in [("action", &label), ("text", &caption)] {
+        if let Some(chars) = over_length(value) {
+            let reason = if sidecar.is_some() {
+                RejectReason::Sidecar
+            } else {
+                RejectReason::LabelTemplate
+            };
+            return Err(refuse(
+                reason,
+                format!(
+                    "the {what} of `{stem}` has {chars} characters; a caption has at most \
+                     {MAX_CAPTION_CHARS}"
+                ),
+            ));
+        }
+    }
     Ok(CaptureAnnotation {
         spans: vec![Span {
             start: Time::Seconds(0.0),

@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use super::span::{
     AnnotationError, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note, Span, Time,
 };
+use crate::humanml3d::caption::{MAX_CAPTION_CHARS, over_length};
 
 /// The header columns, in HumanML3D's order.
 pub const INDEX_COLUMNS: [&str; 4] = ["source_path", "start_frame", "end_frame", "new_name"];
@@ -517,51 +518,221 @@ pub struct CaptionLine {
 }
 
 /// Every caption of a HumanML3D caption file (`caption#tokens#start#end` per line; a line with
-/// fewer fields describes the whole clip). Lines whose times are not numbers, are negative or
-/// end before they start are skipped with a `bad_caption` note naming `file` and the line.
+/// fewer fields describes the whole clip): [`read_caption_file`] over the text's bytes.
 pub fn read_captions(text: &str, file: &str) -> (Vec<CaptionLine>, Vec<Note>) {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    read_caption_file(text.as_bytes(), file)
+}
+
+/// The longest line of a caption file, in bytes, that is read: a caption of
+/// [`MAX_CAPTION_CHARS`] characters (at most 4 bytes each) with its tagged tokens and times fits
+/// well; a longer line is skipped without being held whole.
+pub const MAX_CAPTION_LINE_BYTES: usize = 64 * 1024;
+
+/// Every caption of a HumanML3D caption file read from `reader` (`caption#tokens#start#end` per
+/// line; a line with fewer fields describes the whole clip), one line at a time: memory does not
+/// grow with a line's length. Lines are skipped, each with a note naming `file` and the line, when
+/// their times are not numbers, are negative or end before they start (`bad_caption`), their
+/// caption is longer than [`MAX_CAPTION_CHARS`] or the line longer than
+/// [`MAX_CAPTION_LINE_BYTES`] (`long_caption`), or their caption or times hold a byte that is not
+/// UTF-8 (`caption_encoding`, naming the byte's offset in the file); the other lines are kept.
+/// A read error stops the file with a `caption_unreadable` note.
+pub fn read_caption_file(
+    mut reader: impl std::io::BufRead,
+    file: &str,
+) -> (Vec<CaptionLine>, Vec<Note>) {
     let mut lines = Vec::new();
     let mut notes = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let fields: Vec<&str> = line.split('#').collect();
-        let caption = fields.first().map_or("", |c| c.trim());
-        if caption.is_empty() {
-            continue;
-        }
-        let (start, end) = if fields.len() >= 4 {
-            let time = |s: &str| s.trim().parse::<f64>().ok().filter(|t| t.is_finite());
-            match (
-                time(fields[fields.len() - 2]),
-                time(fields[fields.len() - 1]),
-            ) {
-                (Some(a), Some(b)) if a >= 0.0 && b >= 0.0 && (b > a || (a == 0.0 && b == 0.0)) => {
-                    (a, b)
+    let mut line = RawLine::default();
+    loop {
+        let (used, ends) = match reader.fill_buf() {
+            Ok([]) => {
+                if line.bytes > 0 {
+                    line.finish(file, &mut lines, &mut notes);
                 }
-                _ => {
-                    notes.push(Note::new(
-                        "bad_caption",
-                        format!(
-                            "{file}:{}: start#end `{}#{}`: expected seconds with end after \
-                             start, or 0#0 for the whole clip; caption skipped",
-                            i + 1,
-                            fields[fields.len() - 2],
-                            fields[fields.len() - 1]
-                        ),
-                    ));
-                    continue;
-                }
+                break;
             }
-        } else {
-            (0.0, 0.0)
+            Ok(buf) => {
+                let (part, ends) = match buf.iter().position(|&b| b == b'\n') {
+                    Some(i) => (&buf[..i], true),
+                    None => (buf, false),
+                };
+                line.push(part);
+                (part.len() + usize::from(ends), ends)
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => {
+                notes.push(Note::new(
+                    "caption_unreadable",
+                    format!(
+                        "{file}:{}: {e}; the file's later lines are not read",
+                        line.number + 1
+                    ),
+                ));
+                break;
+            }
         };
-        lines.push(CaptionLine {
-            caption: caption.to_string(),
-            start,
-            end,
-        });
+        reader.consume(used);
+        if ends {
+            line.finish(file, &mut lines, &mut notes);
+        }
     }
     (lines, notes)
+}
+
+/// A line of a caption file as it is read: its first [`MAX_CAPTION_LINE_BYTES`] bytes, and what
+/// is known of the rest.
+#[derive(Default)]
+struct RawLine {
+    /// The bytes kept.
+    kept: Vec<u8>,
+    /// Its length in bytes, all of it.
+    bytes: u64,
+    /// Characters before its first `#` (its caption), while no `#` has been seen.
+    caption_chars: u64,
+    hash_seen: bool,
+    /// Lines finished before it.
+    number: u64,
+    /// Offset of its first byte in the file.
+    start: u64,
+}
+
+impl RawLine {
+    fn push(&mut self, part: &[u8]) {
+        let room = MAX_CAPTION_LINE_BYTES.saturating_sub(self.kept.len());
+        self.kept.extend_from_slice(&part[..part.len().min(room)]);
+        self.bytes += part.len() as u64;
+        if !self.hash_seen {
+            let caption = match part.iter().position(|&b| b == b'#') {
+                Some(i) => {
+                    self.hash_seen = true;
+                    &part[..i]
+                }
+                None => part,
+            };
+            // UTF-8 continuation bytes are 10xxxxxx; every other byte starts a character.
+            self.caption_chars += caption.iter().filter(|&&b| b & 0xc0 != 0x80).count() as u64;
+        }
+    }
+
+    /// Reads the line into `lines` or a note, and makes ready for the next line.
+    fn finish(&mut self, file: &str, lines: &mut Vec<CaptionLine>, notes: &mut Vec<Note>) {
+        self.number += 1;
+        let number = self.number;
+        if self.bytes > MAX_CAPTION_LINE_BYTES as u64 {
+            let what = if self.caption_chars > MAX_CAPTION_CHARS as u64 {
+                format!(
+                    "caption of {} characters is longer than the {MAX_CAPTION_CHARS} a caption \
+                     may have",
+                    self.caption_chars
+                )
+            } else {
+                format!(
+                    "line of {} bytes is longer than the {MAX_CAPTION_LINE_BYTES} a caption line \
+                     may have",
+                    self.bytes
+                )
+            };
+            notes.push(Note::new(
+                "long_caption",
+                format!("{file}:{number}: {what}; caption skipped"),
+            ));
+        } else {
+            let (mut line, mut at) = (self.kept.as_slice(), self.start);
+            const BOM: &[u8] = "\u{feff}".as_bytes();
+            if number == 1
+                && let Some(rest) = line.strip_prefix(BOM)
+            {
+                (line, at) = (rest, at + BOM.len() as u64);
+            }
+            let line = line.strip_suffix(b"\r").unwrap_or(line);
+            if let Some(read) = caption_line_of(line, at, number, file, notes) {
+                lines.push(read);
+            }
+        }
+        // The next line starts after this one's line end.
+        self.start += self.bytes + 1;
+        self.kept.clear();
+        self.bytes = 0;
+        self.caption_chars = 0;
+        self.hash_seen = false;
+    }
+}
+
+/// One line of a caption file (no line end): its caption and times, or `None` with the reason
+/// in `notes`. `at` is the offset of the line's first byte in the file.
+fn caption_line_of(
+    line: &[u8],
+    at: u64,
+    number: u64,
+    file: &str,
+    notes: &mut Vec<Note>,
+) -> Option<CaptionLine> {
+    let fields: Vec<&[u8]> = line.split(|&b| b == b'#').collect();
+    // Only the caption and the times are read; the tagged tokens between them are not.
+    let read = if fields.len() >= 4 {
+        vec![0, fields.len() - 2, fields.len() - 1]
+    } else {
+        vec![0]
+    };
+    let mut text: Vec<&str> = Vec::with_capacity(read.len());
+    for i in read {
+        let field = fields[i];
+        match std::str::from_utf8(field) {
+            Ok(t) => text.push(t),
+            Err(e) => {
+                let offset = fields[..i].iter().map(|f| f.len() as u64 + 1).sum::<u64>()
+                    + e.valid_up_to() as u64;
+                notes.push(Note::new(
+                    "caption_encoding",
+                    format!(
+                        "{file}:{number}: byte {} (0x{:02x}) is not UTF-8; caption skipped",
+                        at + offset,
+                        field[e.valid_up_to()]
+                    ),
+                ));
+                return None;
+            }
+        }
+    }
+    let caption = text[0].trim();
+    if caption.is_empty() {
+        return None;
+    }
+    if let Some(chars) = over_length(caption) {
+        notes.push(Note::new(
+            "long_caption",
+            format!(
+                "{file}:{number}: caption of {chars} characters is longer than the \
+                 {MAX_CAPTION_CHARS} a caption may have; caption skipped"
+            ),
+        ));
+        return None;
+    }
+    let (start, end) = if let [_, start, end] = text[..] {
+        let time = |s: &str| s.trim().parse::<f64>().ok().filter(|t| t.is_finite());
+        match (time(start), time(end)) {
+            (Some(a), Some(b)) if a >= 0.0 && b >= 0.0 && (b > a || (a == 0.0 && b == 0.0)) => {
+                (a, b)
+            }
+            _ => {
+                notes.push(Note::new(
+                    "bad_caption",
+                    format!(
+                        "{file}:{number}: start#end `{start}#{end}`: expected seconds with end \
+                         after start, or 0#0 for the whole clip; caption skipped"
+                    ),
+                ));
+                return None;
+            }
+        }
+    } else {
+        (0.0, 0.0)
+    };
+    Some(CaptionLine {
+        caption: caption.to_string(),
+        start,
+        end,
+    })
 }
 
 /// The first caption of a HumanML3D caption file (lines `caption#tokens#start#end`; a line

@@ -180,32 +180,90 @@ pub enum CaptionError {
         /// End, seconds.
         end: f64,
     },
+    /// Longer than [`MAX_CAPTION_CHARS`]: not a caption (the message quotes its start only).
+    #[error(
+        "caption {start:?}... has {chars} characters; a caption has at most {MAX_CAPTION_CHARS}"
+    )]
+    TooLong {
+        /// Its first characters.
+        start: String,
+        /// Its length in characters.
+        chars: usize,
+    },
     /// The bundled tagger data did not load (a build with broken `schemas/` files).
     #[error("caption tagger data: {0}")]
     Data(String),
 }
 
+/// The longest caption, in characters, that is read or tagged. Real captions are a sentence or
+/// two (the longest of KIT-ML's 12,164 has 221 characters, of BABEL's labels 119); the tagger's
+/// work and memory grow with a caption's length, so a longer text is refused where it is read
+/// (`docs/formats.md`, "Caption files") and by [`tokens`] and [`caption_line`].
+pub const MAX_CAPTION_CHARS: usize = 4_000;
+
+/// The length in characters of `text` when it is longer than [`MAX_CAPTION_CHARS`].
+pub fn over_length(text: &str) -> Option<usize> {
+    // Bytes bound characters: most texts need no count.
+    if text.len() <= MAX_CAPTION_CHARS || text.chars().nth(MAX_CAPTION_CHARS).is_none() {
+        return None;
+    }
+    Some(text.chars().count())
+}
+
+/// [`CaptionError::TooLong`] when `caption` is longer than [`MAX_CAPTION_CHARS`].
+fn check_length(caption: &str) -> Result<(), CaptionError> {
+    match over_length(caption) {
+        None => Ok(()),
+        Some(chars) => Err(CaptionError::TooLong {
+            start: caption.chars().take(40).collect(),
+            chars,
+        }),
+    }
+}
+
 /// The caption's words and tags as HumanML3D's `process_text` gives them: tags from spaCy's
 /// tagger network mapped as spaCy 2.3.4 maps them, lemmas from the lexicon.
+/// A caption longer than [`MAX_CAPTION_CHARS`] is refused ([`CaptionError::TooLong`]).
 pub fn tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
+    check_length(caption)?;
     // The network costs about 0.3 ms a caption; datasets repeat captions (every take of an
     // action from its file name, a caption and its paraphrases' sources), so results are kept.
-    static SEEN: OnceLock<Mutex<HashMap<String, Vec<Token>>>> = OnceLock::new();
+    static SEEN: OnceLock<Mutex<Memo>> = OnceLock::new();
     let seen = SEEN.get_or_init(Mutex::default);
-    if let Some(hit) = seen.lock().ok().and_then(|m| m.get(caption).cloned()) {
+    if let Some(hit) = seen
+        .lock()
+        .ok()
+        .and_then(|m| m.captions.get(caption).cloned())
+    {
         return Ok(hit);
     }
     let out = tag_caption(caption)?;
+    let size = caption.len()
+        + out
+            .iter()
+            .map(|t| std::mem::size_of::<Token>() + t.word.len())
+            .sum::<usize>();
     if let Ok(mut m) = seen.lock()
-        && m.len() < MEMO_CAPTIONS
+        && m.captions.len() < MEMO_CAPTIONS
+        && m.bytes + size <= MEMO_BYTES
     {
-        m.insert(caption.to_string(), out.clone());
+        m.bytes += size;
+        m.captions.insert(caption.to_string(), out.clone());
     }
     Ok(out)
 }
 
-/// How many captions [`tokens`] remembers (a few MB at most).
+/// The captions [`tokens`] remembers, and about how many bytes they hold.
+#[derive(Default)]
+struct Memo {
+    captions: HashMap<String, Vec<Token>>,
+    bytes: usize,
+}
+
+/// How many captions [`tokens`] remembers (a few MB for captions of a sentence or two)...
 const MEMO_CAPTIONS: usize = 1 << 16;
+/// ...and how many bytes of captions and tokens at most, however long the captions are.
+const MEMO_BYTES: usize = 64 << 20;
 
 fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let tagger = tagger()?;
@@ -243,6 +301,7 @@ fn spacy_input<'a>(pieces: &'a [Piece], net: &'a SpacyTagger) -> Vec<SpacyToken<
 /// spaCy's tagger reads (NORM, PREFIX, SUFFIX, SHAPE, SPACY, IS_SPACE, as `Doc.to_array` gives
 /// them): what the tests compare with spaCy's own, so the inputs are checked, not just the tags.
 pub fn spacy_attributes(caption: &str) -> Result<Vec<(String, [u64; 6])>, CaptionError> {
+    check_length(caption)?;
     let net = spacy()?;
     let pieces = split_words(&caption.replace('-', ""));
     Ok(spacy_input(&pieces, net)
@@ -346,6 +405,7 @@ pub fn pos234(penn: &str, word: &str) -> Upos {
 /// [`tokens`] as the rule-based tagger that preceded the perceptron tags them (context rules
 /// over the lexicon's readings; `docs/humanml3d-captions.md`), kept to compare the two.
 pub fn rule_tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
+    check_length(caption)?;
     let tagger = tagger()?;
     let pieces = split_words(&caption.replace('-', ""));
     let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
@@ -380,6 +440,8 @@ fn finish(
 /// `caption#w/TAG w/TAG ...#start#end` (no newline), with `start` and `end` in seconds written as
 /// Python's `'%s' % float` writes them.
 pub fn caption_line(caption: &str, start: f64, end: f64) -> Result<String, CaptionError> {
+    // First: the other errors quote the whole caption.
+    check_length(caption)?;
     if caption.contains('#') {
         return Err(CaptionError::Hash {
             caption: caption.to_string(),

@@ -20,6 +20,10 @@ const FORMAT: &str = "motionforge-caption-tagger 1";
 const ATTRS: [&str; 6] = ["NORM", "PREFIX", "SUFFIX", "SHAPE", "SPACY", "IS_SPACE"];
 /// Pieces per maxout unit, as the model was trained.
 const PIECES: usize = 3;
+/// Tokens the network encodes at once. It needs about 5 KB a token (six embedding rows, three
+/// maxout pieces and a window of three rows, each of `width` floats), so a long text is encoded
+/// in pieces of this many tokens (docs/performance.md, "Caption tagger memory").
+const CHUNK_TOKENS: usize = 256;
 
 /// One token as spaCy's tokenizer gives it.
 pub(crate) struct SpacyToken<'a> {
@@ -385,9 +389,57 @@ impl SpacyTagger {
 
     /// The Penn Treebank tag of each token.
     pub(crate) fn tag(&self, tokens: &[SpacyToken]) -> Vec<&str> {
+        let labels = self.out_b.len();
+        let mut out = Vec::with_capacity(tokens.len());
+        self.scores_in_chunks(tokens, CHUNK_TOKENS, |scores| {
+            out.extend(scores.chunks_exact(labels).map(|row| self.best(row)));
+        });
+        out
+    }
+
+    /// The label with the highest score (the first of equal ones).
+    fn best(&self, row: &[f32]) -> &str {
+        let mut best = (0, f32::NEG_INFINITY);
+        for (c, (s, b)) in row.iter().zip(&self.out_b).enumerate() {
+            if s + b > best.1 {
+                best = (c, s + b);
+            }
+        }
+        self.labels[best.0].as_str()
+    }
+
+    /// The label scores (before the bias) of every token, `chunk` tokens at a time in order:
+    /// the network's buffers then hold `chunk` tokens and their neighbours however long the
+    /// text is, and each token's scores are those of one pass over the whole text.
+    fn scores_in_chunks(&self, tokens: &[SpacyToken], chunk: usize, mut each: impl FnMut(&[f32])) {
+        let mut from = 0;
+        while from < tokens.len() {
+            let to = tokens.len().min(from + chunk.max(1));
+            each(&self.scores(tokens, from, to));
+            from = to;
+        }
+    }
+
+    /// The label scores of `tokens[from..to]`, computed over just the rows they depend on.
+    ///
+    /// The encoder runs over the text with `pad` zero rows at each end, as thinc pads a
+    /// document; the rows are numbered here from the first of those. Residual layer `l` (from 0)
+    /// changes the rows within `depth - 1 - l` of a token and reads one row either side, so a
+    /// token's result depends only on the rows within `depth` of it: the window `[a, b)` takes
+    /// those of the tokens asked for. A row at the window's edge that is not the document's
+    /// edge is computed with a zero neighbour, but that error moves inwards one row a layer and
+    /// stops `depth` rows short of the first token asked for.
+    fn scores(&self, tokens: &[SpacyToken], from: usize, to: usize) -> Vec<f32> {
         let (w, pad, n) = (self.width, self.pad, tokens.len());
-        let mut features = vec![0.0f32; n * ATTRS.len() * w];
-        for (t, row) in tokens
+        let depth = self.layers.len() - 1;
+        let total = n + 2 * pad;
+        let (first, end) = (pad + from, pad + to);
+        let a = first.saturating_sub(depth);
+        let b = total.min(end + depth);
+        // The tokens inside the window; its other rows are padding.
+        let (t0, t1) = (a.max(pad) - pad, b.min(pad + n) - pad);
+        let mut features = vec![0.0f32; (t1 - t0) * ATTRS.len() * w];
+        for (t, row) in tokens[t0..t1]
             .iter()
             .zip(features.chunks_exact_mut(ATTRS.len() * w))
         {
@@ -403,56 +455,46 @@ impl SpacyTagger {
                 }
             }
         }
-        // The encoder runs over the caption with `pad` zero rows at each end, as thinc pads a
-        // document; layer l needs only the rows within (depth - l) of a token.
-        let total = n + 2 * pad;
-        let mut x = vec![0.0f32; total * w];
-        self.layers[0].apply(&features, n, &mut x[pad * w..(pad + n) * w]);
-        let depth = self.layers.len() - 1;
+        let mut x = vec![0.0f32; (b - a) * w];
+        let at = t0 + pad - a;
+        self.layers[0].apply(&features, t1 - t0, &mut x[at * w..(at + t1 - t0) * w]);
         for (l, layer) in self.layers[1..].iter().enumerate() {
             let margin = depth - (l + 1);
-            let lo = pad.saturating_sub(margin);
-            let hi = (pad + n + margin).min(total);
+            // The rows a pass over the whole document changes at this layer, inside the window.
+            let lo = pad.saturating_sub(margin).max(a);
+            let hi = (pad + n + margin).min(b);
+            if lo >= hi {
+                continue;
+            }
             let m = hi - lo;
             let mut window = vec![0.0f32; m * 3 * w];
             for (i, win) in window.chunks_exact_mut(3 * w).enumerate() {
-                let r = lo + i;
+                let r = lo + i - a;
                 if r > 0 {
                     win[..w].copy_from_slice(&x[(r - 1) * w..r * w]);
                 }
                 win[w..2 * w].copy_from_slice(&x[r * w..(r + 1) * w]);
-                if r + 1 < total {
+                if a + r + 1 < b {
                     win[2 * w..].copy_from_slice(&x[(r + 1) * w..(r + 2) * w]);
                 }
             }
             let mut out = vec![0.0f32; m * w];
             layer.apply(&window, m, &mut out);
-            for (dst, add) in x[lo * w..hi * w].iter_mut().zip(&out) {
+            for (dst, add) in x[(lo - a) * w..(hi - a) * w].iter_mut().zip(&out) {
                 *dst += add;
             }
         }
         let labels = self.out_b.len();
-        let mut scores = vec![0.0f32; n * labels];
+        let mut scores = vec![0.0f32; (to - from) * labels];
         matmul_t(
-            &x[pad * w..(pad + n) * w],
-            n,
+            &x[(first - a) * w..(end - a) * w],
+            to - from,
             w,
             &self.out_w,
             labels,
             &mut scores,
         );
         scores
-            .chunks_exact(labels)
-            .map(|row| {
-                let mut best = (0, f32::NEG_INFINITY);
-                for (c, (s, b)) in row.iter().zip(&self.out_b).enumerate() {
-                    if s + b > best.1 {
-                        best = (c, s + b);
-                    }
-                }
-                self.labels[best.0].as_str()
-            })
-            .collect()
     }
 }
 
@@ -497,6 +539,37 @@ mod tests {
         m.tag(&other);
         assert_eq!(m.tag(&caption), first);
         assert_eq!(first, ["VB", "JJ", "NN"]);
+    }
+
+    #[test]
+    fn scores_do_not_depend_on_how_the_text_is_cut() {
+        let m = SpacyTagger::bundled().unwrap();
+        let text = "a person walks forward , turns around and waves the left hand ; then \
+                    someone doesn't stop but jumps up twice , arms raised over the head .";
+        let words: Vec<&str> = text.split(' ').collect();
+        let tokens: Vec<SpacyToken> = words
+            .iter()
+            .enumerate()
+            .map(|(i, text)| SpacyToken {
+                text,
+                norm: None,
+                space_after: i + 1 < words.len(),
+                is_space: false,
+            })
+            .collect();
+        let cut = |chunk: usize| {
+            let mut all = Vec::new();
+            m.scores_in_chunks(&tokens, chunk, |s| {
+                all.extend(s.iter().map(|v| v.to_bits()))
+            });
+            all
+        };
+        let whole = cut(tokens.len());
+        assert_eq!(whole.len(), tokens.len() * m.out_b.len());
+        for chunk in [1, 2, 3, 5, 8, 9, tokens.len() - 1] {
+            assert!(cut(chunk) == whole, "cut every {chunk} tokens");
+        }
+        assert_eq!(m.tag(&tokens[..3]), ["DT", "NN", "VBZ"]);
     }
 
     #[test]
