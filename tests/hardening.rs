@@ -522,3 +522,39 @@ path = "babel.json"
     assert_eq!(report["clips"], 1600, "{report:#}");
     assert_eq!(report["mirrored"], 800);
 }
+
+/// A BABEL label of a million characters (no caption-file reader bounds it) costs one drop, and
+/// the build stays fast and small: the labeller and tagger never see it.
+#[test]
+fn a_huge_annotation_text_is_dropped_at_segmentation_under_a_1_gb_address_space() {
+    let case = Case::new();
+    std::fs::copy(
+        repo().join("fixtures/cmu/01_01.bvh"),
+        case.path("cmu/01_01.bvh"),
+    )
+    .unwrap();
+    let label = |text: String, start: f64| {
+        serde_json::json!({
+            "act_cat": ["walk"], "start_t": start, "end_t": start + 3.0,
+            "proc_label": text.clone(), "raw_label": text, "seg_id": format!("s{start}"),
+        })
+    };
+    let record = serde_json::json!({"1": {
+        "babel_sid": 1, "dur": 22.9, "feat_p": "CMU/CMU/01/01_01_poses.npz",
+        "frame_ann": {"labels": [label("walk ".repeat(200_000), 1.0), label("walk forward".into(), 5.0)], "mul_act": true},
+        "seq_ann": {"labels": []},
+    }});
+    std::fs::write(case.path("babel.json"), record.to_string()).unwrap();
+    let config = case.path("huge.toml");
+    std::fs::write(
+        &config,
+        "[dataset]\nname = \"hard\"\noutput = \"out\"\nfps = 30\n\n[synthetic]\nenabled = false\n\n[[sources]]\nname = \"cmu\"\ncaptures = [\"cmu/01_01.bvh\"]\nprofile = \"cmu\"\n\n[sources.labels]\nkind = \"babel\"\npath = \"babel.json\"\n",
+    )
+    .unwrap();
+    let out = run_limited_to(1024, &build_args(&config));
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let report = case.json("build-report.json");
+    assert_eq!(report["drops_by_reason"]["long_text"], 1, "{report:#}");
+    // The other label and its mirror.
+    assert_eq!(report["clips"], 2, "{report:#}");
+}

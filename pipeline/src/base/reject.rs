@@ -130,6 +130,8 @@ reasons! {
         DroppedLabel => "dropped_label",
         /// Its caption is empty or blank.
         EmptyText => "empty_text",
+        /// Its caption or label is longer than a caption may be (`humanml3d::caption::MAX_CAPTION_CHARS`).
+        LongText => "long_text",
         /// It starts past the capture's end.
         PastEnd => "past_end",
         /// The start trim removes all of it.

@@ -36,7 +36,9 @@ pub(super) struct Summary {
 /// clip's skeleton is kept once per distinct skeleton beside the blocks (the clips share them,
 /// `motion::SkeletonPool`), so decoding gives back clips that share them too.
 pub(super) struct HeldClips {
-    blocks: Vec<Box<[u8]>>,
+    /// Each block compressed, with its length decoded: a block's size is set by its clips'
+    /// texts, not bounded by a guess (a 20 MB caption overflowed a fixed 64 MiB bound).
+    blocks: Vec<(Box<[u8]>, usize)>,
     summaries: Vec<Summary>,
     splits: Vec<Split>,
     skeletons: SkeletonTable,
@@ -98,7 +100,7 @@ impl HeldClips {
         };
         let bytes = postcard::to_stdvec(&*pending).map_err(|e| encode(e.to_string()))?;
         let packed = zstd::bulk::compress(&bytes, LEVEL).map_err(|e| encode(e.to_string()))?;
-        self.blocks.push(packed.into_boxed_slice());
+        self.blocks.push((packed.into_boxed_slice(), bytes.len()));
         pending.clear();
         Ok(())
     }
@@ -131,14 +133,13 @@ impl HeldClips {
     }
 
     fn block(&self, block: usize) -> Result<Vec<Entry>, BuildError> {
-        let packed = self
+        let (packed, len) = self
             .blocks
             .get(block)
             .ok_or_else(|| undecodable(block, "no such block"))?;
-        // At most BLOCK clips of a few KB each: the bound keeps a damaged length from
-        // allocating much.
-        let bytes = zstd::bulk::decompress(packed, BLOCK * 1024 * 1024)
-            .map_err(|e| undecodable(block, &e.to_string()))?;
+        // The length was measured when this process sealed the block.
+        let bytes =
+            zstd::bulk::decompress(packed, *len).map_err(|e| undecodable(block, &e.to_string()))?;
         let mut entries: Vec<Entry> =
             postcard::from_bytes(&bytes).map_err(|e| undecodable(block, &e.to_string()))?;
         for (i, (clip, _)) in entries.iter_mut().enumerate() {

@@ -167,6 +167,13 @@ pub fn run_with<E>(
             ));
             continue;
         }
+        // Whatever the annotation format: one text must not make the labeller and tagger work
+        // (and hold memory) in proportion to a damaged file.
+        let limit = crate::humanml3d::caption::MAX_CAPTION_CHARS;
+        if span.raw_text.chars().count() > limit || span.label.chars().count() > limit {
+            drop(DropReason::LongText, &span.raw_text, None);
+            continue;
+        }
         if drop_labels.contains(&normalize_label(&span.label))
             || drop_labels.contains(&normalize_label(&span.raw_text))
         {
