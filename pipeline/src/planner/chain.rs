@@ -118,7 +118,7 @@ impl Graph {
 /// The most states exploring `scene` may build: [`MAX_STATES`], fewer for a scene whose
 /// requirement checks cost more than [`MAX_CHECKS`] over it per state. Known before any state is
 /// built, as is each state's size (the scene's movable objects, at most `MAX_MOVABLE`).
-pub(super) fn max_states(scene: &Scene) -> usize {
+fn max_states(scene: &Scene) -> usize {
     let allowed = MAX_CHECKS / checks_per_state(scene).max(1);
     usize::try_from(allowed).map_or(MAX_STATES, |n| n.clamp(1, MAX_STATES))
 }
