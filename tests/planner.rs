@@ -799,18 +799,21 @@ fn a_minutes_limit_keeps_the_estimated_session_within_it_and_ends_valid() {
 
 #[test]
 fn a_scene_expanding_into_too_many_instructions_is_refused_before_expanding() {
-    let places: Vec<String> = (0..3000).map(|i| format!("\"spot {i}\"")).collect();
+    // 1,000 places (the most a scene may list) and waving at each with either hand: 2,000
+    // instructions, and walking to each 1,000 more.
+    let places: Vec<String> = (0..1000).map(|i| format!("\"spot {i}\"")).collect();
+    let places = places.join(", ");
     let text = format!(
-        "places = [{}]\n[limits]\ninstructions = 4\n[[interactions]]\ntype = \"walk forward\"\n\
-         text = \"walk to the {{place}}\"\nplaces = [{}]\nleaves = {{ at = \"{{place}}\" }}\n",
-        places.join(", "),
-        places.join(", ")
+        "places = [{places}]\n[limits]\ninstructions = 4\n[[interactions]]\ntype = \"wave\"\n\
+         text = \"wave at the {{place}} with your {{hand}} hand\"\nhands = \"one\"\n\
+         places = [{places}]\n[[interactions]]\ntype = \"walk forward\"\n\
+         text = \"walk to the {{place}}\"\nplaces = [{places}]\nleaves = {{ at = \"{{place}}\" }}\n"
     );
     let err = Scene::parse(&text, Path::new("big.toml"))
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("interactions[0]") && err.contains("more than 2000 instructions"),
+        err.contains("interactions[1]") && err.contains("more than 2000 instructions"),
         "{err}"
     );
 }
@@ -869,5 +872,677 @@ fn a_target_in_the_scene_steers_toward_it_and_must_name_the_scenes_types() {
     assert!(
         text.contains("end.posture: unknown variant `stand`, expected one of `standing`"),
         "{text}"
+    );
+}
+
+/// The living room where the cup, the phone and three more objects (a book, a remote, a glass)
+/// can be picked up and put down at the sofa or the table: a few thousand states, where the
+/// room itself has a few dozen. `statics` more objects are listed that no interaction names.
+fn room_of_movable_objects(statics: usize) -> String {
+    let text = std::fs::read_to_string(scene_path()).unwrap();
+    let mut objects =
+        String::from("phone = \"table\"\nbook = \"sofa\"\nremote = \"sofa\"\nglass = \"table\"\n");
+    for i in 0..statics {
+        let at = if i % 2 == 0 { "table" } else { "sofa" };
+        objects.push_str(&format!("vase{i} = \"{at}\"\n"));
+    }
+    let all = "objects = [\"cup\", \"phone\", \"book\", \"remote\", \"glass\"]";
+    let edited = text
+        .replacen("phone = \"table\"\n", &objects, 1)
+        .replacen(
+            "text = \"pick up the {object} from the table with your {hand} hand\"\nobjects = [\"cup\", \"phone\"]",
+            &format!("text = \"pick up the {{object}} with your {{hand}} hand\"\n{all}"),
+            1,
+        )
+        .replacen(
+            "text = \"put the {object} down on the table\"\nobjects = [\"cup\", \"phone\"]",
+            &format!("text = \"put the {{object}} down\"\n{all}"),
+            1,
+        )
+        .replace(
+            "requires = { posture = \"standing\", at = \"table\" }",
+            "requires = { posture = \"standing\" }",
+        );
+    assert_ne!(edited, text);
+    assert!(edited.contains("text = \"put the {object} down\""));
+    edited
+}
+
+/// `motionforge plan-session` under an address-space limit of `mib` MiB (`prlimit --as`): a
+/// scene that makes it allocate past that fails there instead of taking the machine's memory.
+fn plan_limited(mib: u64, scene: &Path, out: &Path, seed: &str) -> std::process::Output {
+    Command::new("prlimit")
+        .arg(format!("--as={}", mib << 20))
+        .arg(env!("CARGO_BIN_EXE_motionforge"))
+        .args([
+            "plan-session",
+            "--seed",
+            seed,
+            "--capture",
+            "session",
+            "--scene",
+        ])
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .expect("prlimit (util-linux) runs the binary")
+}
+
+#[test]
+fn objects_no_interaction_moves_cost_no_memory_per_state() {
+    // Every state used to carry where every object was: 10,000 objects nobody touches took
+    // 526 MB over the few thousand states of this room (and 200,000 aborted under 4 GB). Now
+    // states carry only the five objects an interaction takes: the same session, in 256 MiB.
+    let dir = tempfile::tempdir().unwrap();
+    let few = dir.path().join("few.toml");
+    let many = dir.path().join("many.toml");
+    std::fs::write(&few, room_of_movable_objects(0)).unwrap();
+    std::fs::write(&many, room_of_movable_objects(10_000)).unwrap();
+    for seed in ["8", "21"] {
+        let a = dir.path().join(format!("a{seed}"));
+        let b = dir.path().join(format!("b{seed}"));
+        for (scene, out) in [(&few, &a), (&many, &b)] {
+            let run = plan_limited(256, scene, out, seed);
+            assert!(
+                run.status.success(),
+                "{}: {:?}\n{}",
+                scene.display(),
+                run.status,
+                String::from_utf8_lossy(&run.stderr)
+            );
+        }
+        for file in ["session.csv", "session.md"] {
+            let (x, y) = (
+                std::fs::read(a.join(file)).unwrap(),
+                std::fs::read(b.join(file)).unwrap(),
+            );
+            assert!(!x.is_empty());
+            assert_eq!(
+                x, y,
+                "seed {seed}: {file} differs with the untouched objects"
+            );
+        }
+        // The session moves the objects around the room: the five-object state space is used.
+        let log = std::fs::read_to_string(a.join("session.csv")).unwrap();
+        assert!(log.contains(",grasp,"), "{log}");
+    }
+    let many_scene = Scene::load(&many).unwrap();
+    assert_eq!(many_scene.objects.len(), 10_005);
+    assert_eq!(many_scene.movable.len(), 5);
+    assert_eq!(many_scene.start.objects.len(), 5);
+}
+
+#[test]
+fn a_scene_of_200000_objects_is_refused_naming_the_file_and_the_limit() {
+    // 200,000 untouched objects (4.4 MB of TOML) aborted the planner under a 4 GB limit; under
+    // 1 GiB the file is refused unread, larger than a scene file may be.
+    let dir = tempfile::tempdir().unwrap();
+    let huge = dir.path().join("huge.toml");
+    std::fs::write(&huge, room_of_movable_objects(200_000)).unwrap();
+    let run = plan_limited(1024, &huge, &dir.path().join("out"), "8");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{:?}: {stderr}", run.status);
+    assert!(
+        stderr.contains(&format!("scene {}", huge.display()))
+            && stderr.contains("more than 1048576 bytes, the most a scene file may have"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("out").exists());
+
+    // Within the size, the list over its limit is named with its line and the limit. 50,000
+    // objects (the limit) still plan.
+    let compact = |statics: usize| {
+        room_of_movable_objects(0).replacen(
+            "glass = \"table\"\n",
+            &format!(
+                "glass = \"table\"\n{}",
+                (0..statics)
+                    .map(|i| format!("v{i}=\"sofa\"\n"))
+                    .collect::<String>()
+            ),
+            1,
+        )
+    };
+    let at_limit = dir.path().join("at-limit.toml");
+    std::fs::write(&at_limit, compact(50_000 - 5)).unwrap();
+    let run = plan_limited(512, &at_limit, &dir.path().join("ok"), "8");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let over = dir.path().join("over.toml");
+    std::fs::write(&over, compact(50_000 - 4)).unwrap();
+    let run = plan_limited(512, &over, &dir.path().join("no"), "8");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    let line = std::fs::read_to_string(&over)
+        .unwrap()
+        .lines()
+        .position(|l| l == "[objects]")
+        .unwrap()
+        + 1;
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "scene {}:{line}: objects: 50001 objects, more than the 50000 a scene may have",
+            over.display()
+        )),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_scenes_lists_are_limited_and_its_messages_bounded() {
+    let room = std::fs::read_to_string(scene_path()).unwrap();
+    let load = |text: &str| Scene::parse(text, Path::new("room.toml"));
+    let names = |prefix: &str, n: usize| -> String {
+        (0..n)
+            .map(|i| format!("\"{prefix}{i}\""))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+
+    // Places: at most 1,000.
+    let text = room.replacen(
+        "places = [\"sofa\", \"table\"]",
+        &format!("places = [\"sofa\", \"table\", {}]", names("spot ", 999)),
+        1,
+    );
+    let err = load(&text).unwrap_err().to_string();
+    assert!(
+        err.contains("room.toml:10: places: 1001 places, more than the 1000 a scene may have"),
+        "{err}"
+    );
+
+    // Interactions: at most 2,000 (each is at least one instruction).
+    let block = "\n[[interactions]]\ntype = \"turn left\"\ntext = \"turn to your left\"\n";
+    let err = load(&format!("{room}{}", block.repeat(1981)))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("interactions: 2001 interactions, more than the 2000 a scene may have"),
+        "{err}"
+    );
+
+    // Objects an interaction takes: at most 32 (each state carries where they are).
+    let objects: String = (0..31).map(|i| format!("toy{i} = \"table\"\n")).collect();
+    let text = room
+        .replacen(
+            "phone = \"table\"\n",
+            &format!("phone = \"table\"\n{objects}"),
+            1,
+        )
+        .replacen(
+            "objects = [\"cup\", \"phone\"]\nhands = \"one\"\nhold = \"take\"",
+            &format!(
+                "objects = [\"cup\", \"phone\", {}]\nhands = \"one\"\nhold = \"take\"",
+                names("toy", 31)
+            ),
+            1,
+        );
+    let err = load(&text).unwrap_err().to_string();
+    assert!(
+        err.contains("objects: 33 objects are taken by interactions")
+            && err.contains("more than the 32 a scene may move"),
+        "{err}"
+    );
+    // 32 are fine, and the other objects stay out of the states.
+    let fine = text.replacen(
+        ", \"toy30\"]\nhands = \"one\"\nhold = \"take\"",
+        "]\nhands = \"one\"\nhold = \"take\"",
+        1,
+    );
+    let scene = load(&fine).unwrap();
+    assert_eq!((scene.objects.len(), scene.movable.len()), (33, 32));
+    assert_eq!(scene.start.objects.len(), 32);
+
+    // A long list of names in a requirement is each place once, however often it is named.
+    let text = room.replacen(
+        "requires = { posture = \"standing\", at = \"{place}\" }\nleaves = { posture = \"sitting\" }",
+        &format!(
+            "requires = {{ posture = \"standing\", at = [{}] }}\nleaves = {{ posture = \"sitting\" }}",
+            vec!["\"sofa\""; 50_000].join(", ")
+        ),
+        1,
+    );
+    let scene = load(&text).unwrap();
+    let sit = scene
+        .candidates
+        .iter()
+        .find(|c| c.motion_type == "sit down")
+        .unwrap();
+    assert!(
+        sit.requires
+            .iter()
+            .any(|r| *r == motionforge::planner::Requirement::At(vec![Some(0)])),
+        "{:?}",
+        sit.requires
+    );
+
+    // Thousands of bad names: the first 100 problems, the count of the rest, and lists of
+    // names in messages cut with their count.
+    let text = room.replacen(
+        "objects = [\"cup\"]\nhands = \"one\"\nhold = \"keep\"",
+        &format!(
+            "objects = [{}]\nhands = \"one\"\nhold = \"keep\"",
+            names("mug", 5_000)
+        ),
+        1,
+    );
+    let err = load(&text).unwrap_err();
+    let message = err.to_string();
+    let SceneError::Invalid {
+        problems, unlisted, ..
+    } = &err
+    else {
+        panic!("{message}")
+    };
+    assert_eq!((problems.len(), *unlisted), (100, 4_900), "{message}");
+    assert!(message.starts_with("scene room.toml has 5000 problems:"));
+    assert!(message.ends_with("... and 4900 more"), "{message}");
+    assert_eq!(message.lines().count(), 102);
+
+    let text = room
+        .replacen(
+            "phone = \"table\"\n",
+            &format!(
+                "phone = \"table\"\n{}",
+                (0..30)
+                    .map(|i| format!("pen{i} = \"table\"\n"))
+                    .collect::<String>()
+            ),
+            1,
+        )
+        .replacen(
+            "objects = [\"cup\"]\nhands = \"one\"\nhold = \"keep\"",
+            "objects = [\"mug\"]\nhands = \"one\"\nhold = \"keep\"",
+            1,
+        );
+    let err = load(&text).unwrap_err().to_string();
+    assert!(err.contains("(objects: cup, pen0, pen1, "), "{err}");
+    assert!(err.contains(", ... (32 in all))"), "{err}");
+}
+
+/// One run of the scene fuzz test: the file written, what was done to it, and how the binary
+/// ended.
+struct FuzzRun {
+    scene: PathBuf,
+    out: PathBuf,
+    mutations: Vec<String>,
+    output: std::process::Output,
+    seconds: f64,
+}
+
+/// Names a mutation may put where a name was.
+const FUZZ_NAMES: &[&str] = &[
+    "sofa",
+    "table",
+    "none",
+    "cup",
+    "phone",
+    "{place}",
+    "{object}",
+    "{hand}",
+    "",
+    "standing",
+    "sitting",
+    "lying",
+    "kneeling",
+    "take",
+    "keep",
+    "release",
+    "one",
+    "both",
+    "left",
+    "any",
+    "walk forward",
+    "sit down",
+    "drink",
+    "bed",
+    "{",
+    "}}",
+    "é",
+];
+
+/// Numbers a mutation may put where a number was.
+const FUZZ_NUMBERS: &[&str] = &[
+    "0",
+    "-1",
+    "1",
+    "1e308",
+    "-1e308",
+    "nan",
+    "inf",
+    "-inf",
+    "4294967296",
+    "18446744073709551616",
+    "99999999999999999999999",
+    "1e-300",
+    "10000",
+    "10001",
+    "240",
+    "240.000001",
+    "0.5",
+    "3600",
+    "1_000_000",
+];
+
+/// A scene mutated by one to three of: a number or a name swapped for an extreme one, a list
+/// made huge, thousands of objects, places or interactions added, the end made unreachable,
+/// the ways back (`leaves`) removed or scrambled (cycles with no exit), lines deleted or
+/// doubled, the file cut short, bytes that are not UTF-8, nesting past any parser's depth.
+fn mutate(rng: &mut fastrand::Rng, text: &str) -> (Vec<u8>, Vec<String>) {
+    let number_re = regex::Regex::new(r"= (-?[0-9][0-9.]*)").unwrap();
+    let string_re = regex::Regex::new("\"([^\"\n]*)\"").unwrap();
+    let list_re = regex::Regex::new(r"\[([^\[\]\n]+)\]").unwrap();
+    let leaves_re = regex::Regex::new("leaves = \\{[^}\n]*\\}").unwrap();
+    let mut text = text.to_string();
+    let mut done = Vec::new();
+    // Bytes spliced in last, at a fraction of the final length.
+    let mut damage: Vec<(f64, Vec<u8>)> = Vec::new();
+    for _ in 0..rng.usize(1..=3) {
+        let pick = |rng: &mut fastrand::Rng, v: &[&str]| v[rng.usize(..v.len())].to_string();
+        match rng.usize(..13) {
+            0 => {
+                let numbers: Vec<_> = number_re
+                    .captures_iter(&text)
+                    .map(|c| c.get(1).unwrap().range())
+                    .collect();
+                if let Some(r) = numbers.get(rng.usize(..numbers.len().max(1))) {
+                    let n = pick(rng, FUZZ_NUMBERS);
+                    done.push(format!("number {} -> {n}", &text[r.clone()]));
+                    text.replace_range(r.clone(), &n);
+                }
+            }
+            1 => {
+                let strings: Vec<_> = string_re
+                    .captures_iter(&text)
+                    .map(|c| c.get(1).unwrap().range())
+                    .collect();
+                if let Some(r) = strings.get(rng.usize(..strings.len().max(1))) {
+                    let n = pick(rng, FUZZ_NAMES);
+                    done.push(format!("name {} -> {n}", &text[r.clone()]));
+                    text.replace_range(r.clone(), &n);
+                }
+            }
+            2 => {
+                let lists: Vec<_> = list_re
+                    .captures_iter(&text)
+                    .map(|c| c.get(1).unwrap().range())
+                    .collect();
+                if let Some(r) = lists.get(rng.usize(..lists.len().max(1))) {
+                    let first = text[r.clone()]
+                        .split(',')
+                        .next()
+                        .unwrap()
+                        .trim()
+                        .to_string();
+                    let n = [1_000, 30_000, 150_000][rng.usize(..3)];
+                    done.push(format!("list [{}] -> {n} x {first}", &text[r.clone()]));
+                    text.replace_range(r.clone(), &vec![first.as_str(); n].join(", "));
+                }
+            }
+            3 => {
+                let n = [100, 10_000, 60_000][rng.usize(..3)];
+                let extra: String = (0..n).map(|i| format!("x{i} = \"table\"\n")).collect();
+                done.push(format!("{n} objects"));
+                text = text.replacen("[objects]\n", &format!("[objects]\n{extra}"), 1);
+            }
+            4 => {
+                let n = [10, 998, 1_500][rng.usize(..3)];
+                let extra: String = (0..n).map(|i| format!(", \"spot {i}\"")).collect();
+                done.push(format!("{n} places"));
+                text = text.replacen(
+                    "\"sofa\", \"table\"]",
+                    &format!("\"sofa\", \"table\"{extra}]"),
+                    1,
+                );
+            }
+            5 => {
+                let n = [10, 500, 2_100][rng.usize(..3)];
+                let block = "\n[[interactions]]\ntype = \"wave\"\ntext = \"wave with your {hand} hand\"\n\
+                             hands = \"one\"\nrequires = { posture = \"lying\" }\n";
+                done.push(format!("{n} interactions"));
+                text.push_str(&block.repeat(n));
+            }
+            6 => {
+                let end = format!(
+                    "[end]\nposture = \"{}\"\nat = \"{}\"\nhands = \"{}\"\n",
+                    pick(rng, &["standing", "sitting", "lying", "kneeling"]),
+                    pick(rng, &["sofa", "table", "none"]),
+                    pick(rng, &["empty", "any"])
+                );
+                done.push(format!("end {end:?}"));
+                text = text.replacen(
+                    "[end]\nposture = \"standing\"\nhands = \"empty\"\n",
+                    &end,
+                    1,
+                );
+            }
+            7 => {
+                let posture = pick(rng, &["standing", "sitting", "lying"]);
+                if rng.bool() {
+                    done.push("no leaves".into());
+                    text = text
+                        .lines()
+                        .filter(|l| !l.starts_with("leaves"))
+                        .collect::<Vec<_>>()
+                        .join("\n");
+                } else {
+                    done.push(format!("every leaves -> {posture}"));
+                    text = leaves_re
+                        .replace_all(&text, format!("leaves = {{ posture = \"{posture}\" }}"))
+                        .into_owned();
+                }
+            }
+            8 => {
+                let lines: Vec<&str> = text.lines().collect();
+                let i = rng.usize(..lines.len().max(1));
+                let double = rng.bool();
+                done.push(format!(
+                    "{} line {}",
+                    if double { "double" } else { "delete" },
+                    i + 1
+                ));
+                let mut out: Vec<&str> = Vec::new();
+                for (j, l) in lines.iter().enumerate() {
+                    if j != i || double {
+                        out.push(l);
+                    }
+                    if j == i && double {
+                        out.push(l);
+                    }
+                }
+                text = out.join("\n") + "\n";
+            }
+            9 => {
+                let at = rng.usize(..text.len().max(1));
+                let at = (0..=at)
+                    .rev()
+                    .find(|&i| text.is_char_boundary(i))
+                    .unwrap_or(0);
+                done.push(format!("cut at byte {at}"));
+                text.truncate(at);
+            }
+            10 => {
+                let at = rng.f64();
+                let junk: Vec<u8> = (0..rng.usize(1..8)).map(|_| rng.u8(..)).collect();
+                done.push(format!("bytes {junk:?} at {:.0}% of the file", at * 100.0));
+                damage.push((at, junk));
+            }
+            11 => {
+                let depth = [100, 10_000, 300_000][rng.usize(..3)];
+                done.push(format!("nesting {depth}"));
+                text.push_str(&format!(
+                    "\nx = {}{}\n",
+                    "[".repeat(depth),
+                    "]".repeat(depth)
+                ));
+            }
+            _ => {
+                let limit = pick(
+                    rng,
+                    &[
+                        "instructions = 10000",
+                        "minutes = 240",
+                        "instructions = 1",
+                        "minutes = 1e9",
+                    ],
+                );
+                done.push(limit.clone());
+                text = text.replacen("instructions = 16", &limit, 1);
+            }
+        }
+    }
+    let mut out = text.into_bytes();
+    for (at, junk) in damage {
+        let at = (at * out.len() as f64) as usize;
+        out.splice(at..at, junk);
+    }
+    (out, done)
+}
+
+/// Runs `plan-session` on `scene` under a 1 GiB address-space limit, killing it after 30 s.
+fn plan_fuzzed(scene: &Path, out: &Path) -> (std::process::Output, f64) {
+    let log = |name: &str| std::fs::File::create(out.with_extension(name)).unwrap();
+    let started = std::time::Instant::now();
+    let mut child = Command::new("prlimit")
+        .arg(format!("--as={}", 1u64 << 30))
+        .arg(env!("CARGO_BIN_EXE_motionforge"))
+        .args([
+            "plan-session",
+            "--seed",
+            "3",
+            "--capture",
+            "session",
+            "--scene",
+        ])
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .stdout(log("stdout"))
+        .stderr(log("stderr"))
+        .spawn()
+        .expect("prlimit (util-linux) runs the binary");
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if started.elapsed().as_secs() >= 30 {
+            child.kill().unwrap();
+            panic!("{}: still running after 30 s", scene.display());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    let output = std::process::Output {
+        status,
+        stdout: std::fs::read(out.with_extension("stdout")).unwrap(),
+        stderr: std::fs::read(out.with_extension("stderr")).unwrap(),
+    };
+    (output, started.elapsed().as_secs_f64())
+}
+
+#[test]
+fn mutated_scene_files_plan_or_are_refused_naming_the_file_in_bounded_memory_and_time() {
+    // 200 mutations of the bundled scene, as it is or with five objects to move about (a few
+    // thousand states), seeded: the same files every run. Each is planned
+    // through the binary under 1 GiB of address space: a session (exit 0, a log the event-log
+    // reader takes once timed) or an error naming the file (exit 2); never a signal or a panic.
+    let rooms = [
+        std::fs::read_to_string(scene_path()).unwrap(),
+        room_of_movable_objects(0),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = fastrand::Rng::with_seed(30);
+    let cases: Vec<(PathBuf, Vec<String>)> = (0..200)
+        .map(|k| {
+            let room = rng.usize(..2);
+            let (bytes, mut mutations) = mutate(&mut rng, &rooms[room]);
+            mutations.insert(0, ["the room", "five objects to move"][room].to_string());
+            let scene = dir.path().join(format!("scene-{k}.toml"));
+            std::fs::write(&scene, bytes).unwrap();
+            (scene, mutations)
+        })
+        .collect();
+    let runs: Vec<FuzzRun> = std::thread::scope(|s| {
+        let workers: Vec<_> = (0..2)
+            .map(|w| {
+                let cases = &cases;
+                s.spawn(move || {
+                    cases
+                        .iter()
+                        .enumerate()
+                        .filter(|(k, _)| k % 2 == w)
+                        .map(|(k, (scene, mutations))| {
+                            let out = scene.with_file_name(format!("out-{k}"));
+                            let (output, seconds) = plan_fuzzed(scene, &out);
+                            FuzzRun {
+                                scene: scene.clone(),
+                                out,
+                                mutations: mutations.clone(),
+                                output,
+                                seconds,
+                            }
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|w| w.join().unwrap())
+            .collect()
+    });
+    let (mut planned, mut refused, mut slowest) = (0, 0, 0.0f64);
+    for run in &runs {
+        let stderr = String::from_utf8_lossy(&run.output.stderr);
+        let what = format!(
+            "{} ({}): {:?} after {:.1} s\n{stderr}",
+            run.scene.display(),
+            run.mutations.join("; "),
+            run.output.status,
+            run.seconds
+        );
+        slowest = slowest.max(run.seconds);
+        match run.output.status.code() {
+            Some(0) => {
+                planned += 1;
+                let log = std::fs::read_to_string(run.out.join("session.csv"))
+                    .unwrap_or_else(|e| panic!("{what}: no event log: {e}"));
+                let timed: String = log
+                    .lines()
+                    .enumerate()
+                    .map(|(i, l)| {
+                        if i == 0 {
+                            format!("{l}\n")
+                        } else {
+                            format!("{i}{l}\n")
+                        }
+                    })
+                    .collect();
+                let read = read_event_log(&timed, EventLogFormat::Csv, "s.csv", 30.0)
+                    .unwrap_or_else(|e| panic!("{what}: the log does not read back: {e}"));
+                assert!(!read["s"].spans.is_empty(), "{what}");
+            }
+            Some(2) => {
+                refused += 1;
+                assert!(
+                    stderr.contains(&format!("scene {}", run.scene.display())),
+                    "the error does not name the file: {what}"
+                );
+            }
+            _ => panic!("neither a session nor a clean error: {what}"),
+        }
+    }
+    eprintln!(
+        "{} mutated scenes: {planned} planned, {refused} refused; slowest {slowest:.1} s",
+        runs.len()
+    );
+    assert_eq!(runs.len(), 200);
+    // Both outcomes are exercised: the mutations are neither all harmless nor all fatal.
+    assert!(
+        planned >= 20 && refused >= 20,
+        "{planned} planned, {refused} refused"
     );
 }

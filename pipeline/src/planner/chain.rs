@@ -4,6 +4,7 @@
 
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, HashMap};
+use std::rc::Rc;
 
 use super::balance::{DatasetCounts, factors};
 use super::scene::{Limit, Scene};
@@ -16,14 +17,23 @@ pub const MAX_STATES: usize = 200_000;
 /// The most transitions (state, instruction) the graph may hold.
 const MAX_EDGES: usize = 4_000_000;
 
+/// The most requirement checks exploring may cost: every state checks every instruction's
+/// requirements, a list of postures or places costing its length, any other requirement one
+/// (a hand or object check looks at no more than `MAX_MOVABLE` positions). A scene whose
+/// instructions cost `w` per state may reach at most this over `w` states: fewer than
+/// [`MAX_STATES`] only past 2,000 per state (the living room costs 88), so the time exploring
+/// takes is bounded before any state is built.
+const MAX_CHECKS: u64 = 400_000_000;
+
 /// The shortest duration estimate, in milliseconds: the segment stage's default shortest clip
 /// (`min_seconds`, 0.5 s). It also bounds a `minutes` session to 28,800 instructions.
 const MIN_MILLIS: u64 = 500;
 
 /// The reachable state graph of a scene.
 pub(super) struct Graph {
-    /// States, the start first.
-    pub states: Vec<State>,
+    /// States, the start first (shared with the index that finds them while exploring: one
+    /// copy of each).
+    pub states: Vec<Rc<State>>,
     /// Per state: (candidate, next state) for every candidate whose requirements hold.
     pub edges: Vec<Vec<(usize, usize)>>,
 }
@@ -31,25 +41,28 @@ pub(super) struct Graph {
 impl Graph {
     /// Every state reachable from the scene's start (breadth first, candidates in file order).
     pub fn explore(scene: &Scene) -> Result<Graph, PlanError> {
-        let mut states = vec![scene.start.clone()];
-        let mut index: HashMap<State, usize> = HashMap::from([(scene.start.clone(), 0)]);
+        let max_states = max_states(scene);
+        let start = Rc::new(scene.start.clone());
+        let mut states = vec![Rc::clone(&start)];
+        let mut index: HashMap<Rc<State>, usize> = HashMap::from([(start, 0)]);
         let mut edges: Vec<Vec<(usize, usize)>> = Vec::new();
         let mut total = 0usize;
         let mut i = 0;
         while i < states.len() {
             let mut out = Vec::new();
             for (c, cand) in scene.candidates.iter().enumerate() {
-                if !cand.requires.iter().all(|r| r.holds(&states[i])) {
+                if !cand.requires.iter().all(|r| r.holds(scene, &states[i])) {
                     continue;
                 }
-                let next = cand.effect.apply(&states[i]);
+                let next = cand.effect.apply(scene, &states[i]);
                 let j = match index.get(&next) {
                     Some(&j) => j,
                     None => {
-                        if states.len() >= MAX_STATES {
-                            return Err(PlanError::TooLarge { states: MAX_STATES });
+                        if states.len() >= max_states {
+                            return Err(PlanError::TooLarge { states: max_states });
                         }
-                        states.push(next.clone());
+                        let next = Rc::new(next);
+                        states.push(Rc::clone(&next));
                         index.insert(next, states.len() - 1);
                         states.len() - 1
                     }
@@ -102,20 +115,48 @@ impl Graph {
     }
 }
 
+/// The most states exploring `scene` may build: [`MAX_STATES`], fewer for a scene whose
+/// requirement checks cost more than [`MAX_CHECKS`] over it per state. Known before any state is
+/// built, as is each state's size (the scene's movable objects, at most `MAX_MOVABLE`).
+fn max_states(scene: &Scene) -> usize {
+    let allowed = MAX_CHECKS / checks_per_state(scene).max(1);
+    usize::try_from(allowed).map_or(MAX_STATES, |n| n.clamp(1, MAX_STATES))
+}
+
+/// What checking every instruction's requirements in one state costs, in [`MAX_CHECKS`] units.
+fn checks_per_state(scene: &Scene) -> u64 {
+    scene
+        .candidates
+        .iter()
+        .map(|c| {
+            c.requires
+                .iter()
+                .map(|r| match r {
+                    Requirement::Posture(l) => l.len().max(1) as u64,
+                    Requirement::At(l) | Requirement::NotAt(l) => l.len().max(1) as u64,
+                    _ => 1,
+                })
+                .sum::<u64>()
+                .max(1)
+        })
+        .sum()
+}
+
 /// Whether a state meets every end requirement.
 pub(super) fn is_end(scene: &Scene, state: &State) -> bool {
-    scene.end.iter().all(|r| r.holds(state))
+    scene.end.iter().all(|r| r.holds(scene, state))
 }
 
 /// The first of `requirements` that no state of `states` meets, else `None` (each is met
 /// somewhere, though maybe never all together).
 pub(super) fn never_met<'r>(
+    scene: &Scene,
     requirements: &'r [Requirement],
-    states: &[State],
+    states: &[Rc<State>],
 ) -> Option<&'r Requirement> {
     requirements
         .iter()
-        .find(|r| !states.iter().any(|s| r.holds(s)))
+        .find(|r| !states.iter().any(|s| r.holds(scene, s)))
 }
 
 /// Estimated seconds of each motion type: the dataset's median, else the scene's
@@ -235,8 +276,8 @@ pub(super) fn walk(
             object: cand.object_name(scene).map(str::to_string),
             hold: cand.hold,
             seconds: millis[c] as f64 / 1000.0,
-            before: graph.states[state].clone(),
-            after: graph.states[next].clone(),
+            before: State::clone(&graph.states[state]),
+            after: State::clone(&graph.states[next]),
         });
         previous = Some(c);
         state = next;
@@ -270,7 +311,7 @@ fn draw(rng: &mut fastrand::Rng, weights: &[f64]) -> usize {
 
 /// The error for a scene whose end no reachable state meets, naming the requirement.
 fn unreachable_end(scene: &Scene, graph: &Graph) -> PlanError {
-    let requirement = match never_met(&scene.end, &graph.states) {
+    let requirement = match never_met(scene, &scene.end, &graph.states) {
         Some(r) => format!(
             "the end state needs {}, which no sequence from the start ({}) reaches",
             r.text(scene),
@@ -296,7 +337,7 @@ fn no_first_step(scene: &Scene, graph: &Graph) -> PlanError {
     let start = &graph.states[0];
     let mut reasons: Vec<String> = Vec::new();
     for cand in &scene.candidates {
-        let why = match cand.requires.iter().find(|r| !r.holds(start)) {
+        let why = match cand.requires.iter().find(|r| !r.holds(scene, start)) {
             Some(r) => format!("needs {}", r.text(scene)),
             None => "leaves a state from which the end is out of budget".to_string(),
         };
@@ -331,7 +372,7 @@ fn never_possible(scene: &Scene, graph: &Graph) -> Vec<String> {
         if used[c] {
             continue;
         }
-        let why = match never_met(&cand.requires, &graph.states) {
+        let why = match never_met(scene, &cand.requires, &graph.states) {
             Some(r) => format!("needs {}, which no reachable state has", r.text(scene)),
             None => "its requirements never hold together".to_string(),
         };
@@ -345,4 +386,17 @@ fn never_possible(scene: &Scene, graph: &Graph) -> Vec<String> {
         }
     }
     notes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_living_room_explores_up_to_the_full_state_limit() {
+        let scene =
+            Scene::load(std::path::Path::new("../schemas/scenes/living-room.toml")).unwrap();
+        assert!(checks_per_state(&scene) < MAX_CHECKS / MAX_STATES as u64);
+        assert_eq!(max_states(&scene), MAX_STATES);
+    }
 }

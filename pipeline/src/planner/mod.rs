@@ -31,7 +31,10 @@ use std::path::{Path, PathBuf};
 pub use balance::{DatasetCounts, factors, kl_to_target};
 pub use chain::MAX_STATES;
 pub use render::{EVENT_LOG_COLUMNS, event_log_csv, operator_sheet};
-pub use scene::{Candidate, Hold, Limit, NO_PLACE, Scene, SceneError, SceneProblem};
+pub use scene::{
+    Candidate, Hold, Limit, MAX_CANDIDATES, MAX_MOVABLE, MAX_OBJECTS, MAX_PLACES, MAX_SCENE_BYTES,
+    NO_PLACE, Scene, SceneError, SceneProblem,
+};
 pub use state::{Effect, Loc, Posture, Requirement, State};
 
 use crate::annotate::span::Hand;
@@ -61,7 +64,8 @@ pub enum PlanError {
          split it into smaller scenes"
     )]
     TooLarge {
-        /// The bound.
+        /// The bound: [`MAX_STATES`], fewer for a scene whose instructions' requirements are
+        /// long to check in every state (`docs/planner.md`).
         states: usize,
     },
 }

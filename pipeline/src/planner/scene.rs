@@ -5,7 +5,9 @@
 //! Reading expands each interaction into candidates (one per place, object and hand it names), so
 //! the chain works on concrete instructions. Every problem is reported at once with its key.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::cell::OnceCell;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -16,7 +18,32 @@ use crate::annotate::taxonomy::{Taxonomy, normalize_label};
 use crate::base::toml_path::{self, SpannedToml, line_of};
 
 /// The most candidates a scene may expand into: the chain enumerates states times candidates.
-const MAX_CANDIDATES: usize = 2_000;
+/// Every interaction is at least one candidate, so it bounds the interactions too.
+pub const MAX_CANDIDATES: usize = 2_000;
+
+/// The largest scene file read, in bytes (1 MiB; the living room is 5 KB). The TOML parser
+/// holds up to about 120 bytes per byte of a file of long arrays of small values (measured,
+/// docs/performance.md), so this bounds reading to about 150 MB at worst.
+pub const MAX_SCENE_BYTES: usize = 1 << 20;
+
+/// The most places a scene may list.
+pub const MAX_PLACES: usize = 1_000;
+
+/// The most hand-held objects a scene may list. Objects no interaction takes cost nothing per
+/// state (their places are kept once), so this bounds only the reading and the messages.
+pub const MAX_OBJECTS: usize = 50_000;
+
+/// The most objects some interaction takes (`hold = "take"`): every state carries where each
+/// of them is, so with [`crate::planner::MAX_STATES`] this bounds the states' memory before any
+/// is built.
+pub const MAX_MOVABLE: usize = 32;
+
+/// The most problems a rejected scene lists (a file with a million bad names gets the first
+/// ones, not a million lines).
+const MAX_PROBLEMS: usize = 100;
+
+/// The most names a message lists (`objects: cup, phone`); a longer list is cut with its count.
+const MAX_NAMES_SHOWN: usize = 20;
 
 /// Why a scene file cannot be used. Every variant names the file; problems name their key.
 #[derive(Debug, thiserror::Error)]
@@ -29,6 +56,18 @@ pub enum SceneError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The file is larger than a scene file may be ([`MAX_SCENE_BYTES`]).
+    #[error(
+        "scene {}: more than {limit} bytes, the most a scene file may have; split it into \
+         smaller scenes",
+        path.display()
+    )]
+    TooBig {
+        /// The scene file.
+        path: PathBuf,
+        /// The limit, in bytes.
+        limit: usize,
+    },
     /// The file is not TOML of the scene's shape.
     #[error("scene {}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
     Parse {
@@ -40,12 +79,14 @@ pub enum SceneError {
         message: String,
     },
     /// Values parse but are not acceptable: every problem found.
-    #[error("{}", invalid_message(path, problems))]
+    #[error("{}", invalid_message(path, problems, *unlisted))]
     Invalid {
         /// The scene file.
         path: PathBuf,
-        /// What is wrong, in file order where lines are known.
+        /// What is wrong, in file order where lines are known (at most the first 100 found).
         problems: Vec<SceneProblem>,
+        /// Problems found beyond those listed.
+        unlisted: usize,
     },
     /// The bundled motion-type taxonomy did not load (a build defect, not the scene's).
     #[error(transparent)]
@@ -63,22 +104,41 @@ pub struct SceneProblem {
     pub message: String,
 }
 
-fn invalid_message(path: &Path, problems: &[SceneProblem]) -> String {
+fn invalid_message(path: &Path, problems: &[SceneProblem], unlisted: usize) -> String {
     let at = |p: &SceneProblem| match p.line {
         Some(line) => format!("{}:{line}: {}: {}", path.display(), p.key, p.message),
         None => format!("{}: {}: {}", path.display(), p.key, p.message),
     };
     match problems {
-        [one] => format!("scene {}", at(one)),
+        [one] if unlisted == 0 => format!("scene {}", at(one)),
         many => {
-            let mut text = format!("scene {} has {} problems:", path.display(), many.len());
+            let mut text = format!(
+                "scene {} has {} problems:",
+                path.display(),
+                many.len() + unlisted
+            );
             for p in many {
                 text.push_str("\n  ");
                 text.push_str(&at(p));
             }
+            if unlisted > 0 {
+                text.push_str(&format!("\n  ... and {unlisted} more"));
+            }
             text
         }
     }
+}
+
+/// `names` joined with `, `, the first [`MAX_NAMES_SHOWN`] of a longer list with its count.
+fn listing(names: &[String]) -> String {
+    if names.len() <= MAX_NAMES_SHOWN {
+        return names.join(", ");
+    }
+    format!(
+        "{}, ... ({} in all)",
+        names[..MAX_NAMES_SHOWN].join(", "),
+        names.len()
+    )
 }
 
 /// A value or a list of values (`posture = "standing"` or `posture = ["standing", "sitting"]`).
@@ -117,12 +177,38 @@ impl<'de, T: Deserialize<'de>> Deserialize<'de> for OneOrMany<T> {
     }
 }
 
-impl<T: Clone> OneOrMany<T> {
-    fn to_vec(&self) -> Vec<T> {
+impl<T> OneOrMany<T> {
+    fn as_slice(&self) -> &[T] {
         match self {
-            OneOrMany::One(x) => vec![x.clone()],
-            OneOrMany::Many(v) => v.clone(),
+            OneOrMany::One(x) => std::slice::from_ref(x),
+            OneOrMany::Many(v) => v,
         }
+    }
+}
+
+impl OneOrMany<Posture> {
+    /// The postures, each once, in file order.
+    fn distinct(&self) -> Vec<Posture> {
+        let mut list: Vec<Posture> = Vec::new();
+        for p in self.as_slice() {
+            if !list.contains(p) {
+                list.push(*p);
+            }
+        }
+        list
+    }
+}
+
+/// True the first time `place` (an index into `places`, `None` the open room) is seen, marking it
+/// in `seen` (one flag per place, then the open room).
+fn first_time(seen: &mut [bool], place: Option<usize>) -> bool {
+    let i = place.unwrap_or(seen.len().saturating_sub(1));
+    match seen.get_mut(i) {
+        Some(flag) if !*flag => {
+            *flag = true;
+            true
+        }
+        _ => false,
     }
 }
 
@@ -355,6 +441,12 @@ pub struct Scene {
     pub places: Vec<String>,
     /// Hand-held objects, sorted by name.
     pub objects: Vec<String>,
+    /// The place (index into `places`) each object of `objects` starts at. An object no
+    /// interaction takes stays there: states do not carry it.
+    pub object_start: Vec<usize>,
+    /// The objects (indices into `objects`, ascending) some interaction takes: the ones a state
+    /// carries, in [`State::objects`], in this order.
+    pub movable: Vec<usize>,
     /// The actor's state when the session starts.
     pub start: State,
     /// What a valid final state must meet.
@@ -375,32 +467,61 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Reads and validates a scene file against the bundled motion types.
+    /// Reads and validates a scene file against the bundled motion types. A file of more than
+    /// [`MAX_SCENE_BYTES`] is refused unread.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+        let read_error = |source| SceneError::Read {
             path: path.to_path_buf(),
             source,
+        };
+        let file = std::fs::File::open(path).map_err(read_error)?;
+        let mut bytes = Vec::new();
+        file.take(MAX_SCENE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(read_error)?;
+        if bytes.len() > MAX_SCENE_BYTES {
+            return Err(SceneError::TooBig {
+                path: path.to_path_buf(),
+                limit: MAX_SCENE_BYTES,
+            });
+        }
+        let text = String::from_utf8(bytes).map_err(|e| {
+            read_error(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "stream did not contain valid UTF-8 (at byte {})",
+                    e.utf8_error().valid_up_to()
+                ),
+            ))
         })?;
         Scene::parse(&text, path)
     }
 
     /// Parses and validates a scene; `path` names it in errors and gives the default name.
     pub fn parse(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        if text.len() > MAX_SCENE_BYTES {
+            return Err(SceneError::TooBig {
+                path: path.to_path_buf(),
+                limit: MAX_SCENE_BYTES,
+            });
+        }
         let taxonomy = Taxonomy::bundled()?;
         let tree = toml::de::DeTable::parse(text).map_err(|e| SceneError::Parse {
             path: path.to_path_buf(),
             line: e.span().map(|s| line_of(text, s.start)),
             message: e.message().trim_end().to_string(),
         })?;
+        // The tree goes into the deserializer whole (no copy kept: it is the largest thing
+        // reading holds); lines are looked up in a second parse, only if there is a problem.
         let parsed: Result<SceneFile, _> =
-            serde_path_to_error::deserialize(toml::Deserializer::from(tree.clone()));
-        let lines = SpannedToml::new(text, tree.into_inner());
+            serde_path_to_error::deserialize(toml::Deserializer::from(tree));
+        let lines = Lines::new(text);
         let file = parsed.map_err(|e| {
             let keys = segments(e.path());
             let line = e
                 .inner()
                 .span()
-                .map(|s| line_of(text, s.start))
+                .map(|s| lines.at(s.start))
                 .or_else(|| lines.line(&steps(&keys)));
             let key = e.path().to_string();
             let key = if key == "." {
@@ -417,18 +538,49 @@ impl Scene {
         let mut problems = Problems {
             lines: &lines,
             found: Vec::new(),
+            unlisted: 0,
         };
-        let scene = resolve(file, path, &taxonomy, &mut problems);
-        if problems.found.is_empty() {
-            Ok(scene)
+        // The lists' lengths first: nothing below is sized by a list over its limit.
+        let counts = [
+            ("places", file.places.len(), MAX_PLACES),
+            ("objects", file.objects.len(), MAX_OBJECTS),
+            ("interactions", file.interactions.len(), MAX_CANDIDATES),
+        ];
+        let over: Vec<_> = counts.into_iter().filter(|(_, n, l)| n > l).collect();
+        let scene = if over.is_empty() {
+            Some(resolve(file, path, &taxonomy, &mut problems))
         } else {
-            let mut found = problems.found;
-            found.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
-            Err(SceneError::Invalid {
-                path: path.to_path_buf(),
-                problems: found,
-            })
+            // Dropped before the problems' lines parse the text again.
+            drop(file);
+            for (list, n, limit) in over {
+                problems.push(
+                    &[k(list)],
+                    format!(
+                        "{n} {list}, more than the {limit} a scene may have; split it into \
+                         smaller scenes"
+                    ),
+                );
+            }
+            None
+        };
+        match scene {
+            Some(scene) if problems.count() == 0 => Ok(scene),
+            _ => {
+                let mut found = problems.found;
+                found.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
+                Err(SceneError::Invalid {
+                    path: path.to_path_buf(),
+                    problems: found,
+                    unlisted: problems.unlisted,
+                })
+            }
         }
+    }
+
+    /// The position in a state's [`State::objects`] of an object of `objects`, `None` for an
+    /// object no interaction takes.
+    pub fn slot(&self, object: usize) -> Option<usize> {
+        self.movable.binary_search(&object).ok()
     }
 
     /// The motion types the scene's interactions have, sorted.
@@ -472,13 +624,119 @@ fn steps(path: &[Seg]) -> Vec<toml_path::Seg<'_>> {
         .collect()
 }
 
+/// The lines of a scene's text: a byte offset's line by binary search (not by counting), and a
+/// key's line from a spanned tree parsed only when a problem asks for one.
+struct Lines<'i> {
+    text: &'i str,
+    starts: Vec<usize>,
+    tree: OnceCell<Option<SpannedToml<'i>>>,
+}
+
+impl<'i> Lines<'i> {
+    fn new(text: &'i str) -> Lines<'i> {
+        let starts = std::iter::once(0)
+            .chain(memchr::memchr_iter(b'\n', text.as_bytes()).map(|i| i + 1))
+            .collect();
+        Lines {
+            text,
+            starts,
+            tree: OnceCell::new(),
+        }
+    }
+
+    /// 1-based line of a byte offset.
+    fn at(&self, offset: usize) -> usize {
+        self.starts.partition_point(|&s| s <= offset).max(1)
+    }
+
+    /// The line of the deepest part of `path` the file spells out.
+    fn line(&self, path: &[toml_path::Seg<'_>]) -> Option<usize> {
+        let tree = self.tree.get_or_init(|| {
+            toml::de::DeTable::parse(self.text)
+                .ok()
+                .map(|t| SpannedToml::new(self.text, t.into_inner()))
+        });
+        tree.as_ref()?.find(path).1.map(|s| self.at(s.start))
+    }
+}
+
+/// A place an interaction's `requires` or `leaves` names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AtName {
+    /// A place of the scene, or the open room (`None`).
+    Fixed(Option<usize>),
+    /// `{place}`: each instruction's bound place.
+    Bound,
+}
+
+impl AtName {
+    fn bind(self, place: Option<usize>) -> Option<usize> {
+        match self {
+            AtName::Fixed(p) => p,
+            AtName::Bound => place,
+        }
+    }
+}
+
+/// The places a list names, each once in file order, and the problems (each once): a name
+/// that is not a place, `{place}` without a `places` list. Linear in the list's length.
+fn at_names(
+    list: &[String],
+    at_value: &dyn Fn(&str) -> Result<Option<usize>, String>,
+    has_places: bool,
+    places: usize,
+) -> (Vec<AtName>, Vec<String>) {
+    let mut names = Vec::new();
+    let mut errors = Vec::new();
+    let mut seen = vec![false; places + 1];
+    let mut bound_seen = false;
+    let mut bad: BTreeSet<&str> = BTreeSet::new();
+    for name in list {
+        if name == "{place}" {
+            if !has_places {
+                if !bound_seen {
+                    errors.push("`{place}` needs a `places` list".to_string());
+                }
+            } else if !bound_seen {
+                names.push(AtName::Bound);
+            }
+            bound_seen = true;
+            continue;
+        }
+        match at_value(name) {
+            Ok(p) => {
+                if first_time(&mut seen, p) {
+                    names.push(AtName::Fixed(p));
+                }
+            }
+            Err(e) => {
+                if bad.insert(name) {
+                    errors.push(e);
+                }
+            }
+        }
+    }
+    (names, errors)
+}
+
 struct Problems<'a, 'i> {
-    lines: &'a SpannedToml<'i>,
+    lines: &'a Lines<'i>,
     found: Vec<SceneProblem>,
+    /// Problems found after the first [`MAX_PROBLEMS`], counted, not listed.
+    unlisted: usize,
 }
 
 impl Problems<'_, '_> {
+    /// Problems found so far, listed or not.
+    fn count(&self) -> usize {
+        self.found.len() + self.unlisted
+    }
+
     fn push(&mut self, path: &[Seg], message: String) {
+        if self.found.len() >= MAX_PROBLEMS {
+            self.unlisted += 1;
+            return;
+        }
         let path = steps(path);
         self.found.push(SceneProblem {
             key: toml_path::key_name(&path),
@@ -536,8 +794,10 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             .unwrap_or_else(|| "scene".into())
     });
 
-    // Places and objects: distinct, non-empty, not the reserved word.
+    // Places and objects: distinct, non-empty, not the reserved word. Looked up by name in a
+    // map: a scene's lists are checked in time linear in their lengths.
     let mut places: Vec<String> = Vec::new();
+    let mut place_ids: HashMap<String, usize> = HashMap::new();
     for (i, p) in file.places.iter().enumerate() {
         let p = p.trim();
         if p.is_empty() || p == NO_PLACE || p.contains(['{', '}', '\n']) {
@@ -545,13 +805,15 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
                 &[k("places"), Seg::I(i)],
                 format!("`{p}`: expected a place name (not empty, not `{NO_PLACE}`, no braces)"),
             );
-        } else if places.iter().any(|q| q == p) {
+        } else if place_ids.contains_key(p) {
             problems.push(&[k("places"), Seg::I(i)], format!("`{p}` is listed twice"));
         } else {
+            place_ids.insert(p.to_string(), places.len());
             places.push(p.to_string());
         }
     }
-    let place_index = |name: &str| places.iter().position(|p| p == name);
+    let place_index = |name: &str| place_ids.get(name).copied();
+    let places_listed = listing(&places);
     // `none` is the open room; anything else must be a listed place.
     let at_value = |name: &str| -> Result<Option<usize>, String> {
         if name == NO_PLACE {
@@ -559,8 +821,7 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         }
         place_index(name).map(Some).ok_or_else(|| {
             format!(
-                "`{name}` is not a place of the scene (places: {}; or `{NO_PLACE}`)",
-                places.join(", ")
+                "`{name}` is not a place of the scene (places: {places_listed}; or `{NO_PLACE}`)"
             )
         })
     };
@@ -569,7 +830,9 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
     let mut object_start: Vec<usize> = Vec::new();
     for (object, at) in &file.objects {
         let key = [k("objects"), k(object)];
-        if object.trim().is_empty() || object.contains(['{', '}', '\n']) || places.contains(object)
+        if object.trim().is_empty()
+            || object.contains(['{', '}', '\n'])
+            || place_ids.contains_key(object.as_str())
         {
             problems.push(
                 &key,
@@ -584,14 +847,13 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             }
             None => problems.push(
                 &key,
-                format!(
-                    "`{at}`: an object starts at one of the places ({})",
-                    places.join(", ")
-                ),
+                format!("`{at}`: an object starts at one of the places ({places_listed})"),
             ),
         }
     }
-    let object_index = |name: &str| objects.iter().position(|o| o == name);
+    // `objects` is sorted (read from a sorted map): found by binary search.
+    let object_index = |name: &str| objects.binary_search_by(|o| o.as_str().cmp(name)).ok();
+    let objects_listed = listing(&objects);
 
     // Start and end.
     let start_at = match file.start.at.as_deref() {
@@ -605,25 +867,27 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         },
     };
     let start_posture = file.start.posture.unwrap_or(Posture::Standing);
-    let start = State {
-        posture: start_posture,
-        at: start_at,
-        objects: object_start.iter().map(|p| Loc::Place(*p)).collect(),
-    };
     let end_file = file.end.unwrap_or_default();
     let mut end = Vec::new();
     end.push(Requirement::Posture(
         end_file
             .posture
             .as_ref()
-            .map(OneOrMany::to_vec)
+            .map(OneOrMany::distinct)
             .unwrap_or_else(|| vec![start_posture]),
     ));
+    // A list of places holds each once (`["sofa", "sofa"]` is `["sofa"]`): a requirement is
+    // at most the places long, however long the file's list.
+    let mut seen = vec![false; places.len() + 1];
     if let Some(at) = &end_file.at {
         let mut list = Vec::new();
-        for (i, a) in at.to_vec().iter().enumerate() {
+        for (i, a) in at.as_slice().iter().enumerate() {
             match at_value(a) {
-                Ok(p) => list.push(p),
+                Ok(p) => {
+                    if first_time(&mut seen, p) {
+                        list.push(p);
+                    }
+                }
                 Err(e) => problems.push(&[k("end"), k("at"), Seg::I(i)], e),
             }
         }
@@ -695,7 +959,7 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
     }
     for (i, inter) in file.interactions.iter().enumerate() {
         let key = |field: &str| vec![k("interactions"), Seg::I(i), k(field)];
-        let before = problems.found.len();
+        let before = problems.count();
         if let Err(e) = check_type(taxonomy, &inter.motion_type) {
             problems.push(&key("type"), e);
         }
@@ -749,10 +1013,7 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
                 Some(x) => bound_places.push(Some(x)),
                 None => problems.push(
                     &[k("interactions"), Seg::I(i), k("places"), Seg::I(j)],
-                    format!(
-                        "`{p}` is not a place of the scene (places: {})",
-                        places.join(", ")
-                    ),
+                    format!("`{p}` is not a place of the scene (places: {places_listed})"),
                 ),
             }
         }
@@ -762,10 +1023,7 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
                 Some(x) => bound_objects.push(Some(x)),
                 None => problems.push(
                     &[k("interactions"), Seg::I(i), k("objects"), Seg::I(j)],
-                    format!(
-                        "`{o}` is not an object of the scene (objects: {})",
-                        objects.join(", ")
-                    ),
+                    format!("`{o}` is not an object of the scene (objects: {objects_listed})"),
                 ),
             }
         }
@@ -800,20 +1058,33 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             HandsFile::One => vec![Some(Hand::Left), Some(Hand::Right)],
             HandsFile::Both => vec![Some(Hand::Both)],
         };
-        // `{place}` in requires/leaves names the bound place.
-        let resolve_at = |name: &str, place: Option<usize>, field: &[Seg]| {
-            if name == "{place}" {
-                return match place {
-                    Some(p) => Ok(Some(p)),
-                    None => Err((
-                        field.to_vec(),
-                        "`{place}` needs a `places` list".to_string(),
-                    )),
-                };
+        // The places `requires` and `leaves` name, resolved once for all the interaction's
+        // instructions (`{place}` is each one's bound place).
+        let has_places = !inter.places.is_empty();
+        let mut resolve_list = |list: &[String], field: &str| {
+            let (names, errors) = at_names(list, &at_value, has_places, places.len());
+            for e in errors {
+                problems.push(&key(field), e);
             }
-            at_value(name).map_err(|e| (field.to_vec(), e))
+            names
         };
-        if problems.found.len() > before {
+        let requires_at = inter
+            .requires
+            .at
+            .as_ref()
+            .map(|l| resolve_list(l.as_slice(), "requires"));
+        let requires_not_at = inter
+            .requires
+            .not_at
+            .as_ref()
+            .map(|l| resolve_list(l.as_slice(), "requires"));
+        let leaves_at = inter
+            .leaves
+            .at
+            .as_ref()
+            .and_then(|a| resolve_list(std::slice::from_ref(a), "leaves").pop());
+        let requires_posture = inter.requires.posture.as_ref().map(OneOrMany::distinct);
+        if problems.count() > before {
             continue;
         }
         // Counted before expanding, so a long list cannot make the reader allocate its product.
@@ -831,49 +1102,23 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         for &place in &bound_places {
             for &object in &bound_objects {
                 for &hand in &hands {
+                    let bind = |names: &[AtName]| -> Vec<Option<usize>> {
+                        names.iter().map(|n| n.bind(place)).collect()
+                    };
                     let mut requires = Vec::new();
-                    let mut errs: Vec<(Vec<Seg>, String)> = Vec::new();
-                    if let Some(p) = &inter.requires.posture {
-                        requires.push(Requirement::Posture(p.to_vec()));
+                    if let Some(p) = &requires_posture {
+                        requires.push(Requirement::Posture(p.clone()));
                     }
-                    if let Some(at) = &inter.requires.at {
-                        let mut list = Vec::new();
-                        for a in at.to_vec() {
-                            match resolve_at(&a, place, &key("requires")) {
-                                Ok(p) => list.push(p),
-                                Err(e) => errs.push(e),
-                            }
-                        }
-                        requires.push(Requirement::At(list));
+                    if let Some(at) = &requires_at {
+                        requires.push(Requirement::At(bind(at)));
                     }
-                    if let Some(not_at) = &inter.requires.not_at {
-                        let mut list = Vec::new();
-                        for a in not_at.to_vec() {
-                            match resolve_at(&a, place, &key("requires")) {
-                                Ok(p) => list.push(p),
-                                Err(e) => errs.push(e),
-                            }
-                        }
-                        requires.push(Requirement::NotAt(list));
+                    if let Some(not_at) = &requires_not_at {
+                        requires.push(Requirement::NotAt(bind(not_at)));
                     }
                     if inter.requires.empty_hands {
                         requires.push(Requirement::EmptyHands);
                     }
                     requires.extend(Requirement::for_hands(hand, hold, object));
-                    let leaves_at = match inter.leaves.at.as_deref() {
-                        None => None,
-                        Some(a) => match resolve_at(a, place, &key("leaves")) {
-                            Ok(p) => Some(p),
-                            Err(e) => {
-                                errs.push(e);
-                                None
-                            }
-                        },
-                    };
-                    if let Some((field, message)) = errs.into_iter().next() {
-                        problems.push(&field, message);
-                        continue;
-                    }
                     candidates.push(Candidate {
                         interaction: i,
                         motion_type: inter.motion_type.clone(),
@@ -885,7 +1130,7 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
                         requires,
                         effect: Effect {
                             posture: inter.leaves.posture,
-                            at: leaves_at,
+                            at: leaves_at.map(|n| n.bind(place)),
                             hold: hold
                                 .zip(object)
                                 .zip(hand)
@@ -935,10 +1180,40 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         }
     }
 
+    // The objects some instruction takes are the only ones that ever move (an object is put
+    // down only from a hand): the states carry where those are, and nothing of the others.
+    let mut movable: Vec<usize> = candidates
+        .iter()
+        .filter(|c| c.hold == Some(Hold::Take))
+        .filter_map(|c| c.object)
+        .collect();
+    movable.sort_unstable();
+    movable.dedup();
+    if movable.len() > MAX_MOVABLE {
+        problems.push(
+            &[k("objects")],
+            format!(
+                "{} objects are taken by interactions (`hold = \"take\"`), more than the \
+                 {MAX_MOVABLE} a scene may move; split it into smaller scenes",
+                movable.len()
+            ),
+        );
+    }
+    let start = State {
+        posture: start_posture,
+        at: start_at,
+        objects: movable
+            .iter()
+            .filter_map(|&o| object_start.get(o).map(|&p| Loc::Place(p)))
+            .collect(),
+    };
+
     Scene {
         name,
         places,
         objects,
+        object_start,
+        movable,
         start,
         end,
         limit,

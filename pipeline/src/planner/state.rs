@@ -47,20 +47,33 @@ pub enum Loc {
     Held(Hand),
 }
 
-/// The actor's state: posture, place and where each hand-held object is.
+/// The actor's state: posture, place and where each object some interaction can move is.
+///
+/// Objects no interaction takes never move: their places are kept once, in
+/// [`Scene::object_start`], not in every state, so a state's size does not grow with them.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct State {
     /// Body posture.
     pub posture: Posture,
     /// The place the actor is at, `None` in the open room.
     pub at: Option<usize>,
-    /// Where each object of [`Scene::objects`] is, in the same order.
+    /// Where each object of [`Scene::movable`] is, in the same order.
     pub objects: Vec<Loc>,
 }
 
 impl State {
-    /// The object in a hand (`Hand::Both` asks for an object held with both).
-    pub fn in_hand(&self, side: Hand) -> Option<usize> {
+    /// Where an object of [`Scene::objects`] is: its entry in the state if some interaction can
+    /// move it, else the place it starts at.
+    pub fn loc(&self, scene: &Scene, object: usize) -> Option<Loc> {
+        match scene.slot(object) {
+            Some(slot) => self.objects.get(slot).copied(),
+            None => scene.object_start.get(object).map(|&p| Loc::Place(p)),
+        }
+    }
+
+    /// The position in [`State::objects`] of the object in a hand (`Hand::Both` asks for an
+    /// object held with both).
+    fn held_slot(&self, side: Hand) -> Option<usize> {
         self.objects.iter().position(|l| match (l, side) {
             (Loc::Held(Hand::Both), _) => true,
             (Loc::Held(h), s) => *h == s,
@@ -68,24 +81,33 @@ impl State {
         })
     }
 
+    /// The object (an index into [`Scene::objects`]) in a hand (`Hand::Both` asks for an object
+    /// held with both).
+    pub fn in_hand(&self, scene: &Scene, side: Hand) -> Option<usize> {
+        self.held_slot(side)
+            .and_then(|slot| scene.movable.get(slot).copied())
+    }
+
     /// True if the hand holds nothing.
     pub fn free(&self, side: Hand) -> bool {
-        self.in_hand(side).is_none()
+        self.held_slot(side).is_none()
     }
 
     /// What the hands hold, for people: `left: cup, right: empty`.
     pub fn hands_text(&self, scene: &Scene) -> String {
-        let name = |side| {
-            self.in_hand(side)
-                .map_or("empty", |o| scene.objects[o].as_str())
-        };
-        match self
+        let name = |o: Option<usize>| o.map_or("empty", |o| scene.objects[o].as_str());
+        let both = self
             .objects
             .iter()
             .position(|l| *l == Loc::Held(Hand::Both))
-        {
+            .and_then(|slot| scene.movable.get(slot).copied());
+        match both {
             Some(o) => format!("both: {}", scene.objects[o]),
-            None => format!("left: {}, right: {}", name(Hand::Left), name(Hand::Right)),
+            None => format!(
+                "left: {}, right: {}",
+                name(self.in_hand(scene, Hand::Left)),
+                name(self.in_hand(scene, Hand::Right))
+            ),
         }
     }
 
@@ -156,8 +178,8 @@ impl Requirement {
         }
     }
 
-    /// Whether the state meets it.
-    pub fn holds(&self, s: &State) -> bool {
+    /// Whether the state meets it (`scene` places the objects the state does not carry).
+    pub fn holds(&self, scene: &Scene, s: &State) -> bool {
         match self {
             Requirement::Posture(list) => list.contains(&s.posture),
             Requirement::At(list) => list.contains(&s.at),
@@ -166,11 +188,11 @@ impl Requirement {
             Requirement::HandFree(Hand::Both) => s.free(Hand::Left) && s.free(Hand::Right),
             Requirement::HandFree(h) => s.free(*h),
             Requirement::ObjectHere(o) => {
-                s.at.is_some_and(|p| s.objects.get(*o) == Some(&Loc::Place(p)))
+                s.at.is_some_and(|p| s.loc(scene, *o) == Some(Loc::Place(p)))
             }
-            Requirement::InHand(o, h) => s.objects.get(*o) == Some(&Loc::Held(*h)),
-            Requirement::Held(o) => matches!(s.objects.get(*o), Some(Loc::Held(_))),
-            Requirement::HeldOtherFree(o) => match s.objects.get(*o) {
+            Requirement::InHand(o, h) => s.loc(scene, *o) == Some(Loc::Held(*h)),
+            Requirement::Held(o) => matches!(s.loc(scene, *o), Some(Loc::Held(_))),
+            Requirement::HeldOtherFree(o) => match s.loc(scene, *o) {
                 Some(Loc::Held(Hand::Both)) => true,
                 Some(Loc::Held(Hand::Left)) => s.free(Hand::Right),
                 Some(Loc::Held(Hand::Right)) => s.free(Hand::Left),
@@ -226,17 +248,20 @@ pub struct Effect {
 }
 
 impl Effect {
-    /// The state after the instruction (its requirements already hold).
-    pub fn apply(&self, s: &State) -> State {
+    /// The state after the instruction (its requirements already hold). Only objects of
+    /// [`Scene::movable`] are taken or put down: an object no interaction takes is never in a
+    /// hand to put down.
+    pub fn apply(&self, scene: &Scene, s: &State) -> State {
         let mut next = s.clone();
-        match self.hold {
-            Some((Hold::Take, o, h)) => next.objects[o] = Loc::Held(h),
-            Some((Hold::Release, o, _)) => {
-                if let Some(p) = s.at {
-                    next.objects[o] = Loc::Place(p);
-                }
-            }
-            _ => {}
+        let moved = match self.hold {
+            Some((Hold::Take, o, h)) => Some((o, Loc::Held(h))),
+            Some((Hold::Release, o, _)) => s.at.map(|p| (o, Loc::Place(p))),
+            _ => None,
+        };
+        if let Some((o, to)) = moved
+            && let Some(loc) = scene.slot(o).and_then(|slot| next.objects.get_mut(slot))
+        {
+            *loc = to;
         }
         if let Some(p) = self.posture {
             next.posture = p;
