@@ -76,11 +76,6 @@ impl Split {
         &self.0
     }
 
-    /// True for the training split (the one normalisation statistics are taken over).
-    pub fn is_train(&self) -> bool {
-        self.0 == Split::TRAIN
-    }
-
     /// Where a split named `name` comes in listings: train, then validation (val, dev), then
     /// test, then any other name.
     pub fn rank(name: &str) -> u8 {

@@ -97,10 +97,6 @@ impl Conjunction {
         }
     }
 
-    /// Whether the second phrase is rendered as a gerund (or gerund-like) form.
-    pub fn needs_gerund(self) -> bool {
-        matches!(self, Conjunction::While | Conjunction::During)
-    }
 }
 
 impl fmt::Display for Conjunction {

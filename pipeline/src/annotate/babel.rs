@@ -238,16 +238,3 @@ fn start_secs(s: &Span) -> f64 {
     }
 }
 
-/// Records by capture key (the mapped stem of `feat_p`).
-pub fn index_by_capture(
-    records: Vec<BabelRecord>,
-    key: impl Fn(&str) -> String,
-) -> BTreeMap<String, CaptureAnnotation> {
-    let mut out = BTreeMap::new();
-    for r in records {
-        if let Some(p) = &r.feat_p {
-            out.insert(key(p), r.annotation);
-        }
-    }
-    out
-}

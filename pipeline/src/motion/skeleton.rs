@@ -146,16 +146,6 @@ impl Skeleton {
         self.joints.iter().map(|j| j.channels.len()).sum()
     }
 
-    /// Rest-pose world positions (all rotations identity), in file units.
-    pub fn rest_positions(&self) -> Vec<DVec3> {
-        let mut out: Vec<DVec3> = Vec::with_capacity(self.len());
-        for joint in &self.joints {
-            let base = joint.parent.map(|p| out[p]).unwrap_or(DVec3::ZERO);
-            out.push(base + joint.offset);
-        }
-        out
-    }
-
     /// A short, stable digest of names, parents, offsets and channels, used to tell skeletons apart.
     pub fn digest(&self) -> String {
         use sha2::{Digest, Sha256};

@@ -225,11 +225,6 @@ impl PartSet {
         self.0 & other.0 == 0
     }
 
-    /// Whether every part of `self` is in `other`.
-    pub fn is_subset(self, other: PartSet) -> bool {
-        self.0 & !other.0 == 0
-    }
-
     /// Number of parts.
     pub fn len(self) -> usize {
         self.0.count_ones() as usize

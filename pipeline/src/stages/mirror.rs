@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::span::Hand;
 use crate::annotate::taxonomy::Taxonomy;
 use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
-use crate::clip::{Clip, LoadedClip};
+use crate::clip::Clip;
 use crate::llm::plans::mirror_paraphrases;
 use crate::motion::{BoundProfiles, MirrorPlan, OffsetPolicy, ProfileSpec};
 use crate::parts::PartSet;
@@ -117,18 +117,4 @@ pub fn mirror_clip(clip: &Clip, taxonomy: &Taxonomy) -> Clip {
         paraphrases: mirror_paraphrases(&clip.paraphrases),
         ..clip.clone()
     }
-}
-
-/// The mirrored copy of a clip with its frames: [`mirror_clip`] and the reflected motion, on
-/// the skeleton `offsets` gives it.
-pub fn mirror_loaded(
-    loaded: &LoadedClip,
-    plan: &MirrorPlan,
-    taxonomy: &Taxonomy,
-    offsets: OffsetPolicy,
-) -> LoadedClip {
-    let motion = plan.mirror(&loaded.motion, offsets);
-    let mut clip = mirror_clip(&loaded.clip, taxonomy);
-    clip.skeleton = std::sync::Arc::clone(&motion.skeleton);
-    LoadedClip { clip, motion }
 }
