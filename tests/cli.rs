@@ -980,3 +980,55 @@ fn bench_captions_tags_each_distinct_caption_of_the_file() {
     assert!(!missing.status.success());
     assert!(text(&missing.stderr).contains("no/such/file.txt"));
 }
+
+#[test]
+fn filter_values_a_dataset_does_not_have_and_missing_options_are_usage_errors_listing_choices() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let dataset = dir.path().join("demo");
+    let ds = dataset.to_str().unwrap();
+    let out = run(&["clips", ds, "--type", "nosuchtype"], dir.path());
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    // The types the demo has are listed, so the user can pick one.
+    assert!(
+        err.contains("nosuchtype") && err.contains("walk forward") && err.contains("wave"),
+        "{err}"
+    );
+    let out = run(&["clips", ds, "--split", "dev"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("train"), "{}", text(&out.stderr));
+    let out = run(&["clips", ds, "--kind", "bogus"], dir.path());
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("real_single") && err.contains("mirrored"),
+        "{err}"
+    );
+    let out = run(
+        &["preview", ds, "--type", "nosuchtype", "-o", "p"],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let out = run(
+        &["preview", ds, "--clip", "cmu/01_01", "-o", "p"],
+        dir.path(),
+    );
+    assert!(
+        text(&out.stderr).contains("did you mean cmu/01_01:"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = run(
+        &["prompt", "render", "pair_compat", "--text", "walk"],
+        dir.path(),
+    );
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("--second"), "{err}");
+    // A type the dataset has still filters.
+    let out = run(&["clips", ds, "--type", "wave", "--json"], dir.path());
+    assert!(out.status.success());
+    let clips: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(!clips.as_array().unwrap().is_empty());
+}

@@ -96,7 +96,6 @@ impl Conjunction {
             Conjunction::AndAtTheSameTime => "and_at_the_same_time",
         }
     }
-
 }
 
 impl fmt::Display for Conjunction {

@@ -484,7 +484,7 @@ enum Command {
         #[arg(long, conflicts_with = "build")]
         write_frames: Option<usize>,
         /// Instead, time a whole build of the folder stage by stage, beside a bare single-thread
-        /// scan of the same bytes into f64 (issue 12).
+        /// scan of the same bytes into f64.
         #[arg(long)]
         build: bool,
         /// With --build: list the folder under this many source names (`bn2-1`..`bn2-N`), so the
@@ -694,6 +694,7 @@ fn exit_code(err: &anyhow::Error) -> u8 {
                         | motionforge::build::clean::CleanError::Refused(_)
                 )
             )
+            || e.downcast_ref::<cli::UsageError>().is_some()
             // An output that would replace or write into a folder the user keeps.
             || e.downcast_ref::<motionforge::base::guard::Refused>()
                 .is_some()

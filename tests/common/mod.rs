@@ -100,10 +100,17 @@ pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
         .collect()
 }
 
-/// The Python that runs the independent readers: `MOTIONFORGE_PYTHON` (set by `scripts/test.sh` to
-/// its virtual environment built from `requirements-test.txt`), else `python3` on PATH.
+/// The Python that runs the independent readers: `MOTIONFORGE_PYTHON`, set by `scripts/test.sh` to
+/// its virtual environment built from `requirements-test.txt`.
 pub fn python() -> std::ffi::OsString {
-    std::env::var_os("MOTIONFORGE_PYTHON").unwrap_or_else(|| "python3".into())
+    // Not the system `python3`: its packages (or their absence) would decide what a test checks.
+    std::env::var_os("MOTIONFORGE_PYTHON").unwrap_or_else(|| {
+        panic!(
+            "MOTIONFORGE_PYTHON is not set: run the tests with scripts/test.sh, which makes the \
+             tests' Python environment from requirements-test.txt and sets it (or set it yourself \
+             to `$(scripts/python-env.sh)`)"
+        )
+    })
 }
 
 /// How to install what a failing Python check was missing.

@@ -237,4 +237,3 @@ fn start_secs(s: &Span) -> f64 {
         _ => 0.0,
     }
 }
-

@@ -20,7 +20,7 @@ pub(crate) struct FilterArgs {
     #[arg(long)]
     pub(crate) split: Option<String>,
     /// Only clips of this kind: real_single, real_pair, synthetic, mirrored or original.
-    #[arg(long)]
+    #[arg(long, value_parser = ["real_single", "real_pair", "synthetic", "mirrored", "original"])]
     pub(crate) kind: Option<String>,
     /// Only clips whose id, caption, texts or paraphrases contain this (any case).
     #[arg(long, value_name = "SUBSTRING")]
@@ -41,8 +41,50 @@ impl FilterArgs {
     }
 }
 
+/// Refuses a `--type` or `--split` the dataset has no clip of, listing the ones it has: an empty
+/// answer would look like a filter that matched nothing.
+pub(crate) fn check_filter_values(dir: &Path, args: &FilterArgs) -> Result<()> {
+    if args.motion_type.is_none() && args.split.is_none() {
+        return Ok(());
+    }
+    let all = dataset::find_clips(dir, &ClipFilter::default(), None)?;
+    let check = |what: &str, given: &Option<String>, values: Vec<&str>| -> Result<()> {
+        let Some(given) = given else { return Ok(()) };
+        let mut values = values;
+        values.sort_unstable();
+        values.dedup();
+        if values.contains(&given.as_str()) {
+            return Ok(());
+        }
+        Err(crate::cli::UsageError(format!(
+            "{}: no clip has {what} `{given}`; its values in {} are: {}",
+            if what == "motion type" {
+                "--type"
+            } else {
+                "--split"
+            },
+            dir.display(),
+            values.join(", ")
+        ))
+        .into())
+    };
+    check(
+        "motion type",
+        &args.motion_type,
+        all.iter()
+            .filter_map(|c| c.motion_type.as_deref())
+            .collect(),
+    )?;
+    check(
+        "split",
+        &args.split,
+        all.iter().map(|c| c.split.as_str()).collect(),
+    )
+}
+
 /// `motionforge clips`.
 pub(crate) fn clips(dir: &Path, args: &FilterArgs, json: bool) -> Result<()> {
+    check_filter_values(dir, args)?;
     let clips = dataset::find_clips(dir, &args.filter(), args.limit)?;
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     if json {
@@ -147,6 +189,7 @@ pub(crate) fn preview(
     options: &PreviewOptions,
     ui: &Ui,
 ) -> Result<()> {
+    check_filter_values(dir, args)?;
     let clips = dataset::list_clips(dir)?;
     let filter = args.filter();
     let mut chosen: Vec<&ClipInfo> = if ids.is_empty() {
@@ -162,7 +205,7 @@ pub(crate) fn preview(
                         path: dir.to_path_buf(),
                         clip_id: id.clone(),
                         count: all.len(),
-                        hint: String::new(),
+                        hint: dataset::near_clip_ids(id, &all),
                     }
                     .into());
                 }

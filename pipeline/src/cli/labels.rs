@@ -110,9 +110,11 @@ pub(crate) fn prompt_command(command: PromptCommand) -> Result<()> {
         "paraphrase" => prompts.paraphrase(&text, n)?,
         "pair_compat" => prompts.pair_compat(
             &text,
-            &motionforge::stages::label::normalize_text(
-                second.as_deref().context("pair_compat needs --second")?,
-            ),
+            &motionforge::stages::label::normalize_text(second.as_deref().ok_or_else(|| {
+                crate::cli::UsageError(
+                    "pair_compat needs --second (the text of the other clip of the pair)".into(),
+                )
+            })?),
         )?,
         other => {
             return Err(motionforge::llm::prompt::PromptError::Unknown(other.to_string()).into());
