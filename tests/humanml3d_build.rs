@@ -389,6 +389,23 @@ fn caption_files_give_every_caption_and_their_sub_spans() {
     );
 }
 
+/// Builds `config` through the binary under a 1 GiB address-space limit, which must succeed: a
+/// build whose memory grows with one damaged input fails here instead of taking the machine.
+fn build_in_1_gib(config: &Path) {
+    let run = Command::new("prlimit")
+        .arg(format!("--as={}", 1u64 << 30))
+        .arg(env!("CARGO_BIN_EXE_motionforge"))
+        .args(["build", "--config"])
+        .arg(config)
+        .output()
+        .expect("prlimit (util-linux) runs the binary");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
 /// Sets one float64 value of a C-order `.npy` file (version 1 header) in place.
 use npyz::WriterBuilder;
 
@@ -543,18 +560,7 @@ fn an_index_of_bad_rows_gives_a_bounded_report_under_a_1_gb_address_space() {
     }
     let rows = text.lines().count() - 2;
     std::fs::write(root.join("index.csv"), &text).unwrap();
-    let run = Command::new("prlimit")
-        .arg(format!("--as={}", 1u64 << 30))
-        .arg(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(&config)
-        .output()
-        .expect("prlimit (util-linux) runs the binary");
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    build_in_1_gib(&config);
     let path = root.join("out/hml3d-joints/build-report.json");
     let size = std::fs::metadata(&path).unwrap().len();
     assert!(size < 1 << 20, "build-report.json is {size} bytes");
@@ -730,18 +736,7 @@ fn damaged_joint_arrays_cost_one_reject_each_under_a_1_gb_address_space() {
         )
         .unwrap();
     }
-    let run = Command::new("prlimit")
-        .arg(format!("--as={}", 1u64 << 30))
-        .arg(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(&config)
-        .output()
-        .expect("prlimit (util-linux) runs the binary");
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    build_in_1_gib(&config);
     let dataset = root.join("out/hml3d-joints");
     let rejects: Vec<serde_json::Value> = lines(&dataset.join("rejects.jsonl"))
         .iter()

@@ -1244,25 +1244,20 @@ fn mutate(rng: &mut fastrand::Rng, text: &str) -> (Vec<u8>, Vec<String>) {
     for _ in 0..rng.usize(1..=3) {
         let pick = |rng: &mut fastrand::Rng, v: &[&str]| v[rng.usize(..v.len())].to_string();
         match rng.usize(..13) {
-            0 => {
-                let numbers: Vec<_> = number_re
+            0 | 1 => {
+                // One number (or name) swapped for an extreme one.
+                let (re, values, what) = if rng.bool() {
+                    (&number_re, FUZZ_NUMBERS, "number")
+                } else {
+                    (&string_re, FUZZ_NAMES, "name")
+                };
+                let found: Vec<_> = re
                     .captures_iter(&text)
                     .map(|c| c.get(1).unwrap().range())
                     .collect();
-                if let Some(r) = numbers.get(rng.usize(..numbers.len().max(1))) {
-                    let n = pick(rng, FUZZ_NUMBERS);
-                    done.push(format!("number {} -> {n}", &text[r.clone()]));
-                    text.replace_range(r.clone(), &n);
-                }
-            }
-            1 => {
-                let strings: Vec<_> = string_re
-                    .captures_iter(&text)
-                    .map(|c| c.get(1).unwrap().range())
-                    .collect();
-                if let Some(r) = strings.get(rng.usize(..strings.len().max(1))) {
-                    let n = pick(rng, FUZZ_NAMES);
-                    done.push(format!("name {} -> {n}", &text[r.clone()]));
+                if let Some(r) = found.get(rng.usize(..found.len().max(1))) {
+                    let n = pick(rng, values);
+                    done.push(format!("{what} {} -> {n}", &text[r.clone()]));
                     text.replace_range(r.clone(), &n);
                 }
             }

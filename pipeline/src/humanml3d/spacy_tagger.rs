@@ -515,11 +515,9 @@ mod tests {
         assert_eq!(word_shape("90s"), "ddx");
     }
 
-    #[test]
-    fn tags_do_not_depend_on_what_was_tagged_before() {
-        let m = SpacyTagger::bundled().unwrap();
-        let words = ["raise", "left", "arm"];
-        let caption: Vec<SpacyToken> = words
+    /// Tokens of `words`, one space between each.
+    fn spaced<'a>(words: &[&'a str]) -> Vec<SpacyToken<'a>> {
+        words
             .iter()
             .enumerate()
             .map(|(i, text)| SpacyToken {
@@ -528,7 +526,13 @@ mod tests {
                 space_after: i + 1 < words.len(),
                 is_space: false,
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn tags_do_not_depend_on_what_was_tagged_before() {
+        let m = SpacyTagger::bundled().unwrap();
+        let caption = spaced(&["raise", "left", "arm"]);
         let first = m.tag(&caption);
         let other = [SpacyToken {
             text: "walk",
@@ -547,16 +551,7 @@ mod tests {
         let text = "a person walks forward , turns around and waves the left hand ; then \
                     someone doesn't stop but jumps up twice , arms raised over the head .";
         let words: Vec<&str> = text.split(' ').collect();
-        let tokens: Vec<SpacyToken> = words
-            .iter()
-            .enumerate()
-            .map(|(i, text)| SpacyToken {
-                text,
-                norm: None,
-                space_after: i + 1 < words.len(),
-                is_space: false,
-            })
-            .collect();
+        let tokens = spaced(&words);
         let cut = |chunk: usize| {
             let mut all = Vec::new();
             m.scores_in_chunks(&tokens, chunk, |s| {
