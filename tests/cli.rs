@@ -1032,3 +1032,39 @@ fn filter_values_a_dataset_does_not_have_and_missing_options_are_usage_errors_li
     let clips: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(!clips.as_array().unwrap().is_empty());
 }
+
+#[test]
+fn a_run_that_stops_early_says_nothing_was_written_and_an_empty_stage_says_it_had_nothing_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo();
+    let out = run(
+        &["run", "segment", "--config", &demo, "--output", "."],
+        dir.path(),
+    );
+    let printed = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        printed.contains("9 captures -> 10 clips (0 mirrored), not written"),
+        "{printed}"
+    );
+    assert!(
+        !printed.contains("part labels:") && !printed.contains("synthetic pairs:"),
+        "{printed}"
+    );
+    assert!(!dir.path().join("demo/data").exists());
+    // The HumanML3D fixture has no compatible pair: its first build has nothing to compose.
+    let config = repo().join("fixtures/humanml3d-joints/build.toml");
+    let out = run(
+        &[
+            "build",
+            "--config",
+            config.to_str().unwrap(),
+            "--output",
+            ".",
+        ],
+        dir.path(),
+    );
+    let printed = text(&out.stdout);
+    assert!(printed.contains("compose  nothing to do"), "{printed}");
+    assert!(!printed.contains("up to date"), "{printed}");
+}

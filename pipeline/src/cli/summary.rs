@@ -221,6 +221,10 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
     for stage in &report.stages {
         let what = if let Some(why) = skipped_stage(report, &stage.stage) {
             format!("skipped ({why})")
+        } else if stage.items == 0 {
+            // A stage with nothing to work on (no compatible pairs, say) did not find its work
+            // done: it had none, on a new folder too.
+            "nothing to do".to_string()
         } else if stage.ran == 0 {
             "up to date, nothing re-run".to_string()
         } else {
@@ -231,18 +235,26 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
         };
         writeln!(out, "{:>10}  {what}", stage.stage)?;
     }
-    writeln!(
-        out,
-        "{} captures -> {} clips ({} mirrored) in {}/ ({seconds:.1} s)",
-        report.captures,
-        report.clips,
-        report.mirrored,
-        report.output.join(motionforge::build::DATA_DIR).display()
-    )?;
-    let wrote = report
-        .stages
-        .iter()
-        .any(|s| s.stage == motionforge::build::Stage::Write.name());
+    let ran =
+        |stage: motionforge::build::Stage| report.stages.iter().any(|s| s.stage == stage.name());
+    let wrote = ran(motionforge::build::Stage::Write);
+    if wrote {
+        writeln!(
+            out,
+            "{} captures -> {} clips ({} mirrored) in {}/ ({seconds:.1} s)",
+            report.captures,
+            report.clips,
+            report.mirrored,
+            report.output.join(motionforge::build::DATA_DIR).display()
+        )?;
+    } else {
+        // `run <stage>` before the write stage: the clips exist in the stage cache only.
+        writeln!(
+            out,
+            "{} captures -> {} clips ({} mirrored), not written: the run stopped before `write` ({seconds:.1} s)",
+            report.captures, report.clips, report.mirrored,
+        )?;
+    }
     if let Some(splits) = split_rows(report).filter(|_| wrote) {
         writeln!(out, "splits: {splits}")?;
     }
@@ -267,6 +279,9 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
         writeln!(out, "annotation notes: {}", counts(&report.notes_by_kind))?;
     }
     let l = &report.labels;
+    if !ran(motionforge::build::Stage::Label) {
+        return print_tail(&mut out, report);
+    }
     writeln!(
         out,
         "part labels: {} ({} texts, {} requests, {} cache hits, {} flagged)",
@@ -308,6 +323,9 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
         }
     }
     let c = &report.synthetic;
+    if !ran(motionforge::build::Stage::Compose) {
+        return print_tail(&mut out, report);
+    }
     writeln!(
         out,
         "synthetic pairs: {} candidates, {} compatible pairs, {} sampled, {} composed, dropped: {}",
@@ -348,6 +366,11 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
             }
         )?;
     }
+    print_tail(&mut out, report)
+}
+
+/// The summary's last lines: rejects, and whether anything changed.
+fn print_tail(out: &mut impl Write, report: &BuildReport) -> std::io::Result<()> {
     if report.rejects.is_empty() {
         writeln!(out, "rejects: none")?;
     } else {
