@@ -340,7 +340,9 @@ fn check_install(page: &str, body: &str, at: &str) {
                     "{at}"
                 );
             }
-            "cargo install --path pipeline" => {
+            "cargo install --locked --path pipeline" => {
+                // --locked: the versions of Cargo.lock, which is committed.
+                assert!(common::repo().join("Cargo.lock").is_file(), "{at}");
                 assert!(members("members").contains(&"pipeline".to_string()));
                 assert_eq!(package["package"]["name"].as_str(), Some("motionforge"));
                 assert!(bins.contains(&"motionforge"), "{at}: {bins:?}");
