@@ -1068,3 +1068,30 @@ fn a_run_that_stops_early_says_nothing_was_written_and_an_empty_stage_says_it_ha
     assert!(printed.contains("compose  nothing to do"), "{printed}");
     assert!(!printed.contains("up to date"), "{printed}");
 }
+
+#[test]
+fn report_and_export_bvh_answer_json_with_json() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let ds = dir.path().join("demo");
+    let ds = ds.to_str().unwrap();
+    let out = run(&["report", ds, "--json"], dir.path());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let files = value["files"].as_array().unwrap();
+    assert!(
+        files
+            .iter()
+            .any(|f| f.as_str().unwrap().ends_with("stats.json")),
+        "{value}"
+    );
+    let out = run(
+        &["export-bvh", ds, "--clip", "cmu/01_01:115-1315", "--json"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(value["path"], "cmu_01_01_115-1315.bvh", "{value}");
+    assert!(value["frames"].as_u64().unwrap() > 0, "{value}");
+    assert!(dir.path().join("cmu_01_01_115-1315.bvh").is_file());
+}

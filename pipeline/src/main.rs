@@ -855,7 +855,17 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
         }
         Command::Report { dataset, output } => {
             let files = motionforge::report::report_dataset(&dataset, output.as_deref())?;
-            if ui.status() {
+            if ui.log.json {
+                let value = serde_json::json!({
+                    "output": output.clone().unwrap_or_else(|| dataset.join("report")),
+                    "files": files,
+                });
+                writeln!(
+                    std::io::stdout(),
+                    "{}",
+                    serde_json::to_string_pretty(&value)?
+                )?;
+            } else if ui.status() {
                 writeln!(
                     std::io::stdout(),
                     "wrote {} report files to {}",

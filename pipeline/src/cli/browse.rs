@@ -152,17 +152,39 @@ pub(crate) fn export_bvh_from_shards(
         .map_err(|e| anyhow::anyhow!("clip `{clip_id}`: {e}"))?;
     let text =
         motionforge::motion::write_bvh(&motion).with_context(|| format!("clip `{clip_id}`"))?;
-    let path = output
-        .unwrap_or_else(|| PathBuf::from(format!("{}.bvh", clip_id.replace(['/', ':', '+'], "_"))));
+    let path = output.unwrap_or_else(|| default_bvh_path(clip_id));
     motionforge::base::write_atomic(&path, text.as_bytes())?;
-    if ui.status() {
+    say_bvh_written(&path, &motion, &frames.info.skeleton, ui)
+}
+
+/// Where `export-bvh` writes without `-o`: the clip id as a plain file name, in the working folder.
+pub(crate) fn default_bvh_path(clip_id: &str) -> PathBuf {
+    PathBuf::from(format!("{}.bvh", preview::file_stem(clip_id)))
+}
+
+/// What `export-bvh` wrote: a line, or with `--json` an object on standard output.
+pub(crate) fn say_bvh_written(
+    path: &Path,
+    motion: &motionforge::motion::Motion,
+    skeleton: &str,
+    ui: &Ui,
+) -> Result<()> {
+    let mut out = std::io::stdout();
+    if ui.log.json {
+        let value = serde_json::json!({
+            "path": path,
+            "frames": motion.num_frames(),
+            "fps": motion.fps,
+            "skeleton": skeleton,
+        });
+        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+    } else if ui.status() {
         writeln!(
-            std::io::stdout(),
-            "wrote {} ({} frames at {} fps, skeleton {})",
+            out,
+            "wrote {} ({} frames at {} fps, skeleton {skeleton})",
             path.display(),
             motion.num_frames(),
             motion.fps,
-            frames.info.skeleton
         )?;
     }
     Ok(())

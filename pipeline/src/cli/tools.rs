@@ -190,20 +190,9 @@ pub(crate) fn export_bvh(
     let motion = motionforge::build::stored_motion(&clip, &profile);
     let text =
         motionforge::motion::write_bvh(&motion).with_context(|| format!("clip `{clip_id}`"))?;
-    let path = output
-        .unwrap_or_else(|| PathBuf::from(format!("{}.bvh", clip_id.replace(['/', ':', '+'], "_"))));
+    let path = output.unwrap_or_else(|| crate::cli::browse::default_bvh_path(clip_id));
     motionforge::build::write_atomic(&path, text.as_bytes())?;
-    if ui.status() {
-        writeln!(
-            std::io::stdout(),
-            "wrote {} ({} frames at {} fps, skeleton {})",
-            path.display(),
-            clip.motion.num_frames(),
-            clip.motion.fps,
-            clip.clip.profile
-        )?;
-    }
-    Ok(())
+    crate::cli::browse::say_bvh_written(&path, &clip.motion, &clip.clip.profile, ui)
 }
 
 /// Peak resident memory of this process in kB (Linux `VmHWM`), if readable.
