@@ -259,9 +259,11 @@ impl Shared {
     }
 }
 
-/// A line of the service's own log (standard error, which systemd's journal keeps).
+/// A line of the service's own log (standard error, which systemd's journal keeps). A closed
+/// standard error loses the line; it does not panic the task that logs it, as `eprintln!` would.
 fn say(line: &str) {
-    eprintln!("motionforge serve: {line}");
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "motionforge serve: {line}");
 }
 
 /// Unix milliseconds as RFC 3339 UTC (`2026-05-01T03:00:00.000Z`).
