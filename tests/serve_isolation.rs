@@ -419,16 +419,27 @@ async fn a_service_killed_mid_build_and_restarted_at_once_resumes_the_build() {
         .iter()
         .find(|s| s["stage"] == "write")
         .map(|s| s["ran"].clone());
-    assert_eq!(wrote, Some(Value::from(1)), "the resume build wrote: {build}");
+    assert_eq!(
+        wrote,
+        Some(Value::from(1)),
+        "the resume build wrote: {build}"
+    );
     assert!(!alive(orphan), "the orphaned build process is gone");
     let clips = build["counts"]["clips"].as_u64().unwrap();
-    assert!(clips > 0 && dataset.join("manifest.json").is_file(), "{build}");
+    assert!(
+        clips > 0 && dataset.join("manifest.json").is_file(),
+        "{build}"
+    );
     let (status, listed) = get(
         &client,
         &format!("{}/datasets/demo/clips?limit=1", second.base),
     )
     .await;
-    assert_eq!((status, listed["total"].as_u64()), (200, Some(clips)), "{listed}");
+    assert_eq!(
+        (status, listed["total"].as_u64()),
+        (200, Some(clips)),
+        "{listed}"
+    );
     eprintln!("orphan alive at restart: {orphan_alive_at_restart}");
     second.stop();
 }
@@ -441,8 +452,8 @@ async fn a_build_waits_for_the_dataset_lock_held_elsewhere() {
     let tmp = tempfile::tempdir().unwrap();
     let state = tmp.path().join("state");
     let config = demo_config(tmp.path());
-    let held = motionforge::base::lock::WorkspaceLock::acquire(&config.dataset_dir(), None)
-        .unwrap();
+    let held =
+        motionforge::base::lock::WorkspaceLock::acquire(&config.dataset_dir(), None).unwrap();
     let (service, base) = start(&state, config, real_builder()).await;
     let client = reqwest::Client::new();
     let id = request_build(&client, &base).await;
