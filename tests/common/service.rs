@@ -46,7 +46,10 @@ pub fn demo_config_file(dir: &Path, output: &Path) -> PathBuf {
     let fixtures = super::repo().join("fixtures");
     let fixtures = fixtures.to_str().unwrap();
     let mut text = std::fs::read_to_string(super::repo().join("fixtures/demo.toml")).unwrap();
-    assert!(text.contains("output = \"../out\""), "the demo config changed");
+    assert!(
+        text.contains("output = \"../out\""),
+        "the demo config changed"
+    );
     text = text.replace(
         "output = \"../out\"",
         &format!("output = {:?}", output.to_str().unwrap()),
@@ -73,8 +76,29 @@ impl ServeProcess {
     /// Starts `motionforge serve --config <config> --state <state>` with `token`, and waits until
     /// it says where it serves.
     pub fn start(config: &Path, state: &Path, token: &str) -> ServeProcess {
+        ServeProcess::start_limited(config, state, token, None)
+    }
+
+    /// [`ServeProcess::start`], under an address-space limit of `mib` MiB (`prlimit --as`) when
+    /// given, so that a memory regression fails instead of taking the machine's memory. The
+    /// build processes it starts inherit the limit.
+    pub fn start_limited(
+        config: &Path,
+        state: &Path,
+        token: &str,
+        mib: Option<u64>,
+    ) -> ServeProcess {
         use std::io::BufRead;
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        let mut command = match mib {
+            Some(mib) => {
+                let mut c = std::process::Command::new("prlimit");
+                c.arg(format!("--as={}", mib << 20))
+                    .arg(env!("CARGO_BIN_EXE_motionforge"));
+                c
+            }
+            None => std::process::Command::new(env!("CARGO_BIN_EXE_motionforge")),
+        };
+        let mut child = command
             .args(["serve", "--bind", "127.0.0.1:0", "--config"])
             .arg(config)
             .arg("--state")
@@ -107,9 +131,19 @@ impl ServeProcess {
         }
     }
 
-    /// Its process id.
+    /// Its process id (`prlimit` runs it in its own process).
     pub fn pid(&self) -> u32 {
         self.child.id()
+    }
+
+    /// Its peak resident memory so far (`VmHWM`), in KiB.
+    pub fn peak_rss_kib(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid())).unwrap();
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .expect("VmHWM in /proc/<pid>/status")
     }
 
     /// Stops it with SIGTERM, as systemd does, and waits for it.
