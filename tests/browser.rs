@@ -492,5 +492,34 @@ async fn reads_during_a_rebuild_see_the_old_dataset_or_the_new_never_an_error() 
     let (_, now) =
         common::service::get(&client, &format!("{base}/datasets/demo/clips?limit=1")).await;
     assert_eq!(now["total"].as_u64(), Some(after), "{now}");
+
+    // A rebuild no one reads after: the service lets go of the shards it replaced, so their disk
+    // space is free (the service runs in this process).
+    let left = common::bvh_files(&tmp.path().join("captures"));
+    std::fs::remove_file(&left[0]).unwrap();
+    let response = client
+        .post(format!("{base}/builds"))
+        .bearer_auth("t0ken")
+        .send()
+        .await
+        .unwrap();
+    let id = response.json::<Value>().await.unwrap()["id"]
+        .as_i64()
+        .unwrap();
+    loop {
+        let (_, build) = common::service::get(&client, &format!("{base}/builds/{id}")).await;
+        match build["state"].as_str().unwrap() {
+            "succeeded" => break,
+            "failed" => panic!("{build}"),
+            _ => tokio::time::sleep(std::time::Duration::from_millis(50)).await,
+        }
+    }
+    let held: Vec<String> = std::fs::read_dir("/proc/self/fd")
+        .unwrap()
+        .filter_map(|fd| std::fs::read_link(fd.ok()?.path()).ok())
+        .map(|target| target.display().to_string())
+        .filter(|t| t.starts_with(&*dataset.to_string_lossy()) && t.ends_with("(deleted)"))
+        .collect();
+    assert!(held.is_empty(), "replaced shards still open: {held:?}");
     service.stop().await.unwrap();
 }

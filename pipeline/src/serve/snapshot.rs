@@ -289,6 +289,18 @@ impl Readers {
         }))
     }
 
+    /// Lets go of dataset `name`'s index, and so of its open shards: once a build has replaced
+    /// them, their disk space is freed when the requests still reading them end, not at the next
+    /// read of the dataset.
+    pub(crate) fn forget(&self, name: &str) {
+        if let Some(slot) = self.slots.get(name) {
+            slot.current
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take();
+        }
+    }
+
     /// Runs `f` on a read thread once fewer than [`HEAVY_READS`] heavy reads run.
     pub(crate) async fn heavy<T: Send + 'static>(
         &self,
