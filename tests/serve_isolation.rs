@@ -380,3 +380,89 @@ fn a_build_process_reports_a_failed_build_as_an_event_and_exit_code_1() {
         "{stdout}"
     );
 }
+
+/// The service killed with SIGKILL mid-build leaves its build process behind: it must stop as
+/// soon as its standard input closes (not build on, holding the dataset's lock), and a service
+/// restarted at once must resume the build, not fail it on the lock the orphan still holds.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_service_killed_mid_build_and_restarted_at_once_resumes_the_build() {
+    use common::service::{ServeProcess, demo_config_file};
+    let tmp = tempfile::tempdir().unwrap();
+    let state = tmp.path().join("state");
+    let config = demo_config_file(tmp.path(), &tmp.path().join("out"));
+    let dataset = tmp.path().join("out/demo");
+    let client = reqwest::Client::new();
+
+    let first = ServeProcess::start(&config, &state, TOKEN);
+    let id = request_build(&client, &first.base).await;
+    // The build process is at work once its first stage writes to the cache.
+    wait_for_file(&dataset.join(".motionforge/cache/ingest")).await;
+    let orphan = motionforge::base::lock::read_holder(&dataset.join(".motionforge/lock"))
+        .expect("the build process holds the dataset's lock")
+        .pid;
+    drop(first); // SIGKILL
+    let second = ServeProcess::start(&config, &state, TOKEN);
+    let orphan_alive_at_restart = alive(orphan);
+
+    let (_, old) = get(&client, &format!("{}/builds/{id}", second.base)).await;
+    assert_eq!(old["state"], "interrupted", "killed mid-build: {old}");
+    let resume = old["resumed_by"].as_i64().expect("a resume build follows");
+    let build = poll_build(&client, &second.base, resume, is_final).await;
+    assert_eq!(
+        build["state"], "succeeded",
+        "the resume build (orphan alive at restart: {orphan_alive_at_restart}): {build}"
+    );
+    // The orphan stopped instead of finishing the dataset behind the service's back.
+    let wrote = build["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "write")
+        .map(|s| s["ran"].clone());
+    assert_eq!(
+        wrote,
+        Some(Value::from(1)),
+        "the resume build wrote: {build}"
+    );
+    assert!(!alive(orphan), "the orphaned build process is gone");
+    let clips = build["counts"]["clips"].as_u64().unwrap();
+    assert!(
+        clips > 0 && dataset.join("manifest.json").is_file(),
+        "{build}"
+    );
+    let (status, listed) = get(
+        &client,
+        &format!("{}/datasets/demo/clips?limit=1", second.base),
+    )
+    .await;
+    assert_eq!(
+        (status, listed["total"].as_u64()),
+        (200, Some(clips)),
+        "{listed}"
+    );
+    eprintln!("orphan alive at restart: {orphan_alive_at_restart}");
+    second.stop();
+}
+
+/// A build process waits for the dataset's lock ([`motionforge::serve::worker::LOCK_WAIT`])
+/// instead of failing at once: whoever holds it (a build process of a killed service, a build
+/// run by hand) is about to let go.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_build_waits_for_the_dataset_lock_held_elsewhere() {
+    let tmp = tempfile::tempdir().unwrap();
+    let state = tmp.path().join("state");
+    let config = demo_config(tmp.path());
+    let held =
+        motionforge::base::lock::WorkspaceLock::acquire(&config.dataset_dir(), None).unwrap();
+    let (service, base) = start(&state, config, real_builder()).await;
+    let client = reqwest::Client::new();
+    let id = request_build(&client, &base).await;
+    poll_build(&client, &base, id, |b| {
+        b["log"].to_string().contains("waiting up to")
+    })
+    .await;
+    drop(held);
+    let build = poll_build(&client, &base, id, is_final).await;
+    assert_eq!(build["state"], "succeeded", "{build}");
+    service.stop().await.unwrap();
+}

@@ -35,6 +35,8 @@ for arg in [
     "--window-size=1400,1200",
 ]:
     options.add_argument(arg)
+# The console, to find Content-Security-Policy violations in it.
+options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
 options.binary_location = shutil.which("chromium") or shutil.which("chromium-browser")
 driver = webdriver.Chrome(
     service=Service(shutil.which("chromedriver")), options=options
@@ -61,6 +63,25 @@ try:
         summary[what] = want
 
     settle(expected["all"], "all")
+    # The page's own style sheet applies under the service's Content-Security-Policy (inline
+    # style attributes would not), and the report's figures load from the service.
+    styles = driver.execute_script(
+        "const s = (q, p) => getComputedStyle(document.querySelector(q))[p];"
+        "return [s('.legend i.left_arm', 'backgroundColor'), s('section.spaced', 'marginTop'),"
+        " s('header', 'backgroundColor')]"
+    )
+    assert styles == ["rgb(31, 90, 220)", "12px", "rgb(38, 50, 56)"], styles
+    summary["styles"] = styles
+    try:
+        wait.until(
+            lambda d: d.execute_script(
+                "const i = [...document.querySelectorAll('#report img')];"
+                "i.forEach(x => x.loading = 'eager');"
+                "return i.length > 0 && i.every(x => x.complete && x.naturalWidth > 0)"
+            )
+        )
+    except Exception:
+        raise AssertionError("the report's figures did not load")
     for select_id, value, want in expected["filters"]:
         Select(driver.find_element(By.ID, select_id)).select_by_value(value)
         settle(want, f"{select_id}={value}")
@@ -116,6 +137,12 @@ try:
     summary["frame_after_play"] = frame
     driver.save_screenshot(os.path.join(shots, "browser-playing.png"))
     driver.find_element(By.ID, "play").click()
+    blocked = [
+        e["message"]
+        for e in driver.get_log("browser")
+        if "Content Security Policy" in e["message"] or "Content-Security-Policy" in e["message"]
+    ]
+    assert not blocked, f"the page broke its own Content-Security-Policy: {blocked}"
 finally:
     driver.quit()
     shutil.rmtree(profile, ignore_errors=True)

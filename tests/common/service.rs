@@ -39,3 +39,127 @@ pub async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
     let status = response.status().as_u16();
     (status, response.json().await.unwrap())
 }
+
+/// Writes a copy of the demo config into `dir` that builds into `output` (its sources still the
+/// repository's fixtures), for commands such as `serve` that take no `--output`; returns its path.
+pub fn demo_config_file(dir: &Path, output: &Path) -> PathBuf {
+    let fixtures = super::repo().join("fixtures");
+    let fixtures = fixtures.to_str().unwrap();
+    let mut text = std::fs::read_to_string(super::repo().join("fixtures/demo.toml")).unwrap();
+    assert!(
+        text.contains("output = \"../out\""),
+        "the demo config changed"
+    );
+    text = text.replace(
+        "output = \"../out\"",
+        &format!("output = {:?}", output.to_str().unwrap()),
+    );
+    for folder in ["bandai-namco-1/", "cmu/", "humanml3d/"] {
+        text = text.replace(&format!("\"{folder}"), &format!("\"{fixtures}/{folder}"));
+    }
+    let path = dir.join("demo.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A `motionforge serve` process on a free loopback port; killed (SIGKILL) when dropped.
+pub struct ServeProcess {
+    /// The process.
+    pub child: std::process::Child,
+    /// Its base URL.
+    pub base: String,
+    /// Its standard error so far, line by line (read on a thread of its own).
+    pub log: Arc<std::sync::Mutex<Vec<String>>>,
+}
+
+impl ServeProcess {
+    /// Starts `motionforge serve --config <config> --state <state>` with `token`, and waits until
+    /// it says where it serves.
+    pub fn start(config: &Path, state: &Path, token: &str) -> ServeProcess {
+        ServeProcess::start_limited(config, state, token, None)
+    }
+
+    /// [`ServeProcess::start`], under an address-space limit of `mib` MiB (`prlimit --as`) when
+    /// given, so that a memory regression fails instead of taking the machine's memory. The
+    /// build processes it starts inherit the limit.
+    pub fn start_limited(
+        config: &Path,
+        state: &Path,
+        token: &str,
+        mib: Option<u64>,
+    ) -> ServeProcess {
+        use std::io::BufRead;
+        let mut command = match mib {
+            Some(mib) => {
+                let mut c = std::process::Command::new("prlimit");
+                c.arg(format!("--as={}", mib << 20))
+                    .arg(env!("CARGO_BIN_EXE_motionforge"));
+                c
+            }
+            None => std::process::Command::new(env!("CARGO_BIN_EXE_motionforge")),
+        };
+        let mut child = command
+            .args(["serve", "--bind", "127.0.0.1:0", "--config"])
+            .arg(config)
+            .arg("--state")
+            .arg(state)
+            .env("MOTIONFORGE_TOKEN", token)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stderr = child.stderr.take().unwrap();
+        let log = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (tx, rx) = std::sync::mpsc::channel();
+        let lines = log.clone();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                if let Some(addr) = line.split("on http://").nth(1) {
+                    let _ = tx.send(addr.trim().to_string());
+                }
+                lines.lock().unwrap().push(line);
+            }
+        });
+        let addr = rx
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .unwrap_or_else(|_| panic!("serve never said where it serves: {:?}", log.lock()));
+        ServeProcess {
+            child,
+            base: format!("http://{addr}"),
+            log,
+        }
+    }
+
+    /// Its process id (`prlimit` runs it in its own process).
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Its peak resident memory so far (`VmHWM`), in KiB.
+    pub fn peak_rss_kib(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid())).unwrap();
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .expect("VmHWM in /proc/<pid>/status")
+    }
+
+    /// Stops it with SIGTERM, as systemd does, and waits for it.
+    pub fn stop(mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for ServeProcess {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}

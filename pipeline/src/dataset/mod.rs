@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-pub use read::{ClipFrames, read_clip, read_clip_in, read_frames};
+pub use read::{ClipFrames, OpenShard, ShardReader, read_clip, read_clip_in, read_frames};
 pub use skeletons::{SkeletonEntry, Skeletons, read_skeletons};
 
 /// Why a dataset folder, or a clip in it, cannot be read.

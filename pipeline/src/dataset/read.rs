@@ -1,12 +1,16 @@
 //! Shard rows to [`ClipInfo`] and [`ClipFrames`], every column found by name.
 
-use std::path::Path;
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use arrow_array::cast::AsArray;
 use arrow_array::types::{Float32Type, Float64Type, Int32Type};
 use arrow_array::{Array, ArrayRef, RecordBatch};
 use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
+use parquet::file::reader::{ChunkReader, Length};
 
 use super::{ClipInfo, DatasetError, Plausibility};
 use crate::io::schema::Column;
@@ -70,18 +74,114 @@ fn table_err(path: &Path, message: impl std::fmt::Display) -> DatasetError {
     }
 }
 
-/// A reader of `columns` (those the shard has; `required` must all be there).
-fn reader(
+/// A shard opened once, read at explicit offsets (`pread`), so any number of threads read it at
+/// the same time without sharing a file position. What it reads stays the file that was opened,
+/// even once a rebuild has replaced or removed the shard's name: a reader that opened every shard
+/// of one build keeps reading that build.
+#[derive(Debug, Clone)]
+pub struct OpenShard {
+    path: PathBuf,
+    file: Arc<File>,
+    len: u64,
+}
+
+impl OpenShard {
+    /// Opens the shard at `path`.
+    pub fn open(path: &Path) -> Result<OpenShard, DatasetError> {
+        let io = |source| DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = File::open(path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        Ok(OpenShard {
+            path: path.to_path_buf(),
+            file: Arc::new(file),
+            len,
+        })
+    }
+
+    /// Where it was opened.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Appends the metadata of every row to `out` ([`ClipInfo::shard`] relative to `dataset`).
+    pub fn read_infos(&self, dataset: &Path, out: &mut Vec<ClipInfo>) -> Result<(), DatasetError> {
+        read_infos_from(dataset, &self.path, self.clone(), out)
+    }
+
+    /// The frames of the row at `row`, which `info` describes ([`read_frames`]).
+    pub fn read_frames(&self, info: ClipInfo, row: usize) -> Result<ClipFrames, DatasetError> {
+        read_frames_from(&self.path, self.clone(), info, row)
+    }
+}
+
+impl Length for OpenShard {
+    fn len(&self) -> u64 {
+        self.len
+    }
+}
+
+/// A reader of an [`OpenShard`] from an offset on, with a position of its own.
+pub struct ShardReader {
+    file: Arc<File>,
+    at: u64,
+}
+
+impl std::io::Read for ShardReader {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.file.read_at(buf, self.at)?;
+        self.at += n as u64;
+        Ok(n)
+    }
+}
+
+impl ChunkReader for OpenShard {
+    type T = std::io::BufReader<ShardReader>;
+
+    fn get_read(&self, start: u64) -> parquet::errors::Result<Self::T> {
+        Ok(std::io::BufReader::new(ShardReader {
+            file: self.file.clone(),
+            at: start,
+        }))
+    }
+
+    fn get_bytes(&self, start: u64, length: usize) -> parquet::errors::Result<bytes::Bytes> {
+        // The footer gives the ranges: none may reach past the end of the file it came from.
+        let end = start
+            .checked_add(length as u64)
+            .filter(|end| *end <= self.len);
+        if end.is_none() {
+            return Err(parquet::errors::ParquetError::EOF(format!(
+                "{length} bytes at offset {start} run past the end of the {}-byte file",
+                self.len
+            )));
+        }
+        let mut buffer = vec![0u8; length];
+        self.file.read_exact_at(&mut buffer, start)?;
+        Ok(buffer.into())
+    }
+}
+
+fn open_err(path: &Path) -> impl Fn(std::io::Error) -> DatasetError + '_ {
+    move |source| DatasetError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// A reader of `columns` (those the shard has; `required` must all be there) of the shard at
+/// `path`, read from `source`.
+fn reader<R: ChunkReader + 'static>(
     path: &Path,
+    source: R,
     columns: &[Column],
     required: &[Column],
     selection: Option<RowSelection>,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReader, DatasetError> {
-    let file = std::fs::File::open(path).map_err(|source| DatasetError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
+    let builder =
+        ParquetRecordBatchReaderBuilder::try_new(source).map_err(|e| table_err(path, e))?;
     let schema = builder.schema().clone();
     for c in required {
         if schema.column_with_name(c.name()).is_none() {
@@ -370,6 +470,17 @@ pub(super) fn read_infos(
     path: &Path,
     out: &mut Vec<ClipInfo>,
 ) -> Result<(), DatasetError> {
+    let file = File::open(path).map_err(open_err(path))?;
+    read_infos_from(dataset, path, file, out)
+}
+
+/// [`read_infos`] from `source`, the content of the shard at `path`.
+fn read_infos_from<R: ChunkReader + 'static>(
+    dataset: &Path,
+    path: &Path,
+    source: R,
+    out: &mut Vec<ClipInfo>,
+) -> Result<(), DatasetError> {
     let required = [
         Column::ClipId,
         Column::SourceKind,
@@ -377,7 +488,7 @@ pub(super) fn read_infos(
         Column::NumFrames,
         Column::NumJoints,
     ];
-    for batch in reader(path, &INFO_COLUMNS, &required, None)? {
+    for batch in reader(path, source, &INFO_COLUMNS, &required, None)? {
         let batch = batch.map_err(|e| table_err(path, e))?;
         out.extend(infos_of(dataset, path, &batch)?);
     }
@@ -387,6 +498,18 @@ pub(super) fn read_infos(
 /// The frames of the row at `row` of the shard `info.shard`, checked against its counts.
 pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFrames, DatasetError> {
     let path = dataset.join(&info.shard);
+    let file = File::open(&path).map_err(open_err(&path))?;
+    read_frames_from(&path, file, info, row)
+}
+
+/// [`read_frames`] from `source`, the content of the shard at `path`.
+fn read_frames_from<R: ChunkReader + 'static>(
+    path: &Path,
+    source: R,
+    info: ClipInfo,
+    row: usize,
+) -> Result<ClipFrames, DatasetError> {
+    let path = path.to_path_buf();
     let selection = RowSelection::from(vec![RowSelector::skip(row), RowSelector::select(1)]);
     let columns = [
         Column::ClipId,
@@ -395,7 +518,7 @@ pub fn read_frames(dataset: &Path, info: ClipInfo, row: usize) -> Result<ClipFra
         Column::RootTranslation,
     ];
     let mut found = None;
-    for batch in reader(&path, &columns, &columns, Some(selection))? {
+    for batch in reader(&path, source, &columns, &columns, Some(selection))? {
         let batch = batch.map_err(|e| table_err(&path, e))?;
         let b = Batch {
             path: &path,

@@ -136,9 +136,21 @@ pub(crate) fn router(shared: AppState) -> Router {
         // Bodies without a length (chunked) are cut at the limit while read.
         .layer(DefaultBodyLimit::max(BODY_LIMIT))
         .layer(middleware::from_fn(refuse_long_bodies))
-        // Outermost, so it sees every answer: extractor rejections and the body limit too.
+        // Outside the routes, so it sees every answer: extractor rejections and the body limit too.
         .layer(middleware::from_fn(json_errors))
+        .layer(middleware::from_fn(no_sniffing))
         .with_state(shared)
+}
+
+/// Marks every answer `X-Content-Type-Options: nosniff`: a browser takes each for the type it
+/// says (a report file served as text stays text), never for what its bytes look like.
+async fn no_sniffing(request: Request, next: Next) -> Response {
+    let mut response = next.run(request).await;
+    response.headers_mut().insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    response
 }
 
 /// Refuses a body whose declared length is over [`BODY_LIMIT`] before reading any of it.

@@ -3,14 +3,15 @@
 //! files. Every file answered is inside the dataset's own folder.
 
 use std::path::{Component, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock};
 
-use axum::Json;
-use axum::extract::{Path, Query, State};
+use axum::extract::{ConnectInfo, Path, Query, State};
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use serde::Deserialize;
+use axum::{Extension, Json};
+use serde::{Deserialize, Serialize, Serializer};
 use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
 
 use super::Shared;
 use super::api::ApiError;
@@ -22,16 +23,86 @@ const PAGE: &str = include_str!("browser.html");
 const DEFAULT_CLIPS: usize = 100;
 /// Most clips one listing returns.
 const MAX_CLIPS: usize = 1000;
+/// Longest name of one file or folder (Linux's `NAME_MAX`, in bytes) a report path may hold.
+const MAX_NAME_BYTES: usize = 255;
+/// Longest report path (bytes).
+const MAX_PATH_BYTES: usize = 1024;
 
 type AppState = Arc<Shared>;
 
+/// The connection a request came on, as the service's listener describes it (absent when the
+/// router is called without one, as in unit tests).
+type Connection = Option<Extension<ConnectInfo<super::wire::ConnectionWrites>>>;
+
+fn writes(connection: Connection) -> Option<Arc<super::wire::Written>> {
+    connection.map(|Extension(ConnectInfo(c))| c.0)
+}
+
+/// The text between the first `open` and the `close` after it in the page.
+fn inline<'p>(page: &'p str, open: &str, close: &str) -> &'p str {
+    page.split_once(open)
+        .and_then(|(_, rest)| rest.split_once(close))
+        .map_or("", |(inside, _)| inside)
+}
+
+/// `'sha256-<base64 of the digest>'`, a CSP source that allows exactly this inline text.
+fn csp_hash(text: &str) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let digest = Sha256::digest(text.as_bytes());
+    let mut b64 = String::new();
+    for chunk in digest.chunks(3) {
+        let n = chunk
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (i, &b)| n | u32::from(b) << (16 - 8 * i));
+        for i in 0..4 {
+            if i <= chunk.len() {
+                b64.push(char::from(ALPHABET[(n >> (18 - 6 * i) & 63) as usize]));
+            } else {
+                b64.push('=');
+            }
+        }
+    }
+    format!("'sha256-{b64}'")
+}
+
+/// The page's Content-Security-Policy: its one inline script and one style sheet (by hash), data
+/// from this service only, nothing else; no framing.
+static PAGE_POLICY: LazyLock<String> = LazyLock::new(|| {
+    format!(
+        "default-src 'none'; script-src {}; style-src {}; img-src 'self'; connect-src 'self'; \
+         base-uri 'none'; form-action 'none'; frame-ancestors 'none'",
+        csp_hash(inline(PAGE, "<script>", "</script>")),
+        csp_hash(inline(PAGE, "<style>", "</style>")),
+    )
+});
+
 pub(crate) async fn page() -> Response {
-    (
+    let mut response = (
         [(
             header::CONTENT_TYPE,
             HeaderValue::from_static("text/html; charset=utf-8"),
         )],
         PAGE,
+    )
+        .into_response();
+    if let Ok(policy) = HeaderValue::from_str(&PAGE_POLICY) {
+        response
+            .headers_mut()
+            .insert(header::CONTENT_SECURITY_POLICY, policy);
+    }
+    response
+}
+
+/// A JSON answer already serialised (as `Json` would have), holding its heavy-read turn while it
+/// is sent.
+fn json_answer(body: super::snapshot::HeldAnswer) -> Response {
+    (
+        [(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        )],
+        axum::body::Body::new(body),
     )
         .into_response()
 }
@@ -62,12 +133,14 @@ fn dataset_error(shared: &Shared, e: DatasetError) -> ApiError {
     }
 }
 
-async fn blocking<T: Send + 'static>(
-    f: impl FnOnce() -> Result<T, DatasetError> + Send + 'static,
-) -> Result<Result<T, DatasetError>, ApiError> {
-    tokio::task::spawn_blocking(f)
-        .await
-        .map_err(ApiError::internal)
+/// The dataset's current snapshot (read once per version of the dataset, shared).
+async fn snapshot(shared: &Shared, name: &str) -> Result<Arc<super::snapshot::Snapshot>, ApiError> {
+    let dir = folder(shared, name)?;
+    shared
+        .readers
+        .snapshot(name, &dir)
+        .await?
+        .map_err(|e| dataset_error(shared, e))
 }
 
 /// The filters and page of `GET /datasets/{name}/clips`.
@@ -88,10 +161,11 @@ fn nonempty(v: Option<String>) -> Option<String> {
 
 pub(crate) async fn list_clips(
     State(shared): State<AppState>,
+    connection: Connection,
     Path(name): Path<String>,
     Query(q): Query<ClipQuery>,
-) -> Result<Json<Value>, ApiError> {
-    let dir = folder(&shared, &name)?;
+) -> Result<Response, ApiError> {
+    folder(&shared, &name)?;
     let limit = q.limit.unwrap_or(DEFAULT_CLIPS);
     if limit == 0 || limit > MAX_CLIPS {
         return Err(ApiError::new(
@@ -106,31 +180,30 @@ pub(crate) async fn list_clips(
         kind: nonempty(q.kind),
         text: nonempty(q.text),
     };
-    let clips = blocking(move || dataset::list_clips(&dir))
-        .await?
-        .map_err(|e| dataset_error(&shared, e))?;
-    // The choices of each filter over the whole dataset, so a page can offer them.
-    let mut types: Vec<&str> = clips
-        .iter()
-        .filter_map(|c| c.motion_type.as_deref())
-        .collect();
-    let mut splits: Vec<&str> = clips.iter().map(|c| c.split.as_str()).collect();
-    let mut kinds: Vec<&str> = clips.iter().map(|c| c.source_kind.as_str()).collect();
-    for v in [&mut types, &mut splits, &mut kinds] {
-        v.sort_unstable();
-        v.dedup();
-    }
-    kinds.extend(["mirrored", "original"]);
-    let kept: Vec<&ClipInfo> = clips.iter().filter(|c| filter.matches(c)).collect();
-    let page: Vec<&ClipInfo> = kept.iter().skip(offset).take(limit).copied().collect();
-    Ok(Json(json!({
-        "dataset": name,
-        "total": kept.len(),
-        "offset": offset,
-        "limit": limit,
-        "choices": { "type": types, "split": splits, "kind": kinds },
-        "clips": page,
-    })))
+    let snapshot = snapshot(&shared, &name).await?;
+    let body = shared
+        .readers
+        .answer(writes(connection), move || {
+            // The choices of each filter over the whole dataset, so a page can offer them.
+            let [types, splits, kinds] = &snapshot.choices;
+            let kept: Vec<&ClipInfo> = snapshot
+                .clips
+                .iter()
+                .filter(|c| filter.matches(c))
+                .collect();
+            let page: Vec<&ClipInfo> = kept.iter().skip(offset).take(limit).copied().collect();
+            serde_json::to_vec(&json!({
+                "dataset": name,
+                "total": kept.len(),
+                "offset": offset,
+                "limit": limit,
+                "choices": { "type": types, "split": splits, "kind": kinds },
+                "clips": page,
+            }))
+            .map_err(ApiError::internal)
+        })
+        .await?;
+    Ok(json_answer(body))
 }
 
 /// `?id=<clip id>`: clip ids hold `/`, `:` and `+`, so they travel as a query value.
@@ -144,11 +217,9 @@ pub(crate) async fn clip_meta(
     Path(name): Path<String>,
     Query(q): Query<ClipId>,
 ) -> Result<Json<Value>, ApiError> {
-    let dir = folder(&shared, &name)?;
-    let clips = blocking(move || dataset::list_clips(&dir))
-        .await?
-        .map_err(|e| dataset_error(&shared, e))?;
-    let Some(clip) = clips.iter().find(|c| c.clip_id == q.id) else {
+    let snapshot = snapshot(&shared, &name).await?;
+    let clips = &snapshot.clips;
+    let Some(clip) = snapshot.clip(&q.id) else {
         return Err(dataset_error(
             &shared,
             DatasetError::NoClip {
@@ -159,8 +230,8 @@ pub(crate) async fn clip_meta(
             },
         ));
     };
-    let mirror = dataset::companion_ids(clip, dataset::Companions::Mirror, &clips);
-    let sources = dataset::companion_ids(clip, dataset::Companions::Sources, &clips);
+    let mirror = dataset::companion_ids(clip, dataset::Companions::Mirror, clips);
+    let sources = dataset::companion_ids(clip, dataset::Companions::Sources, clips);
     let mut value = serde_json::to_value(clip).map_err(ApiError::internal)?;
     value["mirror"] = json!(mirror.first());
     value["sources"] = json!(sources);
@@ -170,18 +241,55 @@ pub(crate) async fn clip_meta(
 
 pub(crate) async fn clip_motion(
     State(shared): State<AppState>,
+    connection: Connection,
     Path(name): Path<String>,
     Query(q): Query<ClipId>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Response, ApiError> {
     let dir = folder(&shared, &name)?;
-    let id = q.id.clone();
-    let read = blocking(move || {
-        let frames = dataset::read_clip(&dir, &id)?;
-        let skeletons = dataset::read_skeletons(&dir)?;
-        Ok((frames, skeletons))
-    })
-    .await?;
-    let (frames, skeletons) = read.map_err(|e| dataset_error(&shared, e))?;
+    let snapshot = snapshot(&shared, &name).await?;
+    let answer = shared.clone();
+    let body = shared
+        .readers
+        .answer(writes(connection), move || {
+            let frames = snapshot
+                .frames(&dir, &q.id)
+                .map_err(|e| dataset_error(&answer, e))?;
+            let skeletons = snapshot.skeletons().map_err(ApiError::internal)?;
+            motion_answer(&frames, skeletons)
+        })
+        .await?;
+    Ok(json_answer(body))
+}
+
+/// `GET /datasets/{name}/motion`'s answer, serialised as it was when built as a JSON value: fields
+/// by name, f32 numbers widened to f64 (non-finite ones null).
+#[derive(Serialize)]
+struct MotionAnswer<'a> {
+    clip_id: &'a str,
+    fps: f64,
+    frame: &'static str,
+    frames: usize,
+    joints: usize,
+    names: Vec<&'a str>,
+    parents: Vec<Option<usize>>,
+    parts: Vec<Option<&'a str>>,
+    #[serde(serialize_with = "widened")]
+    positions: Vec<f32>,
+    root: &'a str,
+}
+
+fn widened<S: Serializer>(values: &[f32], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(
+        values
+            .iter()
+            .map(|&v| v.is_finite().then_some(f64::from(v))),
+    )
+}
+
+fn motion_answer(
+    frames: &dataset::ClipFrames,
+    skeletons: &dataset::Skeletons,
+) -> Result<Vec<u8>, ApiError> {
     let Some(skeleton) = skeletons.get(&frames.info.skeleton) else {
         return Err(ApiError::internal(format!(
             "skeleton `{}` is not in skeletons.json",
@@ -197,19 +305,19 @@ pub(crate) async fn clip_motion(
             frames.info.joints
         )));
     }
-    let positions = dataset::preview::canonical_positions(&frames, skeleton);
-    Ok(Json(json!({
-        "clip_id": frames.info.clip_id,
-        "fps": frames.info.fps,
-        "frames": frames.info.frames,
-        "joints": frames.info.joints,
-        "names": skeleton.joints.iter().map(|j| &j.name).collect::<Vec<_>>(),
-        "parents": skeleton.parents(),
-        "parts": skeleton.joints.iter().map(|j| &j.part).collect::<Vec<_>>(),
-        "root": skeleton.root,
-        "frame": "canonical: the first frame's pelvis on the ground at the origin, facing +y; x right, z up, metres",
-        "positions": positions,
-    })))
+    let answer = MotionAnswer {
+        clip_id: &frames.info.clip_id,
+        fps: frames.info.fps,
+        frame: "canonical: the first frame's pelvis on the ground at the origin, facing +y; x right, z up, metres",
+        frames: frames.info.frames,
+        joints: frames.info.joints,
+        names: skeleton.joints.iter().map(|j| j.name.as_str()).collect(),
+        parents: skeleton.parents(),
+        parts: skeleton.joints.iter().map(|j| j.part.as_deref()).collect(),
+        positions: dataset::preview::canonical_positions(frames, skeleton),
+        root: &skeleton.root,
+    };
+    serde_json::to_vec(&answer).map_err(ApiError::internal)
 }
 
 /// The report's folder.
@@ -258,38 +366,32 @@ pub(crate) struct ReportPath {
 
 pub(crate) async fn report_file(
     State(shared): State<AppState>,
+    connection: Connection,
     Path(name): Path<String>,
     Query(q): Query<ReportPath>,
 ) -> Result<Response, ApiError> {
     let dir = report_dir(&shared, &name)?;
-    let refused = || {
+    let listing = format!("/datasets/{name}/report");
+    let refused = move |path: &str| {
         ApiError::new(
             StatusCode::BAD_REQUEST,
             format!(
-                "path `{}`: expected a file of the report folder, as listed by /datasets/{name}/report",
-                super::public::excerpt(&q.path)
+                "path `{}`: expected a file of the report folder, as listed by {listing}",
+                super::public::excerpt(path)
             ),
         )
     };
     let relative = std::path::Path::new(&q.path);
+    // No file has a NUL or an over-long name: refused here, not failed on by the filesystem.
     if q.path.is_empty()
+        || q.path.len() > MAX_PATH_BYTES
+        || q.path.contains('\0')
         || !relative
             .components()
-            .all(|c| matches!(c, Component::Normal(_)))
+            .all(|c| matches!(c, Component::Normal(n) if n.len() <= MAX_NAME_BYTES))
     {
-        return Err(refused());
+        return Err(refused(&q.path));
     }
-    let path = dir.join(relative);
-    let read = tokio::task::spawn_blocking(move || {
-        // Symbolic links may not lead out of the report folder either.
-        let (real, base) = (path.canonicalize()?, dir.canonicalize()?);
-        if !real.starts_with(&base) || !real.is_file() {
-            return Ok(None);
-        }
-        std::fs::read(&real).map(Some)
-    })
-    .await
-    .map_err(ApiError::internal)?;
     let kind = match relative.extension().and_then(|e| e.to_str()) {
         Some("png") => "image/png",
         Some("svg") => "image/svg+xml",
@@ -297,20 +399,78 @@ pub(crate) async fn report_file(
         Some("md") => "text/markdown; charset=utf-8",
         _ => "text/plain; charset=utf-8",
     };
-    match read {
-        Ok(Some(bytes)) => Ok((
-            [(header::CONTENT_TYPE, HeaderValue::from_static(kind))],
-            bytes,
-        )
-            .into_response()),
-        Ok(None) => Err(refused()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ApiError::new(
-            StatusCode::NOT_FOUND,
-            format!(
-                "no report file `{}` (build the dataset, or see /datasets/{name}/report)",
-                super::public::excerpt(&q.path)
-            ),
-        )),
-        Err(e) => Err(ApiError::internal(e)),
+    let path = dir.join(relative);
+    let body = shared
+        .readers
+        .answer(writes(connection), move || {
+            // Symbolic links may not lead out of the report folder either.
+            let read = path.canonicalize().and_then(|real| {
+                let base = dir.canonicalize()?;
+                if !real.starts_with(&base) || !real.is_file() {
+                    return Ok(None);
+                }
+                std::fs::read(&real).map(Some)
+            });
+            match read {
+                Ok(Some(bytes)) => Ok(bytes),
+                Ok(None) => Err(refused(&q.path)),
+                // `a.md/b`: a file taken for a folder is a path to nothing, too.
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
+                    ) =>
+                {
+                    Err(ApiError::new(
+                        StatusCode::NOT_FOUND,
+                        format!(
+                            "no report file `{}` (build the dataset, or see /datasets/{name}/report)",
+                            super::public::excerpt(&q.path)
+                        ),
+                    ))
+                }
+                Err(e) => Err(ApiError::internal(e)),
+            }
+        })
+        .await?;
+    Ok((
+        [(header::CONTENT_TYPE, HeaderValue::from_static(kind))],
+        axum::body::Body::new(body),
+    )
+        .into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_policy_allows_the_pages_one_script_and_one_style_sheet_by_hash() {
+        // The sha256 of nothing, as CSP writes it.
+        assert_eq!(
+            csp_hash(""),
+            "'sha256-47DEQpj8HBSa+/TImW+5JCeuQeRkm5NMpJWZG3hSuFU='"
+        );
+        assert_eq!(
+            csp_hash("abc"),
+            "'sha256-ungWv48Bz+pBQUDeXa4iI7ADYaOWF3qctBD/YfIAFa0='"
+        );
+        // Whatever else the page holds inline would be blocked: no second script or style
+        // sheet, no style attribute, no handler attribute.
+        assert_eq!(PAGE.matches("<script").count(), 1);
+        assert_eq!(PAGE.matches("<style").count(), 1);
+        assert!(!PAGE.contains(" style=\""));
+        assert!(
+            !regex::Regex::new(r#"<[^>]* on[a-z]+=""#)
+                .unwrap()
+                .is_match(PAGE)
+        );
+        let script = inline(PAGE, "<script>", "</script>");
+        assert!(script.contains("loadDatasets()"));
+        assert!(PAGE_POLICY.contains(&format!("script-src {};", csp_hash(script))));
+        assert!(PAGE_POLICY.contains(&format!(
+            "style-src {};",
+            csp_hash(inline(PAGE, "<style>", "</style>"))
+        )));
     }
 }

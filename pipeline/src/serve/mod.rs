@@ -13,6 +13,7 @@ pub mod log;
 mod public;
 mod queue;
 pub mod schedule;
+mod snapshot;
 mod wire;
 pub mod worker;
 
@@ -180,6 +181,8 @@ pub(crate) struct Shared {
     jobs_dir: PathBuf,
     /// How paths are shown to callers.
     shield: PathShield,
+    /// What the browser reads of each dataset.
+    readers: snapshot::Readers,
 }
 
 impl Shared {
@@ -259,9 +262,11 @@ impl Shared {
     }
 }
 
-/// A line of the service's own log (standard error, which systemd's journal keeps).
+/// A line of the service's own log (standard error, which systemd's journal keeps). A closed
+/// standard error loses the line; it does not panic the task that logs it, as `eprintln!` would.
 fn say(line: &str) {
-    eprintln!("motionforge serve: {line}");
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "motionforge serve: {line}");
 }
 
 /// Unix milliseconds as RFC 3339 UTC (`2026-05-01T03:00:00.000Z`).
@@ -416,6 +421,7 @@ impl Service {
                 .collect(),
             setup.clock.now(),
         );
+        let readers = snapshot::Readers::new(datasets.keys()).map_err(ServeError::Runtime)?;
         let shared = Arc::new(Shared {
             datasets,
             history,
@@ -427,6 +433,7 @@ impl Service {
             builder: setup.builder,
             jobs_dir,
             shield: PathShield::new(std::env::current_dir().ok()),
+            readers,
         });
         for build in shared.history.queued()? {
             if shared.datasets.contains_key(&build.dataset) {
@@ -455,11 +462,14 @@ impl Service {
         let router = api::router(shared.clone());
         let mut server_stop = shutdown;
         let server = tokio::spawn(async move {
-            axum::serve(wire::JsonErrors::new(listener), router)
-                .with_graceful_shutdown(async move {
-                    let _ = server_stop.wait_for(|s| *s).await;
-                })
-                .await
+            axum::serve(
+                wire::JsonErrors::new(listener),
+                router.into_make_service_with_connect_info::<wire::ConnectionWrites>(),
+            )
+            .with_graceful_shutdown(async move {
+                let _ = server_stop.wait_for(|s| *s).await;
+            })
+            .await
         });
         say(&format!(
             "serving {} on http://{addr}",

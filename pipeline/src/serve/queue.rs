@@ -96,6 +96,8 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
     let clock = Instant::now();
     // A process of its own: whatever ends the build (an abort, a signal) leaves the service up.
     let ended = child::run(&shared.builder, &shared.jobs_dir, job, &log).await;
+    // However it ended, it may have replaced the dataset's shards.
+    shared.readers.forget(dataset);
     let duration_ms = i64::try_from(clock.elapsed().as_millis()).unwrap_or(i64::MAX);
     let seconds = duration_ms as f64 / 1000.0;
 

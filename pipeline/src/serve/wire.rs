@@ -10,6 +10,8 @@
 
 use std::io;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll, ready};
 
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
@@ -59,6 +61,95 @@ impl axum::serve::Listener for JsonErrors {
     }
 }
 
+/// How many bytes a connection has written, and what is kept until it has written so many: an
+/// answer's heavy-read turn is held until the answer has left, not merely been handed to the HTTP
+/// server's buffer (`serve::snapshot`).
+#[derive(Default)]
+pub(crate) struct Written {
+    bytes: AtomicU64,
+    kept: Mutex<Vec<(u64, Box<dyn Send>)>>,
+    /// The body waiting for the connection to write more before it hands over more.
+    waiting: Mutex<Option<std::task::Waker>>,
+}
+
+impl std::fmt::Debug for Written {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Written({})", self.bytes())
+    }
+}
+
+impl Written {
+    /// Bytes written so far.
+    pub(crate) fn bytes(&self) -> u64 {
+        self.bytes.load(Ordering::Acquire)
+    }
+
+    /// Keeps `guard` until `mark` bytes in all are written, or the connection is gone.
+    pub(crate) fn keep_until(&self, mark: u64, guard: Box<dyn Send>) {
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        // Read under the lock that `advance` takes after counting: no mark is passed unseen.
+        if self.bytes() < mark {
+            kept.push((mark, guard));
+        }
+    }
+
+    /// True once `mark` bytes in all are written; otherwise `cx` is woken when more are.
+    pub(crate) fn reached(&self, mark: u64, cx: &Context<'_>) -> bool {
+        if self.bytes() >= mark {
+            return true;
+        }
+        *self.waiting.lock().unwrap_or_else(|e| e.into_inner()) = Some(cx.waker().clone());
+        // Written meanwhile: its wake-up may have found no waker yet.
+        self.bytes() >= mark
+    }
+
+    fn advance(&self, n: usize) {
+        let now = self.bytes.fetch_add(n as u64, Ordering::AcqRel) + n as u64;
+        {
+            let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+            if !kept.is_empty() {
+                kept.retain(|(mark, _)| *mark > now);
+            }
+        }
+        let waiting = self
+            .waiting
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        if let Some(waker) = waiting {
+            waker.wake();
+        }
+    }
+
+    #[cfg(test)]
+    pub(crate) fn advance_for_test(&self, n: usize) {
+        self.advance(n);
+    }
+
+    fn release_all(&self) {
+        self.kept.lock().unwrap_or_else(|e| e.into_inner()).clear();
+        let waiting = self
+            .waiting
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        drop(waiting);
+    }
+}
+
+/// What a request knows of its connection ([`axum::extract::ConnectInfo`]): how far it has
+/// written.
+#[derive(Debug, Clone)]
+pub(crate) struct ConnectionWrites(pub(crate) Arc<Written>);
+
+impl axum::extract::connect_info::Connected<axum::serve::IncomingStream<'_, JsonErrors>>
+    for ConnectionWrites
+{
+    fn connect_info(stream: axum::serve::IncomingStream<'_, JsonErrors>) -> Self {
+        ConnectionWrites(stream.io().written.clone())
+    }
+}
+
 /// One connection: reads pass through; writes pass through unless they end with one of hyper's
 /// own error heads, which is replaced.
 #[derive(Debug)]
@@ -67,6 +158,8 @@ pub(crate) struct Connection<T> {
     /// Replacement bytes not yet written, and how many of them are.
     pending: Vec<u8>,
     sent: usize,
+    /// Bytes taken from the server so far.
+    written: Arc<Written>,
 }
 
 impl<T> Connection<T> {
@@ -75,7 +168,15 @@ impl<T> Connection<T> {
             inner,
             pending: Vec::new(),
             sent: 0,
+            written: Arc::default(),
         }
+    }
+}
+
+impl<T> Drop for Connection<T> {
+    fn drop(&mut self) {
+        // Nothing more will be written: what waited for it is let go.
+        self.written.release_all();
     }
 }
 
@@ -117,9 +218,12 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for Connection<T> {
             self.sent = 0;
             // Taken whole: the replacement goes out on this and the next calls.
             let _ = self.poll_pending(cx)?;
+            self.written.advance(buf.len());
             return Poll::Ready(Ok(buf.len()));
         }
-        Pin::new(&mut self.inner).poll_write(cx, buf)
+        let n = ready!(Pin::new(&mut self.inner).poll_write(cx, buf))?;
+        self.written.advance(n);
+        Poll::Ready(Ok(n))
     }
 
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
@@ -216,6 +320,31 @@ mod tests {
             out.ends_with(r#"{"error":"request headers too large"}"#),
             "{out}"
         );
+    }
+
+    #[test]
+    fn what_waits_for_a_written_mark_is_kept_until_the_connection_passes_it() {
+        use std::sync::atomic::AtomicBool;
+        struct Flag(Arc<AtomicBool>);
+        impl Drop for Flag {
+            fn drop(&mut self) {
+                self.0.store(true, Ordering::SeqCst);
+            }
+        }
+        let written = Written::default();
+        let (first, second) = (Arc::new(AtomicBool::new(false)), Arc::default());
+        written.keep_until(100, Box::new(Flag(first.clone())));
+        written.keep_until(300, Box::new(Flag(Arc::clone(&second))));
+        written.advance(99);
+        assert!(!first.load(Ordering::SeqCst));
+        written.advance(1);
+        assert!(first.load(Ordering::SeqCst) && !second.load(Ordering::SeqCst));
+        // A mark already passed lets go at once; a closed connection lets everything go.
+        let third = Arc::new(AtomicBool::new(false));
+        written.keep_until(50, Box::new(Flag(third.clone())));
+        assert!(third.load(Ordering::SeqCst));
+        written.release_all();
+        assert!(second.load(Ordering::SeqCst));
     }
 
     #[test]

@@ -29,6 +29,12 @@ use crate::progress::{Progress, ProgressSink};
 /// The hidden subcommand of the binary that runs a [`Job`].
 pub const SUBCOMMAND: &str = "serve-build";
 
+/// How long a build process waits for the dataset folder's lock. The service runs one build of
+/// a dataset at a time, so a holder is a build process of a service that was killed (it exits
+/// once it sees its standard input close, a fraction of a second later, but a service restarted
+/// at once starts its resume build before that) or a build started by hand.
+pub const LOCK_WAIT: std::time::Duration = std::time::Duration::from_secs(60);
+
 /// What the child needs to run one build.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Job {
@@ -206,6 +212,7 @@ fn run_job(job_file: &Path, events: &Arc<EventWriter>) -> Result<(), WorkerError
         force: job.force,
         offline: job.offline,
         progress: ProgressSink::new(events.clone()),
+        lock_wait: Some(LOCK_WAIT),
         ..BuildOptions::default()
     };
     let report = build(&job.config(), &options)?;
@@ -235,12 +242,21 @@ fn exit_when_orphaned() {
                     Err(_) => break,
                 }
             }
-            eprintln!("motionforge serve-build: the service is gone; stopping the build");
+            // Not `eprintln!`: standard error is a pipe to the service too, closed now, and
+            // its panic would end this thread instead of the process, leaving the build to run
+            // on, holding the dataset's lock, for no one.
+            let _ = writeln!(
+                std::io::stderr(),
+                "motionforge serve-build: the service is gone; stopping the build"
+            );
             std::process::exit(1);
         });
     if let Err(e) = spawned {
         // Not fatal: the service still kills the build when it stops cleanly.
-        eprintln!("motionforge serve-build: cannot watch standard input: {e}");
+        let _ = writeln!(
+            std::io::stderr(),
+            "motionforge serve-build: cannot watch standard input: {e}"
+        );
     }
 }
 
