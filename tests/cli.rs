@@ -170,6 +170,19 @@ fn every_commands_help_ends_with_examples() {
             "`{}`: the examples run motionforge: {first}",
             args.join(" ")
         );
+        // A copied line runs: an example is never wrapped by the help's width, only continued
+        // with `\` (the exit codes follow the examples, after a blank line).
+        let examples = examples.split("\n\n").next().unwrap_or_default();
+        let mut continued = false;
+        for line in examples.lines() {
+            let l = line.trim_start();
+            assert!(
+                continued || l.starts_with('#') || l.contains("motionforge "),
+                "`{}`: an example line that is neither a command nor continued with `\\`: {line:?}",
+                args.join(" ")
+            );
+            continued = l.ends_with('\\');
+        }
     }
 }
 

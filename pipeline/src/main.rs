@@ -269,7 +269,8 @@ enum Command {
     /// mirrored rotations best match the real ones (one roughly symmetric take, e.g. a walk,
     /// is enough). Paste the output into the profile's `[reflections]` table.
     #[command(after_help = examples!(
-        "  motionforge calibrate-mirror --profile bandai-namco ../shared/data/bandai-namco-1/data/dataset-1_walk_normal_001.bvh"
+        "  motionforge calibrate-mirror --profile bandai-namco \\
+      ../shared/data/bandai-namco-1/data/dataset-1_walk_normal_001.bvh"
     ))]
     CalibrateMirror {
         /// Bundled profile name (bandai-namco, cmu, smpl-22) or a profile TOML file.

@@ -62,7 +62,8 @@ pub(crate) enum LabelsCommand {
     /// Sometimes skipped): accuracy per part and their mean.
     #[command(after_help = "Examples:
   motionforge labels eval --gold ../shared/data/sinc/part-labels-gold-dev.json
-  motionforge labels eval --gold ../shared/data/sinc/part-labels-gold-dev.json --source embedded --source ../shared/data/sinc/gpt3-labels-list.json")]
+  motionforge labels eval --gold ../shared/data/sinc/part-labels-gold-dev.json \\
+      --source embedded --source ../shared/data/sinc/gpt3-labels-list.json")]
     Eval {
         /// Gold labels: {text: [global, torso, left arm, right arm, left leg, right leg]} with
         /// 1, 0 or 0.5 (sometimes).
