@@ -1065,6 +1065,17 @@ fn a_run_that_stops_early_says_nothing_was_written_and_an_empty_stage_says_it_ha
         "{printed}"
     );
     assert!(!dir.path().join("demo/data").exists());
+    // On a new folder, the stages behind ingest have no count yet: not "1 of 1".
+    let out = run(
+        &["plan", "--config", &demo, "--output", "fresh"],
+        dir.path(),
+    );
+    let printed = text(&out.stdout);
+    assert!(
+        printed.contains("segment  all to run: ingest re-runs first\n"),
+        "{printed}"
+    );
+    assert!(!printed.contains("1 of 1 to run: ingest"), "{printed}");
     // The HumanML3D fixture has no compatible pair: its first build has nothing to compose.
     let config = repo().join("fixtures/humanml3d-joints/build.toml");
     let out = run(

@@ -66,6 +66,20 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
                 stage.stage.name(),
                 stage.items
             )?;
+        } else if stage.items == 0 {
+            // Behind a stale stage: its items are not known until that stage has run (a count
+            // of 1 here read as one item where the build then ran ten).
+            writeln!(
+                out,
+                "{:>10}  all to run: {}",
+                stage.stage.name(),
+                stage
+                    .reasons
+                    .keys()
+                    .map(String::as_str)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )?;
         } else {
             writeln!(
                 out,
