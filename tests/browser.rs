@@ -16,6 +16,19 @@ use serde_json::Value;
 
 const SCRIPT: &str = include_str!("browser/check_page.py");
 
+/// The demo's clip listing (status, body) and its clip ids.
+async fn demo_clips(client: &reqwest::Client, base: &str) -> (u16, serde_json::Value, Vec<String>) {
+    let (status, all) =
+        common::service::get(client, &format!("{base}/datasets/demo/clips?limit=1000")).await;
+    let ids = all["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["clip_id"].as_str().unwrap().to_string())
+        .collect();
+    (status, all, ids)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_filters_plays_and_draws_a_clip_beside_its_mirror() {
     let out = tempfile::tempdir().unwrap();
@@ -311,15 +324,8 @@ async fn browser_reads_take_bounded_memory_however_many_readers_there_are() {
     );
     let base = service.base.clone();
     let client = reqwest::Client::new();
-    let (status, all) =
-        common::service::get(&client, &format!("{base}/datasets/demo/clips?limit=1000")).await;
+    let (status, all, ids) = demo_clips(&client, &base).await;
     assert_eq!(status, 200, "{all}");
-    let ids: Vec<String> = all["clips"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c["clip_id"].as_str().unwrap().to_string())
-        .collect();
     assert!(ids.len() >= 20, "{} clips", ids.len());
 
     assert_eq!(page_view(&client, &base, &ids[0]).await, [200; 3]);
@@ -400,15 +406,8 @@ async fn reads_during_a_rebuild_see_the_old_dataset_or_the_new_never_an_error() 
     )
     .await;
     let client = reqwest::Client::new();
-    let (_, all) =
-        common::service::get(&client, &format!("{base}/datasets/demo/clips?limit=1000")).await;
+    let (_, all, ids) = demo_clips(&client, &base).await;
     let before = all["total"].as_u64().unwrap();
-    let ids: Vec<String> = all["clips"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c["clip_id"].as_str().unwrap().to_string())
-        .collect();
     assert!(
         shards_before.len() as u64 >= before / 2,
         "{shards_before:?}"

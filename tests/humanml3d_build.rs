@@ -392,16 +392,24 @@ fn caption_files_give_every_caption_and_their_sub_spans() {
 /// Builds `config` through the binary under a 1 GiB address-space limit, which must succeed: a
 /// build whose memory grows with one damaged input fails here instead of taking the machine.
 fn build_in_1_gib(config: &Path) {
-    let run = Command::new("prlimit")
+    let mut limited = Command::new("prlimit");
+    limited
         .arg(format!("--as={}", 1u64 << 30))
-        .arg(env!("CARGO_BIN_EXE_motionforge"))
+        .arg(env!("CARGO_BIN_EXE_motionforge"));
+    build_ok(limited, config, "");
+}
+
+/// Runs `build --config <config>` with `command` (the binary, or a wrapper of it), which must
+/// succeed; `what` heads the failure message.
+fn build_ok(mut command: Command, config: &Path, what: &str) {
+    let run = command
         .args(["build", "--config"])
         .arg(config)
         .output()
-        .expect("prlimit (util-linux) runs the binary");
+        .expect("the binary runs");
     assert!(
         run.status.success(),
-        "{}",
+        "{what}{}",
         String::from_utf8_lossy(&run.stderr)
     );
 }
@@ -426,16 +434,7 @@ fn one_huge_value_in_a_joint_array_rejects_that_capture_at_ingest_and_the_build_
     let root = config.parent().unwrap();
     // Frame 5, joint 3, x of the (180, 52, 3) float64 array: finite, and its square is not.
     set_f64(&root.join(POSE_DATA), (5 * 52 + 3) * 3, 1e200);
-    let run = motionforge()
-        .args(["build", "--config"])
-        .arg(&config)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    build_ok(motionforge(), &config, "");
     let dataset = root.join("out/hml3d-joints");
     let rejects: Vec<serde_json::Value> = lines(&dataset.join("rejects.jsonl"))
         .iter()
@@ -528,15 +527,10 @@ fn an_index_changed_back_and_forth_never_leaves_the_cache_naming_a_removed_entry
     let mut frames = Vec::new();
     for (i, (start, end)) in cuts.into_iter().enumerate() {
         std::fs::write(&index, row(start, end)).unwrap();
-        let run = motionforge()
-            .args(["build", "--config"])
-            .arg(&config)
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "build {i} ({start}..{end}): {}",
-            String::from_utf8_lossy(&run.stderr)
+        build_ok(
+            motionforge(),
+            &config,
+            &format!("build {i} ({start}..{end}): "),
         );
         let dataset = config.parent().unwrap().join("out/hml3d-joints");
         frames.push(common::table_bytes(&dataset));

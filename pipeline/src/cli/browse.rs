@@ -43,11 +43,7 @@ impl FilterArgs {
 
 /// Refuses a `--type` or `--split` the dataset has no clip of, listing the ones it has: an empty
 /// answer would look like a filter that matched nothing.
-pub(crate) fn check_filter_values(dir: &Path, args: &FilterArgs) -> Result<()> {
-    if args.motion_type.is_none() && args.split.is_none() {
-        return Ok(());
-    }
-    let all = dataset::find_clips(dir, &ClipFilter::default(), None)?;
+fn check_filter_values(dir: &Path, all: &[ClipInfo], args: &FilterArgs) -> Result<()> {
     let check = |what: &str, given: &Option<String>, values: Vec<&str>| -> Result<()> {
         let Some(given) = given else { return Ok(()) };
         let mut values = values;
@@ -84,8 +80,14 @@ pub(crate) fn check_filter_values(dir: &Path, args: &FilterArgs) -> Result<()> {
 
 /// `motionforge clips`.
 pub(crate) fn clips(dir: &Path, args: &FilterArgs, json: bool) -> Result<()> {
-    check_filter_values(dir, args)?;
-    let clips = dataset::find_clips(dir, &args.filter(), args.limit)?;
+    // Read once: the whole list answers both what the filters may name and what they keep.
+    let mut clips = dataset::list_clips(dir)?;
+    check_filter_values(dir, &clips, args)?;
+    let filter = args.filter();
+    clips.retain(|c| filter.matches(c));
+    if let Some(n) = args.limit {
+        clips.truncate(n);
+    }
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     if json {
         serde_json::to_writer_pretty(&mut out, &clips)?;
@@ -211,8 +213,8 @@ pub(crate) fn preview(
     options: &PreviewOptions,
     ui: &Ui,
 ) -> Result<()> {
-    check_filter_values(dir, args)?;
     let clips = dataset::list_clips(dir)?;
+    check_filter_values(dir, &clips, args)?;
     let filter = args.filter();
     let mut chosen: Vec<&ClipInfo> = if ids.is_empty() {
         clips.iter().filter(|c| filter.matches(c)).collect()
