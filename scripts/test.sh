@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The README's test command: sets up everything the tests need on a fresh machine, then runs them.
-# Arguments go to `cargo test` (for example `scripts/test.sh --test loaders`).
+# Arguments go to `cargo test` (for example `scripts/test.sh --test builds loaders::`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Debian packages the tests drive (Chromium, LaTeX), when missing.

@@ -1,7 +1,7 @@
 //! Frame-range index and event-log readers, on real data: HumanML3D's `index.csv`, and event logs
 //! written from a real BABEL record (sid 7536) and the BABEL action classes.
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeMap, BTreeSet};
 

@@ -4,7 +4,7 @@
 //! and plays, within its Content-Security-Policy. Screenshots are kept in `target/tmp/browser/`.
 //! And the endpoints it reads from: their answers, their memory under 20 and 200 readers at once,
 //! and reads during a rebuild that replaces every shard.
-mod common;
+use crate::common;
 
 use std::collections::BTreeSet;
 

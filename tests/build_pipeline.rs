@@ -1,5 +1,5 @@
 //! The build end to end on real captures: outputs, reuse of unchanged work, rejects, determinism.
-mod common;
+use crate::common;
 
 use std::fs;
 use std::path::{Path, PathBuf};

@@ -1,7 +1,7 @@
 //! Damaged BVH input never panics and gets a clear error with the right line: specific damage to a
 //! real Bandai Namco capture (each error kind and line asserted), then random damage and arbitrary
 //! strings (proptest).
-mod common;
+use crate::common;
 
 use std::sync::OnceLock;
 

@@ -2,7 +2,7 @@
 //! subset) and CMU 01_01 read with the expected shape, survive `write_bvh` -> `read_bvh`, and agree
 //! with the `bvh_anim` crate. Small hand-written texts cover format features the real files do not
 //! use (CRLF, tabs, exponents, every Euler order, a BOM, trailing blank lines).
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! The command line: global flags (`-q`, `-v`, `--json`), stage progress (log lines and bars),
 //! `config check`, `clean`, and the documented exit codes.
 
-mod common;
+use crate::common;
 
 use std::io;
 use std::path::{Path, PathBuf};

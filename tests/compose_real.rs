@@ -1,5 +1,5 @@
 //! Synthetic simultaneous pairs on real Bandai captures (issue: synthetic pairs).
-mod common;
+use crate::common;
 
 use common::*;
 use motionforge::motion::compose::{Trim, compose, part_bit};

@@ -2,7 +2,7 @@
 //! clean labels and the text pairs of SINC's spatial training split. Word-level spelling rules are
 //! checked on hand-written cases, phrase-level rules on every real label, and exact outputs on a
 //! hand-checked sample of real labels and real pairs.
-mod common;
+use crate::common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 

@@ -1,6 +1,6 @@
 //! A built dataset read back from its folder alone (issue 14): `clips` listing and filters against
 //! an independent reader, `export-bvh` from the shards against the config route, previews.
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -1,5 +1,5 @@
 //! The sharded training set: layout any loader opens, manifest checksums, splits, rebuilds.
-mod common;
+use crate::common;
 
 use std::fs;
 use std::process::Command;

@@ -27,7 +27,7 @@
 //! Any other block, or a block without an info string, fails the test, so a new one cannot go
 //! unrun; every page's blocks are counted.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::io::{Read, Write};

@@ -3,7 +3,7 @@
 //! empty captions, thousands of identical annotation rows), built through the binary under a 2 GB
 //! address-space limit. Each bad file costs one reject line that names it; the rest is built, and
 //! nothing non-finite reaches the dataset.
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

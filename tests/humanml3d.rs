@@ -2,7 +2,7 @@
 //! reference skeleton, the shipped pair 012314 (`new_joint_vecs` and `new_joints`), the raw
 //! 52-joint array of clip 000021 and MoMask's example 000612.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 

@@ -2,7 +2,7 @@
 //! cut by its index as HumanML3D cuts them, captioned from caption files, mirrored, exported as
 //! HumanML3D and as BVH, checked against HumanML3D's own arrays in `../shared`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -9,7 +9,7 @@
 //! auxiliary word forms 2.3.4 lists AUX, as HumanML3D's files have them. Lemmas are spaCy 3's,
 //! recomputed for the 2.3.4 tag where the two versions' tags differ.
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 

@@ -1,6 +1,6 @@
 //! `motionforge export humanml3d` on the demo dataset: the folder HumanML3D's consumers load.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -1,7 +1,7 @@
 //! Kill a build with SIGKILL at several moments, start it again: it finishes, reuses what was
 //! done, and its dataset is byte-identical to an uninterrupted build's.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;

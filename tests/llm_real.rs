@@ -1,7 +1,7 @@
 //! Once, against a real LLM server (llama.cpp with Gemma 3 270M; recipe in docs/llm-real-run.md).
 //! Ignored by default: run with
-//! `MOTIONFORGE_LLM_URL=http://127.0.0.1:8081/v1 cargo test --test llm_real -- --ignored --nocapture`.
-mod common;
+//! `MOTIONFORGE_LLM_URL=http://127.0.0.1:8081/v1 cargo test --test builds llm_real:: -- --ignored --nocapture`.
+use crate::common;
 
 use std::fs;
 

@@ -1,6 +1,6 @@
 //! The LLM stages inside a build: a real OpenAI-compatible server on loopback, the response cache,
 //! `--offline`, imported SINC answers, and the embedded labeller when no LLM is configured.
-mod common;
+use crate::common;
 
 use std::fs;
 use std::process::Command;

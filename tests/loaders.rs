@@ -1,7 +1,7 @@
 //! The demo dataset opened by the loaders its users have: Hugging Face `datasets` (from the
 //! dataset card alone, whose features must be what `datasets` infers from the shards) and DuckDB, from `requirements-test.txt`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,5 +1,5 @@
 //! Mirroring checked on real captures (issue: foundation, "Mirroring").
-mod common;
+use crate::common;
 
 use common::*;
 use glam::DVec3;

@@ -2,7 +2,7 @@
 //! (every `crate::<module>` path outside comments and test modules, `crate::{a, b}` groups
 //! included), the graph of top-level modules has no cycle, and the leaf module `base` depends on
 //! nothing. The binary (`main.rs`, `cli/`) may use any module and is not part of the graph.
-mod common;
+use crate::common;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;

@@ -1,5 +1,5 @@
 //! Skeleton profiles, forward kinematics, resampling and the CLI around them, on real data.
-mod common;
+use crate::common;
 
 use std::process::Command;
 

@@ -2,7 +2,7 @@
 //! protocol), the embedded lexicon labeller, and part-velocity evidence on Bandai Namco captures.
 //!
 //! Run with `--nocapture` to see the tables that `docs/part-labels.md` quotes.
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! `plan`, `status` and `run <stage>`: what a build would run and why, checked against what the
 //! build then does.
 
-mod common;
+use crate::common;
 
 use motionforge::build::{BuildOptions, Plan, Stage, build, plan, status};
 use motionforge::config::Config;

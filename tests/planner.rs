@@ -3,7 +3,7 @@
 //! planner's own rules), read back through the event-log reader and the segment stage on a real
 //! capture with one clip per instruction, balance toward the target from the demo dataset's
 //! counts, and bad scenes are errors naming the key or the requirement.
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

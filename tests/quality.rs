@@ -1,5 +1,5 @@
 //! Plausibility metrics (CODA-style) on every real capture, and damage made on purpose.
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -3,7 +3,7 @@
 //!
 //! Set `MOTIONFORGE_REPORT_KEEP=<dir>` to keep the demo report there for inspection.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -1,5 +1,5 @@
 //! Segmentation on real captures and annotations (issue: segment captures by action).
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -2,7 +2,7 @@
 //! per-dataset queue, statistics, history across restarts, recovery of an interrupted build, the
 //! OpenAPI description, answers that show no absolute path and errors that are short JSON
 //! whatever the request, and the command's clean stop.
-mod common;
+use crate::common;
 
 use std::collections::BTreeSet;
 use std::path::Path;

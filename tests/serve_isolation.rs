@@ -3,7 +3,7 @@
 //! stop kills the build process, a resume build the service died in is not resumed again, a
 //! real build goes through the binary's `serve-build`, and that process stops when the service
 //! is gone.
-mod common;
+use crate::common;
 
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};

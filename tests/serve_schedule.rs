@@ -1,7 +1,7 @@
 //! Cron schedules of `motionforge serve`, on a manual clock: which datasets come due and when,
 //! the loop that queues them, config errors, and a scheduled rebuild of the demo with nothing
 //! changed (a no-op), all without waiting for real time to pass.
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};

@@ -1,5 +1,5 @@
 //! Synthetic pairs inside a build: seeded sampling, compatibility, counts, BVH export.
-mod common;
+use crate::common;
 
 use std::fs;
 use std::process::Command;

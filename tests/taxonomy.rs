@@ -1,6 +1,6 @@
 //! The bundled motion-type taxonomy (LINGO Table A1) and label mapping on real BABEL labels.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 

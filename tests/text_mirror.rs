@@ -1,6 +1,6 @@
 //! Caption mirroring checked on real action texts (BABEL labels and the SINC GPT-3 label list):
 //! every property must hold on every text, and hand-checked real captions must come out exactly.
-mod common;
+use crate::common;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! The workspace lock: a second build of the same dataset folder is refused (or waits), and a
 //! lock left by a killed process is taken over.
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -3,7 +3,7 @@
 //! half-written that looks complete: no temporary files, and a manifest (if any) whose shards are
 //! exactly the ones in `data/`, with matching checksums.
 
-mod common;
+use crate::common;
 
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
