@@ -69,28 +69,44 @@ fn first_segment(path: &str) -> String {
         .collect()
 }
 
+/// Every source folder of the workspace: `pipeline/src` and each crate's `pipeline/<crate>/src`.
+/// Module names are unique across crates, so a `crate::motion` path names the same module
+/// wherever the module lives.
+fn source_dirs() -> Vec<std::path::PathBuf> {
+    let pipeline = common::repo().join("pipeline");
+    let mut dirs = vec![pipeline.join("src")];
+    for entry in std::fs::read_dir(&pipeline).unwrap().flatten() {
+        let src = entry.path().join("src");
+        if src.is_dir() {
+            dirs.push(src);
+        }
+    }
+    dirs
+}
+
 fn graph() -> BTreeMap<String, BTreeSet<String>> {
-    let src = common::repo().join("pipeline/src");
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    let mut stack = vec![src.clone()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                stack.push(path);
-                continue;
+    for src in source_dirs() {
+        let mut stack = vec![src.clone()];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).unwrap().flatten() {
+                let path = entry.path();
+                if path.is_dir() {
+                    stack.push(path);
+                    continue;
+                }
+                if path.extension().is_none_or(|e| e != "rs") {
+                    continue;
+                }
+                let module = module_of(path.strip_prefix(&src).unwrap());
+                if ["main", "cli", "lib"].contains(&module.as_str()) {
+                    continue;
+                }
+                let text = std::fs::read_to_string(&path).unwrap();
+                let deps = uses(&code(&text));
+                let entry = graph.entry(module.clone()).or_default();
+                entry.extend(deps.into_iter().filter(|d| *d != module));
             }
-            if path.extension().is_none_or(|e| e != "rs") {
-                continue;
-            }
-            let module = module_of(path.strip_prefix(&src).unwrap());
-            if ["main", "cli", "lib"].contains(&module.as_str()) {
-                continue;
-            }
-            let text = std::fs::read_to_string(&path).unwrap();
-            let deps = uses(&code(&text));
-            let entry = graph.entry(module.clone()).or_default();
-            entry.extend(deps.into_iter().filter(|d| *d != module));
         }
     }
     graph

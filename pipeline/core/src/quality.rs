@@ -888,7 +888,7 @@ mod tests {
 
     #[test]
     fn skipping_far_bone_pairs_measures_what_every_pair_measures_on_real_captures() {
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
         let mut files: Vec<(PathBuf, &str)> = vec![(root.join("fixtures/cmu/01_01.bvh"), "cmu")];
         for dir in [
             root.join("fixtures/bandai-namco-1/data"),

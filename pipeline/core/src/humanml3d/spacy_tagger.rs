@@ -14,7 +14,7 @@ use std::collections::HashMap;
 
 use serde::Deserialize;
 
-const MODEL: &[u8] = include_bytes!("../../../schemas/caption-tagger-spacy.bin");
+const MODEL: &[u8] = include_bytes!("../../../../schemas/caption-tagger-spacy.bin");
 const FILE: &str = "schemas/caption-tagger-spacy.bin";
 const FORMAT: &str = "motionforge-caption-tagger 1";
 const ATTRS: [&str; 6] = ["NORM", "PREFIX", "SUFFIX", "SHAPE", "SPACY", "IS_SPACE"];

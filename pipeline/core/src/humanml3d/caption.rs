@@ -24,9 +24,9 @@ use serde::Deserialize;
 
 use super::spacy_tagger::{SpacyTagger, SpacyToken};
 
-const RULES_TOML: &str = include_str!("../../../schemas/caption-tagger.toml");
-const LEXICON_TSV: &str = include_str!("../../../schemas/pos-lexicon.tsv");
-const EXCEPTIONS_TSV: &str = include_str!("../../../schemas/pos-exceptions.tsv");
+const RULES_TOML: &str = include_str!("../../../../schemas/caption-tagger.toml");
+const LEXICON_TSV: &str = include_str!("../../../../schemas/pos-lexicon.tsv");
+const EXCEPTIONS_TSV: &str = include_str!("../../../../schemas/pos-exceptions.tsv");
 
 /// A Universal POS tag as spaCy assigns them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -1016,7 +1016,7 @@ mod tests {
 
     #[test]
     fn real_channel_values_take_the_fast_path_and_agree() {
-        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures");
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../fixtures");
         let mut checked = 0usize;
         for dir in ["bandai-namco-1/data", "bandai-namco-2/data", "cmu"] {
             let Ok(entries) = std::fs::read_dir(format!("{root}/{dir}")) else {

@@ -339,12 +339,15 @@ pub enum ProfileError {
 const BUNDLED: [(&str, &str); 3] = [
     (
         "bandai-namco",
-        include_str!("../../../schemas/skeletons/bandai-namco.toml"),
+        include_str!("../../../../schemas/skeletons/bandai-namco.toml"),
     ),
-    ("cmu", include_str!("../../../schemas/skeletons/cmu.toml")),
+    (
+        "cmu",
+        include_str!("../../../../schemas/skeletons/cmu.toml"),
+    ),
     (
         "smpl-22",
-        include_str!("../../../schemas/skeletons/smpl-22.toml"),
+        include_str!("../../../../schemas/skeletons/smpl-22.toml"),
     ),
 ];
 
