@@ -16,7 +16,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use motionforge::annotate::frame_index::{
     MAX_CAPTION_LINE_BYTES, read_caption_file, read_captions,
 };
-use motionforge::humanml3d::caption::{
+use motionforge::caption::{
     CaptionError, MAX_CAPTION_CHARS, Token, Upos, caption_line, over_length, python_float,
     rule_tokens, spacy_attributes, tokens,
 };

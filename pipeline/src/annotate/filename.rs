@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use regex::Regex;
 
 use crate::base::RejectReason;
-use crate::humanml3d::caption::{MAX_CAPTION_CHARS, over_length};
+use crate::caption::{MAX_CAPTION_CHARS, over_length};
 
 use super::span::{CaptureAnnotation, Span, Time};
 

@@ -287,7 +287,7 @@ pub(crate) fn bench_write(data: &Path, profile: &str, target_frames: usize) -> R
 /// `bench --captions FILE`: tags each distinct caption of the file (one a line) for a HumanML3D
 /// caption line, once on one thread, then all of them again (remembered by `caption::tokens`).
 pub(crate) fn bench_captions(path: &Path) -> Result<()> {
-    use motionforge::humanml3d::caption::tokens;
+    use motionforge::caption::tokens;
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let captions: Vec<&str> = text

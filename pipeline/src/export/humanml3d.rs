@@ -690,7 +690,7 @@ fn caption_lines(entry: &Entry) -> (String, Vec<Skipped>) {
     let mut text = String::new();
     let mut refused = Vec::new();
     for caption in &entry.captions {
-        match hml3d::caption::caption_line(caption, 0.0, 0.0) {
+        match crate::caption::caption_line(caption, 0.0, 0.0) {
             Ok(line) => {
                 text.push_str(&line);
                 text.push('\n');

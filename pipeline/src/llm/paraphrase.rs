@@ -33,7 +33,7 @@ use std::sync::LazyLock;
 use regex::Regex;
 use serde::{Deserialize, Serialize};
 
-use crate::humanml3d::caption::{Upos, tokens};
+use crate::caption::{Upos, tokens};
 use crate::text::{rotation_words, side_words};
 
 /// Why a paraphrase line is refused.

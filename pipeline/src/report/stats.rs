@@ -389,10 +389,10 @@ fn text_statistics(rows: &[ClipRow]) -> TextStats {
         let words = caption_words(caption);
         words_per_caption.push(words.len() as f64);
         vocabulary.extend(words);
-        if let Ok(tokens) = crate::humanml3d::caption::tokens(caption) {
+        if let Ok(tokens) = crate::caption::tokens(caption) {
             let in_caption: std::collections::BTreeSet<String> = tokens
                 .into_iter()
-                .filter(|t| t.tag == crate::humanml3d::caption::Upos::Verb)
+                .filter(|t| t.tag == crate::caption::Upos::Verb)
                 .map(|t| t.word.to_lowercase())
                 .collect();
             for verb in in_caption {

@@ -169,7 +169,7 @@ pub fn run_with<E>(
         }
         // Whatever the annotation format: one text must not make the labeller and tagger work
         // (and hold memory) in proportion to a damaged file.
-        let limit = crate::humanml3d::caption::MAX_CAPTION_CHARS;
+        let limit = crate::caption::MAX_CAPTION_CHARS;
         if span.raw_text.chars().count() > limit || span.label.chars().count() > limit {
             drop(DropReason::LongText, &span.raw_text, None);
             continue;

@@ -23,9 +23,7 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
-pub mod caption;
 mod recover;
-mod spacy_tagger;
 
 pub use recover::{positions_from_vectors, recover_from_ric};
 

@@ -210,7 +210,7 @@ struct Spellings {
     keep: HashSet<String>,
 }
 
-const TYPOS_TOML: &str = include_str!("../../schemas/side-words.toml");
+const TYPOS_TOML: &str = include_str!("../../../schemas/side-words.toml");
 
 /// The bundled typo data is part of the source, like the regex below: a unit test loads it, so a
 /// failure here is a build defect, never an input's.

@@ -33,7 +33,7 @@ use std::fmt;
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use crate::motion::BodyPart;
+use motionforge_core::motion::BodyPart;
 
 /// Which labeller gave a clip its parts. Written in tables and reports as `embedded:lexicon`,
 /// `embedded:velocity`, `llm:<model>`, `import:<file>` or `composed`; ordered as those names sort,

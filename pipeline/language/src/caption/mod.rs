@@ -22,7 +22,9 @@ use std::sync::{Mutex, OnceLock};
 
 use serde::Deserialize;
 
-use super::spacy_tagger::{SpacyTagger, SpacyToken};
+mod spacy_tagger;
+
+use self::spacy_tagger::{SpacyTagger, SpacyToken};
 
 const RULES_TOML: &str = include_str!("../../../../schemas/caption-tagger.toml");
 const LEXICON_TSV: &str = include_str!("../../../../schemas/pos-lexicon.tsv");

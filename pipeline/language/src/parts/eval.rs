@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use serde::{Deserialize, Serialize};
 
 use super::{PartSet, part_name};
-use crate::motion::BodyPart;
+use motionforge_core::motion::BodyPart;
 
 /// One manual label.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

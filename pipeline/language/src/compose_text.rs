@@ -319,7 +319,7 @@ fn is_gerund_form(word: &str) -> bool {
 }
 
 /// The bundled word lists (`schemas/compose_text.toml`).
-const WORDS_TOML: &str = include_str!("../../schemas/compose_text.toml");
+const WORDS_TOML: &str = include_str!("../../../schemas/compose_text.toml");
 
 /// The word lists as written in the file; each is documented there.
 #[derive(Deserialize)]
@@ -372,11 +372,12 @@ pub struct WordsError(String);
 
 fn load_words(text: &str) -> Result<Words, WordsError> {
     let f: WordFile = toml::from_str(text).map_err(|e| WordsError(e.to_string()))?;
-    let list =
-        |v: Vec<String>| -> Vec<&'static str> { v.into_iter().map(crate::base::leak).collect() };
+    let list = |v: Vec<String>| -> Vec<&'static str> {
+        v.into_iter().map(motionforge_core::base::leak).collect()
+    };
     let phrases = |v: Vec<String>| -> Vec<Vec<&'static str>> {
         v.into_iter()
-            .map(|p| crate::base::leak(p).split_whitespace().collect())
+            .map(|p| motionforge_core::base::leak(p).split_whitespace().collect())
             .collect()
     };
     let words = Words {
@@ -399,7 +400,7 @@ fn load_words(text: &str) -> Result<Words, WordsError> {
         particle_verbs: f
             .particle_verbs
             .into_iter()
-            .map(|(w, p)| (crate::base::leak(w), list(p)))
+            .map(|(w, p)| (motionforge_core::base::leak(w), list(p)))
             .collect(),
     };
     if words.verbs.is_empty() || words.subjects.iter().any(Vec::is_empty) {

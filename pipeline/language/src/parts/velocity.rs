@@ -32,8 +32,8 @@
 use glam::DVec3;
 
 use super::PartSet;
-use crate::motion::canonical::dataset_positions;
-use crate::motion::{BodyPart, Motion, Profile};
+use motionforge_core::motion::canonical::dataset_positions;
+use motionforge_core::motion::{BodyPart, Motion, Profile};
 
 /// Score above which a part counts as involved: faster than this motion's average part.
 pub const SCORE_THRESHOLD: f64 = 0.0;
@@ -192,7 +192,7 @@ mod tests {
 
     use std::sync::Arc;
 
-    use crate::motion::ProfileSpec;
+    use motionforge_core::motion::ProfileSpec;
 
     /// SMPL-22 with every joint at the origin of its parent, moving `joint` along x by
     /// `amplitude * sin` per frame (metres, 30 fps, 60 frames).

@@ -62,7 +62,7 @@ use std::sync::LazyLock;
 use serde::Deserialize;
 
 use super::PartSet;
-use crate::motion::BodyPart;
+use motionforge_core::motion::BodyPart;
 
 /// What an unknown text gets: both arms (see the module doc).
 pub const UNKNOWN_DEFAULT: PartSet = PartSet::ARMS;
@@ -160,7 +160,7 @@ const fn strong(extra: u8) -> Kind {
 }
 
 /// The bundled lexicon (`schemas/lexicon.toml`).
-const LEXICON_TOML: &str = include_str!("../../../schemas/lexicon.toml");
+const LEXICON_TOML: &str = include_str!("../../../../schemas/lexicon.toml");
 
 /// A set of words from the lexicon file.
 type WordSet = HashSet<&'static str>;
@@ -312,7 +312,10 @@ fn parse_meaning(meaning: &str) -> Result<Kind, String> {
 }
 
 fn word_set(words: Vec<String>) -> WordSet {
-    words.into_iter().map(crate::base::leak).collect()
+    words
+        .into_iter()
+        .map(motionforge_core::base::leak)
+        .collect()
 }
 
 fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
@@ -325,7 +328,7 @@ fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
             phrase: phrase.clone(),
             message,
         })?;
-        let phrase = crate::base::leak(phrase);
+        let phrase = motionforge_core::base::leak(phrase);
         let words: Vec<&'static str> = phrase.split(' ').collect();
         if matches!(kind, Kind::Act { .. }) {
             verbs.extend(words.iter().copied());
@@ -358,7 +361,12 @@ fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
         irregular: file
             .irregular
             .into_iter()
-            .map(|(k, v)| (crate::base::leak(k), crate::base::leak(v)))
+            .map(|(k, v)| {
+                (
+                    motionforge_core::base::leak(k),
+                    motionforge_core::base::leak(v),
+                )
+            })
             .collect(),
     })
 }

@@ -43,7 +43,7 @@
 //!   caller, not the parser's business.
 
 use super::PartSet;
-use crate::motion::BodyPart;
+use motionforge_core::motion::BodyPart;
 
 /// The eight words of SINC's third prompt, in the prompt's order.
 pub const PROMPT_LIST: [&str; 8] = [
