@@ -1,5 +1,6 @@
 //! The statistics report: counts checked against an independent reader (pyarrow), quartiles on
-//! known inputs, every figure and table written, and byte-identical output for the same rows.
+//! known inputs, every figure and table written, byte-identical output for the same rows, and the
+//! figures' text measured on a compiled two-column page.
 //!
 //! Set `MOTIONFORGE_REPORT_KEEP=<dir>` to keep the demo report there for inspection.
 
@@ -10,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use motionforge::report::{
-    self, ClipRow, FIGURES, MIN_VIOLIN, NO_SPLIT, ReportInput, Stats, Summary, UNMAPPED,
+    self, ClipRow, DPI, FIGURES, MIN_VIOLIN, NO_SPLIT, ReportInput, Span, Stats, Summary, UNMAPPED,
     find_clip_tables, lengths_by_type, read_build_counts, read_rows, statistics, violin_outline,
     write_report,
 };
@@ -318,17 +319,16 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
 
     let out1 = tmp.path().join("report1");
     let written = write_report(&rows, &stats, &out1).unwrap();
-    for name in ["stats.json", "tables.tex", "report.md"] {
+    for name in ["stats.json", "tables.tex", "figures.tex", "report.md"] {
         assert!(written.contains(&out1.join(name)), "{name} not written");
     }
-    assert_eq!(written.len(), 3 + 2 * FIGURES.len());
+    assert_eq!(written.len(), 4 + 3 * FIGURES.len());
     let out2 = tmp.path().join("report2");
     write_report(&reversed, &statistics(&reversed, &input), &out2).unwrap();
     let (a, b) = (files(&out1), files(&out2));
     assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
-    for (name, bytes) in &a {
-        assert!(bytes == &b[name], "{} differs between runs", name.display());
-    }
+    let differ: Vec<&PathBuf> = a.keys().filter(|name| a[*name] != b[*name]).collect();
+    assert!(differ.is_empty(), "{differ:?} differ between runs");
     assert!(
         !a.keys().any(|k| k.to_string_lossy().contains(".tmp")),
         "temporary files left: {:?}",
@@ -353,12 +353,20 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
         PY_SVG,
         &svgs.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
     );
+    // Titles in words with their units; the demo's 1 to 3 clips per type on a linear axis.
     let expected_labels: [&[&str]; 5] = [
-        &["motion type", "clips (log scale)"],
-        &["motion type", "motion length (s)"],
+        &["motion type", "clips"],
+        &["motion type", "length (s)"],
         &["lateral (m, + right)", "forward (m)"],
-        &["split", "clips (rows)"],
-        &["foot skating (m/s)", "lean (°)", "ground penetration (m)"],
+        &["split", "clips"],
+        &[
+            "foot skating (m/s)",
+            "ground penetration (m)",
+            "limb-to-spine distance (m)",
+            "lean (°)",
+            "threshold ≤ 0.4",
+            "threshold ≥ 0.03",
+        ],
     ];
     for ((svg, labels), spec) in svgs.iter().zip(expected_labels).zip(FIGURES) {
         let t: Vec<String> =
@@ -371,6 +379,20 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
             );
         }
     }
+    let all_texts: Vec<String> = svgs
+        .iter()
+        .flat_map(|svg| {
+            serde_json::from_value::<Vec<String>>(texts[svg.to_string_lossy().as_ref()].clone())
+                .unwrap()
+        })
+        .collect();
+    for text in &all_texts {
+        assert!(
+            !text.contains('_') && !text.contains("<=") && !text.contains(">="),
+            "a column name or ASCII bound in a figure: {text:?}"
+        );
+    }
+    assert!(!all_texts.iter().any(|t| t.contains("log scale")));
     // Readable type names on the type figures.
     let type_svg: Vec<String> =
         serde_json::from_value(texts[svgs[0].to_string_lossy().as_ref()].clone()).unwrap();
@@ -391,6 +413,17 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
     for (png, spec) in pngs.iter().zip(FIGURES) {
         let bytes = std::fs::read(png).unwrap();
         assert_eq!(png_size(&bytes), (spec.width, spec.height), "{}", spec.stem);
+        // Drawn at its printed width: 3.4 in for a column, 7 in across the page, at 300 dpi.
+        let inches = match spec.span {
+            Span::Column => 3.4,
+            Span::Page => 7.0,
+        };
+        assert_eq!(
+            f64::from(spec.width),
+            inches * f64::from(DPI),
+            "{}",
+            spec.stem
+        );
         assert!(
             bytes.len() > 20_000,
             "{}: only {} bytes",
@@ -438,8 +471,80 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
     // tables.tex typesets in a two-column paper without an overfull box.
     compile_two_column(&out1.join("tables.tex"));
 
-    // report.md embeds every figure.
+    // The type rows in the order of the type figures' bars.
     let md = String::from_utf8(a[Path::new("report.md")].clone()).unwrap();
+    let at = |hay: &str, name: &str| hay.find(name).unwrap_or(usize::MAX);
+    let table_order = |hay: &str, quote: fn(&str) -> String| {
+        let mut names: Vec<&str> = stats
+            .motion_types
+            .iter()
+            .map(|t| t.motion_type.as_str())
+            .collect();
+        names.sort_by_key(|n| at(hay, &quote(n)));
+        names
+    };
+    let bar_order: Vec<&str> = type_svg
+        .iter()
+        .filter_map(|x| {
+            stats
+                .motion_types
+                .iter()
+                .find(|t| t.motion_type == *x)
+                .map(|t| t.motion_type.as_str())
+        })
+        .collect();
+    assert_eq!(bar_order.len(), stats.motion_types.len(), "{type_svg:?}");
+    assert_eq!(
+        table_order(&md, |n| format!("| {} |", report::markdown_escape(n))),
+        bar_order
+    );
+    assert_eq!(
+        table_order(&tex, |n| format!("{} &", report::latex_escape(n))),
+        bar_order
+    );
+
+    // The figures' PDFs: one page at the printed size, the font embedded.
+    for spec in FIGURES {
+        let pdf = &a[&PathBuf::from(format!("figures/{}.pdf", spec.stem))];
+        assert!(pdf.starts_with(b"%PDF-"), "{}", spec.stem);
+        let text = String::from_utf8_lossy(pdf);
+        let media: Vec<f64> = text
+            .split("/MediaBox [")
+            .nth(1)
+            .and_then(|t| t.split(']').next())
+            .map(|t| t.split_whitespace().map(|v| v.parse().unwrap()).collect())
+            .unwrap_or_default();
+        let (w, h) = spec.inches();
+        assert_eq!(media.len(), 4, "{}: {media:?}", spec.stem);
+        assert!(
+            (media[2] - w * 72.0).abs() < 0.01 && (media[3] - h * 72.0).abs() < 0.01,
+            "{}: page {media:?}, not {w} x {h} in",
+            spec.stem
+        );
+        assert!(
+            text.contains("/FontFile2"),
+            "{}: font not embedded",
+            spec.stem
+        );
+        assert!(text.contains("DejaVuSans"), "{}", spec.stem);
+    }
+    // figures.tex: each figure at the width it was drawn for, with its caption and label.
+    let figures_tex = String::from_utf8(a[Path::new("figures.tex")].clone()).unwrap();
+    for spec in FIGURES {
+        let (float, width) = match spec.span {
+            Span::Column => ("figure", "\\columnwidth"),
+            Span::Page => ("figure*", "\\textwidth"),
+        };
+        let block = format!(
+            "\\begin{{{float}}}[tbp]\n\\centering\n\\includegraphics[width={width}]{{figures/{}.pdf}}\n\\caption{{demo\\_set \\& co: {}.}}\n\\label{{{}}}\n\\end{{{float}}}\n",
+            spec.stem, spec.caption, spec.label
+        );
+        assert!(figures_tex.contains(&block), "no {block} in\n{figures_tex}");
+    }
+    // Compiled in a two-column paper, the figures' text prints at 7 to 10 pt.
+    measure_figure_text(&out1);
+
+    // report.md embeds every figure.
     for f in FIGURES {
         assert!(
             md.contains(&format!("](figures/{}.png)", f.stem)),
@@ -447,6 +552,7 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
             f.stem
         );
         assert!(md.contains(&format!("(figures/{}.svg)", f.stem)));
+        assert!(md.contains(&format!("(figures/{}.pdf)", f.stem)));
     }
     assert!(md.contains("too\\_short"));
 
@@ -504,15 +610,13 @@ fn violins_stay_within_each_types_data_range() {
 }
 
 /// Compiles `tables` in a two-column article with pdflatex and fails on any overfull box (a table
-/// wider than its column). Where LaTeX is not installed (scripts/test.sh installs it from Debian
-/// packages when run as root) it says so on standard error and checks nothing more.
+/// wider than its column). Needs LaTeX: `scripts/test.sh` installs it (`scripts/system-packages.sh`);
+/// without it the test fails saying so, rather than passing on a check it did not make.
 fn compile_two_column(tables: &Path) {
-    if Command::new("pdflatex").arg("--version").output().is_err() {
-        eprintln!(
-            "SKIPPED: tables.tex two-column compile: pdflatex is not installed (apt-get install texlive-latex-base texlive-latex-recommended)"
-        );
-        return;
-    }
+    assert!(
+        Command::new("pdflatex").arg("--version").output().is_ok(),
+        "pdflatex is not installed: run the tests through scripts/test.sh, or scripts/system-packages.sh once (texlive-latex-base texlive-latex-recommended)"
+    );
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(tables, dir.path().join("tables.tex")).unwrap();
     std::fs::write(
@@ -534,6 +638,294 @@ fn compile_two_column(tables: &Path) {
         "{overfull:#?}\n{}",
         std::fs::read_to_string(tables).unwrap()
     );
+}
+
+/// DejaVu Sans, the figures' font, per em (2048 units): digits stand 1493 units tall, lowercase
+/// letters without ascenders or descenders 1120.
+const DIGIT_HEIGHT_EM: f64 = 1493.0 / 2048.0;
+const X_HEIGHT_EM: f64 = 1120.0 / 2048.0;
+/// DejaVu Sans' ascender to descender, per em ((1901 + 483) / 2048): the height of the box
+/// pdftotext gives an upright word.
+const LINE_EM: f64 = 2384.0 / 2048.0;
+/// Letters that stand exactly at the x-height (no ascender, descender, dot or accent).
+const X_LETTERS: &str = "acemnorsuvwxz";
+/// Rasterising resolution of the compiled page, pixels per inch.
+const PAGE_DPI: f64 = 400.0;
+
+/// The two-column paper of the figure test: US letter with a 7 in text block and 0.3 in between
+/// the columns (a 3.35 in column), as conference templates have; no page numbers, so every
+/// number on the page is a figure's.
+fn paper(report: &Path, body: &str) -> String {
+    format!(
+        "\\documentclass[twocolumn]{{article}}\n\\usepackage{{graphicx}}\n\
+         \\setlength{{\\textwidth}}{{7in}}\n\\setlength{{\\columnsep}}{{0.3in}}\n\
+         \\setlength{{\\oddsidemargin}}{{-0.25in}}\n\\setlength{{\\evensidemargin}}{{-0.25in}}\n\
+         \\graphicspath{{{{{}/}}}}\n\\pagestyle{{empty}}\n\\begin{{document}}\n{body}\n\\end{{document}}\n",
+        report.display()
+    )
+}
+
+/// Runs pdflatex on `tex` in `dir`; fails on an error or an overfull box.
+fn pdflatex(dir: &Path, tex: &str) -> PathBuf {
+    std::fs::write(dir.join("paper.tex"), tex).unwrap();
+    let out = Command::new("pdflatex")
+        .args(["-interaction=nonstopmode", "-halt-on-error", "paper.tex"])
+        .current_dir(dir)
+        .output()
+        .expect("run pdflatex");
+    let log = std::fs::read_to_string(dir.join("paper.log")).unwrap_or_default();
+    assert!(out.status.success(), "pdflatex failed:\n{log}\n{tex}");
+    let overfull: Vec<&str> = log.lines().filter(|l| l.starts_with("Overfull")).collect();
+    assert!(overfull.is_empty(), "{overfull:#?}\n{tex}");
+    dir.join("paper.pdf")
+}
+
+/// A word pdftotext found: its text, page (from 0) and box in points from the page's top left.
+#[derive(Debug)]
+struct Word {
+    text: String,
+    page: usize,
+    x: (f64, f64),
+    y: (f64, f64),
+}
+
+/// Every word of `pdf` with its box (`pdftotext -bbox`).
+fn words(pdf: &Path) -> Vec<Word> {
+    let html = pdf.with_extension("html");
+    let out = Command::new("pdftotext")
+        .arg("-bbox")
+        .arg(pdf)
+        .arg(&html)
+        .output()
+        .expect("run pdftotext (poppler-utils; scripts/system-packages.sh installs it)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(&html).unwrap();
+    let attr = |line: &str, name: &str| -> f64 {
+        let start = line.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
+        let end = start + line[start..].find('"').unwrap();
+        line[start..end].parse().unwrap()
+    };
+    let mut page = 0;
+    let mut found = Vec::new();
+    for line in html.lines().map(str::trim) {
+        if line.starts_with("<page ") {
+            page += 1;
+        } else if line.starts_with("<word ") {
+            let text = &line[line.find('>').unwrap() + 1..line.rfind("</word>").unwrap()];
+            found.push(Word {
+                text: text
+                    .replace("&amp;", "&")
+                    .replace("&lt;", "<")
+                    .replace("&gt;", ">"),
+                page: page - 1,
+                x: (attr(line, "xMin"), attr(line, "xMax")),
+                y: (attr(line, "yMin"), attr(line, "yMax")),
+            });
+        }
+    }
+    found
+}
+
+/// The pages of `pdf` rasterised in grey at [`PAGE_DPI`]: (width, height, pixels) each.
+fn raster_pages(pdf: &Path) -> Vec<(usize, usize, Vec<u8>)> {
+    let dir = pdf.parent().unwrap();
+    let out = Command::new("pdftoppm")
+        .args(["-gray", "-r", &PAGE_DPI.to_string()])
+        .arg(pdf)
+        .arg(dir.join("page"))
+        .output()
+        .expect("run pdftoppm (poppler-utils; scripts/system-packages.sh installs it)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "pgm"))
+        .collect();
+    files.sort();
+    files
+        .iter()
+        .map(|p| {
+            let bytes = std::fs::read(p).unwrap();
+            // Binary PGM: "P5", width, height, maxval, one byte per pixel.
+            let mut fields = Vec::new();
+            let mut at = 0;
+            while fields.len() < 4 {
+                while bytes[at].is_ascii_whitespace() {
+                    at += 1;
+                }
+                let start = at;
+                while !bytes[at].is_ascii_whitespace() {
+                    at += 1;
+                }
+                fields.push(String::from_utf8_lossy(&bytes[start..at]).into_owned());
+            }
+            assert_eq!(fields[0], "P5", "{}", p.display());
+            let (w, h): (usize, usize) = (fields[1].parse().unwrap(), fields[2].parse().unwrap());
+            let pixels = bytes[at + 1..].to_vec();
+            assert_eq!(pixels.len(), w * h, "{}", p.display());
+            (w, h, pixels)
+        })
+        .collect()
+}
+
+/// The ink height in points of `word` on its rendered page: the tallest run of rows, within the
+/// word's box, that have a dark pixel (black or dark grey text, not the light grid or blue bars).
+fn ink_height(page: &(usize, usize, Vec<u8>), word: &Word) -> Option<f64> {
+    let (w, h, pixels) = page;
+    let px = |pt: f64| (pt * PAGE_DPI / 72.0) as usize;
+    let (x0, x1) = (px(word.x.0), (px(word.x.1) + 1).min(*w));
+    let (y0, y1) = (px(word.y.0), (px(word.y.1) + 1).min(*h));
+    let mut best = 0;
+    let mut run = 0;
+    for y in y0..y1 {
+        if pixels[y * w + x0..y * w + x1].iter().any(|v| *v < 80) {
+            run += 1;
+            best = best.max(run);
+        } else {
+            run = 0;
+        }
+    }
+    (best > 0).then(|| f64::from(best) * 72.0 / PAGE_DPI)
+}
+
+/// The font size, in points, that `word` is printed at on `page`, from its ink: digits (and a
+/// decimal point or minus) over DejaVu's digit height, x-height words over its x-height. `None`
+/// for other words.
+fn printed_size(page: &(usize, usize, Vec<u8>), word: &Word) -> Option<f64> {
+    let t = word.text.as_str();
+    let em = if t.chars().any(|c| c.is_ascii_digit())
+        && t.chars()
+            .all(|c| c.is_ascii_digit() || c == '.' || c == '-')
+    {
+        DIGIT_HEIGHT_EM
+    } else if !t.is_empty() && t.chars().all(|c| X_LETTERS.contains(c)) {
+        X_HEIGHT_EM
+    } else {
+        return None;
+    };
+    let ink = ink_height(page, word)?;
+    // Upright text only: ink and box heights scale together, so their ratio tells a rotated
+    // label (whose box is as tall as the word is long) or a line crossing the box from a word
+    // that lies straight, whatever the size.
+    let ratio = ink / (word.y.1 - word.y.0) / (em / LINE_EM);
+    (0.8..1.2).contains(&ratio).then_some(ink / em)
+}
+
+/// Each figure of the report in `report` (a written report folder), through its `figures.tex`
+/// block, compiled alone in a two-column paper, rasterised: the text of the figure's labels,
+/// measured from its ink on the page, is 7 to 10 pt (the figures set 8 and 9 pt). A full page
+/// with every figure and body text compiles too (kept as `paper.pdf` in
+/// `$MOTIONFORGE_REPORT_KEEP` for `docs/report.md`). Needs pdflatex and poppler-utils
+/// (`scripts/system-packages.sh`); fails saying so without them.
+fn measure_figure_text(report: &Path) {
+    let have = |tool: &str| Command::new(tool).arg("-v").output().is_ok();
+    assert!(
+        have("pdflatex") && have("pdftoppm") && have("pdftotext"),
+        "pdflatex, pdftoppm or pdftotext is missing: run the tests through scripts/test.sh, or scripts/system-packages.sh once (poppler-utils, texlive)"
+    );
+    let figures_tex = std::fs::read_to_string(report.join("figures.tex")).unwrap();
+    let blocks: Vec<&str> = figures_tex
+        .split("\\begin{figure")
+        .skip(1)
+        .map(|b| b.trim())
+        .collect();
+    assert_eq!(blocks.len(), FIGURES.len(), "{figures_tex}");
+    let filler = "The text of a paper runs in two columns around its figures. ".repeat(40);
+    for (spec, block) in FIGURES.iter().zip(&blocks) {
+        assert!(block.contains(&format!("figures/{}.pdf", spec.stem)));
+        let dir = tempfile::tempdir().unwrap();
+        let body = format!("{filler}\n\n\\begin{{figure{block}\n\n{filler}");
+        let pdf = pdflatex(dir.path(), &paper(report, &body));
+        // Words of the caption and body are LaTeX's, not the figure's.
+        let latex_words: Vec<&str> = block
+            .split_whitespace()
+            .chain(filler.split_whitespace())
+            .collect();
+        let pages = raster_pages(&pdf);
+        let candidates: Vec<Word> = words(&pdf)
+            .into_iter()
+            .filter(|w| !latex_words.contains(&w.text.as_str()))
+            .collect();
+        let mut sizes: Vec<(String, f64)> = candidates
+            .iter()
+            .filter_map(|w| printed_size(&pages[w.page], w).map(|s| (w.text.clone(), s)))
+            .collect();
+        assert!(
+            sizes.len() >= 3,
+            "{}: only {sizes:?} measured on the page",
+            spec.stem
+        );
+        sizes.sort_by(|a, b| a.1.total_cmp(&b.1));
+        eprintln!(
+            "{}: {} of {} words measured, {:.2} to {:.2} pt ({} and {} at the ends)",
+            spec.stem,
+            sizes.len(),
+            candidates.len(),
+            sizes[0].1,
+            sizes[sizes.len() - 1].1,
+            sizes[0].0,
+            sizes[sizes.len() - 1].0
+        );
+        for (text, size) in &sizes {
+            assert!(
+                (7.0..=10.0).contains(size),
+                "{}: {text:?} prints at {size:.2} pt, not 7 to 10: {sizes:?}",
+                spec.stem
+            );
+        }
+        // The figure is as wide as the paper sets it: a column, or the text block.
+        let expected = match spec.span {
+            Span::Column => (7.0 - 0.3) / 2.0,
+            Span::Page => 7.0,
+        };
+        assert!(
+            (expected / spec.inches().0 - 1.0).abs() < 0.03,
+            "{}",
+            spec.stem
+        );
+    }
+
+    // Every figure with body text around them, as a paper would have them.
+    let dir = tempfile::tempdir().unwrap();
+    let body = format!(
+        "{filler}\n\n\\input{{{}/figures.tex}}\n\n{}",
+        report.display(),
+        filler.repeat(3)
+    );
+    let pdf = pdflatex(dir.path(), &paper(report, &body));
+    let all = words(&pdf);
+    assert!(
+        all.iter().any(|w| w.text == "lateral"),
+        "no figure text on the page"
+    );
+
+    // The page of docs/report.md: a figure across the page and one in a column, in the text.
+    if let Ok(keep) = std::env::var("MOTIONFORGE_REPORT_KEEP") {
+        let block = |stem: &str| {
+            let i = FIGURES.iter().position(|f| f.stem == stem).unwrap();
+            format!("\\begin{{figure{}", blocks[i])
+        };
+        let body = format!(
+            "{filler}{}\n\n{}\n\n{}\n\n{}",
+            &filler[..filler.len() / 4],
+            block("plausibility"),
+            block("composition"),
+            filler.repeat(5)
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let pdf = pdflatex(dir.path(), &paper(report, &body));
+        std::fs::create_dir_all(&keep).unwrap();
+        std::fs::copy(&pdf, Path::new(&keep).join("paper.pdf")).unwrap();
+    }
 }
 
 /// A table with a `split` column (added with pyarrow, as the sharded writer will): composition
@@ -643,12 +1035,95 @@ fn quartiles_and_groups_on_a_known_input() {
     assert_eq!((q.q1, q.median, q.q3), (1.5, 2.0, 2.5));
 }
 
+/// The text elements of a figure's SVG (plotters writes each on its own line).
+fn svg_texts(report: &Path, stem: &str) -> Vec<String> {
+    let svg = std::fs::read_to_string(report.join(format!("figures/{stem}.svg"))).unwrap();
+    svg.split("<text")
+        .skip(1)
+        .filter_map(|t| t.split_once('>'))
+        .filter_map(|(_, rest)| rest.split_once("</text>"))
+        .map(|(text, _)| text.trim().to_string())
+        .collect()
+}
+
+/// A few clips per type get a linear count axis from zero; counts spanning more than two
+/// decades a log axis. A source kind without rows, or no mirrored copies, get no legend entry
+/// (the composition table still lists the kind, with its zeros).
+#[test]
+fn count_axes_fit_the_counts_and_empty_kinds_have_no_legend() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rows = vec![
+        row("a", "real_single", false, Some("walk"), 30),
+        row("b", "real_single", false, Some("walk"), 60),
+        row("c", "real_single", false, Some("walk"), 90),
+        row("d", "real_single", false, Some("kick"), 45),
+        row("e", "synthetic", false, None, 45),
+    ];
+    let small = tmp.path().join("small");
+    write_report(&rows, &statistics(&rows, &ReportInput::default()), &small).unwrap();
+    let counts = svg_texts(&small, "motion_type_counts");
+    assert!(counts.iter().any(|t| t == "clips"), "{counts:?}");
+    assert!(!counts.iter().any(|t| t.contains("log")), "{counts:?}");
+    // Whole clips from 0: 0, 1, 2, 3.
+    for tick in ["0", "1", "2", "3"] {
+        assert!(
+            counts.iter().any(|t| t == tick),
+            "no tick {tick}: {counts:?}"
+        );
+    }
+    assert!(!counts.iter().any(|t| t.contains('.')), "{counts:?}");
+    let composition = svg_texts(&small, "composition");
+    assert!(
+        composition.iter().any(|t| t == "real single"),
+        "{composition:?}"
+    );
+    assert!(
+        composition.iter().any(|t| t == "synthetic"),
+        "{composition:?}"
+    );
+    assert!(
+        !composition.iter().any(|t| t == "real pair"),
+        "{composition:?}"
+    );
+    assert!(
+        !composition.iter().any(|t| t.contains("mirrored")),
+        "{composition:?}"
+    );
+    let tex = std::fs::read_to_string(small.join("tables.tex")).unwrap();
+    assert!(tex.contains("real pair"), "the table lists every kind");
+
+    // 300 walks against 2 kicks: a log axis; a mirrored copy gets its legend entry.
+    for i in 0..297 {
+        rows.push(row(
+            &format!("w{i:03}"),
+            "real_single",
+            false,
+            Some("walk"),
+            30,
+        ));
+    }
+    rows.push(row("k", "real_single", false, Some("kick"), 45));
+    rows.push(row("a-m", "real_single", true, Some("walk"), 30));
+    let large = tmp.path().join("large");
+    write_report(&rows, &statistics(&rows, &ReportInput::default()), &large).unwrap();
+    let counts = svg_texts(&large, "motion_type_counts");
+    assert!(
+        counts.iter().any(|t| t == "clips (log scale)"),
+        "{counts:?}"
+    );
+    let composition = svg_texts(&large, "composition");
+    assert!(
+        composition.iter().any(|t| t == "mirrored copies (lighter)"),
+        "{composition:?}"
+    );
+}
+
 #[test]
 fn empty_input_still_writes_every_file() {
     let tmp = tempfile::tempdir().unwrap();
     let stats = statistics(&[], &ReportInput::default());
     let written = write_report(&[], &stats, tmp.path()).unwrap();
-    assert_eq!(written.len(), 3 + 2 * FIGURES.len());
+    assert_eq!(written.len(), 4 + 3 * FIGURES.len());
     for p in &written {
         assert!(std::fs::metadata(p).unwrap().len() > 0, "{}", p.display());
     }

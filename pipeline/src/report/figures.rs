@@ -1,78 +1,135 @@
-//! The figures, drawn with plotters into SVG and PNG. PNG text goes through ab_glyph with the
-//! bundled DejaVu Sans, so rendering needs no system font and gives the same pixels everywhere.
+//! The figures, drawn with plotters at their printed size into SVG, then converted to PDF
+//! (svg2pdf) and PNG (resvg) from that one SVG, so the three formats show the same drawing. Text
+//! is set in the bundled DejaVu Sans: plotters lays it out with ab_glyph, and usvg, resvg and
+//! svg2pdf load only that font (no system font), so output is the same on every machine.
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{FontStyle, FontTransform, register_font};
+use svg2pdf::usvg;
 
 use super::stats::{
-    Stats, TypeStats, kde, lengths_by_type, metric_values, quantile, silverman_bandwidth,
-    type_order, whiskers,
+    Stats, kde, lengths_by_type, metric_values, quantile, silverman_bandwidth,
+    types_in_report_order, whiskers,
 };
 use super::{ClipRow, ReportError};
 use crate::base::write_atomic;
 use crate::clip::SourceKind;
 
-/// A figure of the report: its file stem under `figures/`, caption and pixel size.
+/// Drawing units per inch. Figures are laid out in 1/300 in, so the PNG is the drawing at
+/// 300 dpi and the SVG's user units are the PNG's pixels.
+pub const DPI: u32 = 300;
+
+/// How wide a figure is printed in a two-column paper.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Span {
+    /// One column, 3.4 in: `figure` at `\columnwidth`.
+    Column,
+    /// Both columns, 7 in: `figure*` at `\textwidth`.
+    Page,
+}
+
+impl Span {
+    /// The printed width in inches.
+    pub fn inches(self) -> f64 {
+        match self {
+            Span::Column => 3.4,
+            Span::Page => 7.0,
+        }
+    }
+}
+
+/// A figure of the report: its file stem under `figures/`, caption, label and printed size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FigureSpec {
-    /// File stem: the figure is written as `figures/<stem>.svg` and `figures/<stem>.png`.
+    /// File stem: the figure is written as `figures/<stem>.svg`, `.pdf` and `.png`.
     pub stem: &'static str,
-    /// What the figure shows, for `report.md`.
+    /// What the figure shows, for `report.md` and `figures.tex`.
     pub caption: &'static str,
-    /// Width in pixels (SVG user units).
+    /// LaTeX label in `figures.tex`.
+    pub label: &'static str,
+    /// The width it is drawn for.
+    pub span: Span,
+    /// Width in drawing units ([`DPI`] per inch): the PNG's pixels.
     pub width: u32,
-    /// Height in pixels.
+    /// Height in drawing units.
     pub height: u32,
 }
+
+impl FigureSpec {
+    /// Printed width and height in inches.
+    pub fn inches(&self) -> (f64, f64) {
+        (
+            f64::from(self.width) / f64::from(DPI),
+            f64::from(self.height) / f64::from(DPI),
+        )
+    }
+}
+
+const COLUMN: u32 = 1020;
+const PAGE: u32 = 2100;
 
 /// Every figure, in the order of the report.
 pub const FIGURES: [FigureSpec; 5] = [
     FigureSpec {
         stem: "motion_type_counts",
-        caption: "Clips per motion type, log scale (original single clips; LINGO Fig. 6)",
-        width: 1200,
-        height: 700,
+        caption: "Clips per motion type (original single clips; LINGO Fig. 6)",
+        label: "fig:mf-motion-type-counts",
+        span: Span::Page,
+        width: PAGE,
+        height: 780,
     },
     FigureSpec {
         stem: "motion_lengths",
         caption: "Motion length per motion type: Gaussian KDE violins over box plots (LINGO Fig. A2)",
-        width: 1200,
-        height: 800,
+        label: "fig:mf-motion-lengths",
+        span: Span::Page,
+        width: PAGE,
+        height: 840,
     },
     FigureSpec {
         stem: "goal_locations",
         caption: "Locomotion goal locations in the first-frame canonical frame, over a 2D histogram (LINGO Fig. A3)",
-        width: 1000,
-        height: 900,
+        label: "fig:mf-goal-locations",
+        span: Span::Column,
+        width: COLUMN,
+        height: 930,
     },
     FigureSpec {
         stem: "composition",
         caption: "Composition of each split by source kind, mirrored copies lighter (SINC Fig. A.4)",
-        width: 1200,
-        height: 700,
+        label: "fig:mf-composition",
+        span: Span::Column,
+        width: COLUMN,
+        height: 780,
     },
     FigureSpec {
         stem: "plausibility",
         caption: "Plausibility metrics of real versus synthetic clips (originals), box plots",
-        width: 1200,
-        height: 800,
+        label: "fig:mf-plausibility",
+        span: Span::Page,
+        width: PAGE,
+        height: 720,
     },
 ];
 
 type DrawResult<T = ()> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 const FONT: &str = "sans-serif";
+/// The family name usvg resolves `sans-serif` to: the bundled font's.
+const FONT_FAMILY: &str = "DejaVu Sans";
 const FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
-const DESC: f64 = 24.0;
-const TICK: f64 = 20.0;
-const NOTE: f64 = 18.0;
+/// Text sizes in points as printed: axis and panel titles, tick labels, notes and legends.
+/// Papers set 8-9 pt in figures; `tests/report.rs` measures them on a compiled page.
+const DESC: f64 = 9.0;
+const TICK: f64 = 8.0;
+const NOTE: f64 = 8.0;
 /// At most this many goal points are drawn; the histogram below them counts every goal. Keeps
 /// the SVG of a large dataset small.
 const MAX_SCATTER: usize = 5000;
@@ -155,11 +212,86 @@ fn ensure_font() -> Result<(), ReportError> {
     if ok { Ok(()) } else { Err(ReportError::Font) }
 }
 
-fn font(size: f64) -> TextStyle<'static> {
-    TextStyle::from((FONT, size).into_font()).color(&BLACK)
+/// Drawing units for `points` (1/72 in) of print.
+fn dots(points: f64) -> f64 {
+    points * f64::from(DPI) / 72.0
 }
 
-/// Writes every figure of [`FIGURES`] as SVG and PNG into `dir`; returns the paths.
+/// [`dots`] rounded, for plotters' integer sizes.
+fn udots(points: f64) -> u32 {
+    dots(points).round() as u32
+}
+
+/// The figure font at `points` as printed. plotters writes an SVG `font-size` of its size / 1.24
+/// (its ab_glyph layout takes the size as 1.24 em), so the size passed is scaled up by that.
+fn font(points: f64) -> TextStyle<'static> {
+    TextStyle::from((FONT, dots(points) * 1.24).into_font()).color(&BLACK)
+}
+
+/// A line `points` wide.
+fn stroke(color: RGBColor, points: f64) -> ShapeStyle {
+    color.stroke_width(udots(points).max(1))
+}
+
+/// The usvg options every conversion uses: only the bundled font, as `sans-serif`.
+fn svg_options() -> &'static usvg::Options<'static> {
+    static OPTIONS: OnceLock<usvg::Options<'static>> = OnceLock::new();
+    OPTIONS.get_or_init(|| {
+        let mut db = usvg::fontdb::Database::new();
+        db.load_font_data(FONT_BYTES.to_vec());
+        db.set_sans_serif_family(FONT_FAMILY);
+        usvg::Options {
+            font_family: FONT_FAMILY.to_string(),
+            fontdb: Arc::new(db),
+            ..usvg::Options::default()
+        }
+    })
+}
+
+/// The SVG plotters wrote, given its printed size: `width`/`height` in inches (the viewBox keeps
+/// the drawing units), so an SVG viewer, usvg and a paper all see the figure at its size.
+fn with_printed_size(svg: &str, spec: &FigureSpec) -> Result<String, String> {
+    let (w, h) = spec.inches();
+    let drawn = format!("width=\"{}\" height=\"{}\"", spec.width, spec.height);
+    if !svg.contains(&drawn) {
+        return Err(format!("the SVG has no `{drawn}` to give its printed size"));
+    }
+    Ok(svg.replacen(&drawn, &format!("width=\"{w}in\" height=\"{h}in\""), 1))
+}
+
+/// PDF and PNG of one figure's SVG. The PDF embeds the subset of DejaVu Sans its text uses (text
+/// stays text, searchable), written by svg2pdf with no date or random id, so the same SVG gives
+/// the same bytes. The PNG is the SVG rasterised by resvg at [`DPI`] on white.
+fn pdf_and_png(svg: &str, spec: &FigureSpec) -> Result<(Vec<u8>, Vec<u8>), String> {
+    let tree = usvg::Tree::from_str(svg, svg_options()).map_err(|e| e.to_string())?;
+    // usvg measures in CSS pixels (96 per inch): a PDF point is 1/72 in.
+    let pdf = svg2pdf::to_pdf(
+        &tree,
+        svg2pdf::ConversionOptions::default(),
+        svg2pdf::PageOptions { dpi: 96.0 },
+    )
+    .map_err(|e| e.to_string())?;
+    let (w, h) = (spec.width, spec.height);
+    let mut pixmap = resvg::tiny_skia::Pixmap::new(w, h)
+        .ok_or_else(|| format!("cannot make a {w} x {h} image"))?;
+    pixmap.fill(resvg::tiny_skia::Color::WHITE);
+    let scale = f64::from(DPI) / 96.0;
+    resvg::render(
+        &tree,
+        resvg::tiny_skia::Transform::from_scale(scale as f32, scale as f32),
+        &mut pixmap.as_mut(),
+    );
+    // Opaque (white below everything), so dropping alpha loses nothing.
+    let rgb: Vec<u8> = pixmap
+        .data()
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let png = crate::dataset::preview::png_bytes(&rgb, (w, h)).map_err(|e| e.to_string())?;
+    Ok((pdf, png))
+}
+
+/// Writes every figure of [`FIGURES`] as SVG, PDF and PNG into `dir`; returns the paths.
 pub(crate) fn write_figures(
     rows: &[ClipRow],
     stats: &Stats,
@@ -172,40 +304,27 @@ pub(crate) fn write_figures(
     })?;
     let mut written = Vec::new();
     for spec in &FIGURES {
-        let fail = |e: Box<dyn std::error::Error + Send + Sync>| ReportError::Figure {
+        let fail = |message: String| ReportError::Figure {
             figure: spec.stem.to_string(),
-            message: e.to_string(),
+            message,
         };
-        let svg_path = dir.join(format!("{}.svg", spec.stem));
         let mut svg = String::new();
         {
             let root =
                 SVGBackend::with_string(&mut svg, (spec.width, spec.height)).into_drawing_area();
             render(spec, &root, rows, stats)
                 .and_then(|()| root.present().map_err(Into::into))
-                .map_err(fail)?;
+                .map_err(|e| fail(e.to_string()))?;
         }
-        write_atomic(&svg_path, svg.as_bytes())?;
-        written.push(svg_path);
-
-        let png_path = dir.join(format!("{}.png", spec.stem));
-        // Drawn in memory and written like every other file (temporary file, then rename), so a
-        // full disk is reported with the file's path and what to do, not the encoder's message.
-        let (w, h) = (spec.width, spec.height);
-        let mut rgb = vec![0u8; w as usize * h as usize * 3];
-        {
-            let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-            render(spec, &root, rows, stats)
-                .and_then(|()| root.present().map_err(Into::into))
-                .map_err(fail)?;
+        let svg = with_printed_size(&svg, spec).map_err(fail)?;
+        let (pdf, png) = pdf_and_png(&svg, spec).map_err(fail)?;
+        // Each written like every other file (temporary file, then rename), so a full disk is
+        // reported with the file's path and what to do.
+        for (ext, bytes) in [("svg", svg.as_bytes()), ("pdf", &pdf), ("png", &png)] {
+            let path = dir.join(format!("{}.{ext}", spec.stem));
+            write_atomic(&path, bytes)?;
+            written.push(path);
         }
-        let png =
-            crate::dataset::preview::png_bytes(&rgb, (w, h)).map_err(|e| ReportError::Figure {
-                figure: spec.stem.to_string(),
-                message: e.to_string(),
-            })?;
-        write_atomic(&png_path, &png)?;
-        written.push(png_path);
     }
     Ok(written)
 }
@@ -233,7 +352,7 @@ where
 /// `report.md` and `tables.tex` give each figure's ([`FIGURES`]). The top margin keeps the
 /// highest tick label inside the image.
 fn plot_area<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> DrawingArea<DB, Shift> {
-    root.margin(12, 0, 0, 0)
+    root.margin(udots(3.0), 0, 0, 0)
 }
 
 pub(crate) fn kind_label(kind: &str) -> String {
@@ -249,21 +368,12 @@ fn kind_color(kind: &str) -> RGBColor {
     }
 }
 
-/// `c` mixed with white: `t = 0` is `c`, `t = 1` white.
+/// `c` mixed with white: `t = 0` is `c`, `t = 1` white. Figures use opaque colours only: svg2pdf
+/// writes a PDF's graphics states (one per opacity) in hash-map order, so two translucent colours
+/// would make two builds' PDFs differ.
 fn lighten(c: RGBColor, t: f64) -> RGBColor {
     let m = |v: u8| (f64::from(v) + (255.0 - f64::from(v)) * t).round() as u8;
     RGBColor(m(c.0), m(c.1), m(c.2))
-}
-
-/// The motion types in the order of both type figures: most clips first, ties by name.
-fn types_by_count(stats: &Stats) -> Vec<&TypeStats> {
-    let mut types: Vec<&TypeStats> = stats.motion_types.iter().collect();
-    types.sort_by(|a, b| {
-        b.clips
-            .cmp(&a.clips)
-            .then(type_order(&a.motion_type, &b.motion_type))
-    });
-    types
 }
 
 /// Category labels under a categorical x axis: wrapped onto lines that fit the slot, or rotated
@@ -271,10 +381,10 @@ fn types_by_count(stats: &Stats) -> Vec<&TypeStats> {
 struct Categories {
     lines: Vec<Vec<String>>,
     rotated: bool,
-    /// Font size: [`TICK`], or [`NOTE`] when rotated (many categories, long names).
+    /// Font size in points: [`TICK`], or [`NOTE`] when rotated (many categories, long names).
     size: f64,
     line_height: u32,
-    /// Pixels the labels need below the axis.
+    /// Drawing units the labels need below the axis.
     height: u32,
 }
 
@@ -288,7 +398,7 @@ where
 {
     let style = &font(TICK);
     let (_, line_height) = area.estimate_text_size("Ag", style)?;
-    let line_height = line_height + 4;
+    let line_height = line_height + udots(1.5);
     let fits = |s: &str| -> DrawResult<bool> {
         Ok(f64::from(area.estimate_text_size(s, style)?.0) <= slot * 0.92)
     };
@@ -326,11 +436,10 @@ where
         let style = &font(NOTE);
         let mut lines = Vec::new();
         let mut widest = 0;
-        for (name, sub) in labels {
-            let text = match sub {
-                Some(sub) => format!("{name} {sub}"),
-                None => name.clone(),
-            };
+        // Names alone: a rotated "(n = ...)" would make the labels as tall as the plot (the
+        // tables give the counts).
+        for (name, _) in labels {
+            let text = name.clone();
             widest = widest.max(area.estimate_text_size(&text, style)?.0);
             lines.push(vec![text]);
         }
@@ -339,7 +448,7 @@ where
             rotated: true,
             size: NOTE,
             line_height,
-            height: widest + 16,
+            height: widest + udots(5.0),
         });
     }
     let most = all.iter().map(Vec::len).max().unwrap_or(1) as u32;
@@ -348,11 +457,11 @@ where
         rotated: false,
         size: TICK,
         line_height,
-        height: most * line_height + 16,
+        height: most * line_height + udots(5.0),
     })
 }
 
-/// Draws category labels below the axis points `anchors` (backend pixels) on the whole figure.
+/// Draws category labels below the axis points `anchors` (backend units) on the whole figure.
 fn draw_categories<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     anchors: &[(i32, i32)],
@@ -373,13 +482,14 @@ where
                 .transform(FontTransform::Rotate270)
                 .pos(Pos::new(HPos::Right, VPos::Center));
             if let Some(text) = lines.first() {
-                root.draw_text(text, &s, (x, y + 10))?;
+                root.draw_text(text, &s, (x, y + udots(4.5) as i32))?;
             }
         } else {
             let s = style.pos(Pos::new(HPos::Center, VPos::Top));
             for (k, line) in lines.iter().enumerate() {
-                // Clear of the tick marks (5 px) below the axis.
-                root.draw_text(line, &s, (x, y + 12 + (k as u32 * cats.line_height) as i32))?;
+                // Clear of the tick marks below the axis.
+                let dy = udots(4.5) + k as u32 * cats.line_height;
+                root.draw_text(line, &s, (x, y + dy as i32))?;
             }
         }
     }
@@ -456,6 +566,49 @@ fn nice_ticks(lo: f64, hi: f64, target: usize) -> (Vec<f64>, f64) {
     (ticks, step)
 }
 
+/// Integer ticks from 0 covering `top`: a count axis never shows 2.5 clips.
+fn count_ticks(top: f64) -> (Vec<f64>, f64) {
+    let (ticks, step) = nice_ticks(0.0, top, 6);
+    if step >= 1.0 {
+        let ticks = ticks.into_iter().filter(|t| t.fract() == 0.0).collect();
+        return (ticks, step);
+    }
+    (
+        (0..=top.floor().max(0.0) as u64)
+            .map(|t| t as f64)
+            .collect(),
+        1.0,
+    )
+}
+
+/// Tick marks, as printed.
+const TICK_MARK: f64 = 3.0;
+
+/// Width of a y label area holding `labels` as tick labels, and an axis title beside them when
+/// `titled`.
+fn y_label_area<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    labels: &[String],
+    titled: bool,
+) -> DrawResult<u32>
+where
+    DB::ErrorType: 'static,
+{
+    let mut widest = 0;
+    for l in labels {
+        widest = widest.max(area.estimate_text_size(l, &font(TICK))?.0);
+    }
+    let title = if titled { udots(DESC + 5.0) } else { 0 };
+    Ok(widest + udots(TICK_MARK + 4.0) + title)
+}
+
+/// Line widths, as printed: axes, grid lines, data outlines.
+const AXIS_LINE: f64 = 0.6;
+const GRID_LINE: f64 = 0.4;
+const DATA_LINE: f64 = 0.7;
+/// Radius of a clip's dot beside a box or violin.
+const DOT: f64 = 1.3;
+
 /// Horizontal offset of the `k`-th point of a strip, in category units: a fixed low-discrepancy
 /// sequence instead of random jitter, so figures are reproducible.
 fn jitter(k: usize, width: f64) -> f64 {
@@ -472,29 +625,53 @@ fn motion_type_counts<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let types = types_by_count(stats);
+    let types = types_in_report_order(stats);
     let area = plot_area(root);
     let n = types.len().max(1);
     let max = types.iter().map(|t| t.clips).max().unwrap_or(1).max(1) as f64;
-    // Bars rise from 0.5 so a type with one clip still shows a bar on the log axis; the top
-    // leaves room for the count above the tallest bar.
-    let (lo, hi) = (0.5f64.log10(), (max * 2.5).log10().max(1.0));
-    // Few decades: 1-2-5 ticks, so a small dataset's axis is not just "1" and "10".
-    let mantissas: &[f64] = if hi - lo <= 2.5 {
-        &[1.0, 2.0, 5.0]
+    let min = types.iter().map(|t| t.clips).min().unwrap_or(1).max(1) as f64;
+    // A log axis only for counts spanning more than two decades (LINGO's thousands against a
+    // handful); a few clips per type read better as plain bars from zero.
+    let log = max / min > 100.0;
+    let (base, top, bold, light, step) = if log {
+        // Bars rise from 0.5 so a type with one clip still shows a bar; the top leaves room for
+        // the count above the tallest bar.
+        let (lo, hi) = (0.5f64.log10(), (max * 2.5).log10());
+        let bold: Vec<f64> = (lo.floor() as i32..=hi.ceil() as i32)
+            .map(f64::from)
+            // No tick below one clip: the axis only starts at 0.5 to give a count of 1 a bar.
+            .filter(|v| *v >= -1e-9 && *v <= hi + 1e-9)
+            .collect();
+        let light: Vec<f64> = (lo.floor() as i32..=hi.ceil() as i32)
+            .flat_map(|k| (2..10).map(move |m| (f64::from(m) * 10f64.powi(k)).log10()))
+            .filter(|v| *v > lo && *v < hi)
+            .collect();
+        (lo, hi, bold, light, 1.0)
     } else {
-        &[1.0]
+        let top = max * 1.15;
+        let (ticks, step) = count_ticks(top);
+        (0.0, top, ticks, Vec::new(), step)
     };
-    let bold: Vec<f64> = (lo.floor() as i32..=hi.ceil() as i32)
-        .flat_map(|k| mantissas.iter().map(move |m| (m * 10f64.powi(k)).log10()))
-        // No tick below one clip: the axis only starts at 0.5 to give a count of 1 a bar.
-        .filter(|v| *v >= -1e-9 && *v <= hi + 1e-9)
-        .collect();
-    let light: Vec<f64> = (lo.floor() as i32..=hi.ceil() as i32)
-        .flat_map(|k| (2..10).map(move |m| (f64::from(m) * 10f64.powi(k)).log10()))
-        .filter(|v| *v > lo && *v < hi)
-        .collect();
-    let (margin, y_area) = (20u32, 90u32);
+    let height = |clips: usize| {
+        if log {
+            (clips as f64).log10()
+        } else {
+            clips as f64
+        }
+    };
+    let tick_text = |v: f64| {
+        if log {
+            count_label(10f64.powf(v))
+        } else {
+            tick_label(v, step)
+        }
+    };
+    let margin = udots(4.0);
+    let y_area = y_label_area(
+        &area,
+        &bold.iter().map(|v| tick_text(*v)).collect::<Vec<_>>(),
+        true,
+    )?;
     let slot = f64::from(
         area.dim_in_pixel()
             .0
@@ -508,23 +685,25 @@ where
     let cats = layout_categories(&area, &labels, slot)?;
     let mut chart = ChartBuilder::on(&area)
         .margin(margin)
-        .x_label_area_size(cats.height + 40)
+        .x_label_area_size(cats.height + udots(DESC + 6.0))
         .y_label_area_size(y_area)
         .build_cartesian_2d(
             Axis::categories(n),
-            Axis::new(lo..hi, bold).with_light(light),
+            Axis::new(base..top, bold).with_light(light),
         )?;
     chart
         .configure_mesh()
         .disable_x_mesh()
-        .bold_line_style(GRID)
-        .light_line_style(RGBColor(242, 242, 242))
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
+        .bold_line_style(stroke(GRID, GRID_LINE))
+        .light_line_style(stroke(RGBColor(242, 242, 242), GRID_LINE))
         .x_label_formatter(&|_| String::new())
-        .y_label_formatter(&|v| count_label(10f64.powf(*v)))
+        .y_label_formatter(&|v| tick_text(*v))
         .label_style(font(TICK))
         .axis_desc_style(font(DESC))
         .x_desc("motion type")
-        .y_desc("clips (log scale)")
+        .y_desc(if log { "clips (log scale)" } else { "clips" })
         .draw()?;
     if types.is_empty() {
         draw_note(&area, "no original single clips", 0.45)?;
@@ -533,20 +712,27 @@ where
     chart.draw_series(types.iter().enumerate().map(|(i, t)| {
         let x = i as f64;
         Rectangle::new(
-            [(x - 0.36, lo), (x + 0.36, (t.clips as f64).log10())],
+            [(x - 0.36, base), (x + 0.36, height(t.clips))],
             BLUE.filled(),
         )
     }))?;
-    chart.draw_series(types.iter().enumerate().map(|(i, t)| {
-        Text::new(
-            t.clips.to_string(),
-            (i as f64, (t.clips as f64).log10()),
-            // Narrow bars get smaller numbers so neighbours' counts do not run together.
-            font(NOTE.min(slot / 2.2).max(10.0)).pos(Pos::new(HPos::Center, VPos::Bottom)),
-        )
-    }))?;
+    // Counts above the bars when the widest fits its slot; with many types they would run
+    // together, and the table has them.
+    let style = font(NOTE);
+    let mut widest = 0;
+    for t in &types {
+        widest = widest.max(area.estimate_text_size(&t.clips.to_string(), &style)?.0);
+    }
+    if f64::from(widest) <= slot * 0.9 {
+        let style = style.pos(Pos::new(HPos::Center, VPos::Bottom));
+        let lift = -(udots(1.5) as i32);
+        chart.draw_series(types.iter().enumerate().map(|(i, t)| {
+            EmptyElement::at((i as f64, height(t.clips)))
+                + Text::new(t.clips.to_string(), (0, lift), style.clone())
+        }))?;
+    }
     let anchors: Vec<(i32, i32)> = (0..types.len())
-        .map(|i| chart.backend_coord(&(i as f64, lo)))
+        .map(|i| chart.backend_coord(&(i as f64, base)))
         .collect();
     draw_categories(root, &anchors, &cats)?;
     Ok(())
@@ -563,7 +749,7 @@ fn motion_lengths<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let order = types_by_count(stats);
+    let order = types_in_report_order(stats);
     let lengths = lengths_by_type(rows);
     let data: Vec<(&str, &[f64])> = order
         .iter()
@@ -586,7 +772,16 @@ where
         .fold(0.0, f64::max);
     let top = if top > 0.0 { top * 1.05 } else { 1.0 };
     let n = data.len().max(1);
-    let (margin, y_area) = (20u32, 90u32);
+    let (ticks, step) = nice_ticks(0.0, top, 6);
+    let margin = udots(4.0);
+    let y_area = y_label_area(
+        &area,
+        &ticks
+            .iter()
+            .map(|v| tick_label(*v, step))
+            .collect::<Vec<_>>(),
+        true,
+    )?;
     let slot = f64::from(
         area.dim_in_pixel()
             .0
@@ -598,22 +793,23 @@ where
         .map(|(name, v)| (name.to_string(), Some(format!("(n = {})", v.len()))))
         .collect();
     let cats = layout_categories(&area, &labels, slot)?;
-    let (ticks, step) = nice_ticks(0.0, top, 8);
     let mut chart = ChartBuilder::on(&area)
         .margin(margin)
-        .x_label_area_size(cats.height + 40)
+        .x_label_area_size(cats.height + udots(DESC + 6.0))
         .y_label_area_size(y_area)
         .build_cartesian_2d(Axis::categories(n), Axis::new(0.0..top, ticks))?;
     chart
         .configure_mesh()
         .disable_x_mesh()
-        .bold_line_style(GRID)
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
+        .bold_line_style(stroke(GRID, GRID_LINE))
         .x_label_formatter(&|_| String::new())
         .y_label_formatter(&|v| tick_label(*v, step))
         .label_style(font(TICK))
         .axis_desc_style(font(DESC))
         .x_desc("motion type")
-        .y_desc("motion length (s)")
+        .y_desc("length (s)")
         .draw()?;
     if data.is_empty() {
         draw_note(&area, "no original single clips", 0.45)?;
@@ -622,7 +818,7 @@ where
     for outline in violins.iter().flatten() {
         chart.draw_series(std::iter::once(Polygon::new(
             outline.clone(),
-            BLUE.mix(0.3).filled(),
+            lighten(BLUE, 0.7).filled(),
         )))?;
         chart.draw_series(std::iter::once(PathElement::new(
             outline
@@ -630,11 +826,11 @@ where
                 .copied()
                 .chain(outline.first().copied())
                 .collect::<Vec<_>>(),
-            BLUE.stroke_width(2),
+            stroke(BLUE, DATA_LINE),
         )))?;
     }
     // At least a few pixels wide, however many types share the axis.
-    let half = 0.06f64.max(4.0 / slot).min(0.25);
+    let half = 0.06f64.max(dots(1.0) / slot).min(0.25);
     for (i, (_, values)) in data.iter().enumerate() {
         // Without a violin the points are the distribution: always drawn.
         let no_violin = violins[i].is_none();
@@ -644,8 +840,8 @@ where
             chart.draw_series(values.iter().enumerate().map(|(k, v)| {
                 Circle::new(
                     (i as f64 + 0.18 + jitter(k, 0.1), *v),
-                    4,
-                    BLACK.mix(0.55).filled(),
+                    udots(DOT),
+                    lighten(BLACK, 0.45).filled(),
                 )
             }))?;
         }
@@ -720,15 +916,15 @@ where
     );
     let (lo, hi) = whiskers(sorted, q1, q3);
     chart.draw_series([
-        PathElement::new(vec![(x, lo), (x, q1)], color.stroke_width(2)),
-        PathElement::new(vec![(x, q3), (x, hi)], color.stroke_width(2)),
+        PathElement::new(vec![(x, lo), (x, q1)], stroke(color, DATA_LINE)),
+        PathElement::new(vec![(x, q3), (x, hi)], stroke(color, DATA_LINE)),
         PathElement::new(
             vec![(x - half * 0.6, lo), (x + half * 0.6, lo)],
-            color.stroke_width(2),
+            stroke(color, DATA_LINE),
         ),
         PathElement::new(
             vec![(x - half * 0.6, hi), (x + half * 0.6, hi)],
-            color.stroke_width(2),
+            stroke(color, DATA_LINE),
         ),
     ])?;
     chart.draw_series(std::iter::once(Rectangle::new(
@@ -743,14 +939,14 @@ where
     };
     chart.draw_series(std::iter::once(PathElement::new(
         vec![(x - reach, med), (x + reach, med)],
-        median_color.stroke_width(3),
+        stroke(median_color, 1.0),
     )))?;
     if outliers {
         chart.draw_series(
             sorted
                 .iter()
                 .filter(|v| **v < lo || **v > hi)
-                .map(|v| Circle::new((x, *v), 4, color.stroke_width(1))),
+                .map(|v| Circle::new((x, *v), udots(DOT), stroke(color, 0.4))),
         )?;
     }
     Ok(())
@@ -808,9 +1004,9 @@ where
         .collect();
     let area = plot_area(root);
     let (aw, _) = area.dim_in_pixel();
-    let bar_width = 140;
+    let bar_width = udots(50.0);
     let (main, bar) = area.split_horizontally(aw.saturating_sub(bar_width));
-    let (margin, x_area, y_area) = (20u32, 80u32, 90u32);
+    let (margin, x_area, y_area) = (udots(4.0), udots(TICK + DESC + 12.0), udots(38.0));
     let (mw, mh) = main.dim_in_pixel();
     let pw = f64::from(mw.saturating_sub(2 * margin + y_area).max(1));
     let ph = f64::from(mh.saturating_sub(2 * margin + x_area).max(1));
@@ -839,7 +1035,7 @@ where
     let (hx, hy) = (scale * pw / 2.0, scale * ph / 2.0);
     let (x0, x1, y0, y1) = (cx - hx, cx + hx, cy - hy, cy + hy);
 
-    let step = nice_step((x1 - x0).max(y1 - y0) / (pw.max(ph) / 110.0));
+    let step = nice_step((x1 - x0).max(y1 - y0) / (pw.max(ph) / dots(34.0)));
     let ticks = |lo: f64, hi: f64| -> Vec<f64> {
         ((lo / step).ceil() as i64..=(hi / step).floor() as i64)
             .map(|k| k as f64 * step)
@@ -872,7 +1068,9 @@ where
     }))?;
     chart
         .configure_mesh()
-        .bold_line_style(GRID.mix(0.8))
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
+        .bold_line_style(stroke(GRID, GRID_LINE))
         .x_label_formatter(&|v| tick_label(*v, step))
         .y_label_formatter(&|v| tick_label(*v, step))
         .label_style(font(TICK))
@@ -885,29 +1083,33 @@ where
     let stride = goals.len().div_ceil(MAX_SCATTER).max(1);
     let shown: Vec<(f64, f64)> = goals.iter().copied().step_by(stride).collect();
     // Many points shrink and lose their outline so the histogram below stays visible.
-    let radius = match shown.len() {
-        0..=100 => 5,
-        101..=1000 => 3,
-        _ => 2,
-    };
+    let radius = udots(match shown.len() {
+        0..=100 => 1.6,
+        101..=1000 => 1.0,
+        _ => 0.6,
+    });
     let label = if stride > 1 {
         format!("goal of a clip (every {stride}th of {})", goals.len())
     } else {
         format!("goal of a clip (n = {})", goals.len())
     };
-    chart
-        .draw_series(
-            shown
-                .iter()
-                .map(|p| Circle::new(*p, radius, RED.mix(0.85).filled())),
-        )?
-        .label(label)
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+    let swatch = udots(NOTE) as i32;
+    let goals_drawn = chart.draw_series(
+        shown
+            .iter()
+            .map(|p| Circle::new(*p, radius, lighten(RED, 0.15).filled())),
+    )?;
+    // No legend entry for goals that are not there.
+    if !shown.is_empty() {
+        goals_drawn
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x + swatch / 2, y), udots(1.6), RED.filled()));
+    }
     if shown.len() <= 100 {
         chart.draw_series(
             shown
                 .iter()
-                .map(|p| Circle::new(*p, radius, BLACK.stroke_width(1))),
+                .map(|p| Circle::new(*p, radius, stroke(BLACK, 0.3))),
         )?;
     }
     let s = 0.02 * (y1 - y0);
@@ -917,17 +1119,20 @@ where
             BLACK.filled(),
         )))?
         .label("start, facing +y")
-        .legend(|(x, y)| {
+        .legend(move |(x, y)| {
+            let (h, w) = (swatch / 2, swatch / 3);
             Polygon::new(
-                vec![(x + 10, y - 8), (x + 4, y + 6), (x + 16, y + 6)],
+                vec![(x + h, y - h), (x + h - w, y + w), (x + h + w, y + w)],
                 BLACK.filled(),
             )
         });
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(GREY)
+        .margin(udots(3.0))
+        .legend_area_size(udots(NOTE + 2.0))
+        .background_style(WHITE.filled())
+        .border_style(stroke(GREY, GRID_LINE))
         .label_font(font(NOTE))
         .draw()?;
     if goals.is_empty() {
@@ -942,9 +1147,9 @@ where
     let mut cbar = ChartBuilder::on(&bar)
         .margin_top(margin)
         .margin_bottom(margin + x_area)
-        .margin_left(10)
-        .margin_right(10)
-        .set_label_area_size(LabelAreaPosition::Right, 85)
+        .margin_left(udots(3.0))
+        .margin_right(udots(2.0))
+        .set_label_area_size(LabelAreaPosition::Right, udots(34.0))
         .build_cartesian_2d(0.0..1.0, 0.0..max_count as f64)?;
     let cstep = nice_step(max_count as f64 / 6.0).max(1.0);
     cbar.draw_series((0..100).map(|k| {
@@ -956,6 +1161,8 @@ where
     }))?;
     cbar.configure_mesh()
         .disable_mesh()
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
         .y_labels((max_count as f64 / cstep) as usize + 1)
         .y_label_formatter(&|v| {
             if (v / cstep).fract().abs() < 1e-9 {
@@ -965,7 +1172,7 @@ where
             }
         })
         .label_style(font(TICK))
-        .axis_desc_style(font(NOTE))
+        .axis_desc_style(font(DESC))
         .y_desc(format!("clips per {} m bin", tick_label(bin, bin)))
         .draw()?;
     Ok(())
@@ -981,48 +1188,104 @@ where
     let splits = &stats.composition;
     let area = plot_area(root);
     let n = splits.len().max(1);
-    let k = splits.first().map_or(1, |s| s.kinds.len()).max(1);
+    // The kinds with rows in some split, in the table's order: a kind with no data gets neither
+    // bars nor a legend entry (the table still lists it, with its zeros).
+    let kinds: Vec<&str> = splits
+        .first()
+        .map(|s| {
+            s.kinds
+                .iter()
+                .map(|k| k.source_kind.as_str())
+                .filter(|kind| {
+                    splits.iter().any(|s| {
+                        s.kinds
+                            .iter()
+                            .any(|k| k.source_kind == *kind && k.total > 0)
+                    })
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let any_mirrored = splits
+        .iter()
+        .any(|s| s.kinds.iter().any(|k| k.mirrored > 0));
+    let k = kinds.len().max(1);
     let max = splits
         .iter()
         .flat_map(|s| s.kinds.iter().map(|c| c.total))
         .max()
         .unwrap_or(0)
         .max(1) as f64;
-    let top = max * 1.2;
-    let (ticks, step) = nice_ticks(0.0, top, 8);
-    let ticks: Vec<f64> = ticks.into_iter().filter(|t| t.fract() == 0.0).collect();
-    let (margin, y_area) = (20u32, 100u32);
+    let margin = udots(4.0);
+    let labels: Vec<(String, Option<String>)> = splits
+        .iter()
+        .map(|s| (s.split.clone(), Some(format!("(n = {})", s.total))))
+        .collect();
+    // Room above the bars for the counts and the legend (upper right): the top grows so the
+    // legend's rows fit above the tallest bar.
+    let entries = kinds.len() + usize::from(any_mirrored);
+    let legend = dots(NOTE + 3.5) * entries as f64 + dots(8.0);
+    let plot_height = f64::from(area.dim_in_pixel().1) * 0.62;
+    let headroom = ((legend + dots(NOTE + 3.0)) / plot_height).clamp(0.15, 0.7);
+    let top = max / (1.0 - headroom);
+    let (ticks, step) = count_ticks(top);
+    let y_area = y_label_area(
+        &area,
+        &ticks
+            .iter()
+            .map(|v| tick_label(*v, step))
+            .collect::<Vec<_>>(),
+        true,
+    )?;
     let slot = f64::from(
         area.dim_in_pixel()
             .0
             .saturating_sub(2 * margin + y_area)
             .max(1),
     ) / n as f64;
-    let labels: Vec<(String, Option<String>)> = splits
-        .iter()
-        .map(|s| (s.split.clone(), Some(format!("(n = {})", s.total))))
-        .collect();
     let cats = layout_categories(&area, &labels, slot)?;
     let mut chart = ChartBuilder::on(&area)
         .margin(margin)
-        .x_label_area_size(cats.height + 40)
+        .x_label_area_size(cats.height + udots(DESC + 6.0))
         .y_label_area_size(y_area)
         .build_cartesian_2d(Axis::categories(n), Axis::new(0.0..top, ticks))?;
     chart
         .configure_mesh()
         .disable_x_mesh()
-        .bold_line_style(GRID)
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
+        .bold_line_style(stroke(GRID, GRID_LINE))
         .x_label_formatter(&|_| String::new())
-        .y_label_formatter(&|v| tick_label(*v, step.max(1.0)))
+        .y_label_formatter(&|v| tick_label(*v, step))
         .label_style(font(TICK))
         .axis_desc_style(font(DESC))
         .x_desc("split")
-        .y_desc("clips (rows)")
+        .y_desc("clips")
         .draw()?;
+    if kinds.is_empty() {
+        draw_note(&area, "no clips", 0.45)?;
+        let anchors: Vec<(i32, i32)> = (0..splits.len())
+            .map(|i| chart.backend_coord(&(i as f64, 0.0)))
+            .collect();
+        draw_categories(root, &anchors, &cats)?;
+        return Ok(());
+    }
     let width = 0.8 / k as f64;
     let bar_x = |s: usize, j: usize| s as f64 - 0.4 + (j as f64 + 0.5) * width;
+    // Counts above the bars when the widest fits a bar's slot (the table has them all).
+    let style = font(NOTE).pos(Pos::new(HPos::Center, VPos::Bottom));
+    let mut widest = 0;
+    for c in splits.iter().flat_map(|s| &s.kinds) {
+        widest = widest.max(area.estimate_text_size(&c.total.to_string(), &style)?.0);
+    }
+    let counts_fit = f64::from(widest) <= slot * width * 1.05;
+    let lift = -(udots(1.5) as i32);
     for (s, split) in splits.iter().enumerate() {
-        for (j, c) in split.kinds.iter().enumerate() {
+        let shown = split
+            .kinds
+            .iter()
+            .filter(|c| kinds.contains(&c.source_kind.as_str()));
+        for (j, c) in shown.enumerate() {
             let (x, half) = (bar_x(s, j), width * 0.42);
             let color = kind_color(&c.source_kind);
             chart.draw_series([
@@ -1035,48 +1298,45 @@ where
                     lighten(color, 0.55).filled(),
                 ),
             ])?;
-            let at = (x, c.total as f64);
-            let style = font(NOTE).pos(Pos::new(HPos::Center, VPos::Bottom));
-            // An empty bar gets its zero only: "0.0%" under every missing kind is clutter.
-            if c.total == 0 {
-                chart.draw_series([
-                    EmptyElement::at(at) + Text::new("0".to_string(), (0, -4), style)
-                ])?;
-            } else {
-                chart.draw_series([
-                    EmptyElement::at(at) + Text::new(c.total.to_string(), (0, -24), style.clone()),
-                    EmptyElement::at(at)
-                        + Text::new(format!("{:.1}%", c.share * 100.0), (0, -4), style),
-                ])?;
+            if counts_fit {
+                chart.draw_series([EmptyElement::at((x, c.total as f64))
+                    + Text::new(c.total.to_string(), (0, lift), style.clone())])?;
             }
         }
     }
-    if let Some(first) = splits.first() {
-        for c in &first.kinds {
-            let color = kind_color(&c.source_kind);
-            chart
-                .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
-                .label(kind_label(&c.source_kind))
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 7), (x + 20, y + 7)], color.filled())
-                });
-        }
+    let swatch = udots(NOTE) as i32;
+    for kind in &kinds {
+        let color = kind_color(kind);
+        chart
+            .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
+            .label(kind_label(kind))
+            .legend(move |(x, y)| {
+                Rectangle::new(
+                    [(x, y - swatch / 2), (x + swatch, y + swatch / 2)],
+                    color.filled(),
+                )
+            });
+    }
+    if any_mirrored {
         chart
             .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
             .label("mirrored copies (lighter)")
-            .legend(|(x, y)| {
-                Rectangle::new([(x, y - 7), (x + 20, y + 7)], lighten(GREY, 0.55).filled())
+            .legend(move |(x, y)| {
+                Rectangle::new(
+                    [(x, y - swatch / 2), (x + swatch, y + swatch / 2)],
+                    lighten(GREY, 0.55).filled(),
+                )
             });
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.9))
-            .border_style(GREY)
-            .label_font(font(NOTE))
-            .draw()?;
-    } else {
-        draw_note(&area, "no clips", 0.45)?;
     }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .margin(udots(3.0))
+        .legend_area_size(udots(NOTE + 2.0))
+        .background_style(WHITE.filled())
+        .border_style(stroke(GREY, GRID_LINE))
+        .label_font(font(NOTE))
+        .draw()?;
     let anchors: Vec<(i32, i32)> = (0..splits.len())
         .map(|i| chart.backend_coord(&(i as f64, 0.0)))
         .collect();
@@ -1096,7 +1356,8 @@ where
     DB::ErrorType: 'static,
 {
     let area = plot_area(root);
-    let panels = area.split_evenly((2, 2));
+    // One row of panels: a figure* across both columns, each panel a metric.
+    let panels = area.split_evenly((1, 4));
     for (k, (panel, metric)) in panels.iter().zip(&stats.plausibility).enumerate() {
         let info = &metric.info;
         let groups = [
@@ -1116,60 +1377,70 @@ where
             .filter(|t| t.is_finite());
         let reach = max.max(threshold.unwrap_or(0.0));
         // An all-zero metric (no penetration anywhere) still gets a readable axis.
-        let top = if reach > 0.0 { reach * 1.12 } else { 0.01 };
+        let top = if reach > 0.0 { reach * 1.15 } else { 0.01 };
         let (ticks, step) = nice_ticks(0.0, top, 5);
-        let mut chart = ChartBuilder::on(panel)
-            .caption(
-                if info.name == info.column {
-                    info.name.to_string()
-                } else {
-                    format!("{} ({})", info.name, info.column)
-                },
-                font(DESC),
-            )
-            .margin(14)
-            .x_label_area_size(70)
-            .y_label_area_size(95)
-            .build_cartesian_2d(Axis::categories(2), Axis::new(0.0..top, ticks))?;
-        let names: Vec<String> = groups
+        let margin = udots(3.0);
+        let y_area = y_label_area(
+            panel,
+            &ticks
+                .iter()
+                .map(|v| tick_label(*v, step))
+                .collect::<Vec<_>>(),
+            false,
+        )?;
+        let slot = f64::from(
+            panel
+                .dim_in_pixel()
+                .0
+                .saturating_sub(2 * margin + y_area)
+                .max(1),
+        ) / 2.0;
+        let labels: Vec<(String, Option<String>)> = groups
             .iter()
-            .map(|(name, v, _)| format!("{name} (n = {})", v.len()))
+            .map(|(name, v, _)| (name.to_string(), Some(format!("(n = {})", v.len()))))
             .collect();
+        let cats = layout_categories(panel, &labels, slot)?;
+        // The panel's title says what and in which unit, in words (as the table's rows).
+        let mut chart = ChartBuilder::on(panel)
+            .caption(format!("{} ({})", info.name, info.unit), font(DESC))
+            .margin(margin)
+            .x_label_area_size(cats.height)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(Axis::categories(2), Axis::new(0.0..top, ticks))?;
         chart
             .configure_mesh()
             .disable_x_mesh()
-            .bold_line_style(GRID)
-            .x_label_formatter(&|v| {
-                names
-                    .get(v.round().max(0.0) as usize)
-                    .cloned()
-                    .unwrap_or_default()
-            })
+            .set_all_tick_mark_size(udots(TICK_MARK))
+            .axis_style(stroke(BLACK, AXIS_LINE))
+            .bold_line_style(stroke(GRID, GRID_LINE))
+            .x_label_formatter(&|_| String::new())
             .y_label_formatter(&|v| tick_label(*v, step))
-            .label_style(font(NOTE))
-            .axis_desc_style(font(NOTE))
-            .x_desc("clips")
-            .y_desc(format!("{} ({})", info.name, info.unit))
+            .label_style(font(TICK))
             .draw()?;
         if let Some(t) = threshold {
             chart.draw_series(DashedLineSeries::new(
                 [(-0.5, t), (1.5, t)],
-                8,
-                5,
-                RED.stroke_width(2),
+                udots(3.0),
+                udots(2.0),
+                stroke(RED, DATA_LINE),
             ))?;
-            chart.draw_series(std::iter::once(Text::new(
-                format!("default threshold {}", info.threshold),
-                (1.45, t),
-                font(NOTE)
-                    .color(&RED)
-                    .pos(Pos::new(HPos::Right, VPos::Bottom)),
-            )))?;
+            // `<=` set as in the tables: `≤`.
+            let bound = info.threshold.replace("<=", "≤").replace(">=", "≥");
+            chart.draw_series(std::iter::once(
+                EmptyElement::at((1.45, t))
+                    + Text::new(
+                        format!("threshold {bound}"),
+                        (0, -(udots(1.0) as i32)),
+                        font(NOTE)
+                            .color(&RED)
+                            .pos(Pos::new(HPos::Right, VPos::Bottom)),
+                    ),
+            ))?;
         }
         if max == 0.0 && groups.iter().any(|g| !g.1.is_empty()) {
             // A flat panel is a result, not a drawing error: say what it means.
             chart.draw_series(std::iter::once(Text::new(
-                format!("every clip measures 0 {}", info.unit),
+                format!("every clip: 0 {}", info.unit),
                 (0.5, top * 0.5),
                 font(NOTE)
                     .color(&GREY)
@@ -1192,10 +1463,18 @@ where
             draw_box(&mut chart, values, x, 0.12, *color, !points)?;
             if points {
                 chart.draw_series(values.iter().enumerate().map(|(i, v)| {
-                    Circle::new((x + 0.3 + jitter(i, 0.16), *v), 4, color.mix(0.7).filled())
+                    Circle::new(
+                        (x + 0.3 + jitter(i, 0.16), *v),
+                        udots(DOT),
+                        lighten(*color, 0.3).filled(),
+                    )
                 }))?;
             }
         }
+        let anchors: Vec<(i32, i32)> = (0..2)
+            .map(|i| chart.backend_coord(&(f64::from(i), 0.0)))
+            .collect();
+        draw_categories(root, &anchors, &cats)?;
     }
     Ok(())
 }

@@ -5,8 +5,9 @@
 //!
 //! [`read_rows`] reads the few columns needed from clip tables, [`statistics`] reduces them to a
 //! serialisable [`Stats`], and [`write_report`] writes `stats.json`, `tables.tex` (booktabs),
-//! `report.md` and `figures/*.svg` + `figures/*.png` into a folder. The same rows always give the
-//! same bytes: categories are sorted, floats have fixed formatting, nothing records the time.
+//! `figures.tex`, `report.md` and `figures/*.svg`, `*.pdf` and `*.png` into a folder. The same
+//! rows always give the same bytes: categories are sorted, floats have fixed formatting, nothing
+//! records the time.
 
 mod figures;
 mod gallery;
@@ -17,7 +18,7 @@ mod tables;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-pub use figures::{FIGURES, FigureSpec, MIN_VIOLIN, violin_outline};
+pub use figures::{DPI, FIGURES, FigureSpec, MIN_VIOLIN, Span, violin_outline};
 pub use read::{find_clip_tables, read_build_counts, read_rows};
 pub use stats::{
     GoalStats, KNOWN_KINDS, KindCount, METRICS, MetricInfo, MetricStats, NO_LABEL, NO_SPLIT,
@@ -177,8 +178,8 @@ pub enum ReportError {
 }
 
 /// Writes the report of `rows` and `stats` into `out_dir` (created if needed): `stats.json`,
-/// `tables.tex`, `report.md` and, under `figures/`, an SVG and a PNG of every figure in
-/// [`FIGURES`]. Every file is written atomically (temporary file in the same folder, then rename).
+/// `tables.tex`, `figures.tex`, `report.md` and, under `figures/`, an SVG, a PDF and a PNG of
+/// every figure in [`FIGURES`]. Every file is written atomically (temporary file in the same folder, then rename).
 /// Returns the written paths in a fixed order.
 pub fn write_report(
     rows: &[ClipRow],
@@ -201,6 +202,10 @@ fn write_report_with(
     let tex_path = out_dir.join("tables.tex");
     crate::base::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
     written.push(tex_path);
+
+    let figures_tex = out_dir.join("figures.tex");
+    crate::base::write_atomic(&figures_tex, tables::latex_figures(stats).as_bytes())?;
+    written.push(figures_tex);
 
     let figure_dir = out_dir.join("figures");
     written.extend(figures::write_figures(&rows, stats, &figure_dir)?);

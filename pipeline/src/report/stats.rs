@@ -316,6 +316,19 @@ pub(crate) fn type_order(a: &str, b: &str) -> Ordering {
     (a == UNMAPPED, a).cmp(&(b == UNMAPPED, b))
 }
 
+/// The motion types in the order of the report's type tables and both type figures: most clips
+/// first, ties by name, [`UNMAPPED`] last.
+pub(crate) fn types_in_report_order(stats: &Stats) -> Vec<&TypeStats> {
+    let mut types: Vec<&TypeStats> = stats.motion_types.iter().collect();
+    types.sort_by(|a, b| {
+        (a.motion_type == UNMAPPED)
+            .cmp(&(b.motion_type == UNMAPPED))
+            .then(b.clips.cmp(&a.clips))
+            .then(a.motion_type.cmp(&b.motion_type))
+    });
+    types
+}
+
 /// Orders split names as the build writes them ([`Split`]'s order: train, validation, test), with
 /// [`NO_SPLIT`] after test and other names last, alphabetically.
 pub(crate) fn split_order(a: &str, b: &str) -> Ordering {

@@ -1,11 +1,11 @@
-//! `tables.tex` (booktabs tables ready to `\input`) and `report.md` (the same tables in Markdown,
-//! with every figure embedded).
+//! `tables.tex` (booktabs tables ready to `\input`), `figures.tex` (the figures' floats) and
+//! `report.md` (the same tables in Markdown, with every figure embedded).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use super::figures::{FIGURES, kind_label};
-use super::stats::{MetricInfo, MetricStats, Stats, Summary, TypeStats};
+use super::figures::{FIGURES, Span, kind_label};
+use super::stats::{MetricInfo, MetricStats, Stats, Summary, TypeStats, types_in_report_order};
 
 /// Escapes LaTeX's special characters (`\ & % $ # _ { } ~ ^`) so any name typesets as written.
 pub fn latex_escape(s: &str) -> String {
@@ -189,7 +189,7 @@ pub(crate) fn latex(stats: &Stats) -> String {
     body.push_str(" & & \\multicolumn{5}{c}{Length (s)} & \\\\\n\\cmidrule(lr){3-7}\n");
     body.push_str("Motion type & Clips & Min & $Q_1$ & Median & $Q_3$ & Max & Total frames \\\\\n");
     body.push_str("\\midrule\n");
-    for t in &stats.motion_types {
+    for t in types_in_report_order(stats) {
         body.push_str(&tex_type_row(t, &latex_escape(&t.motion_type)));
     }
     body.push_str("\\midrule\n");
@@ -300,6 +300,38 @@ pub(crate) fn latex(stats: &Stats) -> String {
     out
 }
 
+/// `figures.tex`: every figure of [`FIGURES`] as a float with its caption and `fig:mf-*` label,
+/// the PDF included at the width it was drawn for (`\columnwidth`, or `\textwidth` in a
+/// `figure*`), so its text prints at the size it was set in. `tests/report.rs` compiles it in a
+/// two-column page and measures that text.
+pub(crate) fn latex_figures(stats: &Stats) -> String {
+    let title = latex_escape(&title_or(stats, "the dataset"));
+    let mut out = String::new();
+    out.push_str("% Dataset figures written by motionforge's report module.\n");
+    out.push_str(
+        "% Needs \\usepackage{graphicx}; place the figures with \\input{figures.tex}. The paths are\n\
+         % relative to the main document: with the report in report/, add \\graphicspath{{report/}}.\n\n",
+    );
+    for f in &FIGURES {
+        let (float, width) = match f.span {
+            Span::Column => ("figure", "\\columnwidth"),
+            Span::Page => ("figure*", "\\textwidth"),
+        };
+        let _ = writeln!(out, "\\begin{{{float}}}[tbp]");
+        let _ = writeln!(out, "\\centering");
+        let _ = writeln!(
+            out,
+            "\\includegraphics[width={width}]{{figures/{}.pdf}}",
+            f.stem
+        );
+        let _ = writeln!(out, "\\caption{{{title}: {}.}}", latex_escape(f.caption));
+        let _ = writeln!(out, "\\label{{{}}}", f.label);
+        let _ = writeln!(out, "\\end{{{float}}}");
+        out.push('\n');
+    }
+    out
+}
+
 fn tex_metric_rows(m: &MetricStats) -> String {
     let info = &m.info;
     let threshold = latex_escape(info.threshold)
@@ -352,7 +384,7 @@ fn md_figure(out: &mut String, stem: &str) {
     if let Some(f) = FIGURES.iter().find(|f| f.stem == stem) {
         let _ = writeln!(
             out,
-            "\n![{}](figures/{stem}.png)\n\n*{}.* Vector version: [figures/{stem}.svg](figures/{stem}.svg).\n",
+            "\n![{}](figures/{stem}.png)\n\n*{}.* Vector versions: [figures/{stem}.pdf](figures/{stem}.pdf) (for LaTeX: `figures.tex`), [figures/{stem}.svg](figures/{stem}.svg).\n",
             f.caption, f.caption
         );
     }
@@ -443,7 +475,7 @@ pub(crate) fn markdown(stats: &Stats) -> String {
         cells.push(t.total_frames.to_string());
         md_row(out, &cells);
     };
-    for t in &stats.motion_types {
+    for t in types_in_report_order(stats) {
         type_row(&mut out, t, markdown_escape(&t.motion_type));
     }
     type_row(
