@@ -33,8 +33,8 @@ use std::sync::LazyLock;
 use regex::Regex;
 use serde::{Deserialize, Serialize};
 
-use crate::caption::{Upos, tokens};
-use crate::text::{rotation_words, side_words};
+use motionforge_language::caption::{Upos, tokens};
+use motionforge_language::text::{rotation_words, side_words};
 
 /// Why a paraphrase line is refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]

@@ -15,7 +15,7 @@ use serde_json::{Value, json};
 use tokio::sync::Semaphore;
 use tokio::time::Instant;
 
-use crate::llm::cache::{CacheEntry, CacheKey, ResponseCache};
+use crate::cache::{CacheEntry, CacheKey, ResponseCache};
 
 /// Characters of an error body kept in [`LlmError::Http`].
 const BODY_PREVIEW_CHARS: usize = 300;

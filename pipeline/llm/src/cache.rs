@@ -13,9 +13,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::base::hex;
-use crate::base::sha256_hex;
-use crate::llm::client::{RequestKind, SamplingParams};
+use crate::client::{RequestKind, SamplingParams};
+use motionforge_core::base::hex;
+use motionforge_core::base::sha256_hex;
 
 /// Characters of the prompt kept in each record, so a human can tell entries apart.
 const PREVIEW_CHARS: usize = 120;
