@@ -33,6 +33,7 @@ fn capture(path: &Path, profile: &str) -> Capture {
         profile: &spec,
         fps_override: None,
         positions: None,
+        amass: None,
     });
     out.capture.unwrap_or_else(|| panic!("{:?}", out.rejects))
 }

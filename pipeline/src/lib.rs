@@ -64,6 +64,7 @@
 //! # Ok(())
 //! # }
 //! ```
+pub mod amass;
 pub mod annotate;
 pub mod base;
 pub mod build;

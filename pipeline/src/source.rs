@@ -189,9 +189,10 @@ pub fn load_fps_table(
         .collect())
 }
 
-/// The quirks of the sources' annotation files: what their readers noted, and an
+/// The quirks of the sources' annotation files: what their readers noted, an
 /// `annotation_without_capture` note for every annotated capture key that no capture file of its
-/// source has (`files`, as discovered). `annotations` are the config's sources', in order.
+/// source has (`files`, as discovered), and an `amass_not_a_motion` note for every AMASS
+/// `shape.npz` or `*_stagei.npz` the globs found (ingest skips them). `annotations` are the config's sources', in order.
 pub fn annotation_notes(
     config: &Config,
     annotations: &[SourceAnnotations],
@@ -218,6 +219,23 @@ pub fn annotation_notes(
                     ),
                 ));
             }
+        }
+    }
+    // Body shapes and MoSh's first stage sit beside AMASS sequences: skipped, and said so.
+    for file in files {
+        if config
+            .sources
+            .get(file.source)
+            .is_some_and(|s| s.amass.is_some())
+            && crate::amass::is_not_a_motion(&file.file_name())
+        {
+            notes.push(Note::new(
+                "amass_not_a_motion",
+                format!(
+                    "`{}`: a body shape or MoSh stage-i file, not a motion: skipped",
+                    file.display
+                ),
+            ));
         }
     }
     notes

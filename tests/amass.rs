@@ -1,0 +1,697 @@
+//! AMASS captures (issue 32): `.npz` files of SMPL-H / SMPL-X pose parameters read with a body
+//! model, checked against an independent NumPy implementation of the reference maths (smplx's
+//! `lbs` joints, in float32 as smplx computes), and built end to end through the binary.
+//!
+//! AMASS files and SMPL body models cannot be redistributed, so the tests write their own with
+//! NumPy (`GENERATE`): body models with the real key names and shapes (SMPL-H: 6,890 vertices,
+//! 52 joints and its kinematic tree; SMPL-X: 10,475 vertices, 55 joints), seeded random values of
+//! realistic size (vertices within a few centimetres of their joint, `J_regressor` rows
+//! normalised, shape directions of a centimetre per unit), and AMASS-layout sequences.
+//!
+//! The poses are real motion: the raw SMPL-H joints of HumanML3D clip 000021 (an AMASS capture,
+//! `../shared/data/humanml3d/joints/000021.npy`) turned into local rotations of the 22 body joints
+//! by the project's own inverse kinematics (`motion::ik`), with the model's rest joints taken from
+//! that fit's skeleton, and the root turned from y up to AMASS's z up. The shared data has no
+//! finger, jaw or eye motion: those joints take half the rotation of a body joint in the same
+//! frame (so they move with the capture's timing), which exercises every joint of the chain.
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use glam::{DQuat, DVec3};
+use motionforge::amass::{self, Family};
+use motionforge::motion::ProfileSpec;
+use motionforge::motion::ik::{PositionLayout, motion_from_positions};
+use motionforge::motion::npy::read_joint_positions;
+
+/// The NumPy side: body models, AMASS sequences, and the reference joints, from a JSON spec.
+const GENERATE: &str = r#"
+import json, sys, numpy as np
+spec = json.load(open(sys.argv[1]))
+BODY = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19]
+def hand(wrist, first):
+    out = []
+    for finger in range(5):
+        base = first + 3 * finger
+        out += [wrist, base, base + 1]
+    return out
+PARENTS = {
+    'smplh': BODY + hand(20, 22) + hand(21, 37),
+    'smplx': BODY + [15, 15, 15] + hand(20, 25) + hand(21, 40),
+}
+VERTICES = {'smplh': 6890, 'smplx': 10475}
+FACES = {'smplh': 13776, 'smplx': 20908}
+BETAS = {'smplh': 16, 'smplx': 20}
+
+def make_model(m):
+    fam = m['family']
+    rng = np.random.default_rng(m['seed'])
+    rest = np.fromfile(m['rest'], dtype='<f8').reshape(-1, 3)
+    J, V = len(PARENTS[fam]), VERTICES[fam]
+    assert rest.shape[0] == J
+    owner = np.arange(V) % J
+    # Each vertex a few centimetres from its joint; each joint the weighted mean of its vertices.
+    v_template = rest[owner] + rng.normal(0.0, 0.03, (V, 3))
+    regressor = np.zeros((J, V))
+    for j in range(J):
+        w = rng.uniform(0.1, 1.0, (owner == j).sum())
+        regressor[j, owner == j] = w / w.sum()
+    B = BETAS[fam]
+    shapedirs = rng.normal(0.0, 0.01, (J, 3, B))[owner] + rng.normal(0.0, 0.002, (V, 3, B))
+    weights = np.zeros((V, J)); weights[np.arange(V), owner] = 1.0
+    if fam == 'smplh':
+        root = 4294967295
+        kintree = np.array([[root] + PARENTS[fam][1:], list(range(J))], dtype=np.int64)
+        dtype = np.float64
+    else:
+        kintree = np.array([PARENTS[fam], list(range(J))], dtype=np.int32)
+        dtype = np.float32
+    arrays = dict(
+        v_template=v_template.astype(dtype),
+        shapedirs=shapedirs.astype(dtype),
+        posedirs=np.zeros((V, 3, (J - 1) * 9), dtype=np.float32),
+        J_regressor=regressor.astype(dtype),
+        kintree_table=kintree,
+        weights=weights.astype(dtype),
+        f=rng.integers(0, V, (FACES[fam], 3)).astype(np.uint32),
+    )
+    for key in m.get('drop', []):
+        del arrays[key]
+    np.savez_compressed(m['path'], **arrays)
+
+def make_sequence(s):
+    fam = s['family']
+    width = 156 if fam == 'smplh' else 165
+    poses = np.fromfile(s['poses'], dtype='<f8').reshape(-1, width)
+    trans = np.fromfile(s['trans'], dtype='<f8').reshape(-1, 3)
+    arrays = dict(poses=poses, trans=trans, betas=np.array(s['betas'], dtype=np.float64))
+    g = s['gender']
+    arrays['gender'] = np.array(g.encode()) if s.get('gender_bytes') else np.array(g)
+    if fam == 'smplh':
+        arrays['mocap_framerate'] = np.array(s['fps'])
+        arrays['dmpls'] = np.zeros((len(poses), 8))
+    else:
+        arrays['mocap_frame_rate'] = np.array(s['fps'])
+        arrays['surface_model_type'] = np.array('smplx')
+        arrays['num_betas'] = np.array(len(s['betas']))
+        arrays['root_orient'] = poses[:, :3]
+        arrays['pose_body'] = poses[:, 3:66]
+        arrays['pose_jaw'] = poses[:, 66:69]
+        arrays['pose_eye'] = poses[:, 69:75]
+        arrays['pose_hand'] = poses[:, 75:]
+    for key in s.get('drop', []):
+        del arrays[key]
+    for key, value in s.get('replace', {}).items():
+        arrays[key] = np.array(value)
+    if s.get('nan_at'):
+        f, i = s['nan_at']
+        arrays['poses'] = arrays['poses'].copy()
+        arrays['poses'][f, i] = np.nan
+    np.savez(s['path'], **arrays)
+    if s.get('truncate'):
+        data = open(s['path'], 'rb').read()
+        open(s['path'], 'wb').write(data[: len(data) // 2])
+
+# The reference: smplx's lbs (blend_shapes, vertices2joints, batch_rodrigues,
+# batch_rigid_transform) for the joints, in float32, plus trans; frames as HumanML3D takes them.
+def batch_rodrigues(rot_vecs):
+    angle = np.linalg.norm(rot_vecs + 1e-8, axis=1, keepdims=True)
+    rot_dir = rot_vecs / angle
+    cos = np.cos(angle)[:, :, None]
+    sin = np.sin(angle)[:, :, None]
+    rx, ry, rz = np.split(rot_dir, 3, axis=1)
+    zeros = np.zeros_like(rx)
+    K = np.concatenate([zeros, -rz, ry, rz, zeros, -rx, -ry, rx, zeros], axis=1).reshape(-1, 3, 3)
+    ident = np.eye(3, dtype=rot_vecs.dtype)[None]
+    return (ident + sin * K + (1 - cos) * np.matmul(K, K)).astype(np.float32)
+
+def reference(r):
+    seq = np.load(r['sequence'])
+    model = np.load(r['model'])
+    nb = r['num_betas']
+    f32 = np.float32
+    betas = seq['betas'][:nb].astype(f32)
+    v_shaped = model['v_template'].astype(f32) + np.einsum('l,mkl->mk', betas, model['shapedirs'][:, :, :nb].astype(f32))
+    J = np.einsum('ik,ji->jk', v_shaped, model['J_regressor'].astype(f32))
+    parents = model['kintree_table'][0].astype(np.int64)
+    fps = float(seq['mocap_framerate'] if 'mocap_framerate' in seq.files else seq['mocap_frame_rate'])
+    step = int(fps / 20) if r['humanml3d'] else 1
+    frames = list(range(0, seq['poses'].shape[0], step))
+    poses = seq['poses'][frames].astype(f32)
+    trans = seq['trans'][frames].astype(f32)
+    n = J.shape[0]
+    rot = batch_rodrigues(poses.reshape(-1, 3)).reshape(len(frames), n, 3, 3)
+    rel = J.copy()
+    rel[1:] -= J[parents[1:]]
+    out = np.zeros((len(frames), n, 3), dtype=f32)
+    for t in range(len(frames)):
+        chain = [None] * n
+        for j in range(n):
+            m = np.eye(4, dtype=f32)
+            m[:3, :3] = rot[t, j]
+            m[:3, 3] = rel[j]
+            chain[j] = m if j == 0 else np.matmul(chain[parents[j]], m)
+            out[t, j] = chain[j][:3, 3]
+    out += trans[:, None, :]
+    np.save(r['out'], out)
+    print(json.dumps({'out': r['out'], 'frames': len(frames), 'stride': step, 'effective': fps / step}))
+
+for m in spec.get('models', []):
+    make_model(m)
+for s in spec.get('sequences', []):
+    make_sequence(s)
+for r in spec.get('references', []):
+    reference(r)
+"#;
+
+/// The real motion: clip 000021's body joints, fitted by the project's IK.
+struct RealMotion {
+    /// Rest position of each body joint (the fit's skeleton, root placed as SMPL's).
+    rest: Vec<DVec3>,
+    /// Local rotations per frame of the 22 body joints, root turned to z up.
+    rotations: Vec<[DQuat; 22]>,
+    /// Root positions per frame, z up.
+    root: Vec<DVec3>,
+}
+
+fn real_motion() -> RealMotion {
+    let path = common::shared_data().join("humanml3d/joints/000021.npy");
+    let bytes = std::fs::read(&path).unwrap();
+    let array = read_joint_positions(&bytes).unwrap();
+    let body: Vec<DVec3> = array
+        .positions
+        .chunks_exact(array.joints)
+        .flat_map(|f| f[..22].iter().copied())
+        .collect();
+    let spec = ProfileSpec::bundled("smpl-22").unwrap();
+    let layout = PositionLayout::from_profile(&spec).unwrap();
+    let (motion, _) = motion_from_positions(&layout, &body, 20.0, 0.05).unwrap();
+    let mut rest = vec![DVec3::new(0.001, -0.35, 0.012); 22];
+    for (j, joint) in motion.skeleton.joints.iter().enumerate() {
+        if let Some(p) = joint.parent {
+            rest[j] = rest[p] + joint.offset;
+        }
+    }
+    let up = DQuat::from_rotation_x(std::f64::consts::FRAC_PI_2);
+    let frames = motion.num_frames();
+    let rotations = (0..frames)
+        .map(|f| {
+            std::array::from_fn(|j| {
+                let r = motion.rotation(f, j);
+                if j == 0 { up * r } else { r }
+            })
+        })
+        .collect();
+    let root = (0..frames).map(|f| up * motion.translation(f, 0)).collect();
+    RealMotion {
+        rest,
+        rotations,
+        root,
+    }
+}
+
+fn axis_angle(q: DQuat) -> DVec3 {
+    let q = if q.w < 0.0 { -q } else { q };
+    let (axis, angle) = q.to_axis_angle();
+    axis * angle
+}
+
+/// Rest joints of a family: the fitted body, then jaw and eyes by the head and fingers along
+/// each forearm (3 segments of 3 cm, fingers 2 cm apart).
+fn family_rest(real: &RealMotion, family: Family) -> Vec<DVec3> {
+    let mut rest = real.rest.clone();
+    if family == Family::SmplX {
+        let head = rest[15];
+        rest.push(head + DVec3::new(0.0, -0.05, 0.05));
+        rest.push(head + DVec3::new(0.03, 0.03, 0.08));
+        rest.push(head + DVec3::new(-0.03, 0.03, 0.08));
+    }
+    for (wrist, elbow) in [(20, 18), (21, 19)] {
+        let along = (rest[wrist] - rest[elbow]).normalize();
+        let across = along.cross(DVec3::Z).normalize_or(DVec3::X);
+        for finger in 0..5 {
+            let mut at = rest[wrist] + across * (0.02 * (finger as f64 - 2.0));
+            for _ in 0..3 {
+                at += along * 0.03;
+                rest.push(at);
+            }
+        }
+    }
+    assert_eq!(rest.len(), family.joints());
+    rest
+}
+
+/// Axis-angle poses (frames × joints × 3) and translations of the real motion on a family.
+fn family_poses(real: &RealMotion, family: Family, rest: &[DVec3]) -> (Vec<f64>, Vec<f64>) {
+    let n = family.joints();
+    let mut poses = Vec::new();
+    let mut trans = Vec::new();
+    for (f, rotations) in real.rotations.iter().enumerate() {
+        for j in 0..n {
+            let r = if j < 22 {
+                rotations[j]
+            } else {
+                // Half of a body joint's rotation (skipping the root), by joint index.
+                DQuat::IDENTITY.slerp(rotations[1 + (j * 7) % 21], 0.5)
+            };
+            poses.extend(axis_angle(r).to_array());
+        }
+        trans.extend((real.root[f] - rest[0]).to_array());
+    }
+    (poses, trans)
+}
+
+fn write_f64(path: &Path, values: &[f64]) {
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A scratch folder with the real motion's rest joints and poses for both families.
+struct Scratch {
+    dir: tempfile::TempDir,
+}
+
+impl Scratch {
+    fn new() -> Scratch {
+        let dir = tempfile::tempdir().unwrap();
+        let real = real_motion();
+        for family in [Family::SmplH, Family::SmplX] {
+            let rest = family_rest(&real, family);
+            let flat: Vec<f64> = rest.iter().flat_map(|v| v.to_array()).collect();
+            let name = family.folder();
+            write_f64(&dir.path().join(format!("{name}-rest.bin")), &flat);
+            let (poses, trans) = family_poses(&real, family, &rest);
+            write_f64(&dir.path().join(format!("{name}-poses.bin")), &poses);
+            write_f64(&dir.path().join(format!("{name}-trans.bin")), &trans);
+        }
+        Scratch { dir }
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    /// A model spec: family, gender folder under `models/`, seed, keys to leave out.
+    fn model(&self, family: Family, gender: &str, seed: u64, drop: &[&str]) -> serde_json::Value {
+        let path = self
+            .path("models")
+            .join(family.folder())
+            .join(gender)
+            .join("model.npz");
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        serde_json::json!({
+            "path": path, "family": family.folder(), "seed": seed, "drop": drop,
+            "rest": self.path(&format!("{}-rest.bin", family.folder())),
+        })
+    }
+
+    /// A sequence spec (more keys can be added to the object).
+    fn sequence(
+        &self,
+        name: &str,
+        family: Family,
+        gender: &str,
+        betas: &[f64],
+        fps: f64,
+    ) -> serde_json::Value {
+        let f = family.folder();
+        serde_json::json!({
+            "path": self.path(name), "family": f, "gender": gender, "betas": betas, "fps": fps,
+            "poses": self.path(&format!("{f}-poses.bin")),
+            "trans": self.path(&format!("{f}-trans.bin")),
+        })
+    }
+
+    /// Runs the generator; its printed lines (one JSON object per reference).
+    fn generate(&self, spec: serde_json::Value) -> Vec<serde_json::Value> {
+        let path = self.path("spec.json");
+        std::fs::write(&path, spec.to_string()).unwrap();
+        common::run_python(GENERATE, &[&path])
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    }
+}
+
+/// Sixteen realistic non-zero shape coefficients.
+const BETAS: [f64; 16] = [
+    1.2, -0.8, 0.5, 1.9, -1.1, 0.3, -0.4, 0.9, -1.6, 0.7, 0.2, -0.3, 0.6, -0.9, 1.1, -0.2,
+];
+
+/// Largest distance between the library's joints (the motion's forward kinematics) and the
+/// reference's, over every frame and joint.
+fn max_error(motion: &motionforge::motion::Motion, reference: &Path) -> (f64, usize) {
+    let array = read_joint_positions(&std::fs::read(reference).unwrap()).unwrap();
+    let world = motion.forward_kinematics();
+    assert_eq!(array.frames, motion.num_frames(), "{}", reference.display());
+    assert_eq!(array.joints, motion.num_joints(), "{}", reference.display());
+    let worst = world
+        .positions
+        .iter()
+        .zip(&array.positions)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    (worst, array.frames)
+}
+
+#[test]
+fn joints_equal_the_numpy_reference_for_both_families_genders_and_shapes() {
+    let s = Scratch::new();
+    let zero = [0.0; 16];
+    // (file, family, stated gender, as bytes, betas)
+    let cases = [
+        ("h_male_zero.npz", Family::SmplH, "male", false, &zero),
+        ("h_female_betas.npz", Family::SmplH, "female", true, &BETAS),
+        ("x_male_betas.npz", Family::SmplX, "male", true, &BETAS),
+        ("x_female_zero.npz", Family::SmplX, "female", false, &zero),
+    ];
+    let mut models = Vec::new();
+    for (i, family) in [Family::SmplH, Family::SmplX].into_iter().enumerate() {
+        for (k, gender) in ["male", "female"].into_iter().enumerate() {
+            models.push(s.model(family, gender, 10 * i as u64 + k as u64 + 1, &[]));
+        }
+    }
+    let mut sequences = Vec::new();
+    let mut references = Vec::new();
+    for (name, family, gender, bytes, betas) in cases {
+        let mut seq = s.sequence(name, family, gender, betas, 120.0);
+        seq["gender_bytes"] = bytes.into();
+        sequences.push(seq);
+        let model = amass::model_path(&s.path("models"), family, gender);
+        references.push(serde_json::json!({
+            "sequence": s.path(name), "model": model, "num_betas": 10, "humanml3d": false,
+            "out": s.path(&format!("{name}.ref.npy")),
+        }));
+    }
+    s.generate(serde_json::json!({
+        "models": models, "sequences": sequences, "references": references,
+    }));
+    let mut previous: Option<Vec<DVec3>> = None;
+    for (name, family, gender, bytes, betas) in cases {
+        let data = std::fs::read(s.path(name)).unwrap();
+        let seq = amass::read_sequence(name, &data, true).unwrap();
+        assert_eq!(seq.family, family, "{name}");
+        assert_eq!(seq.fps, Some(120.0), "{name}");
+        let stated = seq.gender.clone().unwrap();
+        assert_eq!(
+            (stated.value.as_str(), stated.bytes),
+            (gender, bytes),
+            "{name}"
+        );
+        let chosen = amass::model_gender(amass::GenderChoice::File, Some(&stated), false).unwrap();
+        assert_eq!(chosen, gender);
+        let model =
+            amass::load_model(&amass::model_path(&s.path("models"), family, chosen), 10).unwrap();
+        let motion = amass::to_motion(&seq, &model, 1, 120.0).unwrap();
+        let (worst, frames) = max_error(&motion, &s.path(&format!("{name}.ref.npy")));
+        assert_eq!(frames, 180, "{name}");
+        eprintln!("{name}: largest difference from the reference {worst:e} m");
+        assert!(
+            worst < 1e-5,
+            "{name}: joints differ from the reference by {worst:e} m"
+        );
+        // The shapes and models really differ, so agreeing is not agreeing on nothing.
+        let first: Vec<DVec3> = motion.forward_kinematics().frame(0).to_vec();
+        if let Some(prev) = &previous
+            && prev.len() == first.len()
+        {
+            let apart = prev
+                .iter()
+                .zip(&first)
+                .map(|(a, b)| a.distance(*b))
+                .fold(0.0, f64::max);
+            assert!(
+                apart > 1e-3,
+                "{name}: same joints as the case before ({apart:e})"
+            );
+        }
+        previous = Some(first);
+        assert!(betas.len() >= 10);
+    }
+}
+
+#[test]
+fn the_humanml3d_frame_rate_mode_takes_every_int_fps_over_20th_frame_from_frame_0() {
+    let s = Scratch::new();
+    let rates = [120.0, 250.0, 59.99999, 100.0];
+    let model = amass::model_path(&s.path("models"), Family::SmplH, "male");
+    let mut sequences = Vec::new();
+    let mut references = Vec::new();
+    for fps in rates {
+        let name = format!("rate_{fps}_poses.npz");
+        sequences.push(s.sequence(&name, Family::SmplH, "male", &BETAS, fps));
+        references.push(serde_json::json!({
+            "sequence": s.path(&name), "model": model, "num_betas": 10, "humanml3d": true,
+            "out": s.path(&format!("{name}.ref.npy")),
+        }));
+    }
+    let printed = s.generate(serde_json::json!({
+        "models": [s.model(Family::SmplH, "male", 7, &[])],
+        "sequences": sequences, "references": references,
+    }));
+    let model = amass::load_model(&model, 10).unwrap();
+    let mut effective_rates = Vec::new();
+    for (fps, reference) in rates.into_iter().zip(&printed) {
+        let name = format!("rate_{fps}_poses.npz");
+        let seq =
+            amass::read_sequence(&name, &std::fs::read(s.path(&name)).unwrap(), true).unwrap();
+        let (stride, effective) = amass::humanml3d_stride(seq.fps.unwrap());
+        assert_eq!(
+            stride as u64,
+            reference["stride"].as_u64().unwrap(),
+            "{fps}"
+        );
+        assert!((effective - reference["effective"].as_f64().unwrap()).abs() < 1e-9);
+        let motion = amass::to_motion(&seq, &model, stride, amass::HUMANML3D_FPS).unwrap();
+        assert_eq!(motion.fps, 20.0);
+        let (worst, frames) = max_error(&motion, &s.path(&format!("{name}.ref.npy")));
+        assert_eq!(
+            frames as u64,
+            reference["frames"].as_u64().unwrap(),
+            "{fps}"
+        );
+        assert!(worst < 1e-5, "{fps} fps: {worst:e} m");
+        effective_rates.push((frames, (effective * 1e4).round() / 1e4));
+    }
+    // HumanML3D's published rates: 180 frames at 120 fps every 6th, 250 every 12th (20.83 fps),
+    // 59.99999 every 2nd (30 fps), 100 every 5th.
+    assert_eq!(
+        effective_rates,
+        [(30, 20.0), (15, 20.8333), (90, 30.0), (36, 20.0)]
+    );
+}
+
+/// A config of one AMASS source over `captures` (globs), with `extra` lines in its `[sources.amass]`.
+fn amass_config(dir: &Path, captures: &[&str], extra: &str) -> PathBuf {
+    let captures: Vec<String> = captures.iter().map(|c| format!("{c:?}")).collect();
+    let text = format!(
+        r#"[dataset]
+name = "amass-test"
+output = "out"
+fps = 20.0
+seed = 7
+
+[synthetic]
+exhaustive = true
+
+[[sources]]
+name = "amass"
+captures = [{}]
+profile = "smplh-52"
+licence = "test data written by the test"
+
+[sources.labels]
+kind = "filename"
+pattern = "{{action}}_{{take}}_poses"
+action = "{{action}}"
+text = "a person does a {{action}}"
+
+[sources.amass]
+body_model = "models"
+{extra}
+"#,
+        captures.join(", ")
+    );
+    let path = dir.join("amass.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn motionforge() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_motionforge"))
+}
+
+#[test]
+fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
+    let s = Scratch::new();
+    let mut sequences = vec![
+        s.sequence("walk_001_poses.npz", Family::SmplH, "male", &BETAS, 120.0),
+        s.sequence(
+            "jump_001_poses.npz",
+            Family::SmplH,
+            "female",
+            &[0.0; 16],
+            250.0,
+        ),
+        s.sequence(
+            "wave_001_poses.npz",
+            Family::SmplH,
+            "female",
+            &BETAS,
+            59.99999,
+        ),
+        s.sequence("shape.npz", Family::SmplH, "male", &BETAS, 120.0),
+    ];
+    let mut bad = |name: &str, key: &str, value: serde_json::Value| {
+        let mut seq = s.sequence(name, Family::SmplH, "male", &BETAS, 120.0);
+        seq[key] = value;
+        sequences.push(seq);
+    };
+    bad("cut_001_poses.npz", "truncate", true.into());
+    bad("nan_001_poses.npz", "nan_at", serde_json::json!([40, 17]));
+    bad(
+        "narrow_001_poses.npz",
+        "replace",
+        serde_json::json!({"poses": vec![vec![0.0; 100]; 3]}),
+    );
+    bad(
+        "norate_001_poses.npz",
+        "drop",
+        serde_json::json!(["mocap_framerate"]),
+    );
+    bad("neutral_001_poses.npz", "gender", "neutral".into());
+    s.generate(serde_json::json!({
+        "models": [
+            s.model(Family::SmplH, "male", 3, &[]),
+            s.model(Family::SmplH, "female", 4, &[]),
+        ],
+        "sequences": sequences,
+    }));
+    let config = amass_config(s.dir.path(), &["*.npz"], "frame_rate = \"humanml3d\"");
+    common::run_ok(
+        motionforge()
+            .args(["build", "--quiet", "--config"])
+            .arg(&config),
+    );
+    let dataset = s.path("out/amass-test");
+
+    // Every bad file is refused by name, naming what is wrong; the good ones made clips.
+    let rejects = std::fs::read_to_string(dataset.join("rejects.jsonl")).unwrap();
+    let rejects: Vec<serde_json::Value> = rejects
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let reject_of = |file: &str| {
+        rejects
+            .iter()
+            .find(|r| r["file"] == file)
+            .unwrap_or_else(|| panic!("no reject for {file}: {rejects:?}"))
+    };
+    for (file, words) in [
+        ("cut_001_poses.npz", &["zip"][..]),
+        ("nan_001_poses.npz", &["`poses`", "frame 40", "NaN"]),
+        ("narrow_001_poses.npz", &["`poses`", "100 values per frame"]),
+        ("norate_001_poses.npz", &["mocap_framerate"]),
+        (
+            "neutral_001_poses.npz",
+            &["neutral", "smplh/neutral/model.npz"],
+        ),
+    ] {
+        let r = reject_of(file);
+        assert_eq!(r["reason"], "amass", "{r}");
+        for w in words {
+            assert!(
+                r["message"].as_str().unwrap().contains(w),
+                "{file}: {w}: {r}"
+            );
+        }
+    }
+    assert_eq!(rejects.len(), 5, "{rejects:?}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dataset.join("build-report.json")).unwrap())
+            .unwrap();
+    let notes = &report["notes_by_kind"];
+    // 250 fps (20.83) and 59.99999 fps (30) differ from 20 fps; 120 fps does not.
+    assert_eq!(notes["amass_effective_rate"], 2, "{notes}");
+    assert_eq!(notes["amass_not_a_motion"], 1, "{notes}");
+
+    let listed = common::run_ok(motionforge().args(["clips", "--json"]).arg(&dataset));
+    let rows: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+    let rows = rows.as_array().unwrap();
+    let listed = serde_json::to_string(rows).unwrap();
+    for take in ["walk_001_poses", "jump_001_poses", "wave_001_poses"] {
+        assert!(listed.contains(take), "{take} made no clip: {listed}");
+    }
+
+    // The rows export to HumanML3D's layout, and a clip back to BVH on the model's skeleton.
+    let hml = s.path("hml");
+    common::run_ok(
+        motionforge()
+            .args(["export", "humanml3d", "--quiet", "--dataset"])
+            .arg(&dataset)
+            .arg("--out")
+            .arg(&hml),
+    );
+    let joints: Vec<PathBuf> = std::fs::read_dir(hml.join("joints"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(
+        joints.len(),
+        rows.len(),
+        "a joints file per row: {joints:?}"
+    );
+    let mirrored = joints
+        .iter()
+        .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with('M'))
+        .count();
+    assert_eq!(mirrored, 3, "the three captures' mirrors: {joints:?}");
+    let clip_id = rows
+        .iter()
+        .find_map(|v| v["clip_id"].as_str().map(String::from))
+        .expect("a clip id");
+    let bvh = s.path("clip.bvh");
+    common::run_ok(
+        motionforge()
+            .args(["export-bvh", "--clip", &clip_id, "--output"])
+            .arg(&bvh)
+            .arg(&dataset),
+    );
+    let text = std::fs::read_to_string(&bvh).unwrap();
+    assert!(
+        text.contains("JOINT left_thumb3"),
+        "{}",
+        &text[..400.min(text.len())]
+    );
+}
+
+#[test]
+fn a_body_model_missing_a_key_or_a_gender_is_a_config_error_naming_the_path() {
+    let s = Scratch::new();
+    s.generate(serde_json::json!({
+        "models": [s.model(Family::SmplH, "male", 3, &["J_regressor"])],
+        "sequences": [s.sequence("walk_001_poses.npz", Family::SmplH, "male", &BETAS, 120.0)],
+    }));
+    let config = amass_config(s.dir.path(), &["*.npz"], "");
+    let out = motionforge()
+        .args(["config", "check", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("sources[0].amass.body_model"), "{err}");
+    assert!(err.contains("smplh/male/model.npz"), "{err}");
+    assert!(err.contains("no array `J_regressor`"), "{err}");
+
+    let config = amass_config(s.dir.path(), &["*.npz"], "gender = \"neutral\"");
+    let out = motionforge()
+        .args(["config", "check", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("neutral model"), "{err}");
+}
