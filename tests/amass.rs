@@ -227,9 +227,10 @@ fn family_rest(real: &RealMotion, family: Family) -> Vec<DVec3> {
         rest.push(head + DVec3::new(0.03, 0.03, 0.08));
         rest.push(head + DVec3::new(-0.03, 0.03, 0.08));
     }
-    for (wrist, elbow) in [(20, 18), (21, 19)] {
+    // Spread across the forearm, mirror images of each other (x is the body's side axis).
+    for (wrist, elbow, side) in [(20, 18, 1.0), (21, 19, -1.0)] {
         let along = (rest[wrist] - rest[elbow]).normalize();
-        let across = along.cross(DVec3::Z).normalize_or(DVec3::X);
+        let across = side * along.cross(DVec3::Y).normalize_or(DVec3::Z);
         for finger in 0..5 {
             let mut at = rest[wrist] + across * (0.02 * (finger as f64 - 2.0));
             for _ in 0..3 {
@@ -561,6 +562,8 @@ fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
         serde_json::json!(["mocap_framerate"]),
     );
     bad("neutral_001_poses.npz", "gender", "neutral".into());
+    // An SMPL-X file in a source of SMPL-H's profile.
+    sequences.push(s.sequence("smplx_001_poses.npz", Family::SmplX, "male", &BETAS, 120.0));
     s.generate(serde_json::json!({
         "models": [
             s.model(Family::SmplH, "male", 3, &[]),
@@ -607,7 +610,10 @@ fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
             );
         }
     }
-    assert_eq!(rejects.len(), 5, "{rejects:?}");
+    let r = reject_of("smplx_001_poses.npz");
+    assert_eq!(r["reason"], "profile", "{r}");
+    assert!(r["message"].as_str().unwrap().contains("smplx-55"), "{r}");
+    assert_eq!(rejects.len(), 6, "{rejects:?}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dataset.join("build-report.json")).unwrap())
             .unwrap();
@@ -664,6 +670,15 @@ fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
         "{}",
         &text[..400.min(text.len())]
     );
+    let previews = s.path("previews");
+    common::run_ok(
+        motionforge()
+            .args(["preview", "--quiet", "--clip", &clip_id, "--output"])
+            .arg(&previews)
+            .arg(&dataset),
+    );
+    let drawn = std::fs::read_dir(&previews).unwrap().count();
+    assert_eq!(drawn, 2, "a GIF and a PNG for the clip");
 }
 
 #[test]
@@ -694,4 +709,126 @@ fn a_body_model_missing_a_key_or_a_gender_is_a_config_error_naming_the_path() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{err}");
     assert!(err.contains("neutral model"), "{err}");
+}
+
+/// Largest distance between the forward kinematics of `mirrored` and the reflection of
+/// `original`'s joints (each joint at its partner's reflected place).
+fn mirror_error(
+    plan: &motionforge::motion::MirrorPlan,
+    original: &motionforge::motion::Motion,
+    mirrored: &motionforge::motion::Motion,
+) -> f64 {
+    let reflected = plan.reflect_positions(&original.forward_kinematics().positions);
+    mirrored
+        .forward_kinematics()
+        .positions
+        .iter()
+        .zip(&reflected)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn smpl_reflections_mirror_the_body_and_hands_on_the_models_own_skeleton() {
+    use motionforge::motion::{MirrorPlan, OffsetPolicy, Reflection};
+    let s = Scratch::new();
+    for family in [Family::SmplH, Family::SmplX] {
+        let name = format!("{}_mirror.npz", family.folder());
+        s.generate(serde_json::json!({
+            "models": [s.model(family, "male", 5, &[])],
+            // Zero betas: the generated shape directions are random, not left/right symmetric
+            // as SMPL's are.
+            "sequences": [s.sequence(&name, family, "male", &[0.0; 16], 60.0)],
+        }));
+        let seq =
+            amass::read_sequence(&name, &std::fs::read(s.path(&name)).unwrap(), true).unwrap();
+        let model =
+            amass::load_model(&amass::model_path(&s.path("models"), family, "male"), 10).unwrap();
+        let motion = amass::to_motion(&seq, &model, 1, 60.0).unwrap();
+        let profile = ProfileSpec::bundled(family.profile())
+            .unwrap()
+            .bind(&motion.skeleton)
+            .unwrap();
+        let plan = MirrorPlan::from_profile(&motion.skeleton, &profile).unwrap();
+        // On the mirrored skeleton the copy is the exact reflection.
+        let exact = mirror_error(&plan, &motion, &plan.mirror(&motion, OffsetPolicy::Mirror));
+        assert!(exact < 1e-9, "{family:?}: {exact:e}");
+        // On the original skeleton it is off only by the body's left/right asymmetry (the
+        // capture's bone lengths, a few centimetres), fingers included: each joint's rest frame is the model's own axes,
+        // so SMPL's reflection across x mirrors every local rotation.
+        let kept = mirror_error(&plan, &motion, &plan.mirror(&motion, OffsetPolicy::Keep));
+        // Any other reflection turns limbs the wrong way.
+        let wrong = MirrorPlan::with_reflections(
+            &motion.skeleton,
+            &profile,
+            vec![Reflection::Z; motion.num_joints()],
+        );
+        let off = mirror_error(&wrong, &motion, &wrong.mirror(&motion, OffsetPolicy::Keep));
+        eprintln!("{family:?}: kept skeleton {kept:.4} m, wrong reflections {off:.4} m");
+        assert!(kept < 0.05, "{family:?}: mirrored joints off by {kept} m");
+        assert!(off > 4.0 * kept, "{family:?}: {off} vs {kept}");
+    }
+}
+
+/// Reading an AMASS file and computing its joints, timed on one thread: a 2,000-frame SMPL-H
+/// sequence (the real motion, repeated) read from its bytes, put on the body model's skeleton
+/// and through forward kinematics, best of five. The body model is read once, outside the
+/// timing, as a build reads it. Run in release:
+/// `cargo test --release -p motionforge --test amass -- --ignored --nocapture`
+/// (`docs/performance.md`).
+#[test]
+#[ignore = "a measurement: run in release"]
+fn reading_and_forward_kinematics_frames_per_second() {
+    let s = Scratch::new();
+    let n = Family::SmplH.joints();
+    let poses: Vec<u8> = std::fs::read(s.path("smplh-poses.bin")).unwrap();
+    let trans: Vec<u8> = std::fs::read(s.path("smplh-trans.bin")).unwrap();
+    let frames = 2000;
+    let repeat = |bytes: &[u8], width: usize| -> Vec<u8> {
+        bytes
+            .chunks_exact(width)
+            .cycle()
+            .take(frames)
+            .flatten()
+            .copied()
+            .collect()
+    };
+    std::fs::write(s.path("long-poses.bin"), repeat(&poses, n * 3 * 8)).unwrap();
+    std::fs::write(s.path("long-trans.bin"), repeat(&trans, 3 * 8)).unwrap();
+    let mut seq = s.sequence("long_poses.npz", Family::SmplH, "male", &BETAS, 120.0);
+    seq["poses"] = s
+        .path("long-poses.bin")
+        .to_string_lossy()
+        .into_owned()
+        .into();
+    seq["trans"] = s
+        .path("long-trans.bin")
+        .to_string_lossy()
+        .into_owned()
+        .into();
+    s.generate(serde_json::json!({
+        "models": [s.model(Family::SmplH, "male", 5, &[])],
+        "sequences": [seq],
+    }));
+    let bytes = std::fs::read(s.path("long_poses.npz")).unwrap();
+    let model = amass::load_model(
+        &amass::model_path(&s.path("models"), Family::SmplH, "male"),
+        10,
+    )
+    .unwrap();
+    let mut best = f64::INFINITY;
+    for _ in 0..5 {
+        let start = std::time::Instant::now();
+        let seq = amass::read_sequence("long_poses.npz", &bytes, true).unwrap();
+        let motion = amass::to_motion(&seq, &model, 1, 120.0).unwrap();
+        let world = motion.forward_kinematics();
+        assert_eq!(world.num_frames(), frames);
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    println!(
+        "{frames} frames, {} MB: read + joints {:.0} frames/s on one thread ({:.1} ms)",
+        bytes.len() / 1_000_000,
+        frames as f64 / best,
+        best * 1e3
+    );
 }

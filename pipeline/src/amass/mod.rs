@@ -309,3 +309,75 @@ pub fn to_motion(
         translations,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stated(value: &str, bytes: bool) -> FileGender {
+        FileGender {
+            value: value.into(),
+            bytes,
+        }
+    }
+
+    #[test]
+    fn the_file_gender_is_read_from_str_and_bytes_alike_unless_the_quirk_is_asked_for() {
+        let file = GenderChoice::File;
+        assert_eq!(
+            model_gender(file, Some(&stated("male", true)), false),
+            Ok("male")
+        );
+        assert_eq!(
+            model_gender(file, Some(&stated("female", false)), false),
+            Ok("female")
+        );
+        assert!(
+            model_gender(file, None, false)
+                .unwrap_err()
+                .contains("no `gender`")
+        );
+        assert!(model_gender(file, Some(&stated("m", false)), false).is_err());
+        // HumanML3D: `bdata['gender'] == 'male'` is false for bytes, so female.
+        assert_eq!(
+            model_gender(file, Some(&stated("male", true)), true),
+            Ok("female")
+        );
+        assert_eq!(
+            model_gender(file, Some(&stated("male", false)), true),
+            Ok("male")
+        );
+        assert_eq!(
+            model_gender(file, Some(&stated("neutral", false)), true),
+            Ok("female")
+        );
+        assert_eq!(model_gender(file, None, true), Ok("female"));
+        // A gender set in the config wins over both.
+        let bytes_male = stated("male", true);
+        assert_eq!(
+            model_gender(GenderChoice::Neutral, Some(&bytes_male), true),
+            Ok("neutral")
+        );
+    }
+
+    #[test]
+    fn rodrigues_is_the_rotation_by_the_vectors_length_and_zero_is_the_identity() {
+        assert!(rodrigues(DVec3::ZERO).angle_between(DQuat::IDENTITY) < 1e-7);
+        let r = DVec3::new(0.3, -1.2, 2.0);
+        let expected = DQuat::from_axis_angle(r.normalize(), r.length());
+        assert!(rodrigues(r).angle_between(expected) < 1e-7);
+    }
+
+    #[test]
+    fn humanml3d_strides_match_the_notebook() {
+        assert_eq!(humanml3d_stride(120.0), (6, 20.0));
+        assert_eq!(humanml3d_stride(100.0).0, 5);
+        let (stride, rate) = humanml3d_stride(250.0);
+        assert_eq!(stride, 12);
+        assert!((rate - 20.833333).abs() < 1e-6);
+        let (stride, rate) = humanml3d_stride(59.99999);
+        assert_eq!(stride, 2);
+        assert!((rate - 29.999995).abs() < 1e-9);
+        assert_eq!(humanml3d_stride(15.0), (1, 15.0));
+    }
+}
