@@ -126,17 +126,15 @@ def batch_rodrigues(rot_vecs):
     ident = np.eye(3, dtype=rot_vecs.dtype)[None]
     return (ident + sin * K + (1 - cos) * np.matmul(K, K)).astype(np.float32)
 
-def reference(r):
-    seq = np.load(r['sequence'])
-    model = np.load(r['model'])
-    nb = r['num_betas']
+def joints_of(seq, model, nb, humanml3d):
+    """(frames, joints, 3) float32 joints and the frames' stride and effective rate."""
     f32 = np.float32
     betas = seq['betas'][:nb].astype(f32)
     v_shaped = model['v_template'].astype(f32) + np.einsum('l,mkl->mk', betas, model['shapedirs'][:, :, :nb].astype(f32))
     J = np.einsum('ik,ji->jk', v_shaped, model['J_regressor'].astype(f32))
     parents = model['kintree_table'][0].astype(np.int64)
     fps = float(seq['mocap_framerate'] if 'mocap_framerate' in seq.files else seq['mocap_frame_rate'])
-    step = int(fps / 20) if r['humanml3d'] else 1
+    step = int(fps / 20) if humanml3d else 1
     frames = list(range(0, seq['poses'].shape[0], step))
     poses = seq['poses'][frames].astype(f32)
     trans = seq['trans'][frames].astype(f32)
@@ -154,8 +152,51 @@ def reference(r):
             chain[j] = m if j == 0 else np.matmul(chain[parents[j]], m)
             out[t, j] = chain[j][:3, 3]
     out += trans[:, None, :]
+    return out, step, fps / step
+
+def reference(r):
+    seq = np.load(r['sequence'])
+    out, step, effective = joints_of(seq, np.load(r['model']), r['num_betas'], r['humanml3d'])
     np.save(r['out'], out)
-    print(json.dumps({'out': r['out'], 'frames': len(frames), 'stride': step, 'effective': fps / step}))
+    print(json.dumps({'out': r['out'], 'frames': len(out), 'stride': step, 'effective': effective}))
+
+# HumanML3D's raw_pose_processing: amass_to_pose (its gender test, 10 betas, the stride), the
+# y/z swap, then the segment step (dataset head trims at 20 fps, the slice, x negated) and
+# swap_left_right for the mirror; the 22 body joints kept, as the export writes them.
+def swap_left_right(data):
+    data = data.copy()
+    data[..., 0] *= -1
+    right_chain = [2, 5, 8, 11, 14, 17, 19, 21]
+    left_chain = [1, 4, 7, 10, 13, 16, 18, 20]
+    tmp = data[:, right_chain]
+    data[:, right_chain] = data[:, left_chain]
+    data[:, left_chain] = tmp
+    return data
+
+def notebook(r):
+    bdata = np.load(r['sequence'], allow_pickle=True)
+    gender = 'male' if bdata['gender'] == 'male' else 'female'
+    model = np.load(f"{r['models']}/smplh/{gender}/model.npz")
+    joints, _, _ = joints_of(bdata, model, 10, True)
+    trans_matrix = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
+    data = np.dot(joints, trans_matrix)
+    fps = 20
+    path = r['source_path']
+    if 'Eyes_Japan_Dataset' in path:
+        data = data[3 * fps:]
+    if 'MPI_HDM05' in path:
+        data = data[3 * fps:]
+    if 'TotalCapture' in path:
+        data = data[1 * fps:]
+    if 'MPI_Limits' in path:
+        data = data[1 * fps:]
+    if 'Transitions_mocap' in path:
+        data = data[int(0.5 * fps):]
+    data = data[r['start']:r['end']]
+    data[..., 0] *= -1
+    np.save(r['out'], data[:, :22].astype(np.float32))
+    np.save(r['out_m'], swap_left_right(data)[:, :22].astype(np.float32))
+    print(json.dumps({'out': r['out'], 'gender': gender, 'frames': len(data)}))
 
 for m in spec.get('models', []):
     make_model(m)
@@ -163,6 +204,8 @@ for s in spec.get('sequences', []):
     make_sequence(s)
 for r in spec.get('references', []):
     reference(r)
+for r in spec.get('notebook', []):
+    notebook(r)
 "#;
 
 /// The real motion: clip 000021's body joints, fitted by the project's IK.
@@ -175,7 +218,16 @@ struct RealMotion {
     root: Vec<DVec3>,
 }
 
+/// [`real_motion`] resampled to `fps` by the project's own resampling (slerp of rotations).
+fn real_motion_at(fps: f64) -> RealMotion {
+    real_motion_resampled(Some(fps))
+}
+
 fn real_motion() -> RealMotion {
+    real_motion_resampled(None)
+}
+
+fn real_motion_resampled(fps: Option<f64>) -> RealMotion {
     let path = common::shared_data().join("humanml3d/joints/000021.npy");
     let bytes = std::fs::read(&path).unwrap();
     let array = read_joint_positions(&bytes).unwrap();
@@ -187,6 +239,10 @@ fn real_motion() -> RealMotion {
     let spec = ProfileSpec::bundled("smpl-22").unwrap();
     let layout = PositionLayout::from_profile(&spec).unwrap();
     let (motion, _) = motion_from_positions(&layout, &body, 20.0, 0.05).unwrap();
+    let motion = match fps {
+        Some(fps) => motion.resample(fps),
+        None => motion,
+    };
     let mut rest = vec![DVec3::new(0.001, -0.35, 0.012); 22];
     for (j, joint) in motion.skeleton.joints.iter().enumerate() {
         if let Some(p) = joint.parent {
@@ -287,6 +343,20 @@ impl Scratch {
             write_f64(&dir.path().join(format!("{name}-trans.bin")), &trans);
         }
         Scratch { dir }
+    }
+
+    /// Writes the real motion at `fps` as SMPL-H poses and translations; their file names.
+    fn smplh_at(&self, fps: f64) -> (PathBuf, PathBuf) {
+        let real = real_motion_at(fps);
+        let rest = family_rest(&real, Family::SmplH);
+        let (poses, trans) = family_poses(&real, Family::SmplH, &rest);
+        let names = (
+            self.path(&format!("smplh-poses-{fps}.bin")),
+            self.path(&format!("smplh-trans-{fps}.bin")),
+        );
+        write_f64(&names.0, &poses);
+        write_f64(&names.1, &trans);
+        names
     }
 
     fn path(&self, name: &str) -> PathBuf {
@@ -504,7 +574,7 @@ licence = "test data written by the test"
 
 [sources.labels]
 kind = "filename"
-pattern = "{{action}}_{{take}}_poses"
+pattern = "{{action}}_{{take}}"
 action = "{{action}}"
 text = "a person does a {{action}}"
 
@@ -626,7 +696,8 @@ fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
     let rows: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
     let rows = rows.as_array().unwrap();
     let listed = serde_json::to_string(rows).unwrap();
-    for take in ["walk_001_poses", "jump_001_poses", "wave_001_poses"] {
+    // Clips are named by the capture key, the stem without AMASS's `_poses`.
+    for take in ["walk_001", "jump_001", "wave_001"] {
         assert!(listed.contains(take), "{take} made no clip: {listed}");
     }
 
@@ -831,4 +902,176 @@ fn reading_and_forward_kinematics_frames_per_second() {
         frames as f64 / best,
         best * 1e3
     );
+}
+
+/// Reads a `.npy` of joint positions as (frames, joints, positions).
+fn joints_file(path: &Path) -> motionforge::motion::npy::JointArray {
+    read_joint_positions(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
+        .unwrap()
+}
+
+fn largest_difference(
+    a: &motionforge::motion::npy::JointArray,
+    b: &motionforge::motion::npy::JointArray,
+) -> f64 {
+    assert_eq!((a.frames, a.joints), (b.frames, b.joints));
+    a.positions
+        .iter()
+        .zip(&b.positions)
+        .map(|(x, y)| x.distance(*y))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn humanml3d_index_rows_cut_from_amass_files_export_the_notebooks_joints_and_mirrors() {
+    let s = Scratch::new();
+    // Real rows of HumanML3D's index: a 100 fps KIT capture, two datasets with head trims and a
+    // CMU capture; each pointed at an AMASS file written here at its dataset's rate.
+    let index = std::fs::read_to_string(common::shared_data().join("humanml3d/index.csv")).unwrap();
+    let wanted = [
+        ("000000.npy", 100.0, "male", false),
+        ("004938.npy", 120.0, "female", false),
+        ("000708.npy", 120.0, "male", true),
+        ("000043.npy", 120.0, "male", true),
+    ];
+    let mut rows = Vec::new();
+    for (name, fps, gender, bytes) in wanted {
+        let line = index
+            .lines()
+            .find(|l| l.ends_with(&format!(",{name}")))
+            .unwrap_or_else(|| panic!("no row {name}"));
+        let fields: Vec<&str> = line.split(',').collect();
+        rows.push((
+            line.to_string(),
+            fields[0].to_string(),
+            fields[1].parse::<i64>().unwrap(),
+            fields[2].parse::<i64>().unwrap(),
+            name,
+            fps,
+            gender,
+            bytes,
+        ));
+    }
+    let mut sequences = Vec::new();
+    let mut notebook = Vec::new();
+    for (_, source_path, start, end, name, fps, gender, bytes) in &rows {
+        let relative = source_path
+            .strip_prefix("./pose_data/")
+            .unwrap()
+            .replace(".npy", ".npz");
+        let path = s.path("amass").join(&relative);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        let (poses, trans) = s.smplh_at(*fps);
+        let mut seq = s.sequence("unused", Family::SmplH, gender, &BETAS, *fps);
+        seq["path"] = path.to_string_lossy().into_owned().into();
+        seq["poses"] = poses.to_string_lossy().into_owned().into();
+        seq["trans"] = trans.to_string_lossy().into_owned().into();
+        seq["gender_bytes"] = (*bytes).into();
+        sequences.push(seq);
+        notebook.push(serde_json::json!({
+            "sequence": path, "models": s.path("models"), "source_path": source_path,
+            "start": start, "end": end,
+            "out": s.path(&format!("ref-{name}")), "out_m": s.path(&format!("ref-M{name}")),
+        }));
+    }
+    let printed = s.generate(serde_json::json!({
+        "models": [
+            s.model(Family::SmplH, "male", 3, &[]),
+            s.model(Family::SmplH, "female", 4, &[]),
+        ],
+        "sequences": sequences,
+        "notebook": notebook,
+    }));
+    // HumanML3D's quirk: the bytes `male` files got the female model.
+    let genders: Vec<&str> = printed
+        .iter()
+        .map(|p| p["gender"].as_str().unwrap())
+        .collect();
+    assert_eq!(genders, ["male", "female", "female", "female"]);
+    let mut csv = String::from("source_path,start_frame,end_frame,new_name\n");
+    for (line, ..) in &rows {
+        csv.push_str(line);
+        csv.push('\n');
+    }
+    std::fs::write(s.path("index.csv"), csv).unwrap();
+    let config = s.path("hml.toml");
+    std::fs::write(
+        &config,
+        r#"[dataset]
+name = "hml"
+output = "out"
+fps = 20
+
+[synthetic]
+enabled = false
+
+[[sources]]
+name = "amass"
+captures = ["amass/**/*_poses.npz"]
+profile = "smplh-52"
+
+[sources.labels]
+kind = "frame_index"
+path = "index.csv"
+fps = 20
+humanml3d_cuts = true
+default_text = "a person moves"
+
+[sources.amass]
+body_model = "models"
+frame_rate = "humanml3d"
+humanml3d_gender = true
+"#,
+    )
+    .unwrap();
+    common::run_ok(
+        motionforge()
+            .args(["build", "--quiet", "--config"])
+            .arg(&config),
+    );
+    let dataset = s.path("out/hml");
+    let rejects = std::fs::read_to_string(dataset.join("rejects.jsonl")).unwrap_or_default();
+    assert!(rejects.trim().is_empty(), "{rejects}");
+    let hml = s.path("export");
+    common::run_ok(
+        motionforge()
+            .args(["export", "humanml3d", "--quiet", "--dataset"])
+            .arg(&dataset)
+            .arg("--out")
+            .arg(&hml),
+    );
+    // names.csv: which exported name is which clip.
+    let names = std::fs::read_to_string(hml.join("names.csv")).unwrap();
+    for (_, source_path, _, _, name, ..) in &rows {
+        let key = source_path
+            .rsplit('/')
+            .next()
+            .unwrap()
+            .trim_end_matches(".npy")
+            .trim_end_matches("_poses");
+        let exported = names
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .find(|f| f[1].contains(key) && f[4] == "false")
+            .unwrap_or_else(|| panic!("no exported clip of {key}: {names}"));
+        let ours = joints_file(&hml.join("joints").join(format!("{}.npy", exported[0])));
+        let theirs = joints_file(&s.path(&format!("ref-{name}")));
+        let worst = largest_difference(&ours, &theirs);
+        eprintln!(
+            "{name} ({key}): {} frames, largest difference {worst:e} m",
+            ours.frames
+        );
+        assert!(
+            worst < 1e-5,
+            "{name}: joints/ differs from the notebook's by {worst:e} m"
+        );
+        let ours = joints_file(&hml.join("joints").join(format!("M{}.npy", exported[0])));
+        let theirs = joints_file(&s.path(&format!("ref-M{name}")));
+        let worst = largest_difference(&ours, &theirs);
+        assert!(
+            worst < 1e-5,
+            "M{name}: differs from swap_left_right by {worst:e} m"
+        );
+    }
 }

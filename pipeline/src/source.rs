@@ -25,12 +25,20 @@ pub struct CaptureFile {
 }
 
 impl CaptureFile {
-    /// File stem (name without extension).
+    /// File stem (name without extension): the key annotations find the capture by. An AMASS
+    /// `.npz` also loses its `_poses` suffix, as annotation paths do ([`capture_key`]): BABEL's
+    /// `feat_p` and HumanML3D's `source_path` name `01_01_poses` files `01_01`.
     pub fn stem(&self) -> String {
-        self.path
+        let stem = self
+            .path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
+            .unwrap_or_default();
+        let amass = self.path.extension().is_some_and(|e| e == "npz");
+        match stem.strip_suffix("_poses") {
+            Some(key) if amass && !key.is_empty() => key.to_string(),
+            _ => stem,
+        }
     }
 
     /// File name.
