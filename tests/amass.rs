@@ -846,7 +846,8 @@ fn smpl_reflections_mirror_the_body_and_hands_on_the_models_own_skeleton() {
 /// and through forward kinematics, best of five. The body model is read once, outside the
 /// timing, as a build reads it. Run in release:
 /// `cargo test --release -p motionforge --test amass -- --ignored --nocapture`
-/// (`docs/performance.md`).
+/// (`docs/performance.md`). With `MOTIONFORGE_AMASS_KEEP=<folder>` the body model folder and the
+/// sequence are copied there, for timing whole builds.
 #[test]
 #[ignore = "a measurement: run in release"]
 fn reading_and_forward_kinematics_frames_per_second() {
@@ -902,6 +903,11 @@ fn reading_and_forward_kinematics_frames_per_second() {
         frames as f64 / best,
         best * 1e3
     );
+    if let Some(keep) = std::env::var_os("MOTIONFORGE_AMASS_KEEP") {
+        let keep = PathBuf::from(keep);
+        common::copy_dir(&s.path("models"), &keep.join("models"));
+        std::fs::copy(s.path("long_poses.npz"), keep.join("long_poses.npz")).unwrap();
+    }
 }
 
 /// Reads a `.npy` of joint positions as (frames, joints, positions).
