@@ -1081,3 +1081,115 @@ humanml3d_gender = true
         );
     }
 }
+
+#[test]
+fn babel_feat_p_paths_find_amass_files_and_a_wrong_duration_is_reported() {
+    let s = Scratch::new();
+    // The real BABEL records: 141_05 (3.83 s, CMU at 60 fps) and 86_08 (76.73 s). The files
+    // written here: 141_05 with 230 frames at 60 fps (3.83 s), 86_08 with the 9 s real motion,
+    // far from its record's duration.
+    let (poses60, trans60) = s.smplh_at(60.0);
+    let width = Family::SmplH.joints() * 3 * 8;
+    let cut = |path: &Path, frame_bytes: usize| {
+        let bytes = std::fs::read(path).unwrap();
+        std::fs::write(path, &bytes[..230 * frame_bytes]).unwrap();
+    };
+    cut(&poses60, width);
+    cut(&trans60, 3 * 8);
+    let mut short = s.sequence("unused", Family::SmplH, "male", &BETAS, 60.0);
+    let dir = s.path("amass/CMU/CMU/141");
+    std::fs::create_dir_all(&dir).unwrap();
+    short["path"] = dir
+        .join("141_05_poses.npz")
+        .to_string_lossy()
+        .into_owned()
+        .into();
+    short["poses"] = poses60.to_string_lossy().into_owned().into();
+    short["trans"] = trans60.to_string_lossy().into_owned().into();
+    let mut long = s.sequence("unused", Family::SmplH, "female", &BETAS, 120.0);
+    let (poses120, trans120) = s.smplh_at(120.0);
+    let dir = s.path("amass/CMU/CMU/86");
+    std::fs::create_dir_all(&dir).unwrap();
+    long["path"] = dir
+        .join("86_08_poses.npz")
+        .to_string_lossy()
+        .into_owned()
+        .into();
+    long["poses"] = poses120.to_string_lossy().into_owned().into();
+    long["trans"] = trans120.to_string_lossy().into_owned().into();
+    s.generate(serde_json::json!({
+        "models": [
+            s.model(Family::SmplH, "male", 3, &[]),
+            s.model(Family::SmplH, "female", 4, &[]),
+        ],
+        "sequences": [short, long],
+    }));
+    let babel = common::shared_data().join("babel/babel_records_from_notebook_outputs.json");
+    let config = s.path("babel.toml");
+    std::fs::write(
+        &config,
+        format!(
+            r#"[dataset]
+name = "babel"
+output = "out"
+
+[synthetic]
+enabled = false
+
+[[sources]]
+name = "amass"
+captures = ["amass/**/*_poses.npz"]
+profile = "smplh-52"
+
+[sources.labels]
+kind = "babel"
+path = {babel:?}
+
+[sources.amass]
+body_model = "models"
+"#
+        ),
+    )
+    .unwrap();
+    common::run_ok(
+        motionforge()
+            .args(["build", "--quiet", "--config"])
+            .arg(&config),
+    );
+    let dataset = s.path("out/babel");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dataset.join("build-report.json")).unwrap())
+            .unwrap();
+    let notes = report["notes"].as_array().unwrap();
+    let mismatches: Vec<&str> = notes
+        .iter()
+        .filter(|n| n["kind"] == "duration_mismatch")
+        .map(|n| n["message"].as_str().unwrap())
+        .collect();
+    assert_eq!(mismatches.len(), 1, "{mismatches:?}");
+    assert!(
+        mismatches[0].contains("86_08_poses.npz"),
+        "{}",
+        mismatches[0]
+    );
+    assert!(mismatches[0].contains("76.73"), "{}", mismatches[0]);
+    // No record is left without its capture, and 141_05's labels became clips.
+    assert!(
+        !notes
+            .iter()
+            .any(|n| n["kind"] == "annotation_without_capture"),
+        "{notes:?}"
+    );
+    let listed = common::run_ok(motionforge().args(["clips", "--json"]).arg(&dataset));
+    let rows: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+    let texts: Vec<String> = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["clip_id"].as_str().unwrap().contains("141_05"))
+        .map(|r| r["text"].as_str().unwrap().to_string())
+        .collect();
+    for label in ["hopping left", "hopping right"] {
+        assert!(texts.iter().any(|t| t == label), "{label}: {texts:?}");
+    }
+}
