@@ -112,14 +112,21 @@ impl Array {
     }
 }
 
+// Offsets come from the file: `at` may be anything, so the end is computed checked.
 fn u16_at(b: &[u8], at: usize) -> Option<u16> {
-    Some(u16::from_le_bytes(b.get(at..at + 2)?.try_into().ok()?))
+    Some(u16::from_le_bytes(
+        b.get(at..at.checked_add(2)?)?.try_into().ok()?,
+    ))
 }
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {
-    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+    Some(u32::from_le_bytes(
+        b.get(at..at.checked_add(4)?)?.try_into().ok()?,
+    ))
 }
 fn u64_at(b: &[u8], at: usize) -> Option<u64> {
-    Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
+    Some(u64::from_le_bytes(
+        b.get(at..at.checked_add(8)?)?.try_into().ok()?,
+    ))
 }
 
 const EOCD: u32 = 0x0605_4b50;
@@ -523,6 +530,98 @@ mod tests {
         assert!(err.to_string().contains("overflows"), "{err}");
         let err = parse_npy("poses", &npy("|O", "(2,)", &[0u8; 16])).unwrap_err();
         assert!(err.to_string().contains("pickled"), "{err}");
+    }
+
+    /// A stored (uncompressed) zip of `(name, bytes)` entries, as `np.savez` writes one.
+    fn zip(entries: &[(&str, Vec<u8>)]) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut directory = Vec::new();
+        for (name, data) in entries {
+            let offset = out.len() as u32;
+            let crc = crc32fast::hash(data);
+            let mut header = Vec::new();
+            header.extend(LOCAL.to_le_bytes());
+            header.extend([20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+            header.extend(crc.to_le_bytes());
+            header.extend((data.len() as u32).to_le_bytes());
+            header.extend((data.len() as u32).to_le_bytes());
+            header.extend((name.len() as u16).to_le_bytes());
+            header.extend(0u16.to_le_bytes());
+            out.extend(&header);
+            out.extend(name.as_bytes());
+            out.extend(data);
+            directory.extend(CENTRAL.to_le_bytes());
+            directory.extend([20, 0, 20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+            directory.extend(crc.to_le_bytes());
+            directory.extend((data.len() as u32).to_le_bytes());
+            directory.extend((data.len() as u32).to_le_bytes());
+            directory.extend((name.len() as u16).to_le_bytes());
+            directory.extend([0u8; 12]);
+            directory.extend(offset.to_le_bytes());
+            directory.extend(name.as_bytes());
+        }
+        let at = out.len() as u32;
+        out.extend(&directory);
+        out.extend(EOCD.to_le_bytes());
+        out.extend([0u8; 4]);
+        out.extend((entries.len() as u16).to_le_bytes());
+        out.extend((entries.len() as u16).to_le_bytes());
+        out.extend((directory.len() as u32).to_le_bytes());
+        out.extend(at.to_le_bytes());
+        out.extend([0u8; 2]);
+        out
+    }
+
+    #[test]
+    fn an_archive_reads_and_every_damaged_byte_is_an_error_not_a_panic() {
+        let poses: Vec<u8> = (0..12).flat_map(|i| (i as f64).to_le_bytes()).collect();
+        let archive = zip(&[
+            ("poses.npy", npy("<f8", "(2, 6)", &poses)),
+            ("gender.npy", npy("|S4", "()", b"male")),
+        ]);
+        let npz = Npz::new(&archive).unwrap();
+        assert_eq!(npz.keys().collect::<Vec<_>>(), ["poses", "gender"]);
+        let a = npz.array("poses").unwrap();
+        assert_eq!(a.shape, [2, 6]);
+        assert_eq!(a.floats().unwrap()[11], 11.0);
+        assert!(matches!(npz.array("trans"), Err(NpzError::Missing { .. })));
+        // Every byte flipped, and every length cut: an error or a value, never a panic.
+        for i in 0..archive.len() {
+            for flip in [0x01u8, 0x80, 0xff] {
+                let mut damaged = archive.clone();
+                damaged[i] ^= flip;
+                if let Ok(npz) = Npz::new(&damaged) {
+                    let _ = npz.array("poses");
+                    let _ = npz.array("gender");
+                }
+            }
+            if let Ok(npz) = Npz::new(&archive[..i]) {
+                let _ = npz.array("poses");
+            }
+        }
+        // A value byte flipped is caught by the CRC, naming the key.
+        let mut damaged = archive.clone();
+        let at = archive.len() / 4;
+        damaged[at] ^= 0x01;
+        let err = Npz::new(&damaged).unwrap().array("poses").unwrap_err();
+        assert!(err.to_string().contains("`poses`"), "{err}");
+        // A local header offset at the end of the address space, given in a zip64 extra field.
+        let one = zip(&[("poses.npy", npy("<f8", "(2, 6)", &poses))]);
+        let dir = one.len() - 22 - (46 + "poses.npy".len());
+        let mut far = one[..dir].to_vec();
+        let mut record = one[dir..one.len() - 22].to_vec();
+        record[30..32].copy_from_slice(&12u16.to_le_bytes());
+        record[42..46].copy_from_slice(&u32::MAX.to_le_bytes());
+        record.extend(1u16.to_le_bytes());
+        record.extend(8u16.to_le_bytes());
+        record.extend(u64::MAX.to_le_bytes());
+        far.extend(&record);
+        let mut end = one[one.len() - 22..].to_vec();
+        end[12..16].copy_from_slice(&(record.len() as u32).to_le_bytes());
+        far.extend(end);
+        let npz = Npz::new(&far).unwrap();
+        let err = npz.array("poses").unwrap_err();
+        assert!(err.to_string().contains("local header"), "{err}");
     }
 
     #[test]
