@@ -1082,6 +1082,8 @@ humanml3d_gender = true
     }
 }
 
+/// Also: a second source, HumanML3D's index rows for the same two captures, over the same files
+/// in the same config: one dataset with the clips of both, each named by its source.
 #[test]
 fn babel_feat_p_paths_find_amass_files_and_a_wrong_duration_is_reported() {
     let s = Scratch::new();
@@ -1137,7 +1139,7 @@ output = "out"
 enabled = false
 
 [[sources]]
-name = "amass"
+name = "babel"
 captures = ["amass/**/*_poses.npz"]
 profile = "smplh-52"
 
@@ -1147,10 +1149,35 @@ path = {babel:?}
 
 [sources.amass]
 body_model = "models"
+
+[[sources]]
+name = "humanml3d"
+captures = ["amass/**/*_poses.npz"]
+profile = "smplh-52"
+
+[sources.labels]
+kind = "frame_index"
+path = "index.csv"
+fps = 20
+default_text = "a person moves"
+
+[sources.amass]
+body_model = "models"
 "#
         ),
     )
     .unwrap();
+    // HumanML3D's real rows of the two captures.
+    let index = std::fs::read_to_string(common::shared_data().join("humanml3d/index.csv")).unwrap();
+    let mut rows = String::from("source_path,start_frame,end_frame,new_name\n");
+    for line in index
+        .lines()
+        .filter(|l| l.contains("/141_05_poses") || l.contains("/86_08_poses"))
+    {
+        rows.push_str(line);
+        rows.push('\n');
+    }
+    std::fs::write(s.path("index.csv"), rows).unwrap();
     common::run_ok(
         motionforge()
             .args(["build", "--quiet", "--config"])
@@ -1192,4 +1219,28 @@ body_model = "models"
     for label in ["hopping left", "hopping right"] {
         assert!(texts.iter().any(|t| t == label), "{label}: {texts:?}");
     }
+    // Both sources' clips of the same capture, each clip id starting with its source.
+    let of_141_05 = |source: &str| {
+        rows.as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| {
+                let id = r["clip_id"].as_str().unwrap();
+                id.starts_with(&format!("{source}/")) && id.contains("141_05")
+            })
+            .count()
+    };
+    assert!(of_141_05("babel") >= 2, "{rows:#}");
+    assert!(of_141_05("humanml3d") >= 1, "{rows:#}");
+    // One capture, one split, whichever source its text came from.
+    let splits: std::collections::BTreeSet<&str> = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["clip_id"].as_str().unwrap().contains("141_05"))
+        .map(|r| r["split"].as_str().unwrap())
+        .collect();
+    assert_eq!(splits.len(), 1, "{splits:?}");
+    let rejects = std::fs::read_to_string(dataset.join("rejects.jsonl")).unwrap_or_default();
+    assert!(rejects.trim().is_empty(), "{rejects}");
 }
