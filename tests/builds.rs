@@ -1,10 +1,15 @@
-//! Builds end to end on real captures and what they write: layout, reuse, rejects, faults, locks, resumption, the LLM stages and client, the report, exports, the planner, and the readers users open the table with.
+//! Builds end to end on real captures (and AMASS files written by the tests) and what they write:
+//! layout, reuse, rejects, faults, locks, resumption, the LLM stages and client, the report,
+//! exports, the planner, and the readers users open the table with.
 //!
 //! One test binary per group (not one per file): each binary links the whole library, so a few
 //! binaries build much faster than one per file. Run one file's tests with its module name as the
 //! filter: `cargo test --test builds build_pipeline::`.
 
 mod common;
+
+#[path = "amass.rs"]
+mod amass;
 
 #[path = "build_pipeline.rs"]
 mod build_pipeline;

@@ -243,6 +243,7 @@ fn ingest_bytes(path: &Path, bytes: &[u8], config: &PositionsConfig) -> ingest::
         profile: &spec,
         fps_override: None,
         positions: Some(config),
+        amass: None,
     })
 }
 

@@ -52,6 +52,7 @@ fn cmu() -> &'static Capture {
             profile: &ProfileSpec::bundled("cmu").unwrap(),
             fps_override: None,
             positions: None,
+            amass: None,
         });
         out.capture.unwrap()
     })

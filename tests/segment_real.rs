@@ -33,6 +33,7 @@ fn capture(path: &Path, profile: &str) -> Capture {
         profile: &spec,
         fps_override: None,
         positions: None,
+        amass: None,
     });
     out.capture.unwrap_or_else(|| panic!("{:?}", out.rejects))
 }
@@ -552,4 +553,53 @@ fn leading_trim_and_pair_exclusions_drop_what_they_should_and_count_it() {
         2,
         "singles are kept"
     );
+}
+
+#[test]
+fn babel_extra_files_read_the_first_of_several_annotations() {
+    // The real record 7692, rewritten in the shape of BABEL's extra files: lists of annotations
+    // (`frame_anns`, `seq_anns`) instead of one `frame_ann` and `seq_ann`.
+    let path = common::shared_data().join("babel/babel_records_from_notebook_outputs.json");
+    let text = std::fs::read_to_string(path).unwrap();
+    let main = read_babel(&text, "babel.json").unwrap();
+    let root: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let records = root.get("records").unwrap_or(&root);
+    let record = records["7692"].get("record").unwrap_or(&records["7692"]);
+    let mut extra = record.clone();
+    let object = extra.as_object_mut().unwrap();
+    let frame_ann = object.remove("frame_ann").unwrap();
+    let seq_ann = object.remove("seq_ann").unwrap();
+    let mut second = frame_ann.clone();
+    second["labels"] = serde_json::json!([]);
+    object.insert("frame_anns".into(), serde_json::json!([frame_ann, second]));
+    object.insert("seq_anns".into(), serde_json::json!([seq_ann]));
+    let extra_text = serde_json::json!({ "7692": extra }).to_string();
+    let read = read_babel(&extra_text, "extra.json").unwrap();
+    let original = main.iter().find(|r| r.sid == "7692").unwrap();
+    assert_eq!(read[0].feat_p, original.feat_p);
+    assert_eq!(read[0].annotation.spans, original.annotation.spans);
+    assert!(!read[0].annotation.spans.is_empty());
+    let several: Vec<&str> = read[0]
+        .annotation
+        .notes
+        .iter()
+        .filter(|n| n.kind == "several_annotations")
+        .map(|n| n.message.as_str())
+        .collect();
+    assert_eq!(
+        several,
+        ["sid 7692: 2 annotations in `frame_anns`; the first is read"]
+    );
+    // Only sequence labels: the first of `seq_anns` covers the capture.
+    let object = extra.as_object_mut().unwrap();
+    object.remove("frame_anns");
+    let only_seq = serde_json::json!({ "7692": extra }).to_string();
+    let read = read_babel(&only_seq, "extra.json").unwrap();
+    let texts: Vec<&str> = read[0]
+        .annotation
+        .spans
+        .iter()
+        .map(|s| s.raw_text.as_str())
+        .collect();
+    assert_eq!(texts, ["jump"]);
 }

@@ -64,6 +64,7 @@
 //! # Ok(())
 //! # }
 //! ```
+pub mod amass;
 pub mod annotate;
 pub use motionforge_core::base;
 pub mod build;

@@ -25,12 +25,20 @@ pub struct CaptureFile {
 }
 
 impl CaptureFile {
-    /// File stem (name without extension).
+    /// File stem (name without extension): the key annotations find the capture by. An AMASS
+    /// `.npz` also loses its `_poses` suffix, as annotation paths do ([`capture_key`]): BABEL's
+    /// `feat_p` and HumanML3D's `source_path` name `01_01_poses` files `01_01`.
     pub fn stem(&self) -> String {
-        self.path
+        let stem = self
+            .path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
+            .unwrap_or_default();
+        let amass = self.path.extension().is_some_and(|e| e == "npz");
+        match stem.strip_suffix("_poses") {
+            Some(key) if amass && !key.is_empty() => key.to_string(),
+            _ => stem,
+        }
     }
 
     /// File name.
@@ -189,9 +197,10 @@ pub fn load_fps_table(
         .collect())
 }
 
-/// The quirks of the sources' annotation files: what their readers noted, and an
+/// The quirks of the sources' annotation files: what their readers noted, an
 /// `annotation_without_capture` note for every annotated capture key that no capture file of its
-/// source has (`files`, as discovered). `annotations` are the config's sources', in order.
+/// source has (`files`, as discovered), and an `amass_not_a_motion` note for every AMASS
+/// `shape.npz` or `*_stagei.npz` the globs found (ingest skips them). `annotations` are the config's sources', in order.
 pub fn annotation_notes(
     config: &Config,
     annotations: &[SourceAnnotations],
@@ -218,6 +227,23 @@ pub fn annotation_notes(
                     ),
                 ));
             }
+        }
+    }
+    // Body shapes and MoSh's first stage sit beside AMASS sequences: skipped, and said so.
+    for file in files {
+        if config
+            .sources
+            .get(file.source)
+            .is_some_and(|s| s.amass.is_some())
+            && crate::amass::is_not_a_motion(&file.file_name())
+        {
+            notes.push(Note::new(
+                "amass_not_a_motion",
+                format!(
+                    "`{}`: a body shape or MoSh stage-i file, not a motion: skipped",
+                    file.display
+                ),
+            ));
         }
     }
     notes

@@ -1,5 +1,5 @@
 //! BABEL JSON (`frame_ann.labels[]` with `start_t`/`end_t` in seconds, `seq_ann` for the whole
-//! sequence). Accepts the real quirks: integer times, unsorted labels, `end_t` past the duration,
+//! sequence; the extra files' `frame_anns` and `seq_anns` lists, of which the first is read). Accepts the real quirks: integer times, unsorted labels, `end_t` past the duration,
 //! `null` labels, overlapping segments, and the wrapped record shapes of saved notebook outputs.
 
 use std::collections::BTreeMap;
@@ -61,8 +61,11 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
     let duration = record.get("dur").and_then(number);
     let mut spans = Vec::new();
     let mut nulls = 0;
-    let labels = record
-        .get("frame_ann")
+    // BABEL's extra files hold several annotators' work per sequence, as lists `frame_anns` and
+    // `seq_anns`: the first is read, like the main files' single `frame_ann` and `seq_ann`.
+    let frame_ann = one_annotation(record, "frame_ann", "frame_anns", sid, &mut notes);
+    let seq_ann = one_annotation(record, "seq_ann", "seq_anns", sid, &mut notes);
+    let labels = frame_ann
         .and_then(|f| f.get("labels"))
         .and_then(Value::as_array);
     if let Some(labels) = labels {
@@ -145,8 +148,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
                 )),
             }
         }
-    } else if let Some(seq) = record
-        .get("seq_ann")
+    } else if let Some(seq) = seq_ann
         .and_then(|s| s.get("labels"))
         .and_then(Value::as_array)
     {
@@ -229,6 +231,36 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
             attributes: BTreeMap::from([("babel_sid".to_string(), sid.to_string())]),
         },
     }
+}
+
+/// The record's `single` annotation, else the first of its `several` (BABEL's extra files), with
+/// a note when others are left unread.
+fn one_annotation<'r>(
+    record: &'r Value,
+    single: &str,
+    several: &str,
+    sid: &str,
+    notes: &mut Vec<Note>,
+) -> Option<&'r Value> {
+    if let Some(one) = record.get(single).filter(|v| !v.is_null()) {
+        return Some(one);
+    }
+    let list: Vec<&Value> = record
+        .get(several)
+        .and_then(Value::as_array)?
+        .iter()
+        .filter(|v| !v.is_null())
+        .collect();
+    if list.len() > 1 {
+        notes.push(Note::new(
+            "several_annotations",
+            format!(
+                "sid {sid}: {} annotations in `{several}`; the first is read",
+                list.len()
+            ),
+        ));
+    }
+    list.first().copied()
 }
 
 fn start_secs(s: &Span) -> f64 {

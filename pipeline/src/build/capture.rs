@@ -157,6 +157,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
             profile: spec,
             fps_override,
             positions: source.positions.as_ref(),
+            amass: source.amass.as_ref(),
         }))
     };
     let ingest_fp = ingest::fingerprint(&ingest::CaptureInput {
@@ -167,6 +168,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         profile: spec,
         fps_override,
         positions: source.positions.as_ref(),
+        amass: source.amass.as_ref(),
     });
     let mut parsed: Option<ingest::IngestOutput> = None;
     let Some((ingested, ran)) =

@@ -210,7 +210,7 @@ impl Config {
                 c.push(
                     &at(&[K("profile")]),
                     "\"\"".into(),
-                    "a bundled profile name (bandai-namco, cmu, smpl-22) or a .toml file",
+                    "a bundled profile name (bandai-namco, cmu, smpl-22, smplh-52, smplx-55) or a .toml file",
                 );
             }
             for (file, fps) in &s.fps_override {
@@ -360,6 +360,52 @@ impl Config {
                         &at(&[K("positions"), K("forward")]),
                         p.forward.to_string(),
                         &format!("an axis other than the up axis {}", p.up),
+                    );
+                }
+            }
+            if let Some(a) = &s.amass {
+                if s.positions.is_some() {
+                    c.push(
+                        &at(&[K("amass")]),
+                        "(with `positions`)".into(),
+                        "either `amass` or `positions`: a source's captures are one kind of file",
+                    );
+                }
+                let profile = s.profile.trim();
+                if !(["smplh-52", "smplx-55"].contains(&profile) || profile.ends_with(".toml")) {
+                    c.push(
+                        &at(&[K("profile")]),
+                        format!("{:?}", s.profile),
+                        "`smplh-52` (SMPL-H files) or `smplx-55` (SMPL-X files): AMASS captures become motions on the body model's skeleton",
+                    );
+                }
+                if a.body_model.trim().is_empty() {
+                    c.push(
+                        &at(&[K("amass"), K("body_model")]),
+                        "\"\"".into(),
+                        "the body model folder (smplh/{male,female,neutral}/model.npz), relative to the config file",
+                    );
+                }
+                if a.num_betas > crate::amass::model::MAX_BETAS {
+                    c.push(
+                        &at(&[K("amass"), K("num_betas")]),
+                        a.num_betas.to_string(),
+                        &format!(
+                            "0 to {} shape coefficients (HumanML3D: 10)",
+                            crate::amass::model::MAX_BETAS
+                        ),
+                    );
+                }
+                if a.frame_rate == crate::amass::FrameRateMode::Humanml3d
+                    && (self.dataset.fps - 20.0).abs() > 1e-9
+                {
+                    c.push(
+                        &at(&[K("amass"), K("frame_rate")]),
+                        "\"humanml3d\"".into(),
+                        &format!(
+                            "`resample` with dataset.fps = {}: the `humanml3d` stride gives HumanML3D's 20 fps frames (set dataset.fps = 20)",
+                            self.dataset.fps
+                        ),
                     );
                 }
             }
@@ -571,6 +617,11 @@ impl Config {
                     ),
                 );
             }
+            if let Some(a) = &s.amass
+                && !a.body_model.trim().is_empty()
+            {
+                check_body_model(a, &[K("sources"), I(i), K("amass"), K("body_model")], c);
+            }
             match &s.labels {
                 LabelConfig::Filename { .. } => {}
                 LabelConfig::Babel { path, .. } | LabelConfig::EventLog { path, .. } => {
@@ -719,6 +770,63 @@ fn found_nearby(folder: &Path, ext: &str) -> String {
         String::new()
     };
     format!("; .{ext} files are in {}{more}", listed.join(", "))
+}
+
+/// The body model folder of an AMASS source: there, with model files for the genders the
+/// source asks for, each holding the keys joints need (read once; the build reuses them).
+fn check_body_model(a: &AmassConfig, key: &[Seg<'_>], c: &mut Checks<'_>) {
+    use crate::amass::{Family, GenderChoice, model_path};
+    let dir = &a.body_model_dir;
+    let shown = format!("{:?}", a.body_model);
+    if !dir.is_dir() {
+        c.push(
+            key,
+            shown,
+            &format!(
+                "an existing body model folder (resolved as {}); get SMPL-H from https://mano.is.tue.mpg.de or SMPL-X from https://smpl-x.is.tue.mpg.de (docs/amass.md)",
+                dir.display()
+            ),
+        );
+        return;
+    }
+    let files = crate::amass::model_files(dir);
+    if files.is_empty() {
+        c.push(
+            key,
+            shown,
+            &format!(
+                "a folder holding smplh/{{male,female,neutral}}/model.npz or smplx/... (resolved as {}; none there)",
+                dir.display()
+            ),
+        );
+        return;
+    }
+    let forced = match a.gender {
+        GenderChoice::File => None,
+        GenderChoice::Male => Some("male"),
+        GenderChoice::Female => Some("female"),
+        GenderChoice::Neutral => Some("neutral"),
+    };
+    if let Some(gender) = forced
+        && ![Family::SmplH, Family::SmplX]
+            .iter()
+            .any(|f| model_path(dir, *f, gender).is_file())
+    {
+        c.push(
+            key,
+            shown.clone(),
+            &format!(
+                "a folder with a {gender} model (gender = \"{gender}\"): no {} nor {}",
+                model_path(dir, Family::SmplH, gender).display(),
+                model_path(dir, Family::SmplX, gender).display()
+            ),
+        );
+    }
+    for path in files {
+        if let Err(e) = crate::amass::load_model(&path, a.num_betas) {
+            c.push(key, shown.clone(), &format!("a usable body model: {e}"));
+        }
+    }
 }
 
 pub(super) fn round6(x: f64) -> f64 {

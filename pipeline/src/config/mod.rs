@@ -427,6 +427,42 @@ pub struct SourceConfig {
     /// rate. Without it every capture is read as BVH.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub positions: Option<PositionsConfig>,
+    /// For AMASS captures (`.npz` of SMPL-H or SMPL-X pose parameters): the user's body model
+    /// and how files are read (`docs/amass.md`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amass: Option<AmassConfig>,
+}
+
+/// How a source's AMASS files are read (`docs/amass.md`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AmassConfig {
+    /// The body model folder, relative to the config: `smplh/{male,female,neutral}/model.npz`
+    /// and `smplx/...`, as AMASS documents it.
+    pub body_model: String,
+    /// Shape coefficients used (HumanML3D: 10).
+    #[serde(default = "default_num_betas")]
+    pub num_betas: usize,
+    /// The model each file gets: `file` (its `gender`), `male`, `female` or `neutral`.
+    #[serde(default)]
+    pub gender: crate::amass::GenderChoice,
+    /// `resample` (by time to the dataset rate) or `humanml3d` (HumanML3D's frame stride).
+    #[serde(default)]
+    pub frame_rate: crate::amass::FrameRateMode,
+    /// HumanML3D's gender quirk: only a str `male` gets the male model, every other file (a
+    /// bytes `gender` among them) the female one.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub humanml3d_gender: bool,
+    /// `body_model` resolved against the config's folder.
+    #[serde(skip)]
+    pub body_model_dir: PathBuf,
+}
+
+/// HumanML3D's shape coefficients: the first 10 betas.
+pub const DEFAULT_NUM_BETAS: usize = 10;
+
+fn default_num_betas() -> usize {
+    DEFAULT_NUM_BETAS
 }
 
 /// Joint layout of a joint-position array.
@@ -752,6 +788,12 @@ impl Config {
             .parent()
             .map(crate::base::lexical_path)
             .unwrap_or_default();
+        for source in &mut config.sources {
+            if let Some(amass) = &mut source.amass {
+                amass.body_model_dir =
+                    crate::base::lexical_path(&config.base_dir.join(Path::new(&amass.body_model)));
+            }
+        }
         config.validate(&mut checks);
         Ok((config, checks))
     }

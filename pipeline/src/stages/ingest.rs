@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use crate::annotate::span::Note;
 use crate::base::{Fingerprint, Reject, RejectReason, Stamp};
 use crate::clip::{Capture, CaptureRef};
-use crate::config::PositionsConfig;
+use crate::config::{AmassConfig, PositionsConfig};
 use crate::motion::bvh::FPS_RANGE;
 use crate::motion::ik::{IkError, PositionLayout, motion_from_positions};
 use crate::motion::npy::{NpyError, read_joint_positions};
@@ -16,6 +16,10 @@ use crate::source::CaptureFile;
 pub const NAME: &str = "ingest";
 /// Bump when the stage's output for the same input changes.
 pub const VERSION: u32 = 4;
+
+/// Kind of the note that an AMASS file's frames, taken at HumanML3D's stride, are at another
+/// rate than the 20 fps they are labelled with (counted in the build report's `notes_by_kind`).
+pub const EFFECTIVE_RATE_NOTE: &str = "amass_effective_rate";
 
 /// Bone-length change (relative to the bone's mean) from which a capture's IK fit is reported:
 /// below it the bones are constant to the arrays' float precision.
@@ -39,6 +43,8 @@ pub struct CaptureInput<'a> {
     pub fps_override: Option<f64>,
     /// For joint-position arrays: how to read them (`None`: the file is BVH).
     pub positions: Option<&'a PositionsConfig>,
+    /// For AMASS `.npz` files: the body model and how to read them.
+    pub amass: Option<&'a AmassConfig>,
 }
 
 /// The stage's output for one capture.
@@ -101,9 +107,21 @@ pub fn fingerprint(input: &CaptureInput<'_>) -> Stamp {
         .text("file content", input.sha256)
         .json("skeleton profile", input.profile)
         .json("fps override", &input.fps_override);
-    // Only sources of joint positions name it, so BVH captures keep their fingerprints.
-    match input.positions {
-        Some(p) => print.json("positions", p).stamp(),
+    // Only sources of joint positions and AMASS files name theirs, so BVH captures keep their
+    // fingerprints.
+    let print = match input.positions {
+        Some(p) => print.json("positions", p),
+        None => print,
+    };
+    match input.amass {
+        // The body models are part of the input: a changed model changes every joint.
+        Some(a) => print
+            .json("amass", a)
+            .text(
+                "body models",
+                &crate::amass::models_digest(&a.body_model_dir),
+            )
+            .stamp(),
         None => print.stamp(),
     }
 }
@@ -136,6 +154,9 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
     };
     if let Some(positions) = input.positions {
         return run_positions(input, positions);
+    }
+    if let Some(amass) = input.amass {
+        return run_amass(input, amass);
     }
     let text = match std::str::from_utf8(input.bytes) {
         Ok(t) => t,
@@ -322,6 +343,111 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
         ));
     }
     accepted(input, fps, motion, notes)
+}
+
+/// Ingest of an AMASS `.npz`: the sequence read, its body model found (by family and gender) and
+/// the poses put on the model's skeleton, at the file's rate or HumanML3D's stride.
+fn run_amass(input: &CaptureInput<'_>, config: &AmassConfig) -> IngestOutput {
+    use crate::amass::{FrameRateMode, HUMANML3D_FPS, humanml3d_stride, model_gender, model_path};
+    let file = input.file;
+    let refuse = |reason: RejectReason, message: String, frame: Option<u64>| IngestOutput {
+        capture: None,
+        rejects: vec![reject(NAME, file, reason, message, None, frame)],
+    };
+    // Noted at the source (`source::annotation_notes`), never read as motions.
+    if crate::amass::is_not_a_motion(&file.file_name()) {
+        return IngestOutput::default();
+    }
+    let sequence =
+        match crate::amass::read_sequence(&file.display, input.bytes, input.fps_override.is_none())
+        {
+            Ok(s) => s,
+            Err(e) => {
+                let frame = match &e.kind {
+                    crate::amass::AmassErrorKind::Value { frame, .. } => Some(*frame as u64),
+                    _ => None,
+                };
+                return refuse(RejectReason::Amass, e.kind.to_string(), frame);
+            }
+        };
+    let profile = input.profile.name.as_str();
+    let wanted = sequence.family.profile();
+    if ["smplh-52", "smplx-55"].contains(&profile) && profile != wanted {
+        let message = format!(
+            "{} file (`poses` {} wide) in a source whose profile is `{profile}`: put it in a source with profile `{wanted}`",
+            if wanted == "smplh-52" {
+                "an SMPL-H"
+            } else {
+                "an SMPL-X"
+            },
+            3 * sequence.family.joints()
+        );
+        return refuse(RejectReason::Profile, message, None);
+    }
+    let Some(fps) = input.fps_override.or(sequence.fps) else {
+        return refuse(
+            RejectReason::Amass,
+            crate::amass::AmassErrorKind::NoFrameRate.to_string(),
+            None,
+        );
+    };
+    if !FPS_RANGE.contains(&fps) {
+        let message = format!(
+            "frame rate {fps} is outside the plausible range {} to {} fps",
+            FPS_RANGE.start(),
+            FPS_RANGE.end()
+        );
+        return refuse(RejectReason::Fps, message, None);
+    }
+    let gender = match model_gender(
+        config.gender,
+        sequence.gender.as_ref(),
+        config.humanml3d_gender,
+    ) {
+        Ok(g) => g,
+        Err(message) => return refuse(RejectReason::Amass, message, None),
+    };
+    let path = model_path(&config.body_model_dir, sequence.family, gender);
+    if !path.is_file() {
+        let message = format!(
+            "needs the {gender} {} body model, but {} does not exist (set sources.amass.gender to use another)",
+            sequence.family.folder(),
+            path.display()
+        );
+        return refuse(RejectReason::Amass, message, None);
+    }
+    let model = match crate::amass::load_model(&path, config.num_betas) {
+        Ok(m) => m,
+        Err(e) => return refuse(RejectReason::Amass, e.to_string(), None),
+    };
+    let mut notes = Vec::new();
+    let (stride, label_fps) = match config.frame_rate {
+        FrameRateMode::Resample => (1, fps),
+        FrameRateMode::Humanml3d => {
+            let (stride, effective) = humanml3d_stride(fps);
+            if (effective - HUMANML3D_FPS).abs() > 1e-6 {
+                notes.push(Note::new(
+                    EFFECTIVE_RATE_NOTE,
+                    format!(
+                        "`{}`: {fps} fps taken every {stride} frames is {effective:.4} fps, labelled {HUMANML3D_FPS} fps as HumanML3D does",
+                        file.display
+                    ),
+                ));
+            }
+            (stride, HUMANML3D_FPS)
+        }
+    };
+    let motion = match crate::amass::to_motion(&sequence, &model, stride, label_fps) {
+        Ok(m) => m,
+        Err(e) => return refuse(RejectReason::Amass, e.to_string(), None),
+    };
+    if motion.num_frames() == 0 {
+        return refuse(RejectReason::Empty, "capture has no frames".into(), None);
+    }
+    if let Err(e) = input.profile.bind(&motion.skeleton) {
+        return refuse(RejectReason::Profile, e.to_string(), None);
+    }
+    accepted(input, label_fps, motion, notes)
 }
 
 /// A capture read: its motion at `fps`, with what the reader noted.

@@ -22,7 +22,12 @@ use crate::motion::{BodyPart, Motion, Profile};
 /// Stage name.
 pub const NAME: &str = "segment";
 /// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
+
+/// Seconds by which a capture's duration may differ from the duration its annotation states
+/// (BABEL's `dur`) before the difference is noted: a wrong frame rate or another file under the
+/// same name, not a rounding.
+pub const DURATION_TOLERANCE: f64 = 0.25;
 
 /// What the stage reads for one capture.
 pub struct SegmentInput<'a> {
@@ -131,6 +136,21 @@ pub fn run_with<E>(
     let fps = capture.capture.fps;
     let offset = input.config.timeline_offset_frames as i64;
     let trim = (input.config.trim_start_seconds * fps).ceil() as u64;
+    if let Some(stated) = input.annotation.duration
+        && fps > 0.0
+    {
+        let actual = len.saturating_sub(offset.max(0) as u64) as f64 / fps;
+        if (stated - actual).abs() > DURATION_TOLERANCE {
+            out.notes.push(Note::new(
+                "duration_mismatch",
+                format!(
+                    "`{}`: {actual:.3} s long ({len} frames at {fps} fps), but {} says {stated} s; \
+                     check the frame rate (fps_override, fps_table) or the file",
+                    capture.capture.path, input.annotation.origin
+                ),
+            ));
+        }
+    }
     let drop_labels: Vec<String> = input
         .config
         .drop_labels

@@ -120,6 +120,9 @@ reasons! {
         /// A joint-position array that does not read, does not fit its layout, or whose bone
         /// lengths wander beyond the tolerance.
         Positions => "positions",
+        /// An AMASS `.npz` that does not read (a key missing, damaged or of the wrong shape, no
+        /// frame rate, a NaN pose), or whose body model is missing or does not fit.
+        Amass => "amass",
     }
 }
 

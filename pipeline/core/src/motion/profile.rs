@@ -1,8 +1,8 @@
 //! Skeleton profiles: what each joint is (role, side, body part), how the capture's axes and units
 //! map to the dataset's, and the per-joint reflections that mirror local rotations.
 //!
-//! Profiles are data (`schemas/skeletons/*.toml`); three are bundled: Bandai Namco, CMU (cgspeed
-//! BVH) and the SMPL 22-joint order.
+//! Profiles are data (`schemas/skeletons/*.toml`); five are bundled: Bandai Namco, CMU (cgspeed
+//! BVH), the SMPL 22-joint order, and the SMPL-H and SMPL-X body models of AMASS captures.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -289,7 +289,9 @@ pub enum ProfileError {
         message: String,
     },
     /// No bundled profile of that name.
-    #[error("no bundled skeleton profile `{0}` (bundled: bandai-namco, cmu, smpl-22)")]
+    #[error(
+        "no bundled skeleton profile `{0}` (bundled: bandai-namco, cmu, smpl-22, smplh-52, smplx-55)"
+    )]
     Unknown(String),
     /// The profile names a joint the skeleton lacks.
     #[error(
@@ -336,7 +338,7 @@ pub enum ProfileError {
     },
 }
 
-const BUNDLED: [(&str, &str); 3] = [
+const BUNDLED: [(&str, &str); 5] = [
     (
         "bandai-namco",
         include_str!("../../../../schemas/skeletons/bandai-namco.toml"),
@@ -348,6 +350,14 @@ const BUNDLED: [(&str, &str); 3] = [
     (
         "smpl-22",
         include_str!("../../../../schemas/skeletons/smpl-22.toml"),
+    ),
+    (
+        "smplh-52",
+        include_str!("../../../../schemas/skeletons/smplh-52.toml"),
+    ),
+    (
+        "smplx-55",
+        include_str!("../../../../schemas/skeletons/smplx-55.toml"),
     ),
 ];
 

@@ -1,0 +1,349 @@
+//! The user's SMPL-H or SMPL-X body model (`model.npz`, as AMASS documents it): only what joint
+//! positions need, `v_template`, `shapedirs`, `J_regressor` and `kintree_table`, read once and
+//! reduced to rest joints that are affine in the shape coefficients.
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+
+use super::npz::{Npz, NpzError};
+
+/// The keys a body model file must have (AMASS's and smplx's names). Only the first four are
+/// read; the others are checked to be present, which costs nothing (the archive's directory).
+pub const MODEL_KEYS: [&str; 7] = [
+    "v_template",
+    "shapedirs",
+    "J_regressor",
+    "kintree_table",
+    "posedirs",
+    "weights",
+    "f",
+];
+
+/// The most shape coefficients a model is asked for (SMPL-X has 300 shape and 100 expression
+/// directions).
+pub const MAX_BETAS: usize = 400;
+
+/// The body model families AMASS releases use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Family {
+    /// SMPL-H (AMASS's "SMPL+H G"): 52 joints, poses `(T, 156)`.
+    SmplH,
+    /// SMPL-X (AMASS's "SMPL-X G"): 55 joints, poses `(T, 165)`.
+    SmplX,
+}
+
+impl Family {
+    /// The folder of the body model tree (`smplh`, `smplx`).
+    pub fn folder(self) -> &'static str {
+        match self {
+            Family::SmplH => "smplh",
+            Family::SmplX => "smplx",
+        }
+    }
+
+    /// Joints of the family's skeleton.
+    pub fn joints(self) -> usize {
+        self.names().len()
+    }
+
+    /// Its joint names, in the model's order (smplx's names, `_smplhf` dropped from the eyes).
+    pub fn names(self) -> &'static [&'static str] {
+        match self {
+            Family::SmplH => &SMPLH_JOINTS,
+            Family::SmplX => &SMPLX_JOINTS,
+        }
+    }
+
+    /// The bundled skeleton profile for the family.
+    pub fn profile(self) -> &'static str {
+        match self {
+            Family::SmplH => "smplh-52",
+            Family::SmplX => "smplx-55",
+        }
+    }
+}
+
+macro_rules! hand {
+    ($side:literal) => {
+        [
+            concat!($side, "_index1"),
+            concat!($side, "_index2"),
+            concat!($side, "_index3"),
+            concat!($side, "_middle1"),
+            concat!($side, "_middle2"),
+            concat!($side, "_middle3"),
+            concat!($side, "_pinky1"),
+            concat!($side, "_pinky2"),
+            concat!($side, "_pinky3"),
+            concat!($side, "_ring1"),
+            concat!($side, "_ring2"),
+            concat!($side, "_ring3"),
+            concat!($side, "_thumb1"),
+            concat!($side, "_thumb2"),
+            concat!($side, "_thumb3"),
+        ]
+    };
+}
+
+/// SMPL's 22 body joints, the first joints of both families.
+pub const BODY_JOINTS: [&str; 22] = [
+    "pelvis",
+    "left_hip",
+    "right_hip",
+    "spine1",
+    "left_knee",
+    "right_knee",
+    "spine2",
+    "left_ankle",
+    "right_ankle",
+    "spine3",
+    "left_foot",
+    "right_foot",
+    "neck",
+    "left_collar",
+    "right_collar",
+    "head",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+];
+
+const fn concat_names<const N: usize>(parts: [&[&'static str]; 4]) -> [&'static str; N] {
+    let mut out = [""; N];
+    let mut i = 0;
+    let mut p = 0;
+    while p < parts.len() {
+        let mut k = 0;
+        while k < parts[p].len() {
+            out[i] = parts[p][k];
+            i += 1;
+            k += 1;
+        }
+        p += 1;
+    }
+    out
+}
+
+/// SMPL-H's 52 joints: the body, then the left hand's 15, then the right hand's.
+pub const SMPLH_JOINTS: [&str; 52] =
+    concat_names([&BODY_JOINTS, &[], &hand!("left"), &hand!("right")]);
+
+/// SMPL-X's 55 joints: the body, jaw and eyes, then the hands.
+pub const SMPLX_JOINTS: [&str; 55] = concat_names([
+    &BODY_JOINTS,
+    &["jaw", "left_eye", "right_eye"],
+    &hand!("left"),
+    &hand!("right"),
+]);
+
+/// Why a body model cannot be used: each names the file and the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    /// The file cannot be read.
+    #[error("body model {path}: cannot read: {message}")]
+    Read {
+        /// The model file.
+        path: PathBuf,
+        /// The I/O error.
+        message: String,
+    },
+    /// The archive or one of its arrays is unreadable, or a key is missing.
+    #[error("body model {path}: {source}")]
+    Npz {
+        /// The model file.
+        path: PathBuf,
+        /// What is wrong, naming the key.
+        source: NpzError,
+    },
+    /// An array's shape or values do not fit the others.
+    #[error("body model {path}: `{key}`: {message}")]
+    Shape {
+        /// The model file.
+        path: PathBuf,
+        /// The key.
+        key: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// A body model reduced to its rest joints: `J(β) = J_template + Σ_b β_b · J_dirs[b]`, which is
+/// `J_regressor · (v_template + shapedirs · β)` regrouped.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodyModel {
+    /// The model file.
+    pub path: PathBuf,
+    /// Parent of each joint (`None` for the root, joint 0), from `kintree_table[0]`.
+    pub parents: Vec<Option<usize>>,
+    /// Shape coefficients used (`num_betas`).
+    pub num_betas: usize,
+    /// `J_regressor · v_template`, per joint.
+    template: Vec<DVec3>,
+    /// `J_regressor · shapedirs[..., b]`, per coefficient then joint.
+    directions: Vec<DVec3>,
+}
+
+impl BodyModel {
+    /// Reads `path` and keeps what `num_betas` shape coefficients need.
+    pub fn load(path: &Path, num_betas: usize) -> Result<BodyModel, ModelError> {
+        let bytes = std::fs::read(path).map_err(|e| ModelError::Read {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        BodyModel::from_bytes(path, &bytes, num_betas)
+    }
+
+    /// [`BodyModel::load`] of bytes already read; `path` names the file in errors.
+    pub fn from_bytes(
+        path: &Path,
+        bytes: &[u8],
+        num_betas: usize,
+    ) -> Result<BodyModel, ModelError> {
+        let npz_err = |source| ModelError::Npz {
+            path: path.to_path_buf(),
+            source,
+        };
+        let shape_err = |key, message: String| ModelError::Shape {
+            path: path.to_path_buf(),
+            key,
+            message,
+        };
+        let npz = Npz::new(bytes).map_err(npz_err)?;
+        if let Some(key) = MODEL_KEYS.iter().find(|k| !npz.has(k)) {
+            return Err(npz_err(NpzError::Missing {
+                key: key.to_string(),
+            }));
+        }
+        let floats = |key: &'static str| {
+            let array = npz.array(key).map_err(npz_err)?;
+            let values = array
+                .floats()
+                .ok_or_else(|| shape_err(key, format!("{} values, not numbers", array.kind())))?
+                .into_owned();
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(shape_err(key, format!("value {i} is not finite")));
+            }
+            Ok((array.shape, values))
+        };
+        let (shape, v_template) = floats("v_template")?;
+        let vertices = match shape.as_slice() {
+            [v, 3] if *v > 0 => *v,
+            _ => {
+                return Err(shape_err(
+                    "v_template",
+                    format!("shape {shape:?}; expected (vertices, 3)"),
+                ));
+            }
+        };
+        let (shape, regressor) = floats("J_regressor")?;
+        let joints = match shape.as_slice() {
+            [j, v] if *v == vertices && *j > 0 => *j,
+            _ => {
+                return Err(shape_err(
+                    "J_regressor",
+                    format!("shape {shape:?}; expected (joints, {vertices})"),
+                ));
+            }
+        };
+        let (shape, shapedirs) = floats("shapedirs")?;
+        let stored = match shape.as_slice() {
+            [v, 3, b] if *v == vertices => *b,
+            _ => {
+                return Err(shape_err(
+                    "shapedirs",
+                    format!("shape {shape:?}; expected ({vertices}, 3, betas)"),
+                ));
+            }
+        };
+        if num_betas > stored {
+            return Err(shape_err(
+                "shapedirs",
+                format!("holds {stored} shape directions; num_betas = {num_betas} needs that many"),
+            ));
+        }
+        let kintree = npz.array("kintree_table").map_err(npz_err)?;
+        let table = match (&kintree.values, kintree.shape.as_slice()) {
+            (super::npz::Values::Int(v), [2, j]) if *j == joints => v,
+            _ => {
+                return Err(shape_err(
+                    "kintree_table",
+                    format!(
+                        "{} values of shape {:?}; expected integers of shape (2, {joints})",
+                        kintree.kind(),
+                        kintree.shape
+                    ),
+                ));
+            }
+        };
+        let mut parents = Vec::with_capacity(joints);
+        for (j, &p) in table[..joints].iter().enumerate() {
+            if j == 0 {
+                parents.push(None);
+                continue;
+            }
+            match usize::try_from(p) {
+                Ok(p) if p < j => parents.push(Some(p)),
+                _ => {
+                    return Err(shape_err(
+                        "kintree_table",
+                        format!("joint {j} has parent {p}; expected a joint before it"),
+                    ));
+                }
+            }
+        }
+        // Regrouped sums: J_template = R · v_template, J_dirs[b] = R · shapedirs[.., b].
+        let mut template = vec![DVec3::ZERO; joints];
+        let mut directions = vec![DVec3::ZERO; joints * num_betas];
+        for (j, row) in regressor.chunks_exact(vertices).enumerate() {
+            let mut acc = DVec3::ZERO;
+            let mut dirs = vec![DVec3::ZERO; num_betas];
+            for (v, &w) in row.iter().enumerate() {
+                if w == 0.0 {
+                    continue;
+                }
+                acc += w * DVec3::from_slice(&v_template[3 * v..3 * v + 3]);
+                for (b, d) in dirs.iter_mut().enumerate() {
+                    let at = v * 3 * stored + b;
+                    *d += w * DVec3::new(
+                        shapedirs[at],
+                        shapedirs[at + stored],
+                        shapedirs[at + 2 * stored],
+                    );
+                }
+            }
+            template[j] = acc;
+            for (b, d) in dirs.into_iter().enumerate() {
+                directions[b * joints + j] = d;
+            }
+        }
+        Ok(BodyModel {
+            path: path.to_path_buf(),
+            parents,
+            num_betas,
+            template,
+            directions,
+        })
+    }
+
+    /// Joints of the model.
+    pub fn joints(&self) -> usize {
+        self.parents.len()
+    }
+
+    /// Rest joint positions for shape coefficients `betas` (the first `num_betas` are used;
+    /// the caller checks there are that many).
+    pub fn rest_joints(&self, betas: &[f64]) -> Vec<DVec3> {
+        let n = self.joints();
+        let mut out = self.template.clone();
+        for (b, &beta) in betas.iter().take(self.num_betas).enumerate() {
+            for (j, o) in out.iter_mut().enumerate() {
+                *o += beta * self.directions[b * n + j];
+            }
+        }
+        out
+    }
+}
