@@ -150,14 +150,14 @@ fn top_level_modules_have_no_mutual_dependency() {
 }
 
 #[test]
-fn the_leaf_module_depends_on_nothing_and_data_flows_one_way() {
+fn data_flows_one_way() {
     let graph = graph();
-    // Sources and stages never reach the runner or the sinks that come after them.
-    for early in [
-        "annotate", "source", "stages", "motion", "parts", "config", "llm",
-    ] {
+    // Sources and stages never reach the runner or the sinks that come after them. The file
+    // formats (`io`, `dataset`) are a crate below all of them: the config names the shards'
+    // compression and the manifest records the config, so stages may use their types.
+    for early in ["source", "stages", "config"] {
         let reach = reachable(&graph, early);
-        for late in ["build", "export", "io", "report", "serve"] {
+        for late in ["build", "export", "report", "serve"] {
             assert!(
                 !reach.contains(late),
                 "`{early}` reaches `{late}`: {graph:?}"
@@ -173,6 +173,8 @@ const CRATE_ORDER: &[&str] = &[
     "motionforge-core",
     "motionforge-language",
     "motionforge-llm",
+    "motionforge-sources",
+    "motionforge-format",
     "motionforge",
 ];
 

@@ -64,20 +64,20 @@
 //! # Ok(())
 //! # }
 //! ```
-pub mod amass;
-pub mod annotate;
 pub use motionforge_core::base;
+pub use motionforge_sources::amass;
+pub use motionforge_sources::annotate;
 pub mod build;
-pub mod clip;
 pub use motionforge_language::compose_text;
+pub use motionforge_sources::clip;
 pub mod config;
-pub mod dataset;
+pub use motionforge_format::dataset;
 pub mod export;
 pub use motionforge_core::features;
 pub use motionforge_core::humanml3d;
-pub use motionforge_language::caption;
-pub mod io;
 pub use motionforge_core::motion;
+pub use motionforge_format::io;
+pub use motionforge_language::caption;
 pub use motionforge_language::parts;
 pub use motionforge_llm as llm;
 pub mod planner;

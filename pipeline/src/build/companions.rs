@@ -132,8 +132,12 @@ impl Companions {
             .map(|s| format!("{}: {}", s.name, s.licence))
             .collect();
         let card_body = card_body(config, clips, &licences, &counts.source_kind);
-        let mut manifest =
-            crate::io::manifest::Manifest::new(config, clips, counts, table_fingerprint);
+        let mut manifest = crate::io::manifest::Manifest::new(
+            config.built_from(),
+            clips,
+            counts,
+            table_fingerprint,
+        );
         // The statistics report reads them from the manifest, so a paper's tables list them too.
         manifest.label_contradictions = label_contradictions.to_vec();
         Companions {

@@ -197,9 +197,7 @@ pub struct DatasetConfig {
     pub schedule: Option<String>,
 }
 
-/// The zstd level of the shards unless `dataset.zstd_level` says otherwise: level 1 writes the
-/// motion columns 30% faster than level 3 for 5-7% more bytes (`docs/decisions.md`).
-pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+pub use crate::io::parquet::DEFAULT_ZSTD_LEVEL;
 
 fn default_zstd_level() -> i32 {
     DEFAULT_ZSTD_LEVEL
@@ -689,6 +687,21 @@ impl Default for SegmentConfig {
 }
 
 impl Config {
+    /// What the manifest records of this config. Where the dataset is written is not part of what
+    /// it is: the same config built into another folder gives the same fingerprint.
+    pub fn built_from(&self) -> crate::io::manifest::BuiltFrom {
+        let mut content = self.clone();
+        content.dataset.output = PathBuf::new();
+        crate::io::manifest::BuiltFrom {
+            dataset: self.dataset.name.clone(),
+            fps: self.dataset.fps,
+            seed: self.dataset.seed,
+            config_fingerprint: crate::base::Fingerprint::new("config", 1)
+                .json("config", &content)
+                .finish(),
+        }
+    }
+
     /// Reads and validates a config file.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         Config::parse(&read_config(path)?, path)

@@ -198,7 +198,7 @@ impl ClipFilter {
 
 /// The clip tables of a dataset folder: `data/*.parquet`, sorted by name.
 pub fn shards(dataset: &Path) -> Result<Vec<PathBuf>, DatasetError> {
-    let dir = dataset.join(crate::base::layout::DATA_DIR);
+    let dir = dataset.join(motionforge_core::base::layout::DATA_DIR);
     let entries = std::fs::read_dir(&dir).map_err(|_| DatasetError::NotADataset {
         path: dataset.to_path_buf(),
     })?;

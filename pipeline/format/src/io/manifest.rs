@@ -6,9 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::base::{Fingerprint, Reject};
-use crate::clip::{Clip, SourceKind};
-use crate::config::Config;
+use motionforge_core::base::Reject;
+use motionforge_sources::clip::{Clip, SourceKind};
 
 // Fields are declared in alphabetical order: the file's keys have always been sorted, and a
 // struct serialises in declaration order.
@@ -30,7 +29,7 @@ pub struct Manifest {
     /// Clips whose text contradicts what their motion measurably does (issue 16), by clip id;
     /// listed, never fixed. Absent when there are none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub label_contradictions: Vec<crate::quality::Contradiction>,
+    pub label_contradictions: Vec<motionforge_core::quality::Contradiction>,
     /// The program that wrote it (`motionforge 0.1.0`).
     pub pipeline: String,
     /// Version of the clip table's schema.
@@ -137,7 +136,7 @@ impl Manifest {
     /// The manifest of `dataset` (its `manifest.json`); `None` when the folder has none (not a
     /// finished dataset), an error when it has one that cannot be read.
     pub fn read(dataset: &Path) -> Result<Option<Manifest>, ManifestError> {
-        let path = dataset.join(crate::base::layout::MANIFEST_FILE);
+        let path = dataset.join(motionforge_core::base::layout::MANIFEST_FILE);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -210,10 +209,24 @@ pub fn action_counts(clips: &[Clip]) -> BTreeMap<String, usize> {
         .collect()
 }
 
+/// What a manifest records of the config a dataset was built from.
+#[derive(Debug, Clone)]
+pub struct BuiltFrom {
+    /// The dataset's name.
+    pub dataset: String,
+    /// The dataset's frame rate.
+    pub fps: f64,
+    /// The config's seed.
+    pub seed: u64,
+    /// Fingerprint of the config's content, without where the dataset is written (the same
+    /// config built into another folder gives the same bytes).
+    pub config_fingerprint: String,
+}
+
 impl Manifest {
-    /// The manifest of a dataset built from `config` with rows `clips`, before its shards are
+    /// The manifest of a dataset built from `from` with rows `clips`, before its shards are
     /// written (`splits` is filled in by the writer).
-    pub fn new(config: &Config, clips: &[Clip], counts: Counts, table_fingerprint: &str) -> Self {
+    pub fn new(from: BuiltFrom, clips: &[Clip], counts: Counts, table_fingerprint: &str) -> Self {
         // Distinct captures first, in `Source` order (path, digest, source name), then copied:
         // a copy per clip, most of them dropped as repeats, left the survivors scattered over the
         // allocator's pages (three clips per capture or more, and this runs on every build).
@@ -236,26 +249,20 @@ impl Manifest {
                 source: source.to_string(),
             })
             .collect();
-        // Where the dataset is written is not part of what it is: the same config built into
-        // another folder gives the same bytes.
-        let mut content_config = config.clone();
-        content_config.dataset.output = PathBuf::new();
         Manifest {
-            config_fingerprint: Fingerprint::new("config", 1)
-                .json("config", &content_config)
-                .finish(),
+            config_fingerprint: from.config_fingerprint,
             counts,
-            dataset: config.dataset.name.clone(),
+            dataset: from.dataset,
             files: Files {
-                plans: crate::base::layout::PLANS_FILE.into(),
-                rejects: crate::base::layout::REJECTS_FILE.into(),
-                skeletons: crate::base::layout::SKELETONS_FILE.into(),
+                plans: motionforge_core::base::layout::PLANS_FILE.into(),
+                rejects: motionforge_core::base::layout::REJECTS_FILE.into(),
+                skeletons: motionforge_core::base::layout::SKELETONS_FILE.into(),
             },
-            fps: config.dataset.fps,
+            fps: from.fps,
             label_contradictions: Vec::new(),
             pipeline: format!("motionforge {}", env!("CARGO_PKG_VERSION")),
             schema_version: crate::io::schema::SCHEMA_VERSION,
-            seed: config.dataset.seed,
+            seed: from.seed,
             sources,
             splits: BTreeMap::new(),
             table_fingerprint: table_fingerprint.to_string(),

@@ -11,8 +11,8 @@ use glam::{DQuat, DVec3};
 use serde::Deserialize;
 
 use super::{ClipFrames, DatasetError};
-use crate::motion::profile::dataset_axes;
-use crate::motion::{Channel, Joint, Motion, SignedAxis, Skeleton};
+use motionforge_core::motion::profile::dataset_axes;
+use motionforge_core::motion::{Channel, Joint, Motion, SignedAxis, Skeleton};
 
 /// Every skeleton of a dataset, by skeleton id (the `skeleton` column).
 pub type Skeletons = BTreeMap<String, SkeletonEntry>;
@@ -72,7 +72,7 @@ pub struct SkeletonJoint {
 
 /// Reads `<dataset>/skeletons.json`.
 pub fn read_skeletons(dataset: &Path) -> Result<Skeletons, DatasetError> {
-    let path = dataset.join(crate::base::layout::SKELETONS_FILE);
+    let path = dataset.join(motionforge_core::base::layout::SKELETONS_FILE);
     let text = std::fs::read_to_string(&path).map_err(|source| DatasetError::Io {
         path: path.clone(),
         source,

@@ -11,7 +11,7 @@ use arrow_schema::{DataType, Field, Schema};
 use parquet::arrow::ArrowWriter;
 
 use super::parquet::{Row, TableError};
-use crate::base::{WorkspaceError, write_atomic, write_atomic_with};
+use motionforge_core::base::{WorkspaceError, write_atomic, write_atomic_with};
 
 /// Why normalisation statistics could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -39,9 +39,9 @@ pub enum NormalizationError {
         feature: String,
     },
 }
-use crate::clip::LoadedClip;
-use crate::features::FeatureConfig;
-use crate::motion::Profile;
+use motionforge_core::features::FeatureConfig;
+use motionforge_core::motion::Profile;
+use motionforge_sources::clip::LoadedClip;
 
 /// Running sums for one feature: per element (joint × dimension).
 struct Moments {

@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use super::span::{
     AnnotationError, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note, Span, Time,
 };
-use crate::caption::{MAX_CAPTION_CHARS, over_length};
+use motionforge_language::caption::{MAX_CAPTION_CHARS, over_length};
 
 /// The header columns, in HumanML3D's order.
 pub const INDEX_COLUMNS: [&str; 4] = ["source_path", "start_frame", "end_frame", "new_name"];

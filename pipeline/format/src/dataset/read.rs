@@ -14,7 +14,7 @@ use parquet::file::reader::{ChunkReader, Length};
 
 use super::{ClipInfo, DatasetError, Plausibility};
 use crate::io::schema::Column;
-use crate::motion::BodyPart;
+use motionforge_core::motion::BodyPart;
 
 /// Metadata columns a listing decodes (never the frames).
 const INFO_COLUMNS: [Column; 25] = [
@@ -360,7 +360,7 @@ fn part_names(flags: &[bool]) -> Vec<String> {
         .iter()
         .zip(flags)
         .filter(|(_, on)| **on)
-        .map(|(p, _)| crate::parts::part_name(*p).to_string())
+        .map(|(p, _)| motionforge_language::parts::part_name(*p).to_string())
         .collect()
 }
 

@@ -24,11 +24,11 @@ use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 
 use super::schema::{Column, SCHEMA_VERSION, clip_schema};
-pub use crate::clip::skeleton_name;
-use crate::clip::{Clip, LoadedClip};
-use crate::features::{FeatureConfig, Features};
-use crate::motion::{Motion, Profile};
-use crate::quality::{Plausibility, plausibility};
+use motionforge_core::features::{FeatureConfig, Features};
+use motionforge_core::motion::{Motion, Profile};
+use motionforge_core::quality::{Plausibility, plausibility};
+pub use motionforge_sources::clip::skeleton_name;
+use motionforge_sources::clip::{Clip, LoadedClip};
 
 /// Errors writing a table.
 #[derive(Debug, thiserror::Error)]
@@ -62,7 +62,7 @@ fn parquet_hint(error: &ParquetError) -> &'static str {
     match error {
         ParquetError::External(e) => e
             .downcast_ref::<std::io::Error>()
-            .map(crate::base::io_hint)
+            .map(motionforge_core::base::io_hint)
             .unwrap_or(""),
         _ => "",
     }
@@ -85,7 +85,7 @@ pub fn dataset_motion(motion: &Motion, profile: &Profile) -> DatasetMotion {
     dataset_motion_at(
         motion,
         profile,
-        &crate::motion::canonical::dataset_positions(motion, profile),
+        &motionforge_core::motion::canonical::dataset_positions(motion, profile),
     )
 }
 
@@ -153,7 +153,7 @@ impl<'a> Row<'a> {
         config: &FeatureConfig,
     ) -> Row<'a> {
         let joints = motion.num_joints();
-        let world = crate::motion::canonical::dataset_positions(motion, profile);
+        let world = motionforge_core::motion::canonical::dataset_positions(motion, profile);
         let plausibility = clip
             .plausibility
             .as_deref()
@@ -161,7 +161,7 @@ impl<'a> Row<'a> {
             .or_else(|| Some(plausibility(&world, joints, motion.fps, profile)));
         let dataset = dataset_motion_at(motion, profile, &world);
         let canonical = canonical_positions(&dataset.positions, joints, profile);
-        let features = crate::features::features(
+        let features = motionforge_core::features::features(
             &dataset.positions,
             &dataset.rotations,
             joints,
@@ -200,19 +200,20 @@ impl<'a> Row<'a> {
 }
 
 /// Dataset-frame positions (`frames × joints × 3`) in the first frame's canonical frame
-/// ([`crate::motion::canonical::canonical_frame`], as the goals use). A first frame with no
+/// ([`motionforge_core::motion::canonical::canonical_frame`], as the goals use). A first frame with no
 /// facing direction (hips and shoulders stacked) is only moved over the origin.
 fn canonical_positions(positions: &[f32], joints: usize, profile: &Profile) -> Vec<f32> {
     use glam::DVec3;
     let point = |c: &[f32]| DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]));
     let first: Vec<DVec3> = positions.chunks_exact(3).take(joints).map(point).collect();
-    let frame = crate::motion::canonical::canonical_frame(&first, profile).unwrap_or_else(|| {
-        let pelvis = first.get(profile.root).copied().unwrap_or_default();
-        crate::motion::canonical::CanonicalFrame {
-            origin: DVec3::new(pelvis.x, pelvis.y, 0.0),
-            rotation: glam::DQuat::IDENTITY,
-        }
-    });
+    let frame = motionforge_core::motion::canonical::canonical_frame(&first, profile)
+        .unwrap_or_else(|| {
+            let pelvis = first.get(profile.root).copied().unwrap_or_default();
+            motionforge_core::motion::canonical::CanonicalFrame {
+                origin: DVec3::new(pelvis.x, pelvis.y, 0.0),
+                rotation: glam::DQuat::IDENTITY,
+            }
+        });
     let mut out = Vec::with_capacity(positions.len());
     for c in positions.chunks_exact(3) {
         let p = frame.apply(point(c));
@@ -543,7 +544,7 @@ fn floats(values: Vec<f32>) -> ArrayRef {
 
 /// Six booleans per row in SINC's order: global, torso, left arm, right arm, left leg, right leg.
 fn part_lists(
-    rows: impl Iterator<Item = Option<crate::parts::PartSet>>,
+    rows: impl Iterator<Item = Option<motionforge_language::parts::PartSet>>,
 ) -> Result<ArrayRef, ArrowError> {
     let rows: Vec<Option<Vec<bool>>> = rows.map(|p| p.map(|p| p.to_vec6().to_vec())).collect();
     fixed_per_row(&rows, 6, false, bools)
@@ -551,9 +552,9 @@ fn part_lists(
 
 /// A list of six-boolean part vectors per row (the parts each source of a synthetic pair gave).
 fn nested_part_lists<'a>(
-    rows: impl Iterator<Item = &'a [crate::parts::PartSet]>,
+    rows: impl Iterator<Item = &'a [motionforge_language::parts::PartSet]>,
 ) -> Result<ArrayRef, ArrowError> {
-    let rows: Vec<&[crate::parts::PartSet]> = rows.collect();
+    let rows: Vec<&[motionforge_language::parts::PartSet]> = rows.collect();
     let mut values = Vec::new();
     for parts in &rows {
         for p in *parts {
@@ -876,7 +877,9 @@ fn float_encoding(
     Ok(props)
 }
 
-pub use crate::config::DEFAULT_ZSTD_LEVEL;
+/// The zstd level of the shards unless `dataset.zstd_level` says otherwise: level 1 writes the
+/// motion columns 30% faster than level 3 for 5-7% more bytes (`docs/decisions.md`).
+pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
 
 /// Largest data page before compression. A row group's per-frame column is a few MB, which
 /// parquet's default (1 MB) cut into several pages, each compressed on its own: one page per
@@ -964,7 +967,7 @@ pub fn write_clips(
 /// Writes task plans, one row per step: `text`, `step_id`, `step`, `category`.
 pub fn write_plans(
     file: File,
-    plans: &BTreeMap<String, Vec<crate::llm::plans::PlanStep>>,
+    plans: &BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
 ) -> Result<File, TableError> {
     let schema = Arc::new(arrow_schema::Schema::new(vec![
         Field::new("text", DataType::Utf8, false),
@@ -972,14 +975,14 @@ pub fn write_plans(
         Field::new("step", DataType::Utf8, false),
         Field::new("category", DataType::Utf8, false),
     ]));
-    let rows: Vec<(&String, &crate::llm::plans::PlanStep)> = plans
+    let rows: Vec<(&String, &motionforge_llm::plans::PlanStep)> = plans
         .iter()
         .flat_map(|(t, steps)| steps.iter().map(move |s| (t, s)))
         .collect();
-    let category = |s: &crate::llm::plans::PlanStep| match s.category {
-        crate::llm::plans::StepCategory::Locomotion => "locomotion",
-        crate::llm::plans::StepCategory::Grasp => "grasp",
-        crate::llm::plans::StepCategory::Interaction => "interaction",
+    let category = |s: &motionforge_llm::plans::PlanStep| match s.category {
+        motionforge_llm::plans::StepCategory::Locomotion => "locomotion",
+        motionforge_llm::plans::StepCategory::Grasp => "grasp",
+        motionforge_llm::plans::StepCategory::Interaction => "interaction",
     };
     let batch = RecordBatch::try_new(
         Arc::clone(&schema),

@@ -9,8 +9,8 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::annotate::span::Hand;
-use crate::motion::{Motion, Skeleton};
-use crate::parts::PartSet;
+use motionforge_core::motion::{Motion, Skeleton};
+use motionforge_language::parts::PartSet;
 
 /// Where a clip came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -191,7 +191,7 @@ pub struct Clip {
     pub parts: Option<PartSet>,
     /// Which labeller produced `parts` (`embedded:lexicon`, `embedded:velocity`, `llm:<model>`,
     /// `import:<file>`).
-    pub label_source: Option<crate::parts::LabelSources>,
+    pub label_source: Option<motionforge_language::parts::LabelSources>,
     /// Alternative descriptions of `text` (LLM, side words checked).
     pub paraphrases: Vec<String>,
     /// For a synthetic pair: the two source clips.
@@ -201,7 +201,7 @@ pub struct Clip {
     /// Plausibility metrics (foot skating, ground and self penetration, lean). Boxed: only
     /// synthetic pairs carry them (a real clip's are measured with its row), and inline they
     /// would make every clip of the table about a hundred bytes larger.
-    pub plausibility: Option<Box<crate::quality::Plausibility>>,
+    pub plausibility: Option<Box<motionforge_core::quality::Plausibility>>,
     /// Extra fields from the annotation (file-name groups, sidecar keys).
     pub attributes: Attributes,
     /// Skeleton profile name.
@@ -349,7 +349,7 @@ impl SkeletonTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::parts::{LabelSource, LabelSources};
+    use motionforge_language::parts::{LabelSource, LabelSources};
     use std::collections::BTreeSet;
 
     /// `held` and `replaced` give the same postcard (cache, fingerprints) and JSON bytes.

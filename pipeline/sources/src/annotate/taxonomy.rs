@@ -31,7 +31,7 @@ use regex::{Regex, RegexBuilder};
 use serde::{Deserialize, Serialize};
 
 /// The bundled taxonomy's text (`schemas/motion_types.toml`).
-pub const BUNDLED_TOML: &str = include_str!("../../../schemas/motion_types.toml");
+pub const BUNDLED_TOML: &str = include_str!("../../../../schemas/motion_types.toml");
 
 /// The name errors in the bundled taxonomy are reported under.
 pub const BUNDLED_FILE: &str = "schemas/motion_types.toml";

@@ -8,7 +8,7 @@
 //! (the root's `J_0 + trans`, per frame), its local rotation the pose's, so the motion's forward
 //! kinematics gives the reference's joints. No vertex is skinned: joints do not need it.
 //!
-//! Uses only [`crate::base`] and [`crate::motion`].
+//! Uses only [`motionforge_core::base`] and [`motionforge_core::motion`].
 
 pub mod model;
 pub mod npz;
@@ -21,8 +21,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
-use crate::motion::{Channel, Joint, Motion, Skeleton};
 pub use model::{BodyModel, Family, ModelError};
+use motionforge_core::motion::{Channel, Joint, Motion, Skeleton};
 pub use sequence::{
     AmassError, AmassErrorKind, FileGender, Sequence, humanml3d_stride, is_not_a_motion,
     read_sequence,
@@ -173,7 +173,7 @@ pub fn models_digest(folder: &Path) -> String {
             Some(sha) => sha,
             None => {
                 let sha = match std::fs::read(&path) {
-                    Ok(bytes) => crate::base::sha256_hex(&bytes),
+                    Ok(bytes) => motionforge_core::base::sha256_hex(&bytes),
                     Err(e) => format!("unreadable: {e}"),
                 };
                 if let Ok(mut m) = digests.lock() {
@@ -184,7 +184,7 @@ pub fn models_digest(folder: &Path) -> String {
         };
         all.update(sha.as_bytes());
     }
-    crate::base::hex(&all.finalize()[..16])
+    motionforge_core::base::hex(&all.finalize()[..16])
 }
 
 /// Why a sequence and a model do not make a motion.

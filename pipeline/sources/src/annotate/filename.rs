@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 
 use regex::Regex;
 
-use crate::base::RejectReason;
-use crate::caption::{MAX_CAPTION_CHARS, over_length};
+use motionforge_core::base::RejectReason;
+use motionforge_language::caption::{MAX_CAPTION_CHARS, over_length};
 
 use super::span::{CaptureAnnotation, Span, Time};
 

@@ -16,7 +16,7 @@ use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
 use super::{ClipFrames, DatasetError, SkeletonEntry};
-use crate::motion::Motion;
+use motionforge_core::motion::Motion;
 
 /// The camera's height above the character, as an angle below the horizontal.
 pub const ELEVATION_DEGREES: f64 = 20.0;
@@ -25,7 +25,7 @@ const GRID_M: f64 = 0.5;
 /// Pixels of the title band (caption and id).
 const TITLE_PX: u32 = 34;
 const FONT: &str = "sans-serif";
-const FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+const FONT_BYTES: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 
 /// How previews are drawn.
 #[derive(Debug, Clone, PartialEq)]
@@ -679,7 +679,7 @@ pub fn file_stem(clip_id: &str) -> String {
         stem
     } else {
         let cut: String = stem.chars().take(100).collect();
-        let sha = crate::base::sha256_hex(clip_id.as_bytes());
+        let sha = motionforge_core::base::sha256_hex(clip_id.as_bytes());
         format!("{cut}-{}", &sha[..12])
     }
 }
@@ -697,7 +697,7 @@ pub fn write_preview(
     let gif = dir.join(format!("{stem}.gif"));
     let png = dir.join(format!("{stem}.png"));
     for (path, bytes) in [(&gif, preview.gif()?), (&png, preview.png()?)] {
-        crate::base::write_atomic(path, &bytes).map_err(|e| DatasetError::Io {
+        motionforge_core::base::write_atomic(path, &bytes).map_err(|e| DatasetError::Io {
             path: path.clone(),
             source: std::io::Error::other(e.to_string()),
         })?;
@@ -723,7 +723,7 @@ mod tests {
         ] {
             let stem = file_stem(id);
             assert!(
-                crate::base::guard::is_plain_name(&stem),
+                motionforge_core::base::guard::is_plain_name(&stem),
                 "{id:?} -> {stem:?}"
             );
             assert!(!stem.starts_with('.'), "{id:?} -> {stem:?}");
