@@ -29,6 +29,78 @@ async fn demo_clips(client: &reqwest::Client, base: &str) -> (u16, serde_json::V
     (status, all, ids)
 }
 
+/// What the rendered report must hold, counted in `report.md` itself: its tables (delimiter
+/// rows) and its figures (image lines).
+fn report_expectation(dataset: &std::path::Path) -> Value {
+    let md = std::fs::read_to_string(dataset.join("report/report.md")).unwrap();
+    let tables = md.lines().filter(|l| l.starts_with("|---")).count();
+    let figures = md.lines().filter(|l| l.starts_with("![")).count();
+    assert!(
+        tables >= 3 && figures >= 3,
+        "{tables} tables, {figures} figures"
+    );
+    serde_json::json!({ "tables": tables, "figures": figures })
+}
+
+/// A synthetic pair of mirrored sources whose own length is not its longer source's: the page
+/// must count the pair's frames and head its sources "mirrored source".
+fn pair_expectation(dataset: &std::path::Path, rows: &[motionforge::report::ClipRow]) -> Value {
+    let row = |id: &str| rows.iter().find(|r| r.clip_id == id).unwrap();
+    let clips = motionforge::dataset::list_clips(dataset).unwrap();
+    let pair = clips
+        .iter()
+        .find(|c| {
+            c.source_kind == "synthetic"
+                && c.composed_from.len() == 2
+                && c.composed_from.iter().all(|s| row(s).mirrored)
+                && c.composed_from.iter().map(|s| row(s).frames).max()
+                    != Some(row(&c.clip_id).frames)
+        })
+        .expect("a synthetic pair of mirrored sources, shorter than its longer source");
+    serde_json::json!({
+        "id": pair.clip_id,
+        "sources": pair.composed_from,
+        "headings": ["", "mirrored source", "mirrored source"],
+        "frames": row(&pair.clip_id).frames,
+    })
+}
+
+/// The column view's columns (the first shard's schema, read here with parquet), its rows in
+/// shard order, and words its statistics must show.
+fn table_expectation(
+    tables: &[std::path::PathBuf],
+    rows: &[motionforge::report::ClipRow],
+) -> Value {
+    use parquet::file::reader::FileReader;
+    let reader =
+        parquet::file::reader::SerializedFileReader::new(std::fs::File::open(&tables[0]).unwrap())
+            .unwrap();
+    let columns: Vec<String> = reader
+        .metadata()
+        .file_metadata()
+        .schema_descr()
+        .root_schema()
+        .get_fields()
+        .iter()
+        .map(|f| f.name().to_string())
+        .collect();
+    let splits: BTreeSet<&str> = rows.iter().map(|r| r.split.as_str()).collect();
+    let untyped = rows.iter().filter(|r| r.motion_type.is_none()).count();
+    let frames = |f: fn(usize, usize) -> usize| rows.iter().map(|r| r.frames).reduce(f).unwrap();
+    serde_json::json!({
+        "columns": columns,
+        "total": rows.len(),
+        "first_id": rows[0].clip_id,
+        "id_at_20": rows[20].clip_id,
+        "stats": {
+            "split": [format!("{} distinct", splits.len())],
+            "motion_type": [format!("{untyped} null")],
+            "num_frames": [format!("min {}", frames(usize::min)), format!("max {}", frames(usize::max))],
+            "joint_positions": ["frames × joints × 3"],
+        },
+    })
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_filters_plays_and_draws_a_clip_beside_its_mirror() {
     let out = tempfile::tempdir().unwrap();
@@ -58,10 +130,24 @@ async fn the_page_filters_plays_and_draws_a_clip_beside_its_mirror() {
         ],
         ["filter-kind", "mirrored", count(&|r| r.mirrored)],
     ]);
+    // A motion type that no id or caption holds: found by the search box through the type alone.
+    let type_words = "front left";
+    let type_hits = count(&|r| {
+        r.motion_type
+            .as_deref()
+            .is_some_and(|t| t.contains(type_words))
+            || r.clip_id.contains(type_words)
+            || r.texts.iter().any(|t| t.contains(type_words))
+    });
+    assert!(type_hits > 0 && count(&|r| r.clip_id.contains(type_words)) == 0);
     let expected = serde_json::json!({
         "all": rows.len(),
         "filters": filters,
         "text": ["byebye", count(&|r| r.clip_id.contains("byebye"))],
+        "type_search": [type_words, type_hits],
+        "report": report_expectation(&config.dataset_dir()),
+        "pair": pair_expectation(&config.dataset_dir(), &rows),
+        "table": table_expectation(&tables, &rows),
     });
     assert!(rows.len() >= 20 && count(&|r| r.source_kind == "synthetic") > 0);
 
@@ -100,7 +186,15 @@ async fn the_page_filters_plays_and_draws_a_clip_beside_its_mirror() {
     eprintln!("{summary}");
     let summary: serde_json::Value = serde_json::from_str(summary.trim()).unwrap();
     assert!(summary["frame_after_play"].as_u64().unwrap() > 0);
-    for shot in ["browser-paused.png", "browser-playing.png"] {
+    eprintln!("screenshots in {}", shots.display());
+    for shot in [
+        "browser-hint.png",
+        "browser-report.png",
+        "browser-paused.png",
+        "browser-playing.png",
+        "browser-pair.png",
+        "browser-table.png",
+    ] {
         let bytes = std::fs::read(shots.join(shot)).unwrap();
         assert!(bytes.len() > 10_000 && &bytes[1..4] == b"PNG", "{shot}");
     }

@@ -356,3 +356,113 @@ fn a_version_8_flat_shard_reads_the_same_and_an_unknown_layout_is_refused() {
         "{err}"
     );
 }
+
+/// Rows of `rgb` (`w` wide) holding a bone's colour (a saturated pixel), per band of `band`
+/// rows: the first and last such row in each.
+fn coloured_rows(rgb: &[u8], w: usize, band: std::ops::Range<usize>) -> Option<(usize, usize)> {
+    let hit = |y: usize| {
+        rgb[y * w * 3..(y + 1) * w * 3].chunks_exact(3).any(|p| {
+            let (mx, mn) = (p.iter().max().unwrap(), p.iter().min().unwrap());
+            mx - mn > 80
+        })
+    };
+    let rows: Vec<usize> = band.filter(|&y| hit(y)).collect();
+    Some((*rows.first()?, *rows.last()?))
+}
+
+/// `motionforge preview --with sources` of a synthetic pair of mirrored sources: every title
+/// shows its whole id (a synthetic id is over 100 characters) and the `mirrored` marker, in
+/// lines that each hold text; each panel fits its own clip, so the source that stays in place
+/// is drawn tall however far the other walks (before: one scale for all, about 80 px of 280).
+#[test]
+fn preview_titles_show_whole_ids_and_sources_fit_their_own_panels() {
+    use motionforge::dataset::preview::{PreviewOptions, title_lines};
+    let (dir, config) = demo();
+    let ds = config.dataset_dir();
+    let clips = dataset::list_clips(&ds).unwrap();
+    let by_id = |id: &str| clips.iter().find(|c| c.clip_id == id).unwrap();
+    let pair = clips
+        .iter()
+        .find(|c| c.source_kind == "synthetic" && c.composed_from.iter().all(|s| by_id(s).mirrored))
+        .unwrap();
+    assert!(pair.clip_id.len() > 100, "{}", pair.clip_id);
+    let out = dir.path().join("previews");
+    let status = Command::new(env!("CARGO_BIN_EXE_motionforge"))
+        .arg("preview")
+        .arg(&ds)
+        .args([
+            "--clip",
+            &pair.clip_id,
+            "--with",
+            "sources",
+            "--strip",
+            "1",
+            "-o",
+        ])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let stem = dataset::preview::file_stem(&pair.clip_id);
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(out.join(format!("{stem}.png"))).unwrap(),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let mut rgb = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut rgb).unwrap();
+    let (w, h) = (info.width as usize, info.height as usize);
+    let size = PreviewOptions::default().size as usize;
+    assert_eq!(w, size, "one pose per row");
+
+    // One row per panel: the pair, then its sources; each title whole, in the row's width.
+    let panels: Vec<&dataset::ClipInfo> = std::iter::once(pair)
+        .chain(pair.composed_from.iter().map(|s| by_id(s)))
+        .collect();
+    let titles: Vec<_> = panels
+        .iter()
+        .map(|c| title_lines(c, size as u32 - 8))
+        .collect();
+    for (c, (caption, id)) in panels.iter().zip(&titles) {
+        assert_eq!(id.concat(), c.clip_id, "the id is cut: {id:?}");
+        assert!(!caption.concat().contains('…'), "{caption:?}");
+        assert_eq!(
+            caption[0].starts_with("mirrored: "),
+            c.mirrored,
+            "{caption:?}"
+        );
+    }
+    let band = h / 3 - size;
+    let lines = titles.iter().map(|(c, i)| c.len() + i.len()).max().unwrap();
+    assert!(
+        lines >= 4 && band >= lines * 15,
+        "{lines} lines in a {band}-pixel band"
+    );
+    for r in 0..3 {
+        let top = r * (size + band);
+        // Text on every line of the title (dark pixels).
+        let (caption, id) = &titles[r];
+        let mut y = top + 5;
+        for (k, height) in std::iter::repeat_n(16, caption.len())
+            .chain(std::iter::repeat_n(15, id.len()))
+            .enumerate()
+        {
+            let ink = (y..y + height)
+                .flat_map(|yy| rgb[yy * w * 3..(yy + 1) * w * 3].chunks_exact(3))
+                .filter(|p| p.iter().all(|&v| v < 120))
+                .count();
+            assert!(ink > 5, "row {r}, title line {k}: {ink} dark pixels");
+            y += height;
+        }
+        // The figure: tall in its panel when its clip stays in place.
+        let (first, last) = coloured_rows(&rgb, w, top + band..top + band + size).unwrap();
+        let tall = last - first;
+        eprintln!(
+            "panel {r} ({}): figure {tall} px of {size}",
+            panels[r].clip_id
+        );
+        let walks = panels[r].goal_pelvis.is_some() || panels[r].action.contains("walk");
+        if !walks {
+            assert!(tall * 2 > size, "panel {r}: figure {tall} px of {size}");
+        }
+    }
+}

@@ -447,10 +447,14 @@ async fn openapi_describes_exactly_the_routes_served() {
         let method = reqwest::Method::from_bytes(method.as_bytes()).unwrap();
         let response = client.request(method.clone(), &url).send().await.unwrap();
         let status = response.status().as_u16();
-        // The browser page is HTML; every other answer, errors included, is JSON.
+        // The browser page is HTML and its icon SVG; every other answer, errors included, is
+        // JSON.
         let text = response.text().await.unwrap();
         let body: Value = if path == "/" {
             assert!(text.starts_with("<!doctype html>"), "{method} {path}");
+            Value::Null
+        } else if path == "/favicon.svg" {
+            assert!(text.starts_with("<svg"), "{method} {path}");
             Value::Null
         } else {
             serde_json::from_str(&text).unwrap()
@@ -728,4 +732,209 @@ fn health_status(addr: &str) -> u16 {
                 .status()
                 .as_u16()
         })
+}
+
+/// The browser's report, column view and icon: the report rendered to HTML with its figures
+/// served and nothing else (no file it does not list, no raw HTML, no way out of its folder);
+/// every column's statistics over the whole table and its rows a page at a time, in the order of
+/// the clip listing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_report_renders_its_files_stay_listed_and_the_table_pages_with_statistics() {
+    let out = tempfile::tempdir().unwrap();
+    let state = tempfile::tempdir().unwrap();
+    let config = demo_config(out.path());
+    let built = config.clone();
+    tokio::task::spawn_blocking(move || {
+        motionforge::build::build(&built, &motionforge::build::BuildOptions::default()).unwrap()
+    })
+    .await
+    .unwrap();
+    let ds = config.dataset_dir();
+    let report = ds.join("report");
+    // What a tampered report might hold: raw HTML, links out of the folder, a script link; and
+    // files the report does not name beside its figures, or leading out of it.
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    let figures = md.lines().filter(|l| l.starts_with("![")).count();
+    std::fs::write(
+        report.join("report.md"),
+        format!(
+            "{md}\n<img src=x onerror=alert(1)>\n\n[out](../secret.txt) [run](javascript:alert(1)) \
+             ![up](../../secret.txt) [linked](figures/outside.txt)\n"
+        ),
+    )
+    .unwrap();
+    std::fs::write(ds.join("secret.txt"), "not for the browser").unwrap();
+    std::fs::write(report.join("figures/unlisted.png"), "not listed").unwrap();
+    std::os::unix::fs::symlink(ds.join("secret.txt"), report.join("figures/outside.txt")).unwrap();
+    let (service, base) = start(state.path(), vec![config]).await;
+    let client = reqwest::Client::new();
+
+    let (status, html) = get(&client, &format!("{base}/datasets/demo/report/html")).await;
+    assert_eq!(status, 200, "{html}");
+    let html = html["html"].as_str().unwrap();
+    assert!(html.contains("<table>") && html.contains("<td class=\"right\">"));
+    assert_eq!(html.matches("<figure><img src=").count(), figures, "{html}");
+    assert_eq!(html.matches("<figcaption>").count(), figures);
+    assert!(
+        html.contains("&lt;img src=x onerror=alert(1)&gt;"),
+        "{html}"
+    );
+    for bad in ["<img src=x", "javascript:", "secret.txt", "style="] {
+        assert!(!html.contains(bad), "{bad} in the rendered report");
+    }
+    // Every image of the report is served, as what it is.
+    let (_, listing) = get(&client, &format!("{base}/datasets/demo/report")).await;
+    let listed: Vec<&str> = listing["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    let srcs: Vec<&str> = html
+        .split("<img src=\"")
+        .skip(1)
+        .map(|s| s.split('"').next().unwrap())
+        .collect();
+    assert_eq!(srcs.len(), figures);
+    for src in srcs {
+        let path = src.split("path=").nth(1).unwrap();
+        assert!(listed.contains(&path), "{path} not in {listed:?}");
+        let png = client.get(format!("{base}{src}")).send().await.unwrap();
+        assert_eq!(png.status(), 200, "{src}");
+        assert_eq!(png.headers()["content-type"], "image/png");
+        assert!(
+            png.headers()["content-security-policy"]
+                .to_str()
+                .unwrap()
+                .contains("sandbox")
+        );
+        assert_eq!(&png.bytes().await.unwrap()[1..4], b"PNG");
+    }
+    assert!(listed.contains(&"report.md") && listed.contains(&"stats.json"));
+    // Files the report does not name, and a named link that leads out of the folder: refused.
+    assert!(!listed.contains(&"figures/unlisted.png"), "{listed:?}");
+    for path in [
+        "figures/unlisted.png",
+        "figures/outside.txt",
+        "../secret.txt",
+        "figures/../../secret.txt",
+    ] {
+        let (status, body) = get(
+            &client,
+            &format!("{base}/datasets/demo/report/file?path={path}"),
+        )
+        .await;
+        assert_eq!(status, 400, "{path}: {body}");
+        assert!(!body.to_string().contains("not for the browser"));
+    }
+
+    // The column view: every column of the shards, counted over every row.
+    let (status, clips) = get(&client, &format!("{base}/datasets/demo/clips?limit=1000")).await;
+    assert_eq!(status, 200);
+    let ids: Vec<&str> = clips["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["clip_id"].as_str().unwrap())
+        .collect();
+    let (status, stats) = get(&client, &format!("{base}/datasets/demo/columns")).await;
+    assert_eq!(status, 200, "{stats}");
+    assert_eq!(stats["rows"].as_u64(), Some(ids.len() as u64));
+    let column = |name: &str| {
+        stats["columns"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["name"] == name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+            .clone()
+    };
+    let mirrored = clips["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["mirrored"] == true)
+        .count();
+    let flags = column("mirrored");
+    assert_eq!(flags["kind"], "bool");
+    assert!(
+        flags["top"]
+            .as_array()
+            .unwrap()
+            .contains(&serde_json::json!({ "value": "true", "count": mirrored })),
+        "{flags}"
+    );
+    let id = column("clip_id");
+    assert_eq!(
+        (id["count"].as_u64(), id["distinct"].as_u64()),
+        (Some(ids.len() as u64), Some(ids.len() as u64))
+    );
+    let frames: Vec<u64> = clips["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["frames"].as_u64().unwrap())
+        .collect();
+    let n = column("num_frames");
+    assert_eq!(n["kind"], "number");
+    assert_eq!(n["min"].as_f64(), frames.iter().min().map(|&v| v as f64));
+    assert_eq!(n["max"].as_f64(), frames.iter().max().map(|&v| v as f64));
+    let mean = frames.iter().sum::<u64>() as f64 / frames.len() as f64;
+    assert!((n["mean"].as_f64().unwrap() - mean).abs() < 1e-9, "{n}");
+    let untyped = clips["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["motion_type"].is_null())
+        .count();
+    assert_eq!(
+        column("motion_type")["nulls"].as_u64(),
+        Some(untyped as u64)
+    );
+    assert_eq!(column("joint_positions")["shape"], "frames × joints × 3");
+    // Input paths in the table show as every answer shows paths.
+    assert!(
+        !stats.to_string().contains(&*repo().to_string_lossy()),
+        "absolute paths in {stats}"
+    );
+
+    // Pages of 7 rows cover the table once, in the listing's order; frames as their shape.
+    let mut paged = Vec::new();
+    for offset in (0..ids.len()).step_by(7) {
+        let (status, page) = get(
+            &client,
+            &format!("{base}/datasets/demo/rows?offset={offset}&limit=7"),
+        )
+        .await;
+        assert_eq!(status, 200, "{page}");
+        let names = page["columns"].as_array().unwrap();
+        let at = |name: &str| names.iter().position(|n| n == name).unwrap();
+        for row in page["rows"].as_array().unwrap() {
+            let id = row[at("clip_id")].as_str().unwrap().to_string();
+            let shape = format!("{} × {} × 3", row[at("num_frames")], row[at("num_joints")]);
+            assert_eq!(row[at("joint_positions")], shape.as_str(), "{id}");
+            paged.push(id);
+        }
+    }
+    assert_eq!(paged, ids);
+    let (status, past) = get(&client, &format!("{base}/datasets/demo/rows?offset=100000")).await;
+    assert_eq!(
+        (status, past["rows"].as_array().map(Vec::len)),
+        (200, Some(0))
+    );
+    for limit in [0, 101] {
+        let (status, body) =
+            get(&client, &format!("{base}/datasets/demo/rows?limit={limit}")).await;
+        assert_eq!(status, 400, "{body}");
+    }
+
+    let icon = client
+        .get(format!("{base}/favicon.svg"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(icon.status(), 200);
+    assert_eq!(icon.headers()["content-type"], "image/svg+xml");
+    assert!(icon.text().await.unwrap().starts_with("<svg"));
+    service.stop().await.unwrap();
 }

@@ -314,7 +314,7 @@ enum Command {
     ///
     /// Every filter given must match. `--kind` takes a source kind (real_single, real_pair,
     /// synthetic) or `mirrored` / `original`; `--text` is a case-insensitive substring of the id,
-    /// caption, texts or paraphrases.
+    /// motion type, action, caption, texts or paraphrases.
     #[command(after_help = CLIPS_EXAMPLES)]
     Clips {
         /// The dataset folder (`<output>/<name>`, holding data/).

@@ -22,7 +22,7 @@ pub(crate) struct FilterArgs {
     /// Only clips of this kind: real_single, real_pair, synthetic, mirrored or original.
     #[arg(long, value_parser = ["real_single", "real_pair", "synthetic", "mirrored", "original"])]
     pub(crate) kind: Option<String>,
-    /// Only clips whose id, caption, texts or paraphrases contain this (any case).
+    /// Only clips whose id, motion type, action, caption, texts or paraphrases contain this (any case).
     #[arg(long, value_name = "SUBSTRING")]
     pub(crate) text: Option<String>,
     /// At most this many clips (the first in shard order).
@@ -271,7 +271,12 @@ pub(crate) fn preview(
                     })
             })
             .collect::<Result<Vec<_>>>()?;
-        let rendered = preview::render(&panels, options)?;
+        // A pair's sources may walk far while the pair stays put: each fits its own panel.
+        let scaling = match with {
+            Companions::Sources => preview::PanelScale::Own,
+            _ => preview::PanelScale::Shared,
+        };
+        let rendered = preview::render_scaled(&panels, options, scaling)?;
         let [gif, png] =
             preview::write_preview(&rendered, output, &preview::file_stem(&clip.clip_id))?;
         if ui.status() {

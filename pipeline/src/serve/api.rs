@@ -83,6 +83,7 @@ fn table() -> Vec<Route> {
         route(Verb::Get, "/datasets", list_datasets),
         route(Verb::Get, "/datasets/{name}/stats", dataset_stats),
         route(Verb::Get, "/", super::browse::page),
+        route(Verb::Get, "/favicon.svg", super::browse::favicon),
         route(
             Verb::Get,
             "/datasets/{name}/clips",
@@ -96,8 +97,23 @@ fn table() -> Vec<Route> {
         ),
         route(
             Verb::Get,
+            "/datasets/{name}/columns",
+            super::browse::column_stats,
+        ),
+        route(
+            Verb::Get,
+            "/datasets/{name}/rows",
+            super::browse::table_rows,
+        ),
+        route(
+            Verb::Get,
             "/datasets/{name}/report",
             super::browse::report_files,
+        ),
+        route(
+            Verb::Get,
+            "/datasets/{name}/report/html",
+            super::browse::report_html,
         ),
         route(
             Verb::Get,

@@ -2,6 +2,7 @@
 //! loads from: the clip listing with filters, one clip's metadata, one clip's motion, the report's
 //! files. Every file answered is inside the dataset's own folder.
 
+use std::collections::BTreeSet;
 use std::path::{Component, PathBuf};
 use std::sync::{Arc, LazyLock};
 
@@ -15,6 +16,7 @@ use sha2::{Digest, Sha256};
 
 use super::Shared;
 use super::api::ApiError;
+use super::report;
 use crate::dataset::{self, ClipFilter, ClipInfo, DatasetError};
 
 /// The page: HTML, CSS and JavaScript in one file, compiled in.
@@ -23,6 +25,8 @@ const PAGE: &str = include_str!("browser.html");
 const DEFAULT_CLIPS: usize = 100;
 /// Most clips one listing returns.
 const MAX_CLIPS: usize = 1000;
+/// Rows a page of the column view holds unless `limit` says otherwise.
+const DEFAULT_ROWS: usize = 20;
 /// Longest name of one file or folder (Linux's `NAME_MAX`, in bytes) a report path may hold.
 const MAX_NAME_BYTES: usize = 255;
 /// Longest report path (bytes).
@@ -92,6 +96,37 @@ pub(crate) async fn page() -> Response {
             .insert(header::CONTENT_SECURITY_POLICY, policy);
     }
     response
+}
+
+/// The page's icon: a stick figure in the player's part colours.
+const FAVICON: &str = "<svg xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 32 32\">\
+<rect width=\"32\" height=\"32\" rx=\"6\" fill=\"#263238\"/>\
+<g stroke-width=\"3\" stroke-linecap=\"round\" fill=\"none\">\
+<circle cx=\"16\" cy=\"7\" r=\"3\" stroke=\"#fff\"/>\
+<path d=\"M16 11v9\" stroke=\"#fff\"/>\
+<path d=\"M16 13l-7 4\" stroke=\"#1f5adc\"/><path d=\"M16 13l7-5\" stroke=\"#dc2828\"/>\
+<path d=\"M16 20l-5 8\" stroke=\"#00a0aa\"/><path d=\"M16 20l5 8\" stroke=\"#f08c00\"/>\
+</g></svg>";
+
+pub(crate) async fn favicon() -> Response {
+    (
+        [
+            (
+                header::CONTENT_TYPE,
+                HeaderValue::from_static("image/svg+xml"),
+            ),
+            (
+                header::CACHE_CONTROL,
+                HeaderValue::from_static("max-age=86400"),
+            ),
+            (
+                header::CONTENT_SECURITY_POLICY,
+                HeaderValue::from_static(REPORT_FILE_POLICY),
+            ),
+        ],
+        FAVICON,
+    )
+        .into_response()
 }
 
 /// A JSON answer already serialised (as `Json` would have), holding its heavy-read turn while it
@@ -320,9 +355,121 @@ fn motion_answer(
     serde_json::to_vec(&answer).map_err(ApiError::internal)
 }
 
+pub(crate) async fn column_stats(
+    State(shared): State<AppState>,
+    connection: Connection,
+    Path(name): Path<String>,
+) -> Result<Response, ApiError> {
+    let snapshot = snapshot(&shared, &name).await?;
+    let answer = shared.clone();
+    let body = shared
+        .readers
+        .answer(writes(connection), move || {
+            // Values may be paths of input files (`source_path`): shown as every answer shows
+            // paths.
+            snapshot
+                .column_statistics()
+                .map(|json| {
+                    answer
+                        .shield
+                        .text(&String::from_utf8_lossy(json))
+                        .into_owned()
+                        .into_bytes()
+                })
+                .map_err(|e| ApiError::internal(answer.shield.text(e)))
+        })
+        .await?;
+    Ok(json_answer(body))
+}
+
+/// The page of `GET /datasets/{name}/rows`.
+#[derive(Debug, Deserialize)]
+pub(crate) struct RowsQuery {
+    offset: Option<usize>,
+    limit: Option<usize>,
+}
+
+pub(crate) async fn table_rows(
+    State(shared): State<AppState>,
+    connection: Connection,
+    Path(name): Path<String>,
+    Query(q): Query<RowsQuery>,
+) -> Result<Response, ApiError> {
+    let limit = q.limit.unwrap_or(DEFAULT_ROWS);
+    if limit == 0 || limit > super::columns::MAX_ROWS {
+        return Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            format!("limit {limit}: expected 1 to {}", super::columns::MAX_ROWS),
+        ));
+    }
+    let offset = q.offset.unwrap_or(0);
+    let snapshot = snapshot(&shared, &name).await?;
+    let answer = shared.clone();
+    let body = shared
+        .readers
+        .answer(writes(connection), move || {
+            let mut page = snapshot
+                .rows(offset, limit)
+                .map_err(|e| ApiError::internal(answer.shield.text(&e)))?;
+            page["dataset"] = json!(name);
+            page["offset"] = json!(offset);
+            page["limit"] = json!(limit);
+            let json = serde_json::to_string(&page).map_err(ApiError::internal)?;
+            Ok(answer.shield.text(&json).into_owned().into_bytes())
+        })
+        .await?;
+    Ok(json_answer(body))
+}
+
 /// The report's folder.
 fn report_dir(shared: &Shared, name: &str) -> Result<PathBuf, ApiError> {
     Ok(folder(shared, name)?.join("report"))
+}
+
+/// `report.md` of the report folder `dir`, if there is one; at most
+/// [`report::MAX_REPORT_BYTES`].
+fn read_report_md(dir: &std::path::Path) -> Result<Option<String>, String> {
+    use std::io::Read;
+    let path = dir.join(report::REPORT_MD);
+    let file = match std::fs::File::open(&path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("{}: {e}", path.display())),
+    };
+    let mut bytes = Vec::new();
+    file.take(report::MAX_REPORT_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    if bytes.len() as u64 > report::MAX_REPORT_BYTES {
+        return Err(format!(
+            "{}: over {} bytes, expected a report",
+            path.display(),
+            report::MAX_REPORT_BYTES
+        ));
+    }
+    Ok(Some(String::from_utf8_lossy(&bytes).into_owned()))
+}
+
+/// The report files a browser may fetch (sorted, relative to the report folder `dir`): the
+/// folder's own top-level files and the files `report.md` links to or embeds that are there.
+fn report_listing(dir: &std::path::Path) -> Result<Vec<String>, String> {
+    let mut found = BTreeSet::new();
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for entry in entries.flatten() {
+            let file = entry.file_name().to_string_lossy().into_owned();
+            if !file.starts_with('.') && entry.file_type().is_ok_and(|t| t.is_file()) {
+                found.insert(file);
+            }
+        }
+    }
+    if let Some(markdown) = read_report_md(dir)? {
+        found.extend(
+            report::referenced(&markdown)
+                .into_iter()
+                .filter(|f| dir.join(f).is_file()),
+        );
+    }
+    Ok(found.into_iter().collect())
 }
 
 pub(crate) async fn report_files(
@@ -330,32 +477,58 @@ pub(crate) async fn report_files(
     Path(name): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let dir = report_dir(&shared, &name)?;
-    let files = tokio::task::spawn_blocking(move || {
-        let mut found = Vec::new();
-        let mut stack = vec![(dir.clone(), String::new())];
-        while let Some((at, prefix)) = stack.pop() {
-            let Ok(entries) = std::fs::read_dir(&at) else {
-                continue;
-            };
-            for entry in entries.flatten() {
-                let file = entry.file_name().to_string_lossy().into_owned();
-                if file.starts_with('.') {
-                    continue;
-                }
-                let rel = format!("{prefix}{file}");
-                match entry.file_type() {
-                    Ok(t) if t.is_dir() => stack.push((entry.path(), format!("{rel}/"))),
-                    Ok(t) if t.is_file() => found.push(rel),
-                    _ => {}
-                }
-            }
-        }
-        found.sort();
-        found
-    })
-    .await
-    .map_err(ApiError::internal)?;
+    let files = shared
+        .readers
+        .heavy(move || report_listing(&dir))
+        .await?
+        .map_err(|e| ApiError::internal(shared.shield.text(&e)))?;
     Ok(Json(json!({ "dataset": name, "files": files })))
+}
+
+/// The service's address of a report file.
+fn report_file_url(name: &str, file: &str) -> String {
+    format!(
+        "/datasets/{}/report/file?path={}",
+        query_escape(name),
+        query_escape(file)
+    )
+}
+
+/// `text` as a URL path segment or query value: unreserved characters and `/` as they are.
+fn query_escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for b in text.bytes() {
+        if b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.' | b'~' | b'/') {
+            out.push(char::from(b));
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+pub(crate) async fn report_html(
+    State(shared): State<AppState>,
+    Path(name): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    let dir = report_dir(&shared, &name)?;
+    let for_urls = name.clone();
+    let rendered = shared
+        .readers
+        .heavy(move || {
+            read_report_md(&dir).map(|md| {
+                md.map(|md| report::render(&md, &|file| report_file_url(&for_urls, file)))
+            })
+        })
+        .await?
+        .map_err(|e| ApiError::internal(shared.shield.text(&e)))?;
+    match rendered {
+        Some(html) => Ok(Json(json!({ "dataset": name, "html": html }))),
+        None => Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            format!("dataset `{name}` has no report yet: build it first"),
+        )),
+    }
 }
 
 /// `?path=<file under report/>`.
@@ -363,6 +536,9 @@ pub(crate) async fn report_files(
 pub(crate) struct ReportPath {
     path: String,
 }
+
+/// What a report file may do when opened on its own (an SVG may hold a script): nothing.
+const REPORT_FILE_POLICY: &str = "sandbox; default-src 'none'; style-src 'unsafe-inline'";
 
 pub(crate) async fn report_file(
     State(shared): State<AppState>,
@@ -376,7 +552,7 @@ pub(crate) async fn report_file(
         ApiError::new(
             StatusCode::BAD_REQUEST,
             format!(
-                "path `{}`: expected a file of the report folder, as listed by {listing}",
+                "path `{}`: expected a file of the report, as listed by {listing}",
                 super::public::excerpt(path)
             ),
         )
@@ -396,6 +572,7 @@ pub(crate) async fn report_file(
         Some("png") => "image/png",
         Some("svg") => "image/svg+xml",
         Some("json") => "application/json",
+        Some("pdf") => "application/pdf",
         Some("md") => "text/markdown; charset=utf-8",
         _ => "text/plain; charset=utf-8",
     };
@@ -404,6 +581,22 @@ pub(crate) async fn report_file(
         .readers
         .answer(writes(connection), move || {
             // Symbolic links may not lead out of the report folder either.
+            // Only the files the report lists: those of the folder's top level and those
+            // `report.md` names.
+            let listed = report_listing(&dir).map_err(ApiError::internal)?;
+            if !listed.iter().any(|f| f == &q.path) {
+                return Err(if path.exists() {
+                    refused(&q.path)
+                } else {
+                    ApiError::new(
+                        StatusCode::NOT_FOUND,
+                        format!(
+                            "no report file `{}` (build the dataset, or see /datasets/{name}/report)",
+                            super::public::excerpt(&q.path)
+                        ),
+                    )
+                });
+            }
             let read = path.canonicalize().and_then(|real| {
                 let base = dir.canonicalize()?;
                 if !real.starts_with(&base) || !real.is_file() {
@@ -434,7 +627,13 @@ pub(crate) async fn report_file(
         })
         .await?;
     Ok((
-        [(header::CONTENT_TYPE, HeaderValue::from_static(kind))],
+        [
+            (header::CONTENT_TYPE, HeaderValue::from_static(kind)),
+            (
+                header::CONTENT_SECURITY_POLICY,
+                HeaderValue::from_static(REPORT_FILE_POLICY),
+            ),
+        ],
         axum::body::Body::new(body),
     )
         .into_response())

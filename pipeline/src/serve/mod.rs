@@ -8,10 +8,12 @@
 pub mod api;
 mod browse;
 mod child;
+mod columns;
 pub mod history;
 pub mod log;
 mod public;
 mod queue;
+mod report;
 pub mod schedule;
 mod snapshot;
 mod wire;

@@ -17,7 +17,7 @@
 use std::collections::HashMap;
 use std::os::unix::fs::MetadataExt;
 use std::path::Path;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
@@ -102,6 +102,8 @@ pub(crate) struct Snapshot {
     skeletons: Result<Skeletons, String>,
     /// The choices of each filter over the whole dataset: motion types, splits, kinds.
     pub(crate) choices: [Vec<String>; 3],
+    /// The column view's statistics (JSON), counted at the first request for them.
+    column_statistics: OnceLock<Result<Vec<u8>, String>>,
 }
 
 impl Snapshot {
@@ -168,6 +170,7 @@ impl Snapshot {
             shards,
             skeletons,
             choices: [types, splits, kinds],
+            column_statistics: OnceLock::new(),
         })
     }
 
@@ -191,6 +194,20 @@ impl Snapshot {
             });
         };
         shard.read_frames(info, row)
+    }
+
+    /// Every column's statistics over the whole table ([`super::columns::statistics`]), counted
+    /// once per version.
+    pub(crate) fn column_statistics(&self) -> Result<&[u8], &str> {
+        self.column_statistics
+            .get_or_init(|| super::columns::statistics(&self.shards, self.clips.len()))
+            .as_deref()
+            .map_err(String::as_str)
+    }
+
+    /// Rows `offset..offset + limit` of the whole table ([`super::columns::page`]).
+    pub(crate) fn rows(&self, offset: usize, limit: usize) -> Result<serde_json::Value, String> {
+        super::columns::page(&self.shards, &self.places, &self.clips, offset, limit)
     }
 
     /// The skeletons, or why they cannot be read.

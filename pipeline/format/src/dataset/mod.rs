@@ -154,7 +154,8 @@ pub struct ClipFilter {
     /// The source kind, exactly (`real_single`, `real_pair`, `synthetic`), or `mirrored` for
     /// mirrored copies and `original` for the rest.
     pub kind: Option<String>,
-    /// A substring of the clip id, caption, texts or paraphrases (case-insensitive).
+    /// A substring of the clip id, motion type, action, caption, texts or paraphrases
+    /// (case-insensitive).
     pub text: Option<String>,
 }
 
@@ -184,6 +185,8 @@ impl ClipFilter {
         if let Some(needle) = &self.text {
             let needle = needle.to_lowercase();
             let hit = std::iter::once(&clip.clip_id)
+                .chain(&clip.motion_type)
+                .chain(std::iter::once(&clip.action))
                 .chain(std::iter::once(&clip.text))
                 .chain(&clip.texts)
                 .chain(&clip.paraphrases)

@@ -5,8 +5,9 @@
 //! [`ELEVATION_DEGREES`]: the camera lies in the character's sagittal plane, so a mirrored clip's
 //! drawing is exactly the reflection of its original's. Bones take the colour of their body part
 //! (left side cool, right side warm), over a ground grid of half-metre squares, under the clip's
-//! caption and id. Several clips (a clip and its mirror, a synthetic pair and its sources) share
-//! one scale, side by side.
+//! caption and whole id (wrapped, never cut: a title band as tall as the longest title needs).
+//! Several clips side by side (a clip and its mirror) share one scale; a synthetic pair and its
+//! sources may each fit their own panel ([`PanelScale::Own`]), with a one-metre bar to compare.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -22,8 +23,18 @@ use motionforge_core::motion::Motion;
 pub const ELEVATION_DEGREES: f64 = 20.0;
 /// Ground grid spacing, metres.
 const GRID_M: f64 = 0.5;
-/// Pixels of the title band (caption and id).
-const TITLE_PX: u32 = 34;
+/// Caption text size and line height (pixels).
+const CAPTION_PX: u32 = 13;
+const CAPTION_LINE: u32 = 16;
+/// Clip id text size and line height (pixels): large enough to read a synthetic id.
+const ID_PX: u32 = 12;
+const ID_LINE: u32 = 15;
+/// Pixels above and below a title's lines.
+const TITLE_PAD: u32 = 5;
+/// Most lines of a caption (then it is cut with an ellipsis); an id always shows whole.
+const MAX_CAPTION_LINES: usize = 4;
+/// Most lines of an id: ids from shards made elsewhere may be arbitrarily long.
+const MAX_ID_LINES: usize = 12;
 const FONT: &str = "sans-serif";
 const FONT_BYTES: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 
@@ -50,6 +61,17 @@ impl Default for PreviewOptions {
             animate: true,
         }
     }
+}
+
+/// How the panels of one preview are scaled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PanelScale {
+    /// One scale for every panel, so side-by-side clips (a clip and its mirror) compare.
+    #[default]
+    Shared,
+    /// Each panel fits its own clip (a synthetic pair beside sources that walk far), with a
+    /// one-metre bar in each.
+    Own,
 }
 
 /// One clip to draw: its frames and its skeleton.
@@ -161,6 +183,7 @@ fn part_colour(part: Option<&str>) -> RGBColor {
 const GRID: RGBColor = RGBColor(200, 200, 200);
 const INK: RGBColor = RGBColor(0, 0, 0);
 const GOAL: RGBColor = RGBColor(150, 0, 170);
+const ID_INK: RGBColor = RGBColor(60, 60, 60);
 
 fn ensure_font() -> Result<(), DatasetError> {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
@@ -278,21 +301,96 @@ fn common_scale(scenes: &[Scene], size: u32) -> f64 {
     f64::from(size) * 0.92 / span
 }
 
-/// Text cut to about `px` pixels at `font_px`, with an ellipsis.
-fn fit(text: &str, px: u32, font_px: u32) -> String {
-    let max = (f64::from(px) / (f64::from(font_px) * 0.55)) as usize;
-    if text.chars().count() <= max {
-        text.to_string()
-    } else {
-        let mut s: String = text.chars().take(max.saturating_sub(1)).collect();
-        s.push('…');
-        s
+/// Width in pixels of `text` in the bundled font at `font_px` (an estimate if it cannot be
+/// measured).
+fn text_width(text: &str, font_px: u32) -> u32 {
+    (FONT, font_px)
+        .into_font()
+        .box_size(text)
+        .map(|(w, _)| w)
+        .unwrap_or_else(|_| (text.chars().count() as f64 * f64::from(font_px) * 0.6) as u32)
+}
+
+/// `text` in lines at most `px` pixels wide at `font_px`: broken after the last of `breaks` that
+/// fits in the line's second half, else where the line is full; at most `max_lines`, the last
+/// ending in `…` if the text goes on.
+fn wrap(text: &str, px: u32, font_px: u32, breaks: &[char], max_lines: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut rest: Vec<char> = text.chars().collect();
+    while !rest.is_empty() {
+        let fits = |n: usize| text_width(&rest[..n].iter().collect::<String>(), font_px) <= px;
+        let mut n = rest.len();
+        if !fits(n) {
+            // The longest start that fits (at least one character), by bisection.
+            let (mut lo, mut hi) = (1, rest.len());
+            while lo + 1 < hi {
+                let mid = (lo + hi) / 2;
+                if fits(mid) { lo = mid } else { hi = mid }
+            }
+            n = lo;
+            if let Some(at) = rest[..n].iter().rposition(|c| breaks.contains(c))
+                && at + 1 > n / 2
+            {
+                n = at + 1;
+            }
+        }
+        if lines.len() + 1 == max_lines && n < rest.len() {
+            let mut last: String = rest[..n.saturating_sub(1).max(1)].iter().collect();
+            last.push('…');
+            lines.push(last);
+            break;
+        }
+        let line: String = rest[..n].iter().collect();
+        lines.push(line.trim_end().to_string());
+        rest.drain(..n);
+        while rest.first() == Some(&' ') {
+            rest.remove(0);
+        }
     }
+    lines
+}
+
+/// A panel's title as drawn: the caption's lines (`mirrored: ` first for a mirrored copy) and
+/// the whole clip id's lines, in `px` pixels.
+pub fn title_lines(info: &super::ClipInfo, px: u32) -> (Vec<String>, Vec<String>) {
+    let caption = if info.mirrored {
+        format!("mirrored: {}", info.text)
+    } else {
+        info.text.clone()
+    };
+    (
+        wrap(&caption, px, CAPTION_PX, &[' '], MAX_CAPTION_LINES),
+        wrap(
+            &info.clip_id,
+            px,
+            ID_PX,
+            &['/', ':', '+', '_', '-'],
+            MAX_ID_LINES,
+        ),
+    )
+}
+
+/// Height of the band that holds `titles`.
+fn title_band(titles: &[(Vec<String>, Vec<String>)]) -> u32 {
+    titles
+        .iter()
+        .map(|(c, i)| c.len() as u32 * CAPTION_LINE + i.len() as u32 * ID_LINE)
+        .max()
+        .unwrap_or(0)
+        + 2 * TITLE_PAD
 }
 
 type Draw = Result<(), Box<dyn std::error::Error + Send + Sync>>;
 
-/// Draws the title and ground grid of `scene` into the panel at `x0` of a `w × h` RGB buffer.
+/// A panel's title and where it goes: its lines and the height of the band above the panel.
+struct TitleBand<'t> {
+    lines: &'t (Vec<String>, Vec<String>),
+    height: u32,
+}
+
+/// Draws the title and ground grid of `scene` into the panel at `x0` of a `w × h` RGB buffer, and
+/// a one-metre bar when `bar`.
+#[allow(clippy::too_many_arguments)]
 fn draw_background(
     buf: &mut [u8],
     (w, h): (u32, u32),
@@ -300,6 +398,8 @@ fn draw_background(
     scene: &Scene,
     scale: f64,
     size: u32,
+    title: &TitleBand,
+    bar: bool,
 ) -> Draw {
     let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
     let px = pixel_map(scene, scale, size, x0, y0);
@@ -318,24 +418,31 @@ fn draw_background(
         let b = px(project(DVec3::new(gx[1], y, 0.0)).0);
         root.draw(&PathElement::new(vec![a, b], GRID))?;
     }
-    let info = &scene.panel.frames.info;
-    let caption = TextStyle::from((FONT, 13).into_font()).color(&INK);
-    let id = TextStyle::from((FONT, 10).into_font()).color(&RGBColor(90, 90, 90));
-    let label = if info.mirrored {
-        format!("{} (mirrored)", info.text)
-    } else {
-        info.text.clone()
-    };
-    root.draw(&Text::new(
-        fit(&label, size - 8, 13),
-        (x0 + 4, y0 - TITLE_PX as i32 + 3),
-        caption,
-    ))?;
-    root.draw(&Text::new(
-        fit(&info.clip_id, size - 8, 10),
-        (x0 + 4, y0 - TITLE_PX as i32 + 20),
-        id,
-    ))?;
+    let caption = TextStyle::from((FONT, CAPTION_PX).into_font()).color(&INK);
+    let id = TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK);
+    let mut y = y0 - title.height as i32 + TITLE_PAD as i32;
+    for line in &title.lines.0 {
+        root.draw(&Text::new(line.as_str(), (x0 + 4, y), caption.clone()))?;
+        y += CAPTION_LINE as i32;
+    }
+    for line in &title.lines.1 {
+        root.draw(&Text::new(line.as_str(), (x0 + 4, y), id.clone()))?;
+        y += ID_LINE as i32;
+    }
+    if bar {
+        // One metre of the image plane at this panel's scale, bottom left.
+        let length = scale.round().clamp(1.0, f64::from(size) - 16.0) as i32;
+        let at = y0 + size as i32 - 10;
+        root.draw(&PathElement::new(
+            vec![(x0 + 8, at), (x0 + 8 + length, at)],
+            INK.stroke_width(2),
+        ))?;
+        root.draw(&Text::new(
+            "1 m",
+            (x0 + 10 + length, at - 7),
+            TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK),
+        ))?;
+    }
     root.present()?;
     Ok(())
 }
@@ -415,8 +522,17 @@ pub struct Preview {
     pub strip: Vec<u8>,
 }
 
-/// Renders `panels` side by side (the GIF) and one filmstrip row per panel.
+/// Renders `panels` side by side (the GIF) and one filmstrip row per panel, on one scale.
 pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, DatasetError> {
+    render_scaled(panels, options, PanelScale::Shared)
+}
+
+/// [`render`], with the panels scaled as `scaling` says.
+pub fn render_scaled(
+    panels: &[Panel],
+    options: &PreviewOptions,
+    scaling: PanelScale,
+) -> Result<Preview, DatasetError> {
     ensure_font()?;
     if panels.is_empty() {
         return Err(render_err("nothing to draw"));
@@ -440,18 +556,37 @@ pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, Dat
     }
     let size = options.size.clamp(64, 2048);
     let scenes: Vec<Scene> = panels.iter().map(|p| scene(p, options.fps)).collect();
-    let scale = common_scale(&scenes, size);
+    let scales: Vec<f64> = match scaling {
+        PanelScale::Shared => vec![common_scale(&scenes, size); scenes.len()],
+        PanelScale::Own => scenes
+            .iter()
+            .map(|s| common_scale(std::slice::from_ref(s), size))
+            .collect(),
+    };
+    let bar = scaling == PanelScale::Own;
     let count = scenes.iter().map(Scene::frames).max().unwrap_or(0);
-    let (w, h) = (size * scenes.len() as u32, size + TITLE_PX);
+    // The GIF's titles fit their panel; the filmstrip's, the whole row.
+    let titles: Vec<_> = scenes
+        .iter()
+        .map(|s| title_lines(&s.panel.frames.info, size - 8))
+        .collect();
+    let band = title_band(&titles);
+    let (w, h) = (size * scenes.len() as u32, size + band);
     let mut background = vec![255u8; (w * h * 3) as usize];
     for (k, s) in scenes.iter().enumerate() {
+        let title = TitleBand {
+            lines: &titles[k],
+            height: band,
+        };
         draw_background(
             &mut background,
             (w, h),
-            ((size * k as u32) as i32, TITLE_PX as i32),
+            ((size * k as u32) as i32, band as i32),
             s,
-            scale,
+            scales[k],
             size,
+            &title,
+            bar,
         )
         .map_err(render_err)?;
     }
@@ -465,10 +600,10 @@ pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, Dat
             draw_pose(
                 &mut buf,
                 (w, h),
-                ((size * k as u32) as i32, TITLE_PX as i32),
+                ((size * k as u32) as i32, band as i32),
                 s,
                 at,
-                scale,
+                scales[k],
                 size,
             )
             .map_err(render_err)?;
@@ -477,10 +612,20 @@ pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, Dat
     }
     // The filmstrip: one row per panel, `strip_frames` poses each, on the same scale.
     let cells = options.strip_frames.clamp(1, 32) as u32;
-    let (sw, sh) = (size * cells, (size + TITLE_PX) * scenes.len() as u32);
+    let row_titles: Vec<_> = scenes
+        .iter()
+        .map(|s| title_lines(&s.panel.frames.info, size * cells - 8))
+        .collect();
+    let row_band = title_band(&row_titles);
+    let (sw, sh) = (size * cells, (size + row_band) * scenes.len() as u32);
     let mut strip = vec![255u8; (sw * sh * 3) as usize];
     for (r, s) in scenes.iter().enumerate() {
-        let y0 = (r as u32 * (size + TITLE_PX) + TITLE_PX) as i32;
+        let scale = scales[r];
+        let y0 = (r as u32 * (size + row_band) + row_band) as i32;
+        let title = TitleBand {
+            lines: &row_titles[r],
+            height: row_band,
+        };
         let n = s.frames();
         for c in 0..cells {
             let at = if cells == 1 || n < 2 {
@@ -490,7 +635,7 @@ pub fn render(panels: &[Panel], options: &PreviewOptions) -> Result<Preview, Dat
             };
             let x0 = (c * size) as i32;
             if c == 0 {
-                draw_background(&mut strip, (sw, sh), (x0, y0), s, scale, size)
+                draw_background(&mut strip, (sw, sh), (x0, y0), s, scale, size, &title, bar)
                     .map_err(render_err)?;
             } else {
                 draw_grid_cell(&mut strip, (sw, sh), (x0, y0), s, scale, size)
