@@ -175,6 +175,9 @@ const CRATE_ORDER: &[&str] = &[
     "motionforge-llm",
     "motionforge-sources",
     "motionforge-format",
+    "motionforge-report",
+    "motionforge-export",
+    "motionforge-planner",
     "motionforge",
 ];
 

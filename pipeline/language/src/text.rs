@@ -364,7 +364,7 @@ fn match_case(template: &str, word: &str) -> String {
 /// Mirrors a caption left/right in one pass, so "left ... right" becomes "right ... left".
 ///
 /// ```
-/// use motionforge::text::mirror_text;
+/// use motionforge_language::text::mirror_text;
 /// assert_eq!(mirror_text("Wave-left-hand, then turn_right"), "Wave-right-hand, then turn_left");
 /// assert_eq!(mirror_text("walk counter clockwise"), "walk clockwise");
 /// ```
@@ -387,7 +387,7 @@ pub fn mirror_text(text: &str) -> String {
 /// (e.g. a hand field that says "both"). Case-insensitive; surrounding text is not allowed.
 ///
 /// ```
-/// use motionforge::text::mirror_side_word;
+/// use motionforge_language::text::mirror_side_word;
 /// let hand = "both";
 /// assert_eq!(mirror_side_word("Left"), Some("right"));
 /// assert_eq!(mirror_side_word(hand).unwrap_or(hand), "both");

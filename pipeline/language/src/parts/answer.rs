@@ -247,8 +247,8 @@ fn list_part(item: &str) -> Option<BodyPart> {
 /// Reads an answer to SINC's list prompt. Infallible: whatever it cannot map it reports.
 ///
 /// ```
-/// use motionforge::motion::BodyPart;
-/// use motionforge::parts::answer::parse_part_answer;
+/// use motionforge_core::motion::BodyPart;
+/// use motionforge_language::parts::answer::parse_part_answer;
 ///
 /// let a = parse_part_answer("Answer: right leg\nleft leg\nbuttocks");
 /// assert_eq!(a.parts.to_string(), "global, left_leg, right_leg");

@@ -696,7 +696,7 @@ enum Role {
 /// Labels an action text with SINC's six parts (see the module doc for the rules).
 ///
 /// ```
-/// use motionforge::parts::lexicon::label_text;
+/// use motionforge_language::parts::lexicon::label_text;
 ///
 /// assert_eq!(label_text("walk forward").parts.to_string(), "global, left_leg, right_leg");
 /// assert_eq!(label_text("wave with left hand").parts.to_string(), "left_arm");

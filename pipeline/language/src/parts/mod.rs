@@ -14,8 +14,8 @@
 //! * [`eval::evaluate`] scores any of them against manual labels (SINC Table 1).
 //!
 //! ```
-//! use motionforge::motion::BodyPart;
-//! use motionforge::parts::{PartSet, lexicon::label_text};
+//! use motionforge_core::motion::BodyPart;
+//! use motionforge_language::parts::{PartSet, lexicon::label_text};
 //!
 //! let walk = label_text("walk forward").parts;
 //! let wave = label_text("wave with the right hand").parts;

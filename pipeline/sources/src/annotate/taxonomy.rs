@@ -11,7 +11,7 @@
 //! names it. Anything else is unmapped and reported as such; nothing is guessed.
 //!
 //! ```
-//! use motionforge::annotate::taxonomy::{Taxonomy, TypeMap, TypeMapConfig, TypeRule};
+//! use motionforge_sources::annotate::taxonomy::{Taxonomy, TypeMap, TypeMapConfig, TypeRule};
 //!
 //! let config = TypeMapConfig {
 //!     rules: vec![TypeRule { pattern: r"^turn (to (the )?)?left$".into(), r#type: "turn left".into() }],
@@ -21,7 +21,7 @@
 //! assert_eq!(map.map("Turn to the left").map(|t| t.name.as_str()), Some("turn left"));
 //! assert_eq!(map.taxonomy().mirror_of("turn left"), Some("turn right"));
 //! assert!(map.map("turn around").is_none());
-//! # Ok::<(), motionforge::annotate::taxonomy::TaxonomyError>(())
+//! # Ok::<(), motionforge_sources::annotate::taxonomy::TaxonomyError>(())
 //! ```
 
 use std::collections::{BTreeMap, HashMap};

@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::Serialize;
 
 use super::{ClipRow, ReportInput};
-use crate::clip::{SourceKind, Split};
+use motionforge_sources::clip::{SourceKind, Split};
 
 /// Group name of clips whose label maps to no motion type (the build report's name too).
 pub const UNMAPPED: &str = "(unmapped)";
@@ -308,7 +308,7 @@ pub struct Stats {
     pub rejects: BTreeMap<String, usize>,
     /// Clips whose text contradicts what their motion does, by clip id (absent when none).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub label_contradictions: Vec<crate::quality::Contradiction>,
+    pub label_contradictions: Vec<motionforge_core::quality::Contradiction>,
 }
 
 /// Orders motion-type names alphabetically with [`UNMAPPED`] last.
@@ -402,10 +402,10 @@ fn text_statistics(rows: &[ClipRow]) -> TextStats {
         let words = caption_words(caption);
         words_per_caption.push(words.len() as f64);
         vocabulary.extend(words);
-        if let Ok(tokens) = crate::caption::tokens(caption) {
+        if let Ok(tokens) = motionforge_language::caption::tokens(caption) {
             let in_caption: std::collections::BTreeSet<String> = tokens
                 .into_iter()
-                .filter(|t| t.tag == crate::caption::Upos::Verb)
+                .filter(|t| t.tag == motionforge_language::caption::Upos::Verb)
                 .map(|t| t.word.to_lowercase())
                 .collect();
             for verb in in_caption {

@@ -13,9 +13,9 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::state::{Effect, Loc, Posture, Requirement, State};
-use crate::annotate::span::Hand;
-use crate::annotate::taxonomy::{Taxonomy, normalize_label};
-use crate::base::toml_path::{self, SpannedToml, line_of};
+use motionforge_core::base::toml_path::{self, SpannedToml, line_of};
+use motionforge_sources::annotate::span::Hand;
+use motionforge_sources::annotate::taxonomy::{Taxonomy, normalize_label};
 
 /// The most candidates a scene may expand into: the chain enumerates states times candidates.
 /// Every interaction is at least one candidate, so it bounds the interactions too.
@@ -34,7 +34,7 @@ pub const MAX_PLACES: usize = 1_000;
 pub const MAX_OBJECTS: usize = 50_000;
 
 /// The most objects some interaction takes (`hold = "take"`): every state carries where each
-/// of them is, so with [`crate::planner::MAX_STATES`] this bounds the states' memory before any
+/// of them is, so with [`crate::MAX_STATES`] this bounds the states' memory before any
 /// is built.
 pub const MAX_MOVABLE: usize = 32;
 
@@ -90,7 +90,7 @@ pub enum SceneError {
     },
     /// The bundled motion-type taxonomy did not load (a build defect, not the scene's).
     #[error(transparent)]
-    Taxonomy(#[from] crate::annotate::taxonomy::TaxonomyError),
+    Taxonomy(#[from] motionforge_sources::annotate::taxonomy::TaxonomyError),
 }
 
 /// One problem of a scene: its dotted key, its line and what is wrong.

@@ -28,12 +28,12 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::base::guard::{Kept, check_replaceable, is_plain_name};
-use crate::clip::Split;
-use crate::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
-use crate::io::schema::Column;
-use crate::motion::profile::SmplPlacement;
-use crate::motion::{Motion, ProfileSpec};
+use motionforge_core::base::guard::{Kept, check_replaceable, is_plain_name};
+use motionforge_core::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
+use motionforge_core::motion::profile::SmplPlacement;
+use motionforge_core::motion::{Motion, ProfileSpec};
+use motionforge_format::io::schema::Column;
+use motionforge_sources::clip::Split;
 
 /// Rows the HumanML3D loaders keep: `Text2MotionDatasetV2` drops motions shorter than 40 rows or
 /// 200 rows and longer.
@@ -124,7 +124,7 @@ pub enum ExportError {
     },
     /// The output folder is, holds or lies inside a folder the export must keep.
     #[error(transparent)]
-    Refused(#[from] crate::base::guard::Refused),
+    Refused(#[from] motionforge_core::base::guard::Refused),
 }
 
 /// The export's folder inside the dataset when no `--out` is given: the one place inside the
@@ -169,7 +169,7 @@ pub fn export_humanml3d(
 ) -> Result<ExportSummary, ExportError> {
     let kept = Kept::working_folder().and(dataset, "the dataset folder it exports", &[DEFAULT_DIR]);
     check_replaceable(out, &kept, "pass another --out")?;
-    crate::base::restore_replaced(out).map_err(|e| ExportError::Io {
+    motionforge_core::base::restore_replaced(out).map_err(|e| ExportError::Io {
         path: out.to_path_buf(),
         source: std::io::Error::other(e.to_string()),
     })?;
@@ -186,7 +186,7 @@ pub fn export_humanml3d(
         }
     }
     let shards =
-        crate::report::find_clip_tables(dataset).map_err(|e| ExportError::NotADataset {
+        motionforge_report::find_clip_tables(dataset).map_err(|e| ExportError::NotADataset {
             path: dataset.to_path_buf(),
             message: e.to_string(),
         })?;
@@ -297,7 +297,7 @@ pub fn export_humanml3d(
     // The marker last, then one swap: `out` is always the old export or the new one.
     let path = staging.join(EXPORT_MARKER);
     fs::write(&path, json).map_err(io_err(&path))?;
-    crate::base::replace_dir(&staging, out).map_err(|e| ExportError::Io {
+    motionforge_core::base::replace_dir(&staging, out).map_err(|e| ExportError::Io {
         path: out.to_path_buf(),
         source: std::io::Error::other(e.to_string()),
     })?;
@@ -311,7 +311,7 @@ pub fn is_export(dir: &Path) -> bool {
 }
 
 fn staging_path(out: &Path) -> PathBuf {
-    crate::base::sibling(out, "partial")
+    motionforge_core::base::sibling(out, "partial")
 }
 
 /// HumanML3D's order of names: originals by number, then mirrors by number.
@@ -360,7 +360,7 @@ fn placements(
     dataset: &Path,
     options: &ExportOptions,
 ) -> Result<BTreeMap<String, Result<SmplPlacement, String>>, ExportError> {
-    let path = dataset.join(crate::base::layout::SKELETONS_FILE);
+    let path = dataset.join(motionforge_core::base::layout::SKELETONS_FILE);
     let text = fs::read_to_string(&path).map_err(io_err(&path))?;
     let json: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| ExportError::NotADataset {
@@ -548,13 +548,20 @@ fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportErro
         );
         // A row whose frames do not match its counts is skipped with the reason (the export goes
         // on); a column of another layout fails the shard.
-        let values =
-            match crate::io::parquet::frame_values(positions, Column::JointPositions, i, n, j) {
-                Ok(Some(v)) => Ok(v),
-                Ok(None) => Err("joint_positions is null".to_string()),
-                Err(e @ crate::io::parquet::FrameColumnError::Shape { .. }) => Err(e.to_string()),
-                Err(e) => return Err(table_err(path, e)),
-            };
+        let values = match motionforge_format::io::parquet::frame_values(
+            positions,
+            Column::JointPositions,
+            i,
+            n,
+            j,
+        ) {
+            Ok(Some(v)) => Ok(v),
+            Ok(None) => Err("joint_positions is null".to_string()),
+            Err(e @ motionforge_format::io::parquet::FrameColumnError::Shape { .. }) => {
+                Err(e.to_string())
+            }
+            Err(e) => return Err(table_err(path, e)),
+        };
         out.push(Frames {
             skeleton: skeleton.value(i).to_string(),
             fps: fps.value(i),
@@ -690,7 +697,7 @@ fn caption_lines(entry: &Entry) -> (String, Vec<Skipped>) {
     let mut text = String::new();
     let mut refused = Vec::new();
     for caption in &entry.captions {
-        match crate::caption::caption_line(caption, 0.0, 0.0) {
+        match motionforge_language::caption::caption_line(caption, 0.0, 0.0) {
             Ok(line) => {
                 text.push_str(&line);
                 text.push('\n');

@@ -13,7 +13,7 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
 use super::stats::{NO_SPLIT, NULL_SPLIT};
 use super::{ClipRow, ReportError};
-use crate::io::schema::Column;
+use motionforge_format::io::schema::Column;
 
 /// Columns without which a table is not a clip table.
 const REQUIRED: [Column; 5] = [
@@ -198,7 +198,7 @@ impl<'a> Columns<'a> {
             float_values(&item).map(|v| v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
         };
         // List, large list or fixed-size list (a goal is fixed-size from version 9 on).
-        let rows = crate::io::parquet::list_rows(column)
+        let rows = motionforge_format::io::parquet::list_rows(column)
             .ok_or_else(|| self.type_error(column_name, column, "a list of Float32"))?;
         rows.into_iter()
             .map(|row| {

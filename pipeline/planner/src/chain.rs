@@ -394,8 +394,10 @@ mod tests {
 
     #[test]
     fn the_living_room_explores_up_to_the_full_state_limit() {
-        let scene =
-            Scene::load(std::path::Path::new("../schemas/scenes/living-room.toml")).unwrap();
+        let scene = Scene::load(std::path::Path::new(
+            "../../schemas/scenes/living-room.toml",
+        ))
+        .unwrap();
         assert!(checks_per_state(&scene) < MAX_CHECKS / MAX_STATES as u64);
         assert_eq!(max_states(&scene), MAX_STATES);
     }

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::{ClipRow, ReportError};
-use crate::dataset::{self, preview};
+use motionforge_format::dataset::{self, preview};
 
 /// Poses per filmstrip.
 const STRIP_FRAMES: usize = 6;
@@ -77,7 +77,7 @@ pub(crate) fn write_gallery(
         let drawn = preview::render(&[panel], &options).map_err(gallery_err)?;
         let name = format!("{}.png", preview::file_stem(&motion_type.replace(' ', "-")));
         let path = dir.join(&name);
-        crate::base::write_atomic(&path, &drawn.png().map_err(gallery_err)?)?;
+        motionforge_core::base::write_atomic(&path, &drawn.png().map_err(gallery_err)?)?;
         md.push_str(&format!(
             "\n### {}\n\n![{} filmstrip](gallery/{name})\n\n`{}`: {}\n",
             super::tables::markdown_escape(motion_type),

@@ -27,8 +27,8 @@ pub use stats::{
 };
 pub use tables::{latex_escape, markdown_escape};
 
-use crate::base::WorkspaceError;
-use crate::base::guard::{Kept, check_replaceable};
+use motionforge_core::base::WorkspaceError;
+use motionforge_core::base::guard::{Kept, check_replaceable};
 
 /// What a report is made from besides the clip rows.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -43,7 +43,7 @@ pub struct ReportInput {
     /// Title of the report and of its figures, usually the dataset name.
     pub title: String,
     /// Clips whose text contradicts their motion (the manifest's `label_contradictions`).
-    pub contradictions: Vec<crate::quality::Contradiction>,
+    pub contradictions: Vec<motionforge_core::quality::Contradiction>,
 }
 
 /// One clip, reduced to what the statistics need.
@@ -83,7 +83,7 @@ impl ClipRow {
 
     /// True for synthetic compositions (`source_kind == "synthetic"`).
     pub fn is_synthetic(&self) -> bool {
-        self.source_kind == crate::clip::SourceKind::Synthetic.as_str()
+        self.source_kind == motionforge_sources::clip::SourceKind::Synthetic.as_str()
     }
 }
 
@@ -92,7 +92,7 @@ impl ClipRow {
 pub enum ReportError {
     /// The dataset's `manifest.json` cannot be read.
     #[error(transparent)]
-    Manifest(#[from] crate::io::manifest::ManifestError),
+    Manifest(#[from] motionforge_format::io::manifest::ManifestError),
     /// A file or folder could not be read.
     #[error("{path}: {source}")]
     Io {
@@ -174,7 +174,7 @@ pub enum ReportError {
     Write(#[from] WorkspaceError),
     /// The output folder is, holds or lies inside a folder the report must keep.
     #[error(transparent)]
-    Refused(#[from] crate::base::guard::Refused),
+    Refused(#[from] motionforge_core::base::guard::Refused),
 }
 
 /// Writes the report of `rows` and `stats` into `out_dir` (created if needed): `stats.json`,
@@ -200,11 +200,11 @@ fn write_report_with(
     let rows = stats::sorted_rows(rows);
 
     let tex_path = out_dir.join("tables.tex");
-    crate::base::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
+    motionforge_core::base::write_atomic(&tex_path, tables::latex(stats).as_bytes())?;
     written.push(tex_path);
 
     let figures_tex = out_dir.join("figures.tex");
-    crate::base::write_atomic(&figures_tex, tables::latex_figures(stats).as_bytes())?;
+    motionforge_core::base::write_atomic(&figures_tex, tables::latex_figures(stats).as_bytes())?;
     written.push(figures_tex);
 
     let figure_dir = out_dir.join("figures");
@@ -217,7 +217,7 @@ fn write_report_with(
         markdown.push_str(&section);
     }
     let md_path = out_dir.join("report.md");
-    crate::base::write_atomic(&md_path, markdown.as_bytes())?;
+    motionforge_core::base::write_atomic(&md_path, markdown.as_bytes())?;
     written.push(md_path);
 
     // Last, so a report cut short by a crash has no `stats.json` and does not look finished.
@@ -227,7 +227,7 @@ fn write_report_with(
         message: e.to_string(),
     })?;
     json.push('\n');
-    crate::base::write_atomic(&json_path, json.as_bytes())?;
+    motionforge_core::base::write_atomic(&json_path, json.as_bytes())?;
     written.insert(0, json_path);
     Ok(written)
 }
@@ -241,7 +241,7 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
         check_replaceable(out, &kept, "pass another --output")?;
     }
     // Without a manifest (a folder of shards from elsewhere) the counts are empty.
-    let manifest = crate::io::manifest::Manifest::read(dataset)?;
+    let manifest = motionforge_format::io::manifest::Manifest::read(dataset)?;
     let counts = manifest
         .as_ref()
         .map(|m| m.counts.clone())
@@ -250,7 +250,7 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
         .as_ref()
         .map(|m| m.label_contradictions.clone())
         .unwrap_or_default();
-    let tables = find_clip_tables(&dataset.join(crate::base::layout::DATA_DIR))?;
+    let tables = find_clip_tables(&dataset.join(motionforge_core::base::layout::DATA_DIR))?;
     let title = manifest.map(|m| m.dataset).unwrap_or_else(|| {
         dataset
             .file_name()

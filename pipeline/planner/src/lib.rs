@@ -4,15 +4,15 @@
 //! a valid state, with transition weights that favour the motion types a built dataset lacks.
 //!
 //! Its output is what the build reads back after the session: an event log
-//! ([`crate::annotate::event_log`]) whose instructions become clips, plus an operator sheet.
+//! ([`motionforge_sources::annotate::event_log`]) whose instructions become clips, plus an operator sheet.
 //! A tool over a scene file and a built dataset: it uses the report's readers and the event-log
 //! format, no stage and no runner. `docs/planner.md` documents the rule and the figures.
 //!
 //! ```
 //! use std::path::Path;
-//! use motionforge::planner::{DatasetCounts, Scene, plan};
+//! use motionforge_planner::{DatasetCounts, Scene, plan};
 //!
-//! let scene = Scene::load(Path::new("../schemas/scenes/living-room.toml"))?;
+//! let scene = Scene::load(Path::new("../../schemas/scenes/living-room.toml"))?;
 //! let session = plan(&scene, &DatasetCounts::default(), 7)?;
 //! assert!(!session.steps.is_empty());
 //! assert_eq!(session, plan(&scene, &DatasetCounts::default(), 7)?);
@@ -37,7 +37,7 @@ pub use scene::{
 };
 pub use state::{Effect, Loc, Posture, Requirement, State};
 
-use crate::annotate::span::Hand;
+use motionforge_sources::annotate::span::Hand;
 
 /// Why no session can be planned for a scene.
 #[derive(Debug, thiserror::Error)]
@@ -175,13 +175,16 @@ pub fn write_session(
     scene: &Scene,
     dir: &Path,
     capture: &str,
-) -> Result<WrittenSession, crate::base::WorkspaceError> {
+) -> Result<WrittenSession, motionforge_core::base::WorkspaceError> {
     let event_log = dir.join(format!("{capture}.csv"));
     let sheet = dir.join(format!("{capture}.md"));
     if !dir.as_os_str().is_empty() {
-        std::fs::create_dir_all(dir).map_err(crate::base::io_err(dir))?;
+        std::fs::create_dir_all(dir).map_err(motionforge_core::base::io_err(dir))?;
     }
-    crate::base::write_atomic(&event_log, event_log_csv(session).as_bytes())?;
-    crate::base::write_atomic(&sheet, operator_sheet(session, scene, capture).as_bytes())?;
+    motionforge_core::base::write_atomic(&event_log, event_log_csv(session).as_bytes())?;
+    motionforge_core::base::write_atomic(
+        &sheet,
+        operator_sheet(session, scene, capture).as_bytes(),
+    )?;
     Ok(WrittenSession { event_log, sheet })
 }

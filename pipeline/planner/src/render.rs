@@ -171,7 +171,7 @@ mod tests {
     fn columns_are_the_readers_and_fields_quote_commas() {
         for c in EVENT_LOG_COLUMNS {
             assert!(
-                crate::annotate::event_log::EVENT_COLUMNS.contains(&c),
+                motionforge_sources::annotate::event_log::EVENT_COLUMNS.contains(&c),
                 "{c} is not a column the event-log reader knows"
             );
         }

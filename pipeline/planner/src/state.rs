@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::scene::{Hold, Scene};
-use crate::annotate::span::Hand;
+use motionforge_sources::annotate::span::Hand;
 
 /// The actor's body posture.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Deserialize, Serialize)]

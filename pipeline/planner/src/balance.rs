@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::report::{ReportError, ReportInput, find_clip_tables, read_rows, statistics};
+use motionforge_report::{ReportError, ReportInput, find_clip_tables, read_rows, statistics};
 
 /// Clips and median length per motion type of a built dataset: original real single clips, as
 /// the report counts them (mirrored copies and pairs are not counted).
@@ -22,7 +22,7 @@ pub struct DatasetCounts {
 impl DatasetCounts {
     /// Reads a built dataset folder's shards (`<dataset>/data`) with the report's readers.
     pub fn read(dataset: &Path) -> Result<DatasetCounts, ReportError> {
-        let data = dataset.join(crate::base::layout::DATA_DIR);
+        let data = dataset.join(motionforge_core::base::layout::DATA_DIR);
         let tables = find_clip_tables(&data)?;
         if tables.is_empty() {
             return Err(ReportError::Io {
@@ -47,7 +47,7 @@ impl DatasetCounts {
             ..DatasetCounts::default()
         };
         for t in stats.motion_types {
-            if t.motion_type == crate::report::UNMAPPED {
+            if t.motion_type == motionforge_report::UNMAPPED {
                 continue;
             }
             if let Some(s) = &t.seconds

@@ -19,8 +19,8 @@ use super::stats::{
     types_in_report_order, whiskers,
 };
 use super::{ClipRow, ReportError};
-use crate::base::write_atomic;
-use crate::clip::SourceKind;
+use motionforge_core::base::write_atomic;
+use motionforge_sources::clip::SourceKind;
 
 /// Drawing units per inch. Figures are laid out in 1/300 in, so the PNG is the drawing at
 /// 300 dpi and the SVG's user units are the PNG's pixels.
@@ -287,7 +287,8 @@ fn pdf_and_png(svg: &str, spec: &FigureSpec) -> Result<(Vec<u8>, Vec<u8>), Strin
         .chunks_exact(4)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    let png = crate::dataset::preview::png_bytes(&rgb, (w, h)).map_err(|e| e.to_string())?;
+    let png =
+        motionforge_format::dataset::preview::png_bytes(&rgb, (w, h)).map_err(|e| e.to_string())?;
     Ok((pdf, png))
 }
 
