@@ -1,4 +1,4 @@
-//! Library tests without a build: readers of captures and annotations on real files, the motion core, mirroring, composition, text, captions, labels, plausibility, the taxonomy, and the module graph.
+//! Library tests without a build: readers of captures and annotations on real files, the motion core, mirroring, composition, text, captions, labels, plausibility, the taxonomy, and the crate graph.
 //!
 //! One test binary per group (not one per file): each binary links the whole library, so a few
 //! binaries build much faster than one per file. Run one file's tests with its module name as the
@@ -33,8 +33,8 @@ mod mirror_real;
 #[path = "motion_core.rs"]
 mod motion_core;
 
-#[path = "module_graph.rs"]
-mod module_graph;
+#[path = "crate_graph.rs"]
+mod crate_graph;
 
 #[path = "parts_labels.rs"]
 mod parts_labels;

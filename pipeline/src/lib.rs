@@ -65,12 +65,6 @@
 //! # }
 //! ```
 pub use motionforge_core::base;
-pub use motionforge_sources::amass;
-pub use motionforge_sources::annotate;
-pub mod build;
-pub use motionforge_language::compose_text;
-pub use motionforge_sources::clip;
-pub mod config;
 pub use motionforge_core::features;
 pub use motionforge_core::humanml3d;
 pub use motionforge_core::motion;
@@ -80,12 +74,18 @@ pub use motionforge_export as export;
 pub use motionforge_format::dataset;
 pub use motionforge_format::io;
 pub use motionforge_language::caption;
+pub use motionforge_language::compose_text;
 pub use motionforge_language::parts;
 pub use motionforge_llm as llm;
 pub use motionforge_planner as planner;
 pub use motionforge_report as report;
-pub mod serve;
-pub mod source;
-pub mod stages;
+pub use motionforge_runner as build;
+pub use motionforge_runner::config;
+pub use motionforge_runner::source;
+pub use motionforge_runner::stages;
+pub use motionforge_serve as serve;
+pub use motionforge_sources::amass;
+pub use motionforge_sources::annotate;
+pub use motionforge_sources::clip;
 pub mod terminal;
 pub use motionforge_language::text;

@@ -1,0 +1,110 @@
+//! The label check: real clips whose motion contradicts what their text claims, measured once
+//! per capture and cached.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use rayon::prelude::*;
+
+use super::capture::Shared;
+use super::motions::{self, MotionIndex, MotionSource};
+use super::{BuildError, Fingerprint, sha256_hex};
+use motionforge_sources::clip::Clip;
+
+/// Stage-cache folder of the label check's findings, one entry per capture with claiming clips.
+const LABEL_CHECK: &str = "label-check";
+/// Version of the label check's cached findings (bump when `quality::contradictions` changes).
+const LABEL_CHECK_VERSION: u32 = 1;
+
+/// The real single clips (mirrors included) whose motion contradicts what their text says
+/// (`quality::contradictions`), in `clip_id` order. Only clips whose text makes a claim the
+/// motion can be measured for are read. The findings are cached per capture, keyed by those
+/// clips (texts, skeletons, where their frames are) and the mirror's offset policy, so a rebuild
+/// reads no frames; captures are checked on all cores.
+pub(super) fn contradicting_labels(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    clips: &[Clip],
+    index: &MotionIndex,
+) -> Result<Vec<motionforge_core::quality::Contradiction>, BuildError> {
+    let mut by_capture: BTreeMap<(&str, &str), Vec<&Clip>> = BTreeMap::new();
+    for clip in clips.iter().filter(|c| {
+        c.kind == motionforge_sources::clip::SourceKind::RealSingle
+            && motionforge_core::quality::claims(&c.text)
+                != motionforge_core::quality::Claims::default()
+    }) {
+        by_capture
+            .entry((clip.capture.source.as_str(), clip.capture.path.as_str()))
+            .or_default()
+            .push(clip);
+    }
+    // The skeleton profiles the clips are measured with.
+    let profiles = sha256_hex(&serde_json::to_vec(&shared.specs).unwrap_or_default());
+    let checked = by_capture
+        .par_iter()
+        // Each thread reads with its own memory of recent chunks.
+        .map_init(
+            || motions.sibling(),
+            |motions, ((_, path), held)| {
+                let refs: Vec<Option<&motions::MotionRef>> =
+                    held.iter().map(|c| index.get(&motions::key(c))).collect();
+                let encoded =
+                    motionforge_core::base::encoded_sha256(&(held, &refs), "clips to check")?;
+                let stamp = Fingerprint::new(LABEL_CHECK, LABEL_CHECK_VERSION)
+                    .text("clips", &encoded)
+                    .json("config mirror.offsets", &shared.config.mirror.offsets)
+                    .text("skeleton profiles", &profiles)
+                    .stamp();
+                let found = shared.workspace.try_item(LABEL_CHECK, path, &stamp, || {
+                    let mut out = Vec::new();
+                    for clip in held {
+                        let Some(profile) = shared.profile_of(clip) else {
+                            continue;
+                        };
+                        let motion = motions.motion_of(clip, index)?;
+                        let positions = motionforge_core::motion::canonical::dataset_positions(
+                            &motion, &profile,
+                        );
+                        out.extend(motionforge_core::quality::contradictions(
+                            &clip.clip_id,
+                            &clip.text,
+                            &positions,
+                            motion.num_joints(),
+                            motion.fps,
+                            &profile,
+                        ));
+                    }
+                    Ok::<_, BuildError>(out)
+                })?;
+                Ok::<_, BuildError>((stamp.fingerprint, found.map(|(f, _)| f).unwrap_or_default()))
+            },
+        )
+        .collect::<Result<Vec<_>, BuildError>>()?;
+    let live: BTreeSet<String> = checked.iter().map(|(f, _)| f.clone()).collect();
+    shared.workspace.prune(LABEL_CHECK, &live);
+    let mut out: Vec<motionforge_core::quality::Contradiction> =
+        checked.into_iter().flat_map(|(_, found)| found).collect();
+    out.sort_by(|a, b| {
+        a.clip_id
+            .cmp(&b.clip_id)
+            .then_with(|| a.claim.cmp(&b.claim))
+    });
+    Ok(out)
+}
+
+/// Leaves out of `clips` the ones in `contradictions` and the synthetic pairs made from them;
+/// how many rows that removed.
+pub(super) fn drop_contradicting(
+    clips: &mut Vec<Clip>,
+    contradictions: &[motionforge_core::quality::Contradiction],
+) -> usize {
+    if contradictions.is_empty() {
+        return 0;
+    }
+    let wrong: BTreeSet<&str> = contradictions.iter().map(|c| c.clip_id.as_str()).collect();
+    let before = clips.len();
+    clips.retain(|c| {
+        !wrong.contains(c.clip_id.as_str())
+            && !c.composed_from.iter().any(|id| wrong.contains(id.as_str()))
+    });
+    before - clips.len()
+}

@@ -1,0 +1,856 @@
+//! The build runner: runs the stages over every capture, reuses cached work whose fingerprint is
+//! unchanged, writes outputs atomically and records what it rejected and why.
+
+pub mod config;
+pub mod source;
+pub mod stages;
+
+mod capture;
+pub mod clean;
+mod companions;
+mod digests;
+mod held;
+mod label_check;
+mod lookup;
+mod motions;
+mod output;
+mod pack;
+mod plan;
+mod synthetic;
+mod text;
+pub mod workspace;
+
+pub use motionforge_core::base::lock;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+pub use lookup::{ProfiledClip, collect_clips, find_clip, stored_motion};
+pub use motionforge_core::base::{
+    Dropped, Fingerprint, Reject, Stamp, WorkspaceError, sha256_hex, temp_path, write_atomic,
+    write_atomic_with,
+};
+pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
+pub use workspace::{Ledger, Miss, SeenStamps, StageLedger, Workspace};
+
+use capture::{Item, Shared};
+use motions::MotionIndex;
+use output::{Table, write_outputs};
+
+use crate::config::Config;
+use crate::source::{SourceAnnotations, SourceError};
+use crate::stages::{ingest, mirror};
+use crate::stages::{label, segment};
+use motionforge_core::motion::ProfileSpec;
+use motionforge_format::io::parquet::TableError;
+use motionforge_sources::annotate::span::Note;
+use motionforge_sources::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
+use motionforge_sources::clip::Clip;
+
+pub use motionforge_core::base::layout::{
+    CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE, REPORT_FILE,
+    REPORT_STATS, SKELETONS_FILE,
+};
+
+/// Version of the table-writing stage.
+const WRITE_VERSION: u32 = 4;
+
+/// The stages of a build in dependency order: each needs every one before it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// Read and check capture files.
+    Ingest,
+    /// Cut captures into clips by their annotations.
+    Segment,
+    /// Body parts of every text (embedded labeller, LLM or imported answers).
+    Label,
+    /// Alternative captions (LLM).
+    Paraphrase,
+    /// Task plans of single actions (LLM).
+    Plan,
+    /// Left/right mirrored copies of every clip.
+    Mirror,
+    /// Synthetic simultaneous-action pairs, measured for plausibility.
+    Compose,
+    /// Parquet shards, manifest, card, normalisation statistics.
+    Write,
+    /// Statistics report (tables, figures, stats.json).
+    Report,
+}
+
+impl Stage {
+    /// Every stage, in order.
+    pub const ALL: [Stage; 9] = [
+        Stage::Ingest,
+        Stage::Segment,
+        Stage::Label,
+        Stage::Paraphrase,
+        Stage::Plan,
+        Stage::Mirror,
+        Stage::Compose,
+        Stage::Write,
+        Stage::Report,
+    ];
+
+    /// The stage's name in reports and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Ingest => ingest::NAME,
+            Stage::Segment => segment::NAME,
+            Stage::Label => label::NAME,
+            Stage::Paraphrase => "paraphrase",
+            Stage::Plan => "plan",
+            Stage::Mirror => mirror::NAME,
+            Stage::Compose => crate::stages::compose::NAME,
+            Stage::Write => "write",
+            Stage::Report => "report",
+        }
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Stage {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Stage, String> {
+        Stage::ALL
+            .into_iter()
+            .find(|stage| stage.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+                format!("unknown stage `{s}`; expected one of {}", names.join(", "))
+            })
+    }
+}
+
+/// Errors that stop a build (bad inputs do not: they become rejects).
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// A source cannot be resolved.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// The workspace or an output cannot be written.
+    #[error(transparent)]
+    Workspace(#[from] WorkspaceError),
+    /// Split assignment is inconsistent (a capture in two splits).
+    #[error(transparent)]
+    Split(#[from] crate::stages::split::SplitError),
+    /// The written shards put one capture in two splits.
+    #[error(
+        "capture `{capture}` appears in splits {splits:?} of the written shards; a capture must be in one split"
+    )]
+    SplitLeak {
+        /// The capture path.
+        capture: String,
+        /// The splits it appears in.
+        splits: Vec<String>,
+    },
+    /// Normalisation statistics cannot be written.
+    #[error(transparent)]
+    Normalization(Box<motionforge_format::io::normalization::NormalizationError>),
+    /// The embedded labeller's lexicon (`schemas/lexicon.toml`) is invalid.
+    #[error(transparent)]
+    Lexicon(#[from] motionforge_language::parts::lexicon::LexiconError),
+    /// The synthetic-pair composer's word file (`schemas/compose_text.toml`) is invalid.
+    #[error(transparent)]
+    Words(#[from] motionforge_language::compose_text::WordsError),
+    /// The paraphrase check's word file (`schemas/paraphrase.toml`) is invalid.
+    #[error(transparent)]
+    ParaphraseWords(#[from] motionforge_llm::paraphrase::ParaphraseWordsError),
+    /// A dataset's `manifest.json` cannot be read.
+    #[error(transparent)]
+    Manifest(#[from] motionforge_format::io::manifest::ManifestError),
+    /// The statistics report cannot be made.
+    #[error("report: {0}")]
+    Report(String),
+    /// A prompt template does not load or render.
+    #[error(transparent)]
+    Prompt(#[from] motionforge_llm::prompt::PromptError),
+    /// An LLM stage cannot run (cache file, missing answers with `on_miss = "fail"`).
+    #[error("{0}")]
+    Llm(String),
+    /// The motion-type taxonomy or mapping is invalid.
+    #[error(transparent)]
+    Taxonomy(#[from] TaxonomyError),
+    /// A held clip's motion cannot be found (internal bookkeeping; `--force` rebuilds it).
+    #[error("{0}")]
+    Motion(String),
+    /// The dataset folder is one the build must not write into.
+    #[error(transparent)]
+    Refused(#[from] motionforge_core::base::guard::Refused),
+    /// The table cannot be written.
+    #[error("{path}: {source}")]
+    Table {
+        /// The table path.
+        path: PathBuf,
+        /// The error.
+        source: TableError,
+    },
+}
+
+impl From<motionforge_format::io::normalization::NormalizationError> for BuildError {
+    fn from(e: motionforge_format::io::normalization::NormalizationError) -> Self {
+        BuildError::Normalization(Box::new(e))
+    }
+}
+
+/// What one stage did in a build.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StageRun {
+    /// Stage name.
+    pub stage: String,
+    /// Items the stage covers.
+    pub items: usize,
+    /// Items computed in this build.
+    pub ran: usize,
+    /// Items reused from the cache.
+    pub reused: usize,
+}
+
+/// The outcome of a build, also written as `build-report.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BuildReport {
+    /// Dataset name.
+    pub dataset: String,
+    /// The output folder.
+    pub output: PathBuf,
+    /// Per-stage work done.
+    pub stages: Vec<StageRun>,
+    /// Captures found.
+    pub captures: usize,
+    /// Rows in the clip table.
+    pub clips: usize,
+    /// Rows that are mirrored copies.
+    pub mirrored: usize,
+    /// Rows by source kind (`real_single`, `real_pair`, ...), mirrors included.
+    pub kinds: BTreeMap<String, usize>,
+    /// Clips per action label (originals only).
+    pub actions: BTreeMap<String, usize>,
+    /// Single clips per motion type (originals only); `(unmapped)` for labels with no type.
+    pub motion_types: BTreeMap<String, usize>,
+    /// Labels that map to no motion type, with counts: listed, never merged.
+    pub unmapped_labels: BTreeMap<String, usize>,
+    /// Segments dropped during segmentation, by reason.
+    pub drops_by_reason: BTreeMap<String, usize>,
+    /// Every dropped segment: file, reason, text and frames.
+    pub drops: Vec<Dropped>,
+    /// Annotation quirks handled (clamped ends, null labels, ...), by kind.
+    pub notes_by_kind: BTreeMap<String, usize>,
+    /// Every annotation quirk, for people.
+    pub notes: Vec<Note>,
+    /// Rejected inputs by reason.
+    pub rejects_by_reason: BTreeMap<String, usize>,
+    /// Every rejected input.
+    pub rejects: Vec<Reject>,
+    /// Body-part labelling: sources, requests, cache hits, flagged answers.
+    pub labels: crate::stages::label::LabelReport,
+    /// Paraphrases: answered, skipped by reason, rejected lines.
+    pub paraphrases: crate::stages::augment::AugmentReport,
+    /// Task plans: answered, skipped by reason, rejected plans.
+    pub plans: crate::stages::augment::AugmentReport,
+    /// Synthetic pairs: candidates, compatible, sampled, composed, dropped by reason.
+    pub synthetic: crate::stages::compose::ComposeReport,
+    /// The optional LLM check of sampled pairs: asked, answered, skipped.
+    pub pair_check: crate::stages::augment::AugmentReport,
+    /// Fingerprint of the written table's inputs.
+    pub table_fingerprint: String,
+    /// Real clips whose motion contradicts their text (turn side, walking direction, hand), in
+    /// `clip_id` order. Listed, never fixed; left out of the table with `label_check.drop`.
+    #[serde(default)]
+    pub label_contradictions: Vec<motionforge_core::quality::Contradiction>,
+    /// Rows left out because of them (`label_check.drop`): the clips and the synthetic pairs
+    /// made from them.
+    #[serde(default)]
+    pub label_contradictions_dropped: usize,
+    /// Why the statistics report could not be written (the dataset was); the build then fails
+    /// after writing this file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub report_error: Option<String>,
+}
+
+impl BuildReport {
+    /// True when no stage ran any item: everything was reused.
+    pub fn nothing_ran(&self) -> bool {
+        self.stages.iter().all(|s| s.ran == 0)
+    }
+}
+
+/// Options of a build.
+#[derive(Debug, Clone, Default)]
+pub struct BuildOptions {
+    /// Ignore the cache and recompute everything.
+    pub force: bool,
+    /// Send no LLM request: answers come from the response cache only.
+    pub offline: bool,
+    /// Where stage progress is reported.
+    pub progress: motionforge_core::progress::ProgressSink,
+    /// Run only up to this stage (and everything it depends on); all stages when `None`.
+    pub through: Option<Stage>,
+    /// How long to wait for another build of the same dataset folder to finish (`None`: refuse
+    /// at once).
+    pub lock_wait: Option<std::time::Duration>,
+}
+
+fn run_stages<'a>(
+    config: &'a Config,
+    options: &BuildOptions,
+    probe: bool,
+) -> Result<Staged<'a>, BuildError> {
+    let output = config.dataset_dir();
+    let through = options.through.unwrap_or(Stage::Report);
+    let progress = &options.progress;
+    let workspace = if probe {
+        Workspace::probing(&output)
+    } else {
+        Workspace::new(&output)
+    };
+    if options.force && !probe {
+        let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
+    }
+    motionforge_language::parts::lexicon::check_lexicon()?;
+    motionforge_language::compose_text::check_words()?;
+    motionforge_llm::paraphrase::check_words()?;
+    let files = source::discover(config)?;
+    let specs: Vec<ProfileSpec> = config
+        .sources
+        .iter()
+        .map(|s| source::resolve_profile(config, s))
+        .collect::<Result<_, _>>()?;
+    let annotations: Vec<SourceAnnotations> = config
+        .sources
+        .iter()
+        .map(|s| source::load_annotations(config, s))
+        .collect::<Result<_, _>>()?;
+    let fps_tables: Vec<BTreeMap<String, f64>> = config
+        .sources
+        .iter()
+        .map(|s| source::load_fps_table(config, s))
+        .collect::<Result<_, _>>()?;
+    let (types, types_digest) = load_types(config)?;
+    // `--force` trusts nothing remembered: every capture is read and hashed again.
+    let digests = if options.force && !probe {
+        digests::FileDigests::default()
+    } else {
+        digests::FileDigests::load(&workspace)
+    };
+    let mut shared = Shared {
+        config,
+        workspace,
+        specs,
+        bound: Default::default(),
+        skeletons: Default::default(),
+        annotations,
+        fps_tables,
+        types,
+        types_digest,
+        digests,
+    };
+    let motions = shared.motions();
+
+    progress.stage_started(ingest::NAME, files.len() as u64);
+    let mut items: Vec<Item> = files
+        .par_iter()
+        .map(|file| {
+            let item = capture::segment_capture(&shared, file);
+            progress.advanced(ingest::NAME, 1);
+            item
+        })
+        .collect::<Result<_, _>>()?;
+    std::mem::take(&mut shared.digests).save(&shared.workspace)?;
+    // In probe mode, a capture whose ingest or segment output is not cached stops there: what
+    // follows depends on outputs that do not exist yet.
+    let upstream_pending = items.iter().any(|i| i.pending.is_some());
+    // Splits by capture: set before labelling so every later copy (mirror, pair) inherits it.
+    let splits = crate::stages::split::Splits::from_config(config)?;
+    for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+        splits.assign(clip);
+    }
+    let mut stages = vec![capture_run(&items, Stage::Ingest, progress)];
+    if through >= Stage::Segment {
+        stages.push(capture_run(&items, Stage::Segment, progress));
+    }
+    let run_text = through >= Stage::Label && !upstream_pending;
+    let text = if run_text {
+        text::run(
+            &shared,
+            &motions,
+            &mut items,
+            options.offline || probe,
+            through,
+            progress,
+        )?
+    } else {
+        text::TextOutcome {
+            pending: upstream_pending,
+            ..Default::default()
+        }
+    };
+    for run in &text.runs {
+        progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+    }
+    stages.extend(text.runs.iter().cloned());
+    let run_mirror = config.mirror.enabled && through >= Stage::Mirror && !text.pending;
+    if run_mirror {
+        progress.stage_started(mirror::NAME, items.len() as u64);
+        items
+            .par_iter_mut()
+            .map(|item| {
+                let done = capture::mirror_capture(&shared, item);
+                progress.advanced(mirror::NAME, 1);
+                done
+            })
+            .collect::<Result<Vec<()>, _>>()?;
+    }
+    let mirror_pending = items.iter().any(|i| i.pending == Some(Stage::Mirror));
+    let first_pending = items_pending_stage(&items);
+
+    for stage in [Stage::Ingest, Stage::Segment, Stage::Mirror] {
+        let live: BTreeSet<String> = items
+            .iter()
+            .filter_map(|i| i.fingerprint(stage))
+            .map(str::to_string)
+            .collect();
+        shared.workspace.prune(stage.name(), &live);
+    }
+
+    // Frame chunks that no held clip points to belong to outputs that are gone.
+    let live: BTreeSet<String> = items
+        .iter()
+        .flat_map(|i| i.refs.iter().chain(&i.mirrored_refs))
+        .flat_map(|r| r.chunks())
+        .map(|(_, fingerprint)| fingerprint.to_string())
+        .collect();
+    shared.workspace.prune(motions::SEGMENT_CHUNKS, &live);
+    for retired in motions::RETIRED_CHUNKS {
+        shared.workspace.prune(retired, &BTreeSet::new());
+    }
+
+    if run_mirror {
+        stages.push(capture_run(&items, Stage::Mirror, progress));
+    }
+
+    // Exactly: grown by doubling, the list kept up to a third of its capacity (a `Clip` is a few
+    // hundred bytes before its strings) unused until the synthetic pairs are added.
+    let mut clips: Vec<Clip> =
+        Vec::with_capacity(items.iter().map(|i| i.clips.len() + i.mirrored.len()).sum());
+    let mut index = MotionIndex::new();
+    let mut rejects: Vec<Reject> = Vec::new();
+    let mut drops_by_reason = BTreeMap::new();
+    let mut drops: Vec<Dropped> = Vec::new();
+    let mut unmapped_labels = BTreeMap::new();
+    let mut notes: Vec<Note> = Vec::new();
+    for item in items {
+        for (clip, at) in item
+            .clips
+            .iter()
+            .zip(item.refs)
+            .chain(item.mirrored.iter().zip(item.mirrored_refs))
+        {
+            index.insert(motions::key(clip), at);
+        }
+        clips.extend(item.clips);
+        clips.extend(item.mirrored);
+        rejects.extend(item.rejects);
+        add_counts(&mut drops_by_reason, item.segment.drops);
+        drops.extend(item.segment.dropped);
+        add_counts(&mut unmapped_labels, item.segment.unmapped);
+        notes.extend(item.segment.notes);
+    }
+    notes.extend(source::annotation_notes(
+        config,
+        &shared.annotations,
+        &files,
+    ));
+
+    rejects.extend(text.rejects.iter().cloned());
+    let mut rejects: Vec<Reject> = rejects.into_iter().map(Reject::bounded).collect();
+    // Row order: by clip id, so the table does not depend on scheduling or glob order.
+    clips.sort_by(|a, b| {
+        a.clip_id
+            .cmp(&b.clip_id)
+            .then(a.capture.path.cmp(&b.capture.path))
+    });
+    rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
+    notes.sort();
+    drops.sort();
+
+    // Synthetic pairs from the labelled originals and mirrors.
+    let mut compose_report = crate::stages::compose::ComposeReport::default();
+    let mut pair_check = crate::stages::augment::AugmentReport::default();
+    let mut blocked = if upstream_pending {
+        first_pending
+    } else if text.pending {
+        Some(Stage::Label)
+    } else if mirror_pending {
+        Some(Stage::Mirror)
+    } else {
+        None
+    };
+    if through >= Stage::Compose && blocked.is_none() {
+        progress.stage_started(crate::stages::compose::NAME, clips.len() as u64);
+        match synthetic::compose(
+            &shared,
+            &motions,
+            &mut clips,
+            &mut index,
+            options.offline || probe,
+            progress,
+        )? {
+            Some((report, check, run)) => {
+                progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+                compose_report = report;
+                pair_check = check;
+                stages.push(run);
+            }
+            None => blocked = Some(Stage::Compose),
+        }
+    }
+    Ok(Staged {
+        output,
+        files: files.len(),
+        stages,
+        clips,
+        rejects,
+        notes,
+        drops_by_reason,
+        drops,
+        unmapped_labels,
+        text,
+        compose: compose_report,
+        pair_check,
+        blocked,
+        index,
+        shared,
+    })
+}
+
+/// What the per-capture `stage` did over `items`, reported as finished.
+fn capture_run(
+    items: &[Item],
+    stage: Stage,
+    progress: &motionforge_core::progress::ProgressSink,
+) -> StageRun {
+    let ran: Vec<bool> = items.iter().filter_map(|i| i.ran(stage)).collect();
+    let run = StageRun {
+        stage: stage.name().into(),
+        items: ran.len(),
+        ran: ran.iter().filter(|r| **r).count(),
+        reused: ran.iter().filter(|r| !**r).count(),
+    };
+    progress.stage_finished(stage.name(), run.ran as u64, run.reused as u64);
+    run
+}
+
+/// The first stage a pending (probe-mode) capture stopped at.
+fn items_pending_stage(items: &[Item]) -> Option<Stage> {
+    items.iter().filter_map(|i| i.pending).min()
+}
+
+/// What the stages produced, before anything is written.
+struct Staged<'a> {
+    shared: Shared<'a>,
+    output: PathBuf,
+    files: usize,
+    stages: Vec<StageRun>,
+    clips: Vec<Clip>,
+    rejects: Vec<Reject>,
+    notes: Vec<Note>,
+    drops_by_reason: BTreeMap<String, usize>,
+    drops: Vec<Dropped>,
+    unmapped_labels: BTreeMap<String, usize>,
+    text: text::TextOutcome,
+    compose: crate::stages::compose::ComposeReport,
+    pair_check: crate::stages::augment::AugmentReport,
+    /// In probe mode: the first stage whose output is not cached.
+    blocked: Option<Stage>,
+    /// Where the frames of `clips` are (the clips are held without them).
+    index: MotionIndex,
+}
+
+/// Runs every stage of the build described by `config` and writes the dataset.
+pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, BuildError> {
+    // Before the lock, which creates `.motionforge/`: a build writes README.md, data/ and more
+    // into the dataset folder, so it must not be the working folder or someone else's folder.
+    motionforge_core::base::guard::check_owned(
+        &config.dataset_dir(),
+        clean::made_by_a_build,
+        "set [dataset] output and name (or --output) to a folder of the dataset's own",
+    )?;
+    // One build per dataset folder at a time; released when this function returns.
+    let _lock = lock::WorkspaceLock::acquire(&config.dataset_dir(), options.lock_wait)
+        .map_err(WorkspaceError::from)?;
+    let Staged {
+        shared,
+        output,
+        files,
+        mut stages,
+        clips,
+        rejects,
+        notes,
+        drops_by_reason,
+        drops,
+        unmapped_labels,
+        text,
+        compose,
+        pair_check,
+        blocked: _,
+        index,
+    } = run_stages(config, options, false)?;
+    let motions = shared.motions();
+    let label_contradictions =
+        label_check::contradicting_labels(&shared, &motions, &clips, &index)?;
+    let mut clips = clips;
+    let label_contradictions_dropped = if config.label_check.drop {
+        label_check::drop_contradicting(&mut clips, &label_contradictions)
+    } else {
+        0
+    };
+    let workspace = &shared.workspace;
+    let (profiles, skeletons) = companions::skeletons_of(&shared, &clips);
+    let table_stamp = table_stamp(config, &clips, &index, &text.plans)?;
+    let table_fingerprint = table_stamp.fingerprint.clone();
+    let table = Table {
+        plans: &text.plans,
+        profiles: &profiles,
+        skeletons: &skeletons,
+        rejects: &rejects,
+        motions: &motions,
+    };
+    let companions = companions::Companions::of(
+        config,
+        &clips,
+        &rejects,
+        drops_by_reason.clone(),
+        &label_contradictions,
+        &table_fingerprint,
+    );
+    let counts = companions.manifest.counts.clone();
+    let through = options.through.unwrap_or(Stage::Report);
+    let mut stamps = workspace.take_seen();
+    // What the build report says of the clips, taken before the write stage takes them.
+    let n_clips = clips.len();
+    let n_mirrored = clips.iter().filter(|c| c.mirrored).count();
+    let actions = motionforge_format::io::manifest::action_counts(&clips);
+    let mut report_error = None;
+    if through >= Stage::Write {
+        options.progress.stage_started(Stage::Write.name(), 1);
+        let write_ran = write_outputs(
+            options.force,
+            &output,
+            workspace,
+            &table_fingerprint,
+            &table,
+            &companions,
+            output::Rows { clips, index },
+        )?;
+        stages.push(single_run(options, Stage::Write, write_ran));
+        stamps.push(Miss {
+            stage: Stage::Write.name().into(),
+            key: "*".into(),
+            stamp: table_stamp,
+        });
+        if through >= Stage::Report && n_clips == 0 {
+            // Nothing to describe: a report of an earlier build would describe rows that are gone.
+            let stale = output.join("report");
+            if stale.exists() {
+                std::fs::remove_dir_all(&stale).map_err(workspace::io_err(&stale))?;
+            }
+            let _ = std::fs::remove_file(workspace.root().join(REPORT_MARKER));
+            options.progress.stage_started(Stage::Report.name(), 0);
+            options.progress.stage_finished(Stage::Report.name(), 0, 0);
+            stages.push(StageRun {
+                stage: Stage::Report.name().into(),
+                items: 0,
+                ran: 0,
+                reused: 0,
+            });
+        } else if through >= Stage::Report {
+            // The report is derived from the shards: redo it when they changed or it is missing.
+            options.progress.stage_started(Stage::Report.name(), 1);
+            let report_ran =
+                options.force || !report_is_current(&output, workspace, &table_fingerprint);
+            if report_ran {
+                let marker = workspace.root().join(REPORT_MARKER);
+                let _ = std::fs::remove_file(&marker);
+                // The dataset is written by now: a failed report (a full disk) is recorded in
+                // build-report.json and fails the build after it, rather than losing both.
+                match motionforge_report::report_dataset(&output, None) {
+                    Ok(_) => write_atomic(&marker, table_fingerprint.as_bytes())?,
+                    Err(e) => report_error = Some(e.to_string()),
+                }
+            }
+            stages.push(single_run(options, Stage::Report, report_ran));
+        }
+    }
+
+    let mut notes_by_kind = BTreeMap::new();
+    for n in &notes {
+        *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;
+    }
+    // Counted whole above, listed up to a bound: the report stays readable and its size bounded.
+    let notes = motionforge_sources::annotate::span::cap_per_kind(
+        notes,
+        motionforge_sources::annotate::span::NOTES_PER_KIND,
+    );
+    let report = BuildReport {
+        label_contradictions,
+        label_contradictions_dropped,
+        dataset: config.dataset.name.clone(),
+        output: output.clone(),
+        stages,
+        captures: files,
+        clips: n_clips,
+        mirrored: n_mirrored,
+        kinds: counts.source_kind,
+        actions,
+        motion_types: counts.motion_type,
+        unmapped_labels,
+        drops_by_reason,
+        drops,
+        notes_by_kind,
+        notes,
+        rejects_by_reason: counts.reject_reason,
+        rejects,
+        labels: text.label,
+        paraphrases: text.paraphrase,
+        plans: text.plan,
+        synthetic: compose,
+        pair_check,
+        table_fingerprint,
+        report_error,
+    };
+    // A partial run (`run <stage>`) leaves the last full build's report in place.
+    if through == Stage::Report {
+        let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
+        write_atomic(&output.join(REPORT_FILE), &json)?;
+    }
+    save_ledger(workspace, &report.stages, stamps)?;
+    match report.report_error {
+        Some(e) => Err(BuildError::Report(e)),
+        None => Ok(report),
+    }
+}
+
+/// The run of a stage with one item (write, report), reported as finished.
+fn single_run(options: &BuildOptions, stage: Stage, ran: bool) -> StageRun {
+    options
+        .progress
+        .stage_finished(stage.name(), u64::from(ran), u64::from(!ran));
+    StageRun {
+        stage: stage.name().into(),
+        items: 1,
+        ran: usize::from(ran),
+        reused: usize::from(!ran),
+    }
+}
+
+/// Inside the workspace: the table fingerprint the report in `report/` was made from.
+const REPORT_MARKER: &str = "report-of";
+
+/// True when `report/` is complete and made from the table with `fingerprint` (a crash between
+/// writing the shards and finishing the report leaves it stale, not current).
+fn report_is_current(output: &std::path::Path, workspace: &Workspace, fingerprint: &str) -> bool {
+    output.join(REPORT_STATS).is_file()
+        && std::fs::read_to_string(workspace.root().join(REPORT_MARKER))
+            .is_ok_and(|f| f == fingerprint)
+}
+
+/// The write stage's stamp: the table's input is exactly its rows (and the plans), so their
+/// encoding is the fingerprint.
+fn table_stamp(
+    config: &Config,
+    clips: &[Clip],
+    index: &MotionIndex,
+    plans: &BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
+) -> Result<Stamp, BuildError> {
+    // The rows without frames, and where their frames are (stage outputs named by content).
+    let encoded = motionforge_core::base::encoded_sha256(&(clips, index), "clip table")?;
+    Ok(Fingerprint::new(Stage::Write.name(), WRITE_VERSION)
+        .text("rows", &encoded)
+        .json("config features", &config.features)
+        .json("config dataset.shard_bytes", &config.dataset.shard_bytes)
+        .json("config dataset.zstd_level", &config.dataset.zstd_level)
+        .json("task plans", plans)
+        .json(
+            "schema version",
+            &motionforge_format::io::schema::SCHEMA_VERSION,
+        )
+        .stamp())
+}
+
+/// Records what this run did in the workspace ledger: for every stage it ran, when, its counts
+/// and each item's stamp (so `plan` can later say what changed). Stages it did not reach keep
+/// their earlier record.
+fn save_ledger(
+    workspace: &Workspace,
+    runs: &[StageRun],
+    stamps: SeenStamps,
+) -> Result<(), BuildError> {
+    let stamps = stamps.into_vec()?;
+    let mut ledger = Ledger::load(workspace);
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    for run in runs {
+        let entries = stamps
+            .iter()
+            .filter(|m| m.stage == run.stage)
+            .map(|m| (m.key.clone(), m.stamp.clone()))
+            .collect();
+        ledger.stages.insert(
+            run.stage.clone(),
+            StageLedger {
+                last_run: now,
+                items: run.items,
+                ran: run.ran,
+                reused: run.reused,
+                entries,
+            },
+        );
+    }
+    let json = serde_json::to_vec_pretty(&ledger).unwrap_or_default();
+    write_atomic(&workspace.root().join(workspace::LEDGER_FILE), &json)?;
+    Ok(())
+}
+
+fn add_counts(into: &mut BTreeMap<String, usize>, from: BTreeMap<String, usize>) {
+    for (k, v) in from {
+        *into.entry(k).or_insert(0) += v;
+    }
+}
+
+fn load_types(config: &Config) -> Result<(TypeMap, String), BuildError> {
+    let cfg = &config.motion_types;
+    let (taxonomy, text) = match &cfg.taxonomy {
+        Some(path) => {
+            let path = config.resolve(path);
+            let text = std::fs::read_to_string(&path).map_err(workspace::io_err(&path))?;
+            (
+                Taxonomy::from_toml(&text, &path.display().to_string())?,
+                text,
+            )
+        }
+        None => (
+            Taxonomy::bundled()?,
+            motionforge_sources::annotate::taxonomy::BUNDLED_TOML.to_string(),
+        ),
+    };
+    let digest = Fingerprint::new("motion_types", 1)
+        .text("taxonomy", &text)
+        .json("config motion_types", cfg)
+        .finish();
+    Ok((
+        TypeMap::new(taxonomy.with_extra(cfg.extra.clone())?, cfg)?,
+        digest,
+    ))
+}

@@ -1,0 +1,75 @@
+//! Clips as a build would write them, frames included, read without writing a dataset:
+//! `export-bvh` from a config and `bench --write-frames` take them this way.
+
+use super::{BuildError, BuildOptions, run_stages};
+use crate::config::Config;
+use motionforge_core::motion::Profile;
+use motionforge_sources::clip::LoadedClip;
+
+/// Every clip a build would write (synthetic pairs included), from cached stage outputs where
+/// they are fresh; nothing is written except cache entries. `export-bvh` reads clips this way.
+pub fn collect_clips(
+    config: &Config,
+    options: &BuildOptions,
+) -> Result<Vec<LoadedClip>, BuildError> {
+    let staged = run_stages(config, options, false)?;
+    let motions = staged.shared.motions();
+    staged
+        .clips
+        .iter()
+        .map(|c| motions.load(c, &staged.index))
+        .collect()
+}
+
+/// A clip with its frames and its profile bound to its skeleton.
+pub type ProfiledClip = (LoadedClip, Profile);
+
+/// The clip `clip_id` as a build would write it, frames included (see [`collect_clips`]), with
+/// its profile bound to its skeleton (what the write stage turns its frames into rows with), and
+/// the ids of every clip (to suggest one when `clip_id` is not there). Only that clip's frames
+/// are read.
+pub fn find_clip(
+    config: &Config,
+    options: &BuildOptions,
+    clip_id: &str,
+) -> Result<(Option<ProfiledClip>, Vec<String>), BuildError> {
+    let staged = run_stages(config, options, false)?;
+    let motions = staged.shared.motions();
+    let found = match staged.clips.iter().find(|c| c.clip_id == clip_id) {
+        None => None,
+        Some(c) => {
+            let spec = staged
+                .shared
+                .specs
+                .iter()
+                .find(|s| s.name == c.profile)
+                .ok_or_else(|| {
+                    BuildError::Motion(format!("clip `{clip_id}`: no profile `{}`", c.profile))
+                })?;
+            let profile = staged.shared.bound.bind(spec, &c.skeleton).map_err(|e| {
+                BuildError::Motion(format!(
+                    "clip `{clip_id}`: profile `{}` does not fit its skeleton: {e}",
+                    c.profile
+                ))
+            })?;
+            Some((motions.load(c, &staged.index)?, profile))
+        }
+    };
+    Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
+}
+
+/// A clip's motion as the dataset stores it: its row's f32 rotations and positions
+/// (`io::parquet::dataset_motion`) read back on its own skeleton as `export-bvh <dataset>` reads
+/// them from the shards (`dataset::skeletons::motion_from_rows`), so a clip exported from the
+/// config and from the shards is the same file.
+pub fn stored_motion(clip: &LoadedClip, profile: &Profile) -> motionforge_core::motion::Motion {
+    let stored = motionforge_format::io::parquet::dataset_motion(&clip.motion, profile);
+    motionforge_format::dataset::skeletons::motion_from_rows(
+        (*clip.motion.skeleton).clone(),
+        profile.to_dataset_axes().inverse(),
+        profile.unit_scale,
+        clip.motion.fps,
+        &stored.positions,
+        &stored.rotations,
+    )
+}

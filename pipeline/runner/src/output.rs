@@ -1,0 +1,689 @@
+//! The write stage: the clip table and its companions, written atomically, skipped when the last
+//! build wrote the same.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::companions::{Companions, card};
+use super::held::{HeldClips, Summary};
+use super::motions::{MotionIndex, MotionRef, MotionSource, key};
+use super::{
+    BuildError, CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE,
+    Reject, SKELETONS_FILE, Workspace, sha256_hex, workspace, write_atomic, write_atomic_with,
+};
+use motionforge_core::base::HashingWriter;
+use motionforge_core::motion::Profile;
+use motionforge_format::io::normalization::NormalizationStats;
+use motionforge_format::io::parquet::{
+    ROWS_PER_GROUP, Row, ShardWriter, TableError, rows_to_batch,
+};
+use motionforge_sources::clip::{Clip, Split};
+use rayon::prelude::*;
+
+/// What the last write recorded: its inputs' fingerprint, each shard's content fingerprint, and
+/// the outputs' checksums with their stat data.
+#[derive(Debug, Default, Serialize, Deserialize)]
+struct State {
+    table_fingerprint: String,
+    shards: BTreeMap<String, String>,
+    outputs: BTreeMap<String, String>,
+    /// Each output's length and modification time (ns) when recorded.
+    #[serde(default)]
+    stamps: BTreeMap<String, (u64, u128)>,
+}
+
+/// Inside the workspace: what the last write recorded.
+const STATE_FILE: &str = "state.json";
+
+/// A file's length and modification time in nanoseconds.
+fn stat_stamp(path: &Path) -> Option<(u64, u128)> {
+    super::digests::stat_data(&std::fs::metadata(path).ok()?)
+}
+
+/// The last write's record, and when it was written (the state file's modification time).
+struct Recorded {
+    state: State,
+    at: Option<u128>,
+}
+
+impl Recorded {
+    fn load(workspace: &Workspace) -> Option<Recorded> {
+        let path = workspace.root().join(STATE_FILE);
+        let state = std::fs::read(&path)
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok())?;
+        Some(Recorded {
+            state,
+            at: stat_stamp(&path).map(|(_, at)| at),
+        })
+    }
+
+    /// Whether the output `name` still holds the bytes recorded. Stat data is trusted as the
+    /// capture digests trust it (`docs/decisions.md`): unchanged length and modification time,
+    /// the file last modified before the record was written (git's rule for racily clean
+    /// files); otherwise the file is read and hashed.
+    fn unchanged(&self, output: &Path, name: &str) -> bool {
+        let Some(sha) = self.state.outputs.get(name) else {
+            return false;
+        };
+        let path = output.join(name);
+        let stamp = stat_stamp(&path);
+        if let (Some(now), Some(then), Some(at)) = (stamp, self.state.stamps.get(name), self.at)
+            && now == *then
+            && now.1 < at
+        {
+            return true;
+        }
+        std::fs::read(&path).is_ok_and(|b| &sha256_hex(&b) == sha)
+    }
+
+    fn outputs_match(&self, output: &Path) -> bool {
+        !self.state.outputs.is_empty()
+            && self
+                .state
+                .outputs
+                .keys()
+                .all(|name| self.unchanged(output, name))
+    }
+}
+
+/// What the write stage writes.
+pub(super) struct Table<'a> {
+    pub(super) plans: &'a BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
+    pub(super) profiles: &'a BTreeMap<String, Profile>,
+    pub(super) skeletons: &'a BTreeMap<String, serde_json::Value>,
+    pub(super) rejects: &'a [Reject],
+    /// Reads them back.
+    pub(super) motions: &'a MotionSource,
+}
+
+/// The table's rows before they are written: the clips in row order and where their frames are.
+pub(super) struct Rows {
+    /// The clips, sorted by id.
+    pub(super) clips: Vec<Clip>,
+    /// Where each one's frames are.
+    pub(super) index: MotionIndex,
+}
+
+/// One planned shard: its file and the clips (indices into the sorted clip list) it holds.
+struct ShardPlan {
+    split: Split,
+    file: String,
+    clips: Vec<usize>,
+}
+
+/// Rough uncompressed size of a clip's row: the per-joint arrays dominate (positions 3, rotations
+/// 4, 6D rotations 6, velocities 3 floats per joint and frame; root, contacts and future root per
+/// frame), whether or not every feature column is switched on.
+fn row_bytes(clip: Summary) -> u64 {
+    let frames = u64::from(clip.frames);
+    let joints = u64::from(clip.joints);
+    frames * joints * (3 + 4 + 6 + 3) * 4 + frames * (3 + 9) * 4 + frames * 4 + 2048
+}
+
+/// Shards per split, in split order, each filled up to `target` bytes (at least one clip).
+fn plan_shards(clips: &HeldClips, target: u64) -> Vec<ShardPlan> {
+    let splits = crate::stages::split::split_order(clips.summaries().map(|(s, _)| s.clone()));
+    let mut plans = Vec::new();
+    for split in splits {
+        let mut groups: Vec<Vec<usize>> = vec![Vec::new()];
+        let mut size = 0u64;
+        for (i, (_, c)) in clips
+            .summaries()
+            .enumerate()
+            .filter(|(_, (s, _))| **s == split)
+        {
+            let b = row_bytes(c);
+            if size + b > target && groups.last().is_some_and(|g| !g.is_empty()) {
+                groups.push(Vec::new());
+                size = 0;
+            }
+            size += b;
+            if let Some(g) = groups.last_mut() {
+                g.push(i);
+            }
+        }
+        let n = groups.len();
+        for (index, group) in groups.into_iter().enumerate() {
+            plans.push(ShardPlan {
+                file: format!("{DATA_DIR}/{split}-{index:05}-of-{n:05}.parquet"),
+                split: split.clone(),
+                clips: group,
+            });
+        }
+    }
+    plans
+}
+
+/// Reads back `split` and `source_path` of every written shard and refuses a capture found in
+/// two splits: the guarantee is checked on what was written, not assumed.
+fn check_splits(
+    plans: &[ShardPlan],
+    path_of: impl Fn(&ShardPlan) -> std::path::PathBuf,
+) -> Result<(), BuildError> {
+    use arrow_array::{Array, StringArray};
+    use parquet::arrow::ProjectionMask;
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let mut seen: BTreeMap<String, std::collections::BTreeSet<String>> = BTreeMap::new();
+    for plan in plans {
+        let path = path_of(plan);
+        let table_err = |e: parquet::errors::ParquetError| BuildError::Table {
+            path: path.clone(),
+            source: e.into(),
+        };
+        let file = std::fs::File::open(&path).map_err(workspace::io_err(&path))?;
+        let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(table_err)?;
+        let mask = ProjectionMask::columns(builder.parquet_schema(), ["split", "source_path"]);
+        let reader = builder.with_projection(mask).build().map_err(table_err)?;
+        for batch in reader {
+            let batch = batch.map_err(|e| BuildError::Table {
+                path: path.clone(),
+                source: e.into(),
+            })?;
+            let column = |name: &str| {
+                batch
+                    .column_by_name(name)
+                    .and_then(|c| c.as_any().downcast_ref::<StringArray>().cloned())
+            };
+            let (Some(splits), Some(paths)) = (column("split"), column("source_path")) else {
+                continue;
+            };
+            for r in 0..batch.num_rows() {
+                if splits.is_null(r) || paths.is_null(r) {
+                    continue;
+                }
+                seen.entry(paths.value(r).to_string())
+                    .or_default()
+                    .insert(splits.value(r).to_string());
+            }
+        }
+    }
+    if let Some((capture, splits)) = seen.into_iter().find(|(_, s)| s.len() > 1) {
+        return Err(BuildError::SplitLeak {
+            capture,
+            splits: splits.into_iter().collect(),
+        });
+    }
+    Ok(())
+}
+
+/// Whether the written outputs are those of a table with `fingerprint`, untouched since; else why
+/// not.
+pub(super) fn written(
+    output: &Path,
+    workspace: &Workspace,
+    fingerprint: &str,
+) -> Result<(), String> {
+    let Some(recorded) = Recorded::load(workspace) else {
+        return Err("never written".to_string());
+    };
+    if !recorded.outputs_match(output) {
+        return Err("output files changed or missing".to_string());
+    }
+    if recorded.state.table_fingerprint != fingerprint {
+        return Err("rows changed".to_string());
+    }
+    Ok(())
+}
+
+/// Inside the workspace: where a write stages the new dataset's files before switching.
+const STAGING_DIR: &str = "staging";
+
+/// Moves a fully written dataset from `staging` into `output`, by renames only (no new bytes, so
+/// no disk-space failure part-way). The old manifest goes first and the new one comes last:
+/// while the switch runs, the folder has no manifest, which readers are told means "not a
+/// finished dataset" (docs/reference.md, "Disk full, unwritable folders"); before and after, the
+/// manifest describes exactly the shards in `data/`.
+fn switch(
+    output: &Path,
+    staging: &Path,
+    plans: &[ShardPlan],
+    has_normalization: bool,
+) -> Result<(), BuildError> {
+    let rename = |from: &Path, to: &Path| -> Result<(), BuildError> {
+        std::fs::rename(from, to).map_err(|e| {
+            BuildError::Workspace(workspace::io_err(to)(std::io::Error::new(
+                e.kind(),
+                format!("cannot move the new file into place: {e}"),
+            )))
+        })
+    };
+    let manifest = output.join(MANIFEST_FILE);
+    if manifest.exists() {
+        std::fs::remove_file(&manifest).map_err(workspace::io_err(&manifest))?;
+    }
+    let data = output.join(DATA_DIR);
+    std::fs::create_dir_all(&data).map_err(workspace::io_err(&data))?;
+    for plan in plans {
+        let staged = staging.join(&plan.file);
+        if staged.is_file() {
+            rename(&staged, &output.join(&plan.file))?;
+        }
+    }
+    // Shards of an earlier layout (other split names or counts) would look like part of the set.
+    let planned: std::collections::BTreeSet<&str> = plans.iter().map(|p| p.file.as_str()).collect();
+    if let Ok(entries) = std::fs::read_dir(&data) {
+        for entry in entries.flatten() {
+            let name = format!("{DATA_DIR}/{}", entry.file_name().to_string_lossy());
+            if name.ends_with(".parquet") && !planned.contains(name.as_str()) {
+                std::fs::remove_file(entry.path()).map_err(workspace::io_err(&entry.path()))?;
+            }
+        }
+    }
+    let normalization = output.join(NORMALIZATION_DIR);
+    if normalization.exists() {
+        std::fs::remove_dir_all(&normalization).map_err(workspace::io_err(&normalization))?;
+    }
+    if has_normalization {
+        rename(&staging.join(NORMALIZATION_DIR), &normalization)?;
+    }
+    for name in [
+        SKELETONS_FILE,
+        REJECTS_FILE,
+        PLANS_FILE,
+        CARD_FILE,
+        MANIFEST_FILE,
+    ] {
+        rename(&staging.join(name), &output.join(name))?;
+    }
+    let _ = std::fs::remove_dir_all(staging);
+    Ok(())
+}
+
+/// What one shard needs to be written or checked.
+struct ShardJob<'a> {
+    table: &'a Table<'a>,
+    /// The rows' clips, in row order, each with where its frames are.
+    clips: &'a HeldClips,
+    companions: &'a Companions,
+    skeletons_json: &'a str,
+    recorded: Option<&'a Recorded>,
+    force: bool,
+    output: &'a Path,
+    staging: &'a Path,
+    /// Whether normalisation statistics are gathered (over every split; each profile then takes
+    /// the training split's, or the first split's that holds it).
+    stats: bool,
+}
+
+/// What writing (or keeping) one shard gave.
+struct ShardDone {
+    entry: motionforge_format::io::manifest::Shard,
+    fingerprint: String,
+    /// Statistics over the shard's rows.
+    stats: Option<NormalizationStats>,
+}
+
+impl ShardJob<'_> {
+    /// The shard's content fingerprint: its rows without frames, where the frames are, and what
+    /// the writer adds (skeletons, schema, features).
+    fn fingerprint(
+        &self,
+        plan: &ShardPlan,
+        rows: &[(Clip, MotionRef)],
+    ) -> Result<String, BuildError> {
+        let held: Vec<&Clip> = rows.iter().map(|(c, _)| c).collect();
+        let refs: Vec<Option<&MotionRef>> = rows.iter().map(|(_, at)| Some(at)).collect();
+        let encoded = motionforge_core::base::encoded_sha256(&(&held, &refs), &plan.file)?;
+        Ok(super::Fingerprint::new("shard", 1)
+            .text("rows", &encoded)
+            .text("skeletons", self.skeletons_json)
+            .json(
+                "schema version",
+                &motionforge_format::io::schema::SCHEMA_VERSION,
+            )
+            .json("config features", &self.companions.features)
+            .json("config dataset.zstd_level", &self.companions.zstd_level)
+            .finish())
+    }
+
+    /// Writes the shard into the staging folder, or keeps the one in place when the last build
+    /// wrote the same; gathers the normalisation statistics of its rows either way.
+    fn run(&self, plan: &ShardPlan) -> Result<ShardDone, BuildError> {
+        // The shard's clips, decoded once for its fingerprint and its rows.
+        let rows = self.clips.get(&plan.clips)?;
+        let fingerprint = self.fingerprint(plan, &rows)?;
+        let kept = match self.recorded {
+            Some(recorded)
+                if !self.force
+                    && recorded.state.shards.get(&plan.file) == Some(&fingerprint)
+                    && recorded.unchanged(self.output, &plan.file) =>
+            {
+                let sha256 = recorded.state.outputs.get(&plan.file).cloned();
+                let bytes = stat_stamp(&self.output.join(&plan.file)).map(|(len, _)| len);
+                sha256.zip(bytes)
+            }
+            _ => None,
+        };
+        let mut stats = self.stats.then(NormalizationStats::default);
+        let (sha256, bytes) = match kept {
+            Some(kept) => {
+                if let Some(stats) = &mut stats {
+                    self.each_row_group(&rows, |rows| {
+                        rows.iter().for_each(|r| stats.add_row(r));
+                        Ok(())
+                    })
+                    .map_err(|e| e.into_build(self.output.join(&plan.file)))?;
+                }
+                kept
+            }
+            None => self.write(plan, &rows, stats.as_mut())?,
+        };
+        Ok(ShardDone {
+            entry: motionforge_format::io::manifest::Shard {
+                bytes: bytes as usize,
+                file: plan.file.clone(),
+                rows: plan.clips.len(),
+                sha256,
+            },
+            fingerprint,
+            stats,
+        })
+    }
+
+    /// Writes the shard to the staging folder; returns its checksum and size.
+    fn write(
+        &self,
+        plan: &ShardPlan,
+        clips: &[(Clip, MotionRef)],
+        mut stats: Option<&mut NormalizationStats>,
+    ) -> Result<(String, u64), BuildError> {
+        let path = self.staging.join(&plan.file);
+        let mut failure = None;
+        let mut written = None;
+        write_atomic_with(&path, |file| {
+            let file = file.try_clone()?;
+            let result = (|| {
+                let mut writer = ShardWriter::new(
+                    HashingWriter::new(file),
+                    self.skeletons_json,
+                    self.companions.zstd_level,
+                )?;
+                self.each_row_group(clips, |rows| {
+                    if let Some(stats) = stats.as_deref_mut() {
+                        rows.iter().for_each(|r| stats.add_row(r));
+                    }
+                    // The rows' arrays are copied into the batch: let them go before encoding.
+                    let batch = rows_to_batch(&rows)?;
+                    drop(rows);
+                    Ok(writer.write_batch(&batch)?)
+                })?;
+                let (_, sha256, bytes) = writer.finish()?.finish();
+                Ok::<_, TableOrBuild>((sha256, bytes))
+            })();
+            match result {
+                Ok(done) => {
+                    written = Some(done);
+                    Ok(())
+                }
+                Err(e) => {
+                    failure = Some(e);
+                    Err(std::io::Error::other("table encoding failed"))
+                }
+            }
+        })
+        .map_err(|e| match failure.take() {
+            // Named by where it goes: the staging folder is an implementation detail.
+            Some(failure) => failure.into_build(self.output.join(&plan.file)),
+            None => BuildError::Workspace(e),
+        })?;
+        written.ok_or_else(|| BuildError::Motion(format!("{}: nothing written", plan.file)))
+    }
+
+    /// Calls `each` with the shard's rows, one row group at a time, in row order. A group's
+    /// frames are read in storage order (neighbours on disk together) and its rows prepared on
+    /// all cores.
+    fn each_row_group(
+        &self,
+        clips: &[(Clip, MotionRef)],
+        mut each: impl FnMut(Vec<Row<'_>>) -> Result<(), TableOrBuild>,
+    ) -> Result<(), TableOrBuild> {
+        let Table {
+            profiles, motions, ..
+        } = *self.table;
+        // Each shard reads with its own recent-entry memory, so parallel shards do not evict
+        // each other's chunks.
+        let motions = motions.sibling();
+        for group in clips.chunks(ROWS_PER_GROUP) {
+            let held: Vec<&Clip> = group.iter().map(|(c, _)| c).collect();
+            let mut order: Vec<usize> = (0..group.len()).collect();
+            // By the chunk a motion is made from first: a mirror (or a composite) is read right
+            // after its original, while the original's chunk is still decoded in the source's
+            // memory of recent entries, instead of decoding the chunk a second time.
+            order.sort_by_cached_key(|&i| (group[i].1.chunks().first().copied(), &group[i].1));
+            let mut frames: Vec<Option<motionforge_core::motion::Motion>> = vec![None; group.len()];
+            for i in order {
+                let (clip, at) = &group[i];
+                frames[i] = Some(
+                    motions
+                        .motion(at, &clip.profile)
+                        .map_err(TableOrBuild::Build)?,
+                );
+            }
+            let rows =
+                held.par_iter()
+                    .zip(frames.par_iter())
+                    .map(|(clip, motion)| {
+                        let profile = profiles.get(&clip.profile).ok_or_else(|| {
+                            TableError::MissingProfile {
+                                clip: clip.clip_id.clone(),
+                                profile: clip.profile.clone(),
+                            }
+                        })?;
+                        let motion = motion.as_ref().ok_or_else(|| {
+                            BuildError::Motion(format!("no frames read for `{}`", clip.clip_id))
+                        });
+                        let motion = motion.map_err(TableOrBuild::Build)?;
+                        Ok(Row::new(clip, motion, profile, &self.companions.features))
+                    })
+                    .collect::<Result<Vec<Row<'_>>, TableOrBuild>>()?;
+            // The rows hold what they need of the frames.
+            drop(frames);
+            each(rows)?;
+        }
+        Ok(())
+    }
+}
+
+/// A shard failed in the table encoder or in the build around it.
+enum TableOrBuild {
+    Table(TableError),
+    Build(BuildError),
+}
+
+impl TableOrBuild {
+    /// The build error, a table error named by the file it was for.
+    fn into_build(self, path: std::path::PathBuf) -> BuildError {
+        match self {
+            TableOrBuild::Table(source) => BuildError::Table { path, source },
+            TableOrBuild::Build(e) => e,
+        }
+    }
+}
+
+impl From<TableError> for TableOrBuild {
+    fn from(e: TableError) -> Self {
+        TableOrBuild::Table(e)
+    }
+}
+
+pub(super) fn write_outputs(
+    force: bool,
+    output: &Path,
+    workspace: &Workspace,
+    fingerprint: &str,
+    table: &Table<'_>,
+    companions: &Companions,
+    rows: Rows,
+) -> Result<bool, BuildError> {
+    let Rows { clips, index } = rows;
+    let Table {
+        plans,
+        skeletons,
+        rejects,
+        ..
+    } = *table;
+    let state_path = workspace.root().join(STATE_FILE);
+    let recorded = Recorded::load(workspace);
+    if !force
+        && let Some(recorded) = &recorded
+        && recorded.state.table_fingerprint == fingerprint
+        && recorded.outputs_match(output)
+    {
+        return Ok(false);
+    }
+    let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
+    // From here on the clips are read a shard at a time: held compressed, they no longer grow
+    // the build's memory with the dataset.
+    let clips = HeldClips::new(clips, |c| index.get(&key(c)).cloned())?;
+    drop(index);
+    let plans_for_shards = plan_shards(&clips, companions.shard_bytes);
+    // Normalisation statistics per split, gathered shard by shard as the rows pass; each
+    // profile takes the training split's, or the first split's holding it (CMU in the demo).
+    let with_stats = !plans_for_shards.is_empty();
+    // Everything new is written into a staging folder first; the dataset folder keeps the
+    // previous dataset, complete and valid, until the new one is fully written (a full disk
+    // fails here and leaves it untouched). Then `switch` moves the new files in, by renames only.
+    let staging = workspace.root().join(STAGING_DIR);
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging).map_err(workspace::io_err(&staging))?;
+    }
+    let staged_data = staging.join(DATA_DIR);
+    std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
+    let job = ShardJob {
+        table,
+        clips: &clips,
+        companions,
+        skeletons_json: &skeletons_json,
+        recorded: recorded.as_ref(),
+        force,
+        output,
+        staging: &staging,
+        stats: with_stats,
+    };
+    // Shards are written on all cores; their results are taken in shard order, so the manifest,
+    // the merged statistics and the error reported (the first shard's that failed) are the same
+    // on every run.
+    let done: Vec<Result<ShardDone, BuildError>> = plans_for_shards
+        .par_iter()
+        .map(|plan| job.run(plan))
+        .collect();
+    let done = done
+        .into_iter()
+        .collect::<Result<Vec<ShardDone>, BuildError>>()?;
+    let mut per_split: BTreeMap<Split, NormalizationStats> = BTreeMap::new();
+    let mut shard_fingerprints = BTreeMap::new();
+    let mut shard_entries: BTreeMap<String, Vec<motionforge_format::io::manifest::Shard>> =
+        BTreeMap::new();
+    let mut split_rows: BTreeMap<Split, usize> = BTreeMap::new();
+    let mut split_bytes: BTreeMap<Split, usize> = BTreeMap::new();
+    let mut outputs = BTreeMap::new();
+    for (plan, done) in plans_for_shards.iter().zip(done) {
+        if let Some(stats) = done.stats {
+            per_split
+                .entry(plan.split.clone())
+                .or_default()
+                .merge(stats);
+        }
+        *split_rows.entry(plan.split.clone()).or_insert(0) += done.entry.rows;
+        *split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
+        outputs.insert(plan.file.clone(), done.entry.sha256.clone());
+        shard_entries
+            .entry(plan.split.to_string())
+            .or_default()
+            .push(done.entry);
+        shard_fingerprints.insert(plan.file.clone(), done.fingerprint);
+    }
+    let staged_path = |plan: &ShardPlan| {
+        let staged = staging.join(&plan.file);
+        if staged.is_file() {
+            staged
+        } else {
+            output.join(&plan.file)
+        }
+    };
+    check_splits(&plans_for_shards, staged_path)?;
+    if with_stats {
+        // Split order: train first.
+        let splits = per_split
+            .into_iter()
+            .map(|(split, stats)| (split.to_string(), stats))
+            .collect();
+        NormalizationStats::per_profile(splits).write(&staging.join(NORMALIZATION_DIR))?;
+    }
+    write_atomic(&staging.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
+    let mut lines = String::new();
+    for r in rejects {
+        lines.push_str(&serde_json::to_string(r).unwrap_or_default());
+        lines.push('\n');
+    }
+    write_atomic(&staging.join(REJECTS_FILE), lines.as_bytes())?;
+    let plans_path = staging.join(PLANS_FILE);
+    let mut plans_error = None;
+    write_atomic_with(&plans_path, |file| {
+        motionforge_format::io::parquet::write_plans(file.try_clone()?, plans)
+            .map(|_| ())
+            .map_err(|e| {
+                plans_error = Some(e);
+                std::io::Error::other("plan table encoding failed")
+            })
+    })
+    .map_err(|e| match plans_error.take() {
+        Some(source) => BuildError::Table {
+            path: output.join(PLANS_FILE),
+            source,
+        },
+        None => BuildError::Workspace(e),
+    })?;
+    let mut manifest = companions.manifest.clone();
+    manifest.splits = split_rows
+        .iter()
+        .map(|(split, rows)| {
+            let split_entry = motionforge_format::io::manifest::SplitShards {
+                rows: *rows,
+                shards: shard_entries
+                    .get(split.as_str())
+                    .cloned()
+                    .unwrap_or_default(),
+            };
+            (split.to_string(), split_entry)
+        })
+        .collect();
+    write_atomic(&staging.join(MANIFEST_FILE), &manifest.to_json())?;
+    let name = manifest.dataset.clone();
+    write_atomic(
+        &staging.join(CARD_FILE),
+        card(&name, &split_rows, &split_bytes, companions).as_bytes(),
+    )?;
+    for name in [
+        SKELETONS_FILE,
+        REJECTS_FILE,
+        PLANS_FILE,
+        MANIFEST_FILE,
+        CARD_FILE,
+    ] {
+        let path = staging.join(name);
+        let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
+        outputs.insert(name.to_string(), sha256_hex(&bytes));
+    }
+    switch(output, &staging, &plans_for_shards, with_stats)?;
+    // Stat data of the files now in place, recorded before the state file is written, so each is
+    // older than the record that vouches for it.
+    let stamps = outputs
+        .keys()
+        .filter_map(|name| stat_stamp(&output.join(name)).map(|s| (name.clone(), s)))
+        .collect();
+    let state = State {
+        table_fingerprint: fingerprint.to_string(),
+        shards: shard_fingerprints,
+        outputs,
+        stamps,
+    };
+    write_atomic(
+        &state_path,
+        &serde_json::to_vec_pretty(&state).unwrap_or_default(),
+    )?;
+    Ok(true)
+}

@@ -1,0 +1,365 @@
+//! `paraphrase` and `plan`: LLM text augmentation of action texts (LINGO B.1.6 and appendix C).
+//! Both run through the response cache; with no LLM configured they use cached answers only and
+//! say in the build report what they skipped.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::OnInvalid;
+use motionforge_core::progress::ProgressSink;
+use motionforge_llm::Unanswered;
+use motionforge_llm::cache::ResponseCache;
+use motionforge_llm::client::{LlmClient, LlmConfig, LlmError, RequestEvent};
+use motionforge_llm::paraphrase::{ParaphraseFault, check_paraphrases};
+use motionforge_llm::plans::{PlanStep, parse_task_plan, repair_message};
+use motionforge_llm::prompt::{PromptError, Prompts};
+
+/// How a stage's LLM answers fared against its checks, for the build report: what passed, what
+/// failed by reason, and what the stage's `on_invalid` policy made of the failures.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct AnswerChecks {
+    /// Answers that passed (for paraphrases: lines).
+    pub accepted: usize,
+    /// Answers (lines) that failed, by reason code (`markup`, `off_list`, `invalid_plan`, ...).
+    pub rejected_by_reason: BTreeMap<String, usize>,
+    /// Failed answers replaced by the embedded labeller's.
+    pub fell_back: usize,
+    /// Failed answers not used.
+    pub dropped: usize,
+    /// Failed answers used anyway (`on_invalid = "keep"`).
+    pub kept: usize,
+    /// Answers cut off by the token limit (also after the retry with more tokens): failed
+    /// requests, never cached.
+    pub truncated: usize,
+}
+
+impl AnswerChecks {
+    /// Counts one failed answer under `reason`.
+    pub fn reject(&mut self, reason: &str) {
+        *self
+            .rejected_by_reason
+            .entry(reason.to_string())
+            .or_insert(0) += 1;
+    }
+
+    /// Answers that failed their checks.
+    pub fn rejected(&self) -> usize {
+        self.rejected_by_reason.values().sum()
+    }
+}
+
+/// What a text-augmentation stage did, for the build report.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct AugmentReport {
+    /// Unique texts the stage covers.
+    pub texts: usize,
+    /// Texts answered (cache or LLM).
+    pub answered: usize,
+    /// Requests sent (repairs included).
+    pub requests: usize,
+    /// Texts whose answer was asked of the LLM this run rather than found in the cache.
+    #[serde(default)]
+    pub asked: usize,
+    /// Texts skipped, by reason (no LLM configured, offline cache miss, request failed).
+    pub skipped: BTreeMap<String, usize>,
+    /// Answers rejected after parsing (and repair, for plans): text and reason.
+    pub rejected: Vec<(String, String)>,
+    /// The checks' counts: accepted, rejected by reason, and what the policy did.
+    #[serde(default)]
+    pub checks: AnswerChecks,
+}
+
+/// Why a text-augmentation stage stops the build.
+#[derive(Debug, thiserror::Error)]
+pub enum AugmentError {
+    /// A prompt does not render.
+    #[error(transparent)]
+    Prompt(#[from] PromptError),
+    /// The server is gone (the probe found nothing, or the circuit breaker opened).
+    #[error("{stage}: {error}")]
+    Server {
+        /// The stage.
+        stage: String,
+        /// The client's error.
+        error: LlmError,
+    },
+}
+
+/// Where an LLM stage reports its requests: the stage's name and the build's progress.
+#[derive(Debug, Clone, Copy)]
+pub struct Asking<'a> {
+    /// The stage name (`paraphrase`, `plan`, `pair_check`, `label`).
+    pub stage: &'a str,
+    /// The build's progress receiver.
+    pub progress: &'a ProgressSink,
+}
+
+impl Asking<'_> {
+    /// The observer handed to the client: the stage's bar counts the prompts sent.
+    pub fn observe(&self, event: RequestEvent) {
+        match event {
+            RequestEvent::Sending { to_send, .. } if to_send > 0 => {
+                self.progress.requests_started(self.stage, to_send as u64);
+            }
+            RequestEvent::Sending { .. } => {}
+            RequestEvent::Finished { ok } => {
+                // The failure first, so the progress line of this request counts it.
+                if !ok {
+                    self.progress.failed(self.stage, 1);
+                }
+                self.progress.advanced(self.stage, 1);
+            }
+        }
+    }
+}
+
+/// Answers for `prompts`: from the cache when offline or without a server, else asked. A server
+/// that is gone stops the stage with the client's error.
+pub(crate) fn answers(
+    prompts: &[String],
+    llm: Option<&LlmConfig>,
+    offline: bool,
+    cache: Option<&mut ResponseCache>,
+    report: &mut AugmentReport,
+    asking: Asking<'_>,
+) -> Result<Vec<Option<String>>, AugmentError> {
+    let (Some(cfg), Some(cache)) = (llm, cache) else {
+        *report
+            .skipped
+            .entry(Unanswered::NoLlm.to_string())
+            .or_insert(0) += prompts.len();
+        return Ok(vec![None; prompts.len()]);
+    };
+    if offline {
+        return Ok(prompts
+            .iter()
+            .map(|p| {
+                let hit = cache.get(&cfg.cache_key(p)).map(str::to_string);
+                if hit.is_none() {
+                    *report
+                        .skipped
+                        .entry(Unanswered::Offline.to_string())
+                        .or_insert(0) += 1;
+                }
+                hit
+            })
+            .collect());
+    }
+    let client = match LlmClient::new(cfg.clone()) {
+        Ok(c) => c,
+        Err(e) => {
+            *report
+                .skipped
+                .entry(Unanswered::Client(e.to_string()).to_string())
+                .or_insert(0) += prompts.len();
+            return Ok(vec![None; prompts.len()]);
+        }
+    };
+    let results = client.complete_all_observed(prompts, cache, &|e| asking.observe(e));
+    let mut out = Vec::with_capacity(results.len());
+    for r in results {
+        match r {
+            Ok(a) => {
+                report.requests += usize::from(!a.from_cache);
+                report.asked += usize::from(!a.from_cache);
+                out.push(Some(a.text));
+            }
+            Err(e) if e.stops_stage() => {
+                return Err(AugmentError::Server {
+                    stage: asking.stage.to_string(),
+                    error: e,
+                });
+            }
+            Err(e) => {
+                if matches!(e, LlmError::Truncated { .. }) {
+                    report.checks.truncated += 1;
+                }
+                *report
+                    .skipped
+                    .entry(Unanswered::RequestFailed(e.to_string()).to_string())
+                    .or_insert(0) += 1;
+                out.push(None);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Paraphrases of every text, each answer checked line by line (`llm::paraphrase`): the lines
+/// kept per normalised text. Refused lines are dropped, or kept with `on_invalid = "keep"`
+/// (duplicates never are); both are counted in `report.checks`.
+#[allow(clippy::too_many_arguments)]
+pub fn paraphrase(
+    texts: &BTreeSet<String>,
+    n: usize,
+    on_invalid: OnInvalid,
+    prompts: &Prompts,
+    llm: Option<&LlmConfig>,
+    offline: bool,
+    cache: Option<&mut ResponseCache>,
+    report: &mut AugmentReport,
+    asking: Asking<'_>,
+) -> Result<BTreeMap<String, Vec<String>>, AugmentError> {
+    let texts: Vec<&String> = texts.iter().collect();
+    report.texts = texts.len();
+    let rendered: Vec<String> = texts
+        .iter()
+        .map(|t| prompts.paraphrase(t, n))
+        .collect::<Result<_, _>>()?;
+    let mut out = BTreeMap::new();
+    for (t, answer) in texts
+        .iter()
+        .zip(answers(&rendered, llm, offline, cache, report, asking)?)
+    {
+        let Some(answer) = answer else { continue };
+        report.answered += 1;
+        let checked = check_paraphrases(t, &answer, n);
+        if checked.lines.is_empty() {
+            // Small models answer nothing at all; that is a failed answer too, not a quiet one.
+            report.checks.reject("empty");
+            report.checks.dropped += 1;
+            report
+                .rejected
+                .push(((*t).clone(), "the answer holds no line".into()));
+        }
+        let mut kept = Vec::new();
+        for (line, fault) in checked.lines {
+            let Some(fault) = fault else {
+                report.checks.accepted += 1;
+                kept.push(line);
+                continue;
+            };
+            report.checks.reject(fault.code());
+            report
+                .rejected
+                .push((format!("{t} -> {line}"), fault.to_string()));
+            if on_invalid == OnInvalid::Keep && fault != ParaphraseFault::Duplicate {
+                report.checks.kept += 1;
+                kept.push(line);
+            } else {
+                report.checks.dropped += 1;
+            }
+        }
+        out.insert((*t).clone(), kept);
+    }
+    Ok(out)
+}
+
+/// Pairs an LLM says a person cannot do at once (SINC's optional semantic check): `pair_compat`
+/// asked once per pair of normalised texts, through the cache. Pairs without an answer are not
+/// vetoed; the report counts them as skipped.
+pub fn incompatible_pairs(
+    pairs: &[(String, String)],
+    prompts: &Prompts,
+    llm: Option<&LlmConfig>,
+    offline: bool,
+    cache: Option<&mut ResponseCache>,
+    report: &mut AugmentReport,
+    asking: Asking<'_>,
+) -> Result<BTreeSet<(String, String)>, AugmentError> {
+    report.texts = pairs.len();
+    let rendered: Vec<String> = pairs
+        .iter()
+        .map(|(a, b)| prompts.pair_compat(a, b))
+        .collect::<Result<_, _>>()?;
+    let mut out = BTreeSet::new();
+    for (pair, answer) in pairs
+        .iter()
+        .zip(answers(&rendered, llm, offline, cache, report, asking)?)
+    {
+        let Some(answer) = answer else { continue };
+        report.answered += 1;
+        let first = answer
+            .trim()
+            .trim_start_matches(|c: char| !c.is_alphabetic())
+            .to_lowercase();
+        let word: String = first.chars().take_while(|c| c.is_alphabetic()).collect();
+        if word == "no" {
+            report.checks.accepted += 1;
+            out.insert(pair.clone());
+        } else if word == "yes" {
+            report.checks.accepted += 1;
+        } else {
+            report.checks.reject("not_yes_or_no");
+            report.checks.dropped += 1;
+            report.rejected.push((
+                format!("{} + {}", pair.0, pair.1),
+                format!("answer is neither yes nor no: `{}`", answer.trim()),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Task plans of every text; an invalid plan is asked once more with a repair message, then
+/// rejected with its reason.
+pub fn plan(
+    texts: &BTreeSet<String>,
+    prompts: &Prompts,
+    llm: Option<&LlmConfig>,
+    offline: bool,
+    mut cache: Option<&mut ResponseCache>,
+    report: &mut AugmentReport,
+    asking: Asking<'_>,
+) -> Result<BTreeMap<String, Vec<PlanStep>>, AugmentError> {
+    let texts: Vec<&String> = texts.iter().collect();
+    report.texts = texts.len();
+    let rendered: Vec<String> = texts
+        .iter()
+        .map(|t| prompts.task_plan(t))
+        .collect::<Result<_, _>>()?;
+    let first = answers(
+        &rendered,
+        llm,
+        offline,
+        cache.as_deref_mut(),
+        report,
+        asking,
+    )?;
+    let mut out = BTreeMap::new();
+    let mut repairs: Vec<(usize, String)> = Vec::new();
+    for (i, answer) in first.iter().enumerate() {
+        let Some(answer) = answer else { continue };
+        match parse_task_plan(answer) {
+            Ok(steps) => {
+                report.answered += 1;
+                report.checks.accepted += 1;
+                out.insert(texts[i].clone(), steps);
+            }
+            Err(e) => repairs.push((
+                i,
+                format!("{}\n{}\n\n{}", rendered[i], answer, repair_message(&e)),
+            )),
+        }
+    }
+    if !repairs.is_empty() {
+        let again: Vec<String> = repairs.iter().map(|(_, p)| p.clone()).collect();
+        let mut repair_report = AugmentReport::default();
+        let repaired = answers(&again, llm, offline, cache, &mut repair_report, asking)?;
+        report.checks.truncated += repair_report.checks.truncated;
+        for ((i, _), answer) in repairs.iter().zip(repaired) {
+            report.requests += repair_report.requests;
+            repair_report.requests = 0;
+            let result = answer
+                .ok_or_else(|| "no answer to the repair request".to_string())
+                .and_then(|a| parse_task_plan(&a).map_err(|e| e.to_string()));
+            match result {
+                Ok(steps) => {
+                    report.answered += 1;
+                    report.checks.accepted += 1;
+                    out.insert(texts[*i].clone(), steps);
+                }
+                Err(reason) => {
+                    report.checks.reject("invalid_plan");
+                    report.checks.dropped += 1;
+                    report.rejected.push((
+                        texts[*i].clone(),
+                        format!("invalid plan after one repair: {reason}"),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,174 @@
+//! The runner's side of the compose stage: its stamp over the clips it pairs (and the optional
+//! LLM pair check), its cached output, and the composites' frames added to the motion index.
+
+use std::collections::BTreeSet;
+
+use super::capture::Shared;
+use super::motions::{self, MotionIndex, MotionSource};
+use super::{BuildError, Fingerprint, StageRun, label, text};
+use motionforge_sources::clip::Clip;
+
+/// The compose stage's cache entry: the synthetic clips (their skeletons in the table), where
+/// their frames come from, and each distinct skeleton once.
+type ComposeEntry = (
+    crate::stages::compose::ComposeOutput,
+    Vec<motions::MotionRef>,
+    motionforge_sources::clip::SkeletonTable,
+);
+
+/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
+/// `None` in probe mode when its output is not cached.
+pub(super) fn compose(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    clips: &mut Vec<Clip>,
+    index: &mut MotionIndex,
+    offline: bool,
+    progress: &motionforge_core::progress::ProgressSink,
+) -> Result<
+    Option<(
+        crate::stages::compose::ComposeReport,
+        crate::stages::augment::AugmentReport,
+        StageRun,
+    )>,
+    BuildError,
+> {
+    let config = shared.config;
+    let all: Vec<&Clip> = clips.iter().collect();
+    // The clips without frames, and where their frames are: together, the stage's input.
+    let encoded = motionforge_core::base::encoded_sha256(&(&all, &*index), "clips to compose")?;
+    let vetoed = llm_vetoes(shared, &all, offline, progress)?;
+    let stamp = Fingerprint::new(
+        crate::stages::compose::NAME,
+        crate::stages::compose::VERSION,
+    )
+    .text("clips", &encoded)
+    .json("config synthetic", &config.synthetic)
+    .json("config dataset.seed", &config.dataset.seed)
+    .json("llm pair check", &vetoed.0)
+    .stamp();
+    let composed = shared
+        .workspace
+        .try_item(crate::stages::compose::NAME, "*", &stamp, || {
+            let mut refs: Vec<motions::MotionRef> = Vec::new();
+            let out = crate::stages::compose::run(
+                &all,
+                &config.synthetic,
+                config.dataset.seed,
+                |c| c.split.clone(),
+                |c| shared.profile_of(c),
+                |c| motions.motion_of(c, index),
+                |a, b| {
+                    let key = (
+                        label::normalize_text(&a.text),
+                        label::normalize_text(&b.text),
+                    );
+                    vetoed.0.contains(&key).then_some("llm_incompatible")
+                },
+                |clip, recipe| {
+                    // The composite's skeleton is a copy made when its source was read (a
+                    // mirror's); held clips share one copy of each.
+                    shared.skeletons.share(&mut clip.skeleton);
+                    let source = |c: &Clip| {
+                        index.get(&motions::key(c)).cloned().ok_or_else(|| {
+                            BuildError::Motion(format!(
+                                "no motion recorded for clip `{}`",
+                                c.clip_id
+                            ))
+                        })
+                    };
+                    refs.push(motions::MotionRef::Composed {
+                        first: Box::new(source(recipe.first)?),
+                        first_parts: recipe.first_parts,
+                        second: Box::new(source(recipe.second)?),
+                        second_parts: recipe.second_parts,
+                        start: match recipe.trim {
+                            motionforge_core::motion::compose::Trim::Start => None,
+                            motionforge_core::motion::compose::Trim::At(s) => Some(s as u32),
+                        },
+                        frames: recipe.frames as u32,
+                    });
+                    Ok::<(), BuildError>(())
+                },
+            )?;
+            let mut out = out;
+            // Stored with each distinct skeleton once, not once per synthetic clip.
+            let skeletons = motionforge_sources::clip::SkeletonTable::take_all(&mut out.clips);
+            Ok::<_, BuildError>((out, refs, skeletons))
+        })?;
+    let Some(((mut composed, refs, skeletons), ran)): Option<(ComposeEntry, bool)> = composed
+    else {
+        return Ok(None);
+    };
+    if !skeletons.give_all(&mut composed.clips) || refs.len() != composed.clips.len() {
+        return Err(BuildError::Motion(format!(
+            "the {} cache entry is inconsistent; run the build again with --force",
+            crate::stages::compose::NAME
+        )));
+    }
+    shared.workspace.prune(
+        crate::stages::compose::NAME,
+        &BTreeSet::from([stamp.fingerprint]),
+    );
+    let run = StageRun {
+        stage: crate::stages::compose::NAME.into(),
+        items: composed.report.sampled,
+        ran: if ran { composed.report.sampled } else { 0 },
+        reused: if ran { 0 } else { composed.report.sampled },
+    };
+    for (clip, at) in composed.clips.iter().zip(refs) {
+        index.insert(motions::key(clip), at);
+    }
+    let mut composed_clips = composed.clips;
+    for clip in &mut composed_clips {
+        shared.skeletons.share(&mut clip.skeleton);
+    }
+    // Exactly: growing by doubling left up to half the clip list (about 1 KB per clip) unused.
+    clips.reserve_exact(composed_clips.len());
+    clips.extend(composed_clips);
+    clips.sort_by(|a, b| {
+        a.clip_id
+            .cmp(&b.clip_id)
+            .then(a.capture.path.cmp(&b.capture.path))
+    });
+    Ok(Some((composed.report, vetoed.1, run)))
+}
+
+/// Text pairs the LLM says cannot be done at once, for the sampled pairs (when `llm_check` is on),
+/// and what asking did.
+fn llm_vetoes(
+    shared: &Shared<'_>,
+    clips: &[&Clip],
+    offline: bool,
+    progress: &motionforge_core::progress::ProgressSink,
+) -> Result<
+    (
+        BTreeSet<(String, String)>,
+        crate::stages::augment::AugmentReport,
+    ),
+    BuildError,
+> {
+    let config = shared.config;
+    let mut report = crate::stages::augment::AugmentReport::default();
+    if !config.synthetic.enabled || !config.synthetic.llm_check {
+        return Ok((BTreeSet::new(), report));
+    }
+    let texts =
+        crate::stages::compose::texts_to_check(clips, &config.synthetic, config.dataset.seed);
+    let prompts = config.prompts()?;
+    let mut cache = text::open_cache(shared)?;
+    let vetoed = crate::stages::augment::incompatible_pairs(
+        &texts,
+        &prompts,
+        config.llm.as_ref(),
+        offline,
+        cache.as_mut(),
+        &mut report,
+        crate::stages::augment::Asking {
+            stage: "pair_check",
+            progress,
+        },
+    )
+    .map_err(text::augment_error)?;
+    Ok((vetoed, report))
+}

@@ -1,0 +1,315 @@
+//! Text stages over the whole dataset (each unique text is asked once, however many clips share
+//! it): part labels, paraphrases, task plans. They run between segmentation and mirroring, so
+//! mirrors inherit mirrored labels and paraphrases.
+
+use motionforge_core::base::RejectReason;
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::{Deserialize, Serialize};
+
+use super::capture::{Item, Shared};
+use super::motions::MotionSource;
+use super::{BuildError, Fingerprint, Reject, StageRun};
+use crate::config::Labeller;
+use crate::stages::augment::{self, Asking, AugmentError, AugmentReport};
+use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
+use motionforge_language::parts::PartSet;
+use motionforge_llm::cache::ResponseCache;
+use motionforge_llm::plans::PlanStep;
+use motionforge_sources::clip::{Clip, LoadedClip, SourceKind};
+
+/// Bump when label assignment changes for the same inputs. 2: flagged LLM answers follow
+/// `part_labels.on_invalid` (the embedded labeller by default) instead of being used.
+const LABEL_VERSION: u32 = 2;
+
+/// What the text stages produced.
+#[derive(Debug, Default)]
+pub(super) struct TextOutcome {
+    /// Per-stage work.
+    pub(super) runs: Vec<StageRun>,
+    /// Labelling counts.
+    pub(super) label: LabelReport,
+    /// Paraphrase counts and skips.
+    pub(super) paraphrase: AugmentReport,
+    /// Plan counts and skips.
+    pub(super) plan: AugmentReport,
+    /// Task plans by text.
+    pub(super) plans: BTreeMap<String, Vec<PlanStep>>,
+    /// Texts whose LLM request failed after its last retry, and plans still invalid after repair.
+    pub(super) rejects: Vec<Reject>,
+    /// In probe mode: the label assignment is not cached (labels, and all after, would run).
+    pub(super) pending: bool,
+}
+
+fn text_reject(stage: &str, text: &str, reason: RejectReason, message: String) -> Reject {
+    Reject {
+        stage: stage.to_string(),
+        file: format!("text: {text}"),
+        line: None,
+        frame: None,
+        reason,
+        message,
+    }
+}
+
+/// Per-clip labels as cached.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+struct ClipLabels {
+    by_clip: BTreeMap<
+        String,
+        (
+            Option<PartSet>,
+            Option<motionforge_language::parts::LabelSources>,
+        ),
+    >,
+    report: LabelReport,
+}
+
+/// The LLM response cache, when the config can use one (an `[llm]` section or the LLM labeller).
+pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> {
+    let config = shared.config;
+    let wanted = config.llm.is_some() || config.part_labels.labeller == Labeller::Llm;
+    if !wanted {
+        return Ok(None);
+    }
+    let path = config.llm_cache_path();
+    ResponseCache::open(&path)
+        .map(Some)
+        .map_err(|e| BuildError::Llm(format!("{}: {e}", path.display())))
+}
+
+/// Runs the text stages and puts their results on the items' clips.
+pub(super) fn run(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    items: &mut [Item],
+    offline: bool,
+    through: super::Stage,
+    progress: &motionforge_core::progress::ProgressSink,
+) -> Result<TextOutcome, BuildError> {
+    use super::Stage;
+    let config = shared.config;
+    let prompts = config.prompts()?;
+    let mut cache = open_cache(shared)?;
+    let mut outcome = TextOutcome::default();
+
+    // Part labels.
+    let mut report = LabelReport::default();
+    let clips: Vec<&Clip> = items.iter().flat_map(|i| i.clips.iter()).collect();
+    let input = LabelInput {
+        config: &config.part_labels,
+        llm: config.llm.as_ref(),
+        prompts: &prompts,
+        offline,
+        progress,
+    };
+    let labels =
+        label::label_texts(&clips, &input, cache.as_mut(), &mut report).map_err(|e| match e {
+            label::LabelError::Prompt(p) => BuildError::Prompt(p),
+            other => BuildError::Llm(other.to_string()),
+        })?;
+    let segment_fps: Vec<&str> = items
+        .iter()
+        .filter_map(|i| i.fingerprint(super::Stage::Segment))
+        .collect();
+    let stamp = Fingerprint::new(label::NAME, LABEL_VERSION)
+        .json("part labels", &labels)
+        .json("segments", &segment_fps)
+        .stamp();
+    let n_clips = clips.len();
+    let assigned = shared.workspace.try_item(label::NAME, "*", &stamp, || {
+        // One capture's frames at a time (the velocity evidence needs the motions), captures on
+        // all cores; the per-capture results are summed afterwards in capture order, so the
+        // figures do not depend on scheduling.
+        use rayon::prelude::*;
+        type Labelled = (
+            Vec<(
+                String,
+                (
+                    Option<motionforge_language::parts::PartSet>,
+                    Option<motionforge_language::parts::LabelSources>,
+                ),
+            )>,
+            BTreeMap<String, usize>,
+            (f64, usize),
+        );
+        let per_capture: Vec<Labelled> = items
+            .par_iter()
+            .map_init(
+                || motions.sibling(),
+                |motions, item| {
+                    let mut labelled = Vec::with_capacity(item.clips.len());
+                    let mut sources = BTreeMap::new();
+                    // Per capture, summed in clip order as one call over the capture would.
+                    let mut capture_agreement = (0.0, 0usize);
+                    for (clip, at) in item.clips.iter().zip(&item.refs) {
+                        let mut full = LoadedClip {
+                            clip: clip.clone(),
+                            motion: motions.motion(at, &clip.profile)?,
+                        };
+                        let mut part = LabelReport::default();
+                        let one = std::slice::from_mut(&mut full);
+                        label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);
+                        let full = full.clip;
+                        for (source, n) in part.sources {
+                            *sources.entry(source).or_insert(0) += n;
+                        }
+                        if let Some((value, n)) = part.velocity_agreement {
+                            capture_agreement.0 += value * n as f64;
+                            capture_agreement.1 += n;
+                        }
+                        labelled.push((full.clip_id, (full.parts, full.label_source)));
+                    }
+                    Ok::<_, BuildError>((labelled, sources, capture_agreement))
+                },
+            )
+            .collect::<Result<_, _>>()?;
+        let mut report = report.clone();
+        let mut by_clip = BTreeMap::new();
+        let mut agreement = (0.0, 0usize);
+        for (labelled, sources, capture_agreement) in per_capture {
+            by_clip.extend(labelled);
+            for (source, n) in sources {
+                *report.sources.entry(source).or_insert(0) += n;
+            }
+            if capture_agreement.1 > 0 {
+                let mean = capture_agreement.0 / capture_agreement.1 as f64;
+                agreement.0 += mean * capture_agreement.1 as f64;
+                agreement.1 += capture_agreement.1;
+            }
+        }
+        if agreement.1 > 0 {
+            report.velocity_agreement = Some((agreement.0 / agreement.1 as f64, agreement.1));
+        }
+        Ok::<_, BuildError>(ClipLabels { by_clip, report })
+    })?;
+    let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
+        outcome.pending = true;
+        return Ok(outcome);
+    };
+    shared
+        .workspace
+        .prune(label::NAME, &BTreeSet::from([stamp.fingerprint]));
+    for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+        if let Some((parts, source)) = assigned.by_clip.get(&clip.clip_id) {
+            clip.parts = *parts;
+            clip.label_source = source.clone();
+        }
+    }
+    // A request that failed after its last retry is a reject (the text fell back as configured);
+    // an offline cache miss is not: it is what offline means.
+    for (text, reason) in &report.missing {
+        if reason.is_failure() {
+            outcome.rejects.push(text_reject(
+                label::NAME,
+                text,
+                RejectReason::LlmRequest,
+                reason.to_string(),
+            ));
+        }
+    }
+    // Requests, cache hits and the answers' checks are this build's; the rest of the report is the
+    // cached assignment's.
+    outcome.label = LabelReport {
+        requests: report.requests,
+        cache_hits: report.cache_hits,
+        missing: report.missing,
+        checks: report.checks,
+        ..assigned.report
+    };
+    outcome.runs.push(StageRun {
+        stage: label::NAME.into(),
+        items: n_clips,
+        ran: if ran { n_clips } else { report.requests },
+        reused: if ran { 0 } else { n_clips },
+    });
+
+    // Paraphrases of every clip's caption.
+    if config.paraphrases.enabled && through >= Stage::Paraphrase {
+        let texts: BTreeSet<String> = items
+            .iter()
+            .flat_map(|i| i.clips.iter().map(|c| normalize_text(&c.text)))
+            .collect();
+        let mut report = AugmentReport::default();
+        let found = augment::paraphrase(
+            &texts,
+            config.paraphrases.n,
+            config.paraphrases.on_invalid,
+            &prompts,
+            config.llm.as_ref(),
+            offline,
+            cache.as_mut(),
+            &mut report,
+            Asking {
+                stage: Stage::Paraphrase.name(),
+                progress,
+            },
+        )
+        .map_err(augment_error)?;
+        for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+            clip.paraphrases = found
+                .get(&normalize_text(&clip.text))
+                .cloned()
+                .unwrap_or_default();
+        }
+        outcome
+            .runs
+            .push(augment_run(Stage::Paraphrase.name(), &report));
+        outcome.paraphrase = report;
+    }
+    // Task plans of every single action.
+    if config.task_plans.enabled && through >= Stage::Plan {
+        let texts: BTreeSet<String> = items
+            .iter()
+            .flat_map(|i| {
+                i.clips
+                    .iter()
+                    .filter(|c| c.kind == SourceKind::RealSingle)
+                    .map(|c| normalize_text(&c.text))
+            })
+            .collect();
+        let mut report = AugmentReport::default();
+        outcome.plans = augment::plan(
+            &texts,
+            &prompts,
+            config.llm.as_ref(),
+            offline,
+            cache.as_mut(),
+            &mut report,
+            Asking {
+                stage: Stage::Plan.name(),
+                progress,
+            },
+        )
+        .map_err(augment_error)?;
+        for (text, reason) in &report.rejected {
+            outcome.rejects.push(text_reject(
+                Stage::Plan.name(),
+                text,
+                RejectReason::InvalidPlan,
+                reason.clone(),
+            ));
+        }
+        outcome.runs.push(augment_run(Stage::Plan.name(), &report));
+        outcome.plan = report;
+    }
+    Ok(outcome)
+}
+
+/// A prompt error stays a prompt error (exit code 2); a server that is gone is an LLM error.
+pub(super) fn augment_error(e: AugmentError) -> BuildError {
+    match e {
+        AugmentError::Prompt(p) => BuildError::Prompt(p),
+        other => BuildError::Llm(other.to_string()),
+    }
+}
+
+fn augment_run(stage: &str, report: &AugmentReport) -> StageRun {
+    StageRun {
+        stage: stage.into(),
+        items: report.texts,
+        // Texts, not requests: a plan's repair is a second request for the same text.
+        ran: report.asked,
+        reused: report.answered.saturating_sub(report.asked),
+    }
+}
