@@ -26,7 +26,7 @@ const CRATE_ORDER: &[&str] = &[
 /// and its other dependencies, as written.
 fn crates() -> Vec<(String, std::path::PathBuf, Vec<String>, Vec<String>)> {
     let pipeline = common::repo().join("pipeline");
-    let mut dirs = vec![pipeline.clone()];
+    let mut dirs = Vec::new();
     for entry in std::fs::read_dir(&pipeline).unwrap().flatten() {
         if entry.path().join("Cargo.toml").is_file() {
             dirs.push(entry.path());

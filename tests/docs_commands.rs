@@ -311,7 +311,7 @@ fn toml_file(path: &Path) -> toml::Table {
 /// The install block's commands, checked against the manifests they would build from.
 fn check_install(page: &str, body: &str, at: &str) {
     let root = toml_file(&common::repo().join("Cargo.toml"));
-    let package = toml_file(&common::repo().join("pipeline/Cargo.toml"));
+    let package = toml_file(&common::repo().join("pipeline/cli/Cargo.toml"));
     let workspace = root["workspace"].as_table().unwrap();
     let members = |key: &str| -> Vec<String> {
         workspace[key]
@@ -330,9 +330,9 @@ fn check_install(page: &str, body: &str, at: &str) {
     for command in commands(body) {
         match without_comment(&command) {
             "cargo build --release" => {
-                // Built from the root, it builds the default member, pipeline/, whose binary
+                // Built from the root, it builds the default member, pipeline/cli, whose binary
                 // target/release/motionforge is the program this test runs in its debug build.
-                assert!(members("default-members").contains(&"pipeline".to_string()));
+                assert!(members("default-members").contains(&"pipeline/cli".to_string()));
                 assert!(bins.contains(&"motionforge"), "{at}: {bins:?}");
                 assert!(command.contains("target/release/motionforge"), "{at}");
                 assert!(
@@ -340,10 +340,10 @@ fn check_install(page: &str, body: &str, at: &str) {
                     "{at}"
                 );
             }
-            "cargo install --locked --path pipeline" => {
+            "cargo install --locked --path pipeline/cli" => {
                 // --locked: the versions of Cargo.lock, which is committed.
                 assert!(common::repo().join("Cargo.lock").is_file(), "{at}");
-                assert!(members("members").contains(&"pipeline".to_string()));
+                assert!(members("members").contains(&"pipeline/cli".to_string()));
                 assert_eq!(package["package"]["name"].as_str(), Some("motionforge"));
                 assert!(bins.contains(&"motionforge"), "{at}: {bins:?}");
             }

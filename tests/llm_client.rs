@@ -1130,7 +1130,7 @@ fn works_when_called_from_inside_a_runtime() {
 #[test]
 fn docs_config_examples_parse() {
     let doc = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/llm-servers.md"),
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/llm-servers.md"),
     )
     .unwrap();
     let blocks: Vec<&str> = doc

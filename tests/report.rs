@@ -17,10 +17,7 @@ use motionforge::report::{
 };
 
 fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the crate is in a folder of the repository")
-        .to_path_buf()
+    common::repo()
 }
 
 /// Builds the demo into `dir` with the binary, as a user would.

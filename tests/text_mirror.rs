@@ -620,7 +620,7 @@ fn words_that_merely_contain_a_side_word_stay() {
         texts.len(),
         caption_words.len()
     );
-    let wordnet_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/pos-lexicon.tsv");
+    let wordnet_path = crate::common::repo().join("schemas/pos-lexicon.tsv");
     let wordnet: BTreeSet<String> = read(&wordnet_path)
         .lines()
         .filter(|l| !l.starts_with('#'))

@@ -2,7 +2,7 @@
 """Exports spaCy en_core_web_sm's part-of-speech tagger for the HumanML3D caption tagger.
 
 HumanML3D's caption lines carry the tags spaCy's `en_core_web_sm` gave each word. motionforge
-writes those lines without Python, so `pipeline/src/humanml3d/caption.rs` runs the same network
+writes those lines without Python, so `pipeline/language/src/caption/mod.rs` runs the same network
 that model runs: its `tok2vec` (hash embeddings of NORM, PREFIX, SUFFIX, SHAPE, SPACY and
 IS_SPACE; a maxout layer; four residual window-convolution layers with maxout and layer
 normalisation) and its `tagger` (a linear layer over 50 Penn Treebank tags). This script reads

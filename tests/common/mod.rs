@@ -9,7 +9,7 @@ use motionforge::motion::{Bvh, read_bvh};
 
 /// The repository root.
 pub fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// `../shared/data` beside the repository (or `MOTIONFORGE_SHARED_DATA`). Tests that need it fail

@@ -41,8 +41,18 @@
 //!    **report** ([`report`]) then reads the shards back for the statistics report.
 //!
 //! [`build::build`] runs it all, reusing every cached output whose fingerprint is unchanged.
-//! Modules depend on each other one way (sources, then stages, then sinks, over the leaf
-//! [`base`]); `tests/module_graph.rs` keeps it so.
+//!
+//! # The crates
+//!
+//! This library re-exports the modules of the workspace's crates under one name, as `polars`
+//! does for its crates: `motionforge-core` ([`base`], [`motion`], [`humanml3d`], [`features`],
+//! [`quality`], [`progress`]), `motionforge-language` ([`text`], [`compose_text`], [`caption`],
+//! [`parts`]), `motionforge-llm` ([`llm`]), `motionforge-sources` ([`annotate`], [`amass`],
+//! [`clip`]), `motionforge-format` ([`io`], [`dataset`]), `motionforge-report` ([`report`]),
+//! `motionforge-export` ([`export`]), `motionforge-planner` ([`planner`]), `motionforge-runner`
+//! ([`build`], [`config`], [`source`], [`stages`]) and `motionforge-serve` ([`serve`]). They
+//! depend on each other one way, in that order (`docs/architecture.md`; `tests/crate_graph.rs`
+//! keeps the order); the binary's own modules are [`terminal`] and the commands.
 //!
 //! # Example
 //!
