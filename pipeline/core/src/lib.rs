@@ -8,6 +8,13 @@
 //! * [`humanml3d`]: HumanML3D's 263-number representation and its inverse.
 //! * [`features`] and [`quality`]: per-clip derived features and plausibility metrics.
 //! * [`progress`]: the progress events stages report.
+//!
+//! # A clip's way through this crate
+//!
+//! Step 1 of a clip's way from capture to row (`docs/architecture.md`): the capture's bytes become a
+//! [`motion::Skeleton`] and a [`motion::Motion`] here ([`motion::read_bvh`], or [`motion::npy`] and
+//! inverse kinematics for joint arrays), and the clip's frames come back here at the end, when its
+//! row is made: forward kinematics, [`features`] and [`quality`] measure them.
 
 pub mod base;
 pub mod features;

@@ -18,6 +18,9 @@
 //! assert_eq!(session, plan(&scene, &DatasetCounts::default(), 7)?);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! Step 6 of a clip's way, looking forward: the dataset's counts per motion type decide which
+//! instructions the next capture session favours, whose event log makes the next clips.
 
 mod balance;
 mod chain;

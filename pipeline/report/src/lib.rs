@@ -8,6 +8,11 @@
 //! `figures.tex`, `report.md` and `figures/*.svg`, `*.pdf` and `*.png` into a folder. The same
 //! rows always give the same bytes: categories are sorted, floats have fixed formatting, nothing
 //! records the time.
+//!
+//! # A clip's way through this crate
+//!
+//! Step 6: the clip's row, read back from the shards, is counted in its motion type, length,
+//! goals, label source and plausibility. Principal types: [`Stats`], [`ReportInput`].
 
 mod figures;
 mod gallery;

@@ -1,5 +1,15 @@
 //! The build runner: runs the stages over every capture, reuses cached work whose fingerprint is
 //! unchanged, writes outputs atomically and records what it rejected and why.
+//!
+//! Principal types: [`config::Config`], [`Stage`], [`Workspace`], [`BuildOptions`] and
+//! [`BuildReport`]; the stages are in [`stages`].
+//!
+//! # A clip's way through this crate
+//!
+//! Step 7 ties steps 1-6 together: [`source`] finds the capture, [`stages::ingest`] and
+//! [`stages::segment`] read and cut it, [`stages::label`], [`stages::augment`],
+//! [`stages::mirror`] and [`stages::compose`] add to the clip, and the write stage hands its row
+//! to the format crate; [`build`] runs them in order, reusing every cached item.
 
 pub mod config;
 pub mod source;

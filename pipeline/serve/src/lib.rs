@@ -4,6 +4,9 @@
 //! The routes are in [`api`], the history in [`history`], schedules and the clock in
 //! [`schedule`]. Each build runs in a process of its own ([`worker`]), so no build can take the
 //! service down. `docs/service.md` explains running it and `docs/openapi.json` describes the API.
+//!
+//! Step 8 of a clip's way: the service runs the runner on demand or on a schedule, and its
+//! browser plays the clip beside its mirror from the shards.
 
 pub mod api;
 mod browse;
