@@ -1,20 +1,20 @@
 //! Shared helpers for integration tests: where the real data lives, and reading it.
 #![allow(dead_code)]
 
-pub mod service;
+pub(crate) mod service;
 
 use std::path::{Path, PathBuf};
 
 use motionforge::motion::{Bvh, read_bvh};
 
 /// The repository root.
-pub fn repo() -> PathBuf {
+pub(crate) fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// `../shared/data` beside the repository (or `MOTIONFORGE_SHARED_DATA`). Tests that need it fail
 /// loudly when it is missing rather than skipping into a pass.
-pub fn shared_data() -> PathBuf {
+pub(crate) fn shared_data() -> PathBuf {
     let dir = std::env::var_os("MOTIONFORGE_SHARED_DATA")
         .map(PathBuf::from)
         .unwrap_or_else(|| repo().join("../shared/data"));
@@ -27,7 +27,7 @@ pub fn shared_data() -> PathBuf {
 }
 
 /// Sorted `.bvh` files in a folder.
-pub fn bvh_files(dir: &Path) -> Vec<PathBuf> {
+pub(crate) fn bvh_files(dir: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
         .map(|e| e.unwrap().path())
@@ -38,27 +38,27 @@ pub fn bvh_files(dir: &Path) -> Vec<PathBuf> {
 }
 
 /// Reads a BVH file, panicking with the path on error.
-pub fn load(path: &Path) -> Bvh {
+pub(crate) fn load(path: &Path) -> Bvh {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     read_bvh(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// A Bandai Namco dataset-1 capture by content/style/take.
-pub fn bandai1(content: &str, style: &str) -> PathBuf {
+pub(crate) fn bandai1(content: &str, style: &str) -> PathBuf {
     shared_data().join(format!(
         "bandai-namco-1/data/dataset-1_{content}_{style}_001.bvh"
     ))
 }
 
 /// A Bandai Namco dataset-2 subset capture.
-pub fn bandai2(content: &str, take: u32) -> PathBuf {
+pub(crate) fn bandai2(content: &str, take: u32) -> PathBuf {
     shared_data().join(format!(
         "bandai-namco-2-subset/data/dataset-2_{content}_normal_{take:03}.bvh"
     ))
 }
 
 /// The Parquet shards of a built dataset folder, sorted by name.
-pub fn shards(dataset: &Path) -> Vec<PathBuf> {
+pub(crate) fn shards(dataset: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dataset.join("data"))
         .unwrap_or_else(|e| panic!("{}: {e}", dataset.display()))
         .map(|e| e.unwrap().path())
@@ -69,7 +69,7 @@ pub fn shards(dataset: &Path) -> Vec<PathBuf> {
 }
 
 /// All shard bytes of a dataset, concatenated in name order: equal bytes, equal datasets.
-pub fn table_bytes(dataset: &Path) -> Vec<u8> {
+pub(crate) fn table_bytes(dataset: &Path) -> Vec<u8> {
     shards(dataset)
         .iter()
         .flat_map(|p| std::fs::read(p).unwrap())
@@ -78,7 +78,7 @@ pub fn table_bytes(dataset: &Path) -> Vec<u8> {
 
 /// Columns of a Parquet file or folder of shards, read with pyarrow (an independent reader,
 /// from `requirements-test.txt`): one `|`-joined line per row.
-pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
+pub(crate) fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
     let script = format!(
         "import pyarrow.parquet as pq, sys\nt = pq.read_table(sys.argv[1], columns='{columns}'.split(','))\nfor r in t.to_pylist(): print('|'.join(str(r[c]) for c in '{columns}'.split(',')))"
     );
@@ -102,7 +102,7 @@ pub fn pyarrow_rows(table: &Path, columns: &str) -> Vec<String> {
 
 /// The Python that runs the independent readers: `MOTIONFORGE_PYTHON`, set by `scripts/test.sh` to
 /// its virtual environment built from `requirements-test.txt`.
-pub fn python() -> std::ffi::OsString {
+pub(crate) fn python() -> std::ffi::OsString {
     // Not the system `python3`: its packages (or their absence) would decide what a test checks.
     std::env::var_os("MOTIONFORGE_PYTHON").unwrap_or_else(|| {
         panic!(
@@ -114,10 +114,10 @@ pub fn python() -> std::ffi::OsString {
 }
 
 /// How to install what a failing Python check was missing.
-pub const PYTHON_SETUP: &str = "run the tests with scripts/test.sh, which makes a Python environment from requirements-test.txt";
+pub(crate) const PYTHON_SETUP: &str = "run the tests with scripts/test.sh, which makes a Python environment from requirements-test.txt";
 
 /// Runs `command`, failing the test with its standard error unless it succeeds.
-pub fn run_ok(command: &mut std::process::Command) -> std::process::Output {
+pub(crate) fn run_ok(command: &mut std::process::Command) -> std::process::Output {
     let out = command.output().unwrap();
     assert!(
         out.status.success(),
@@ -128,7 +128,7 @@ pub fn run_ok(command: &mut std::process::Command) -> std::process::Output {
 }
 
 /// Builds the demo config into `output` with the binary; its dataset folder is `output/demo`.
-pub fn build_demo(output: &Path) -> std::process::Output {
+pub(crate) fn build_demo(output: &Path) -> std::process::Output {
     run_ok(
         std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
             .args(["build", "--config"])
@@ -139,7 +139,7 @@ pub fn build_demo(output: &Path) -> std::process::Output {
 }
 
 /// A fresh folder with the named Bandai Namco dataset-1 captures (stems) copied into `captures/`.
-pub fn bandai1_scratch(names: &[&str]) -> tempfile::TempDir {
+pub(crate) fn bandai1_scratch(names: &[&str]) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     std::fs::create_dir_all(dir.path().join("captures")).unwrap();
     for name in names {
@@ -152,7 +152,7 @@ pub fn bandai1_scratch(names: &[&str]) -> tempfile::TempDir {
 }
 
 /// The walk, kick and bye takes most LLM-stage tests label.
-pub const WALK_KICK_BYE: [&str; 3] = [
+pub(crate) const WALK_KICK_BYE: [&str; 3] = [
     "dataset-1_walk_normal_001",
     "dataset-1_kick_normal_001",
     "dataset-1_bye_normal_001",
@@ -160,7 +160,7 @@ pub const WALK_KICK_BYE: [&str; 3] = [
 
 /// Runs a Python script (the readers `requirements-test.txt` lists) with `args`, fails the test with its
 /// standard error unless it succeeds, and returns its standard output.
-pub fn run_python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> String {
+pub(crate) fn run_python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> String {
     let out = std::process::Command::new(python())
         .args(["-c", script])
         .args(args)
@@ -175,7 +175,7 @@ pub fn run_python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> String
 }
 
 /// Copies the folder `from` into `to`, recursively (a sandbox copy of fixtures or a dataset).
-pub fn copy_dir(from: &Path, to: &Path) {
+pub(crate) fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for entry in std::fs::read_dir(from).unwrap() {
         let entry = entry.unwrap();
@@ -190,7 +190,7 @@ pub fn copy_dir(from: &Path, to: &Path) {
 
 /// The tests' Python ([`python`]) with Hugging Face offline and its cache in `hf_home`, so a test
 /// neither reaches the network nor reads or fills the user's cache.
-pub fn offline_python(hf_home: &Path) -> std::process::Command {
+pub(crate) fn offline_python(hf_home: &Path) -> std::process::Command {
     let mut command = std::process::Command::new(python());
     command
         .env("HF_DATASETS_OFFLINE", "1")

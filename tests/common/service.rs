@@ -10,7 +10,7 @@ use serde_json::Value;
 
 /// A service over `configs` with state in `state`, builds run by `builder`, accepting `token`;
 /// and its base URL.
-pub async fn start_service(
+pub(crate) async fn start_service(
     state: &Path,
     configs: Vec<Config>,
     builder: PathBuf,
@@ -34,7 +34,7 @@ pub async fn start_service(
 }
 
 /// Status and JSON body of `GET url`.
-pub async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
+pub(crate) async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
     let response = client.get(url).send().await.unwrap();
     let status = response.status().as_u16();
     (status, response.json().await.unwrap())
@@ -42,7 +42,7 @@ pub async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
 
 /// Writes a copy of the demo config into `dir` that builds into `output` (its sources still the
 /// repository's fixtures), for commands such as `serve` that take no `--output`; returns its path.
-pub fn demo_config_file(dir: &Path, output: &Path) -> PathBuf {
+pub(crate) fn demo_config_file(dir: &Path, output: &Path) -> PathBuf {
     let fixtures = super::repo().join("fixtures");
     let fixtures = fixtures.to_str().unwrap();
     let mut text = std::fs::read_to_string(super::repo().join("fixtures/demo.toml")).unwrap();
@@ -63,7 +63,7 @@ pub fn demo_config_file(dir: &Path, output: &Path) -> PathBuf {
 }
 
 /// A `motionforge serve` process on a free loopback port; killed (SIGKILL) when dropped.
-pub struct ServeProcess {
+pub(crate) struct ServeProcess {
     /// The process.
     pub child: std::process::Child,
     /// Its base URL.
@@ -75,14 +75,14 @@ pub struct ServeProcess {
 impl ServeProcess {
     /// Starts `motionforge serve --config <config> --state <state>` with `token`, and waits until
     /// it says where it serves.
-    pub fn start(config: &Path, state: &Path, token: &str) -> ServeProcess {
+    pub(crate) fn start(config: &Path, state: &Path, token: &str) -> ServeProcess {
         ServeProcess::start_limited(config, state, token, None)
     }
 
     /// [`ServeProcess::start`], under an address-space limit of `mib` MiB (`prlimit --as`) when
     /// given, so that a memory regression fails instead of taking the machine's memory. The
     /// build processes it starts inherit the limit.
-    pub fn start_limited(
+    pub(crate) fn start_limited(
         config: &Path,
         state: &Path,
         token: &str,
@@ -132,12 +132,12 @@ impl ServeProcess {
     }
 
     /// Its process id (`prlimit` runs it in its own process).
-    pub fn pid(&self) -> u32 {
+    pub(crate) fn pid(&self) -> u32 {
         self.child.id()
     }
 
     /// Its peak resident memory so far (`VmHWM`), in KiB.
-    pub fn peak_rss_kib(&self) -> u64 {
+    pub(crate) fn peak_rss_kib(&self) -> u64 {
         let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid())).unwrap();
         status
             .lines()
@@ -147,7 +147,7 @@ impl ServeProcess {
     }
 
     /// Stops it with SIGTERM, as systemd does, and waits for it.
-    pub fn stop(mut self) {
+    pub(crate) fn stop(mut self) {
         let _ = std::process::Command::new("kill")
             .args(["-TERM", &self.child.id().to_string()])
             .status();

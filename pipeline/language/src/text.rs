@@ -45,7 +45,9 @@ use regex::{Captures, Regex};
 /// A body or direction side named in a caption.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Side {
+    /// "left", "leftward", ...
     Left,
+    /// "right", "rightward", ...
     Right,
 }
 
@@ -62,7 +64,9 @@ impl Side {
 /// A rotation sense named in a caption.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Rotation {
+    /// "clockwise", "cw", ...
     Clockwise,
+    /// "counterclockwise", "anticlockwise", "ccw", ...
     Counterclockwise,
 }
 

@@ -40,7 +40,7 @@ pub(super) struct Graph {
 
 impl Graph {
     /// Every state reachable from the scene's start (breadth first, candidates in file order).
-    pub fn explore(scene: &Scene) -> Result<Graph, PlanError> {
+    pub(crate) fn explore(scene: &Scene) -> Result<Graph, PlanError> {
         let max_states = max_states(scene);
         let start = Rc::new(scene.start.clone());
         let mut states = vec![Rc::clone(&start)];
@@ -83,7 +83,7 @@ impl Graph {
 
     /// The least cost from each state to a valid end state (`None`: unreachable), by Dijkstra on
     /// the reversed graph from every end state.
-    pub fn cost_to_end(&self, scene: &Scene, cost: &[u64]) -> Vec<Option<u64>> {
+    pub(crate) fn cost_to_end(&self, scene: &Scene, cost: &[u64]) -> Vec<Option<u64>> {
         let n = self.states.len();
         let mut reverse: Vec<Vec<(usize, u64)>> = vec![Vec::new(); n];
         for (from, out) in self.edges.iter().enumerate() {

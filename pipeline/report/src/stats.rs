@@ -378,10 +378,10 @@ pub struct TextStats {
 }
 
 /// How many verbs [`TextStats::top_verbs`] lists.
-pub const TOP_VERBS: usize = 10;
+pub(crate) const TOP_VERBS: usize = 10;
 
 /// The words of a caption as the text statistics count them.
-pub fn caption_words(caption: &str) -> Vec<String> {
+pub(crate) fn caption_words(caption: &str) -> Vec<String> {
     caption
         .to_lowercase()
         .split(|c: char| !(c.is_ascii_alphanumeric() || c == '\''))

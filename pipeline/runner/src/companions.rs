@@ -244,7 +244,7 @@ pub(super) fn card_body(
 }
 
 /// The card's usage snippet, run by `tests/loaders.rs` on the demo's card.
-pub const CARD_SNIPPET: &str = r#"import numpy as np
+pub(crate) const CARD_SNIPPET: &str = r#"import numpy as np
 from datasets import load_dataset
 
 root = "<dataset folder>"  # this folder (the one holding README.md and data/)
