@@ -307,3 +307,45 @@ print(t.num_rows)
 "#;
     run_python(script, &[&dir.path().join("out/ds")]);
 }
+
+/// The shard writer encodes a row group's columns on all the pool's threads (issue 34): the
+/// shards must not depend on how many there are.
+#[test]
+fn one_thread_and_two_threads_write_the_same_shards() {
+    let built: Vec<(tempfile::TempDir, std::path::PathBuf)> = ["1", "2"]
+        .into_iter()
+        .map(|threads| {
+            let out = tempfile::tempdir().unwrap();
+            run_ok(
+                Command::new(env!("CARGO_BIN_EXE_motionforge"))
+                    .env("RAYON_NUM_THREADS", threads)
+                    .args(["build", "--config"])
+                    .arg(repo().join("fixtures/demo.toml"))
+                    .arg("--output")
+                    .arg(out.path()),
+            );
+            let dataset = out.path().join("demo");
+            (out, dataset)
+        })
+        .collect();
+    let (one, two) = (&built[0].1, &built[1].1);
+    let names = |dataset: &std::path::Path| -> Vec<std::ffi::OsString> {
+        shards(dataset)
+            .iter()
+            .map(|p| p.file_name().unwrap().to_owned())
+            .collect()
+    };
+    assert!(!shards(one).is_empty());
+    assert_eq!(names(one), names(two));
+    for (a, b) in shards(one).iter().zip(shards(two)) {
+        assert!(
+            fs::read(a).unwrap() == fs::read(&b).unwrap(),
+            "{} differs between 1 and 2 threads",
+            a.file_name().unwrap().to_string_lossy()
+        );
+    }
+    assert_eq!(
+        fs::read(one.join("manifest.json")).unwrap(),
+        fs::read(two.join("manifest.json")).unwrap()
+    );
+}

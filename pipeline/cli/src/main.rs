@@ -501,6 +501,10 @@ enum Command {
         /// Namco: `dataset-2_{content}_{style}_{take}`).
         #[arg(long, requires = "build")]
         pattern: Option<String>,
+        /// With --build: run the builds and the plan on a pool of this many threads (1 to measure
+        /// one core, 2 for two...); default one per CPU (or `RAYON_NUM_THREADS`).
+        #[arg(long, value_name = "N", requires = "build", value_parser = clap::value_parser!(u16).range(1..))]
+        threads: Option<u16>,
         /// Instead, time `preview` (GIF and filmstrip, one thread) on the first 100 original
         /// clips of this built dataset folder, written to a temporary folder: previews per second.
         #[arg(long, value_name = "DATASET", conflicts_with_all = ["build", "write_frames"])]
@@ -964,6 +968,7 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
             copies,
             keep,
             pattern,
+            threads,
             previews,
             captions,
         } => match write_frames {
@@ -982,6 +987,7 @@ fn run(cli: Cli, ui: &Ui) -> Result<ExitCode> {
                     copies,
                     keep,
                     pattern,
+                    threads: threads.map(usize::from),
                 },
                 ui,
             )?,

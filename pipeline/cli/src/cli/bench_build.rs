@@ -29,6 +29,9 @@ pub(crate) struct BuildBench {
     pub(crate) keep: Option<PathBuf>,
     /// File-name pattern; default `<prefix>_{content}_{style}_{take}` from the first file name.
     pub(crate) pattern: Option<String>,
+    /// Threads of the rayon pool the builds and the plan run on; default rayon's own
+    /// (`RAYON_NUM_THREADS`, else one per CPU).
+    pub(crate) threads: Option<usize>,
 }
 
 /// The first line of the config the bench writes: marks a `--keep` folder as the bench's own.
@@ -52,7 +55,18 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         .with_context(|| format!("cannot write {}", config_path.display()))?;
     let config = load_checked(&config_path, None)?;
     let dataset = config.dataset_dir();
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // Everything the build runs in parallel runs on rayon: a pool of N threads is the build on N
+    // cores (the scan and the encode reference are single-threaded by design).
+    let threads = args
+        .threads
+        .unwrap_or_else(rayon::current_num_threads)
+        .max(1);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("bench-build-{i}"))
+        .build()
+        .context("cannot start the build's thread pool")?;
     let start_load = load_average();
 
     // The full builds come first, so the process peak read after them is theirs: nothing before
@@ -64,7 +78,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
             std::fs::remove_dir_all(&dataset)
                 .with_context(|| format!("cannot remove {}", dataset.display()))?;
         }
-        let (run, r) = timed_build(&config, ui)?;
+        let (run, r) = pool.install(|| timed_build(&config, ui))?;
         if r.clips == 0 {
             bail!(
                 "the build wrote 0 clips from {} captures ({} rejected: {}); does `--pattern {pattern}` match the file names?",
@@ -88,7 +102,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let mut noop = Vec::new();
     let mut noop_ran = Vec::new();
     for _ in 0..repeat {
-        let (run, r) = timed_build(&config, ui)?;
+        let (run, r) = pool.install(|| timed_build(&config, ui))?;
         noop_ran.extend(
             r.stages
                 .iter()
@@ -105,7 +119,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         let start_rss_kb = rss_kb();
         let cpu = CpuSnapshot::now();
         let t0 = Instant::now();
-        let p = plan(&config, &BuildOptions::default())?;
+        let p = pool.install(|| plan(&config, &BuildOptions::default()))?;
         let seconds = t0.elapsed().as_secs_f64();
         plan_stale |= !p.nothing_to_run();
         plans.push(Timed {
@@ -117,6 +131,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     }
 
     let scan = scan(&input, copies, repeat)?;
+    let encode = encode_reference(&dataset.join(DATA_DIR), config.dataset.zstd_level, repeat)?;
     let end_load = load_average();
 
     let result = Results {
@@ -125,6 +140,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         copies,
         repeat,
         threads,
+        cpus,
         pattern: &pattern,
         report: &report,
         full,
@@ -133,6 +149,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         plans,
         plan_stale,
         scan,
+        encode,
         cache,
         shards,
         load: (start_load, end_load),
@@ -388,6 +405,8 @@ struct BuildRun {
     /// Resident memory when the build started.
     start_rss_kb: Option<u64>,
     cpu: CpuUse,
+    /// The process's CPU seconds over the build (user + system, all threads).
+    cpu_seconds: f64,
 }
 
 /// A timed call that reports no stages (plan).
@@ -423,6 +442,8 @@ fn timed_build(config: &motionforge::config::Config, ui: &Ui) -> Result<(BuildRu
             total: end.at.duration_since(start.at).as_secs_f64(),
             start_rss_kb,
             cpu,
+            cpu_seconds: end.cpu_ticks.saturating_sub(start.cpu_ticks) as f64
+                / clock_ticks_per_second(),
         },
         report,
     ))
@@ -496,6 +517,8 @@ fn phases(start: Mark, end: Mark, events: &[(Mark, Event)]) -> Vec<Phase> {
 /// The bare scan's best and range, and what it parsed.
 struct Scan {
     seconds: Vec<f64>,
+    /// This thread's CPU seconds of each pass.
+    cpu_seconds: Vec<f64>,
     numbers: u64,
     bytes: u64,
     peak_rss_kb: Option<u64>,
@@ -511,8 +534,10 @@ fn scan(input: &Input, copies: usize, repeat: usize) -> Result<Scan> {
         .map(|f| std::fs::read_to_string(f).with_context(|| format!("cannot read {}", f.display())))
         .collect::<Result<_>>()?;
     let mut seconds = Vec::new();
+    let mut cpu_seconds = Vec::new();
     let mut numbers = 0u64;
     for _ in 0..repeat {
+        let cpu0 = thread_cpu_seconds();
         let t0 = Instant::now();
         let (mut sum, mut count) = (0.0f64, 0u64);
         for _ in 0..copies {
@@ -528,14 +553,100 @@ fn scan(input: &Input, copies: usize, repeat: usize) -> Result<Scan> {
         // The sum is used, so the parsing cannot be optimised away.
         std::hint::black_box(sum);
         seconds.push(t0.elapsed().as_secs_f64());
+        cpu_seconds.push(thread_cpu_seconds() - cpu0);
         numbers = count;
     }
     Ok(Scan {
         seconds,
+        cpu_seconds,
         numbers,
         bytes: texts.iter().map(|t| t.len() as u64).sum::<u64>() * copies as u64,
         peak_rss_kb: peak_rss_kb(),
     })
+}
+
+// ---- the encode reference ------------------------------------------------------------------
+
+/// The encode reference: what arrow-rs's own writer spends encoding the table the build wrote.
+struct EncodeReference {
+    /// Wall seconds of each pass (all shards).
+    seconds: Vec<f64>,
+    /// This thread's CPU seconds of each pass.
+    cpu_seconds: Vec<f64>,
+    shards: usize,
+    rows: usize,
+    /// Bytes one pass wrote.
+    bytes: u64,
+    /// Whether every shard the reference wrote is byte for byte the build's.
+    identical: bool,
+}
+
+/// Every finished shard read back into memory (not timed), then written again to memory by
+/// arrow-rs's `ArrowWriter` in one thread, with the shard writer's own properties
+/// ([`shard_properties`](motionforge::io::parquet::shard_properties): zstd at the dataset's
+/// level, BYTE_STREAM_SPLIT floats without dictionary, no statistics on frame lists, 8 MB pages,
+/// 64-row groups, the same key-value metadata); only the writes are timed, `repeat` times. One
+/// shard is in memory at a time.
+fn encode_reference(data: &Path, zstd_level: i32, repeat: usize) -> Result<EncodeReference> {
+    use parquet::arrow::ArrowWriter;
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(data)
+        .with_context(|| format!("cannot list {}", data.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "parquet"))
+        .collect();
+    files.sort();
+    let mut reference = EncodeReference {
+        seconds: vec![0.0; repeat],
+        cpu_seconds: vec![0.0; repeat],
+        shards: files.len(),
+        rows: 0,
+        bytes: 0,
+        identical: true,
+    };
+    for file in &files {
+        let shard = bytes::Bytes::from(
+            std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?,
+        );
+        let reader = ParquetRecordBatchReaderBuilder::try_new(shard.clone())
+            .with_context(|| format!("cannot read {}", file.display()))?;
+        let skeletons = reader
+            .metadata()
+            .file_metadata()
+            .key_value_metadata()
+            .and_then(|kv| kv.iter().find(|kv| kv.key == "motionforge.skeletons"))
+            .and_then(|kv| kv.value.clone())
+            .unwrap_or_default();
+        // The reader copies the file's key-value metadata into the Arrow schema; the writer
+        // adds it back from the properties, so the schema the build wrote has none.
+        let schema = Arc::new(arrow_schema::Schema::new(reader.schema().fields().clone()));
+        let batches = reader
+            .with_batch_size(motionforge::io::parquet::ROWS_PER_GROUP)
+            .build()?
+            .collect::<Result<Vec<_>, _>>()
+            .with_context(|| format!("cannot read {}", file.display()))?;
+        reference.rows += batches.iter().map(|b| b.num_rows()).sum::<usize>();
+        let props = motionforge::io::parquet::shard_properties(&skeletons, zstd_level)?;
+        for pass in 0..repeat {
+            // Room for the whole file up front, as a file's pages would not be copied again.
+            let mut out = Vec::with_capacity(shard.len());
+            let cpu0 = thread_cpu_seconds();
+            let t0 = Instant::now();
+            let mut writer =
+                ArrowWriter::try_new(&mut out, Arc::clone(&schema), Some(props.clone()))?;
+            for batch in &batches {
+                writer.write(batch)?;
+            }
+            writer.close()?;
+            reference.seconds[pass] += t0.elapsed().as_secs_f64();
+            reference.cpu_seconds[pass] += thread_cpu_seconds() - cpu0;
+            if pass == 0 {
+                reference.bytes += out.len() as u64;
+                reference.identical &= out[..] == shard[..];
+            }
+        }
+    }
+    Ok(reference)
 }
 
 // ---- machine readings ------------------------------------------------------------------------
@@ -583,6 +694,21 @@ fn own_cpu_ticks() -> u64 {
             .unwrap_or(0)
     };
     field(14) + field(15)
+}
+
+/// This thread's CPU time in seconds (user + system); 0 where unreadable.
+fn thread_cpu_seconds() -> f64 {
+    let mut now = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec, which lives on this stack frame.
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) } == 0;
+    if ok {
+        now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9
+    } else {
+        0.0
+    }
 }
 
 /// Clock ticks per second of `/proc` times.
@@ -691,7 +817,10 @@ struct Results<'a> {
     input: &'a Input,
     copies: usize,
     repeat: usize,
+    /// Threads of the pool the builds ran on.
     threads: usize,
+    /// CPUs of the machine.
+    cpus: usize,
     pattern: &'a str,
     report: &'a BuildReport,
     full: Vec<BuildRun>,
@@ -700,6 +829,7 @@ struct Results<'a> {
     plans: Vec<Timed>,
     plan_stale: bool,
     scan: Scan,
+    encode: EncodeReference,
     cache: BTreeMap<String, u64>,
     shards: Vec<u64>,
     load: (Option<String>, Option<String>),
@@ -765,6 +895,26 @@ impl Results<'_> {
         self.full_range().0 / self.scan_range().0
     }
 
+    /// The floor's CPU: the bare scan's plus the encode reference's, each its fastest pass.
+    fn floor_cpu(&self) -> f64 {
+        let scan = min_max(self.scan.cpu_seconds.iter().copied()).0;
+        let encode = min_max(self.encode.cpu_seconds.iter().copied()).0;
+        scan + encode
+    }
+
+    /// The fastest build's CPU seconds over the floor's (issue 34's target: at most 1.5).
+    fn floor_ratio(&self) -> Option<f64> {
+        let floor = self.floor_cpu();
+        self.best()
+            .filter(|_| floor > 0.0)
+            .map(|b| b.cpu_seconds / floor)
+    }
+
+    /// A stretch of the fastest build, by name.
+    fn best_phase(&self, name: &str) -> Option<&Phase> {
+        self.best()?.phases.iter().find(|p| p.name == name)
+    }
+
     fn frames_per_core(&self) -> f64 {
         self.input_frames() as f64 / self.full_range().0 / self.threads as f64
     }
@@ -790,13 +940,14 @@ impl Results<'_> {
         let dropped: usize = r.drops_by_reason.values().sum();
         writeln!(
             out,
-            "bench --build: {} captures ({} x {}), {} frames, {:.1} MB of BVH, {} threads",
+            "bench --build: {} captures ({} x {}), {} frames, {:.1} MB of BVH, a pool of {} threads on {} CPUs",
             grouped(self.input.files.len() as u64 * self.copies as u64),
             self.copies,
             self.input.dir.display(),
             grouped(self.input_frames()),
             mb(self.input_bytes()),
-            self.threads
+            self.threads,
+            self.cpus
         )?;
         writeln!(
             out,
@@ -868,7 +1019,7 @@ impl Results<'_> {
                 best.total,
                 format!("{lo:.2}-{hi:.2}"),
                 "100%",
-                format!("{:.1}", best.cpu.own * self.threads as f64),
+                format!("{:.1}", best.cpu_seconds / best.total.max(1e-9)),
                 best.peak_rss_kb.map_or_else(
                     || "-".to_string(),
                     |kb| format!("{:.0}", kb as f64 / 1024.0)
@@ -891,6 +1042,37 @@ impl Results<'_> {
                 "ratio: {:.1}x the bare scan (full build {lo:.2} s on {} threads / scan {slo:.3} s on one)",
                 self.ratio(),
                 self.threads
+            )?;
+            let (elo, ehi) = min_max(self.encode.cpu_seconds.iter().copied());
+            let (ewlo, _) = min_max(self.encode.seconds.iter().copied());
+            writeln!(
+                out,
+                "encode reference: {elo:.3} s CPU (range {elo:.3}-{ehi:.3}), {ewlo:.3} s wall: arrow-rs's ArrowWriter on one thread re-encoding the {} shards ({} rows, read into memory first, not timed) with the shard writer's properties, {:.1} MB; the same bytes as the build's: {}",
+                self.encode.shards,
+                grouped(self.encode.rows as u64),
+                mb(self.encode.bytes),
+                if self.encode.identical { "yes" } else { "no" }
+            )?;
+            if let Some(write) = self.best_phase("write") {
+                writeln!(
+                    out,
+                    "write stage: {:.2} s wall, {:.2} s CPU, {:.2} cores (a pool of {} threads)",
+                    write.seconds,
+                    write.cpu_seconds,
+                    write.cpu_seconds / write.seconds.max(1e-9),
+                    self.threads
+                )?;
+            }
+            let (scan_cpu, _) = min_max(self.scan.cpu_seconds.iter().copied());
+            writeln!(
+                out,
+                "against the floor: build {:.2} s CPU / (scan {scan_cpu:.3} + encode reference {elo:.3} s CPU) = {}x (target at most 1.5x); wall {:.2} s = build CPU / {:.2} (target: at most CPU / 1.8 = {:.2} s)",
+                best.cpu_seconds,
+                self.floor_ratio()
+                    .map_or_else(|| "n/a".to_string(), |r| format!("{r:.2}")),
+                best.total,
+                best.cpu_seconds / best.total.max(1e-9),
+                best.cpu_seconds / 1.8
             )?;
             writeln!(
                 out,
@@ -996,6 +1178,7 @@ impl Results<'_> {
                 "stages": phases,
                 "peak_rss_kb": run.peak_rss_kb,
                 "start_rss_kb": run.start_rss_kb,
+                "cpu_seconds": run.cpu_seconds,
                 "cpu_share_own": run.cpu.own,
                 "cpu_share_others": run.cpu.others,
             })
@@ -1009,6 +1192,7 @@ impl Results<'_> {
             "copies": self.copies,
             "repeat": self.repeat,
             "threads": self.threads,
+            "cpus": self.cpus,
             "pattern": self.pattern,
             "profile": self.args.profile,
             "captures": self.input.files.len() * self.copies,
@@ -1040,11 +1224,23 @@ impl Results<'_> {
                 "seconds_min": slo,
                 "seconds_max": shi,
                 "seconds": self.scan.seconds,
+                "cpu_seconds": self.scan.cpu_seconds,
                 "numbers": self.scan.numbers,
                 "bytes": self.scan.bytes,
                 "peak_rss_kb": self.scan.peak_rss_kb,
             },
             "ratio": self.ratio(),
+            "encode_reference": {
+                "writer": "arrow-rs ArrowWriter, one thread, the shard writer's properties",
+                "seconds": self.encode.seconds,
+                "cpu_seconds": self.encode.cpu_seconds,
+                "shards": self.encode.shards,
+                "rows": self.encode.rows,
+                "bytes": self.encode.bytes,
+                "identical_to_shards": self.encode.identical,
+            },
+            "floor_cpu_seconds": self.floor_cpu(),
+            "floor_ratio": self.floor_ratio(),
             "frames_per_second_per_core": self.frames_per_core(),
             "peak_rss_kb": {
                 "full_build_first": self.full.first().and_then(|r| r.peak_rss_kb),

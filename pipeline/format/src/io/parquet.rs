@@ -15,13 +15,17 @@ use arrow_array::{
     ListArray, RecordBatch, StringArray, StructArray,
 };
 use arrow_buffer::{NullBuffer, OffsetBuffer, ScalarBuffer};
-use arrow_schema::{ArrowError, DataType, Field, Fields};
+use arrow_schema::{ArrowError, DataType, Field, Fields, SchemaRef};
 use glam::{DQuat, DVec3};
 use parquet::arrow::ArrowWriter;
+use parquet::arrow::arrow_writer::{
+    ArrowColumnChunk, ArrowLeafColumn, ArrowRowGroupWriterFactory, compute_leaves,
+};
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::errors::ParquetError;
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
+use parquet::file::writer::SerializedFileWriter;
 
 use super::schema::{Column, SCHEMA_VERSION, clip_schema};
 use motionforge_core::features::{FeatureConfig, Features};
@@ -885,17 +889,48 @@ pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
 /// parquet's default (1 MB) cut into several pages, each compressed on its own: one page per
 /// column chunk writes faster and compresses a little better (`docs/decisions.md`, "Shard
 /// writer: no statistics on frame lists, 8 MB pages").
-const PAGE_BYTES: usize = 8 * 1024 * 1024;
+pub const PAGE_BYTES: usize = 8 * 1024 * 1024;
 
 /// Clips per row group: large enough for efficient scans, small enough that one group's buffers
 /// stay a few tens of MB for long captures.
 pub const ROWS_PER_GROUP: usize = 64;
 
+/// The writer properties of a shard, compressed with zstd at `zstd_level` (1 to 22): float
+/// columns BYTE_STREAM_SPLIT without a dictionary (and without statistics when per-frame),
+/// [`PAGE_BYTES`] pages, [`ROWS_PER_GROUP`] rows per group, and the schema version and the
+/// skeletons in the file's `key_value_metadata`, so the file describes itself. Public so that a
+/// reference encoder (`bench --build`) writes with the same settings.
+pub fn shard_properties(
+    skeletons_json: &str,
+    zstd_level: i32,
+) -> Result<WriterProperties, TableError> {
+    Ok(float_encoding(&clip_schema(), WriterProperties::builder())?
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(zstd_level)?))
+        .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
+        .set_data_page_size_limit(PAGE_BYTES)
+        .set_key_value_metadata(Some(vec![
+            KeyValue::new(
+                "motionforge.schema_version".to_string(),
+                SCHEMA_VERSION.to_string(),
+            ),
+            KeyValue::new(
+                "motionforge.skeletons".to_string(),
+                skeletons_json.to_string(),
+            ),
+        ]))
+        .build())
+}
+
 /// A shard of the clip table being written: one row group per [`ShardWriter::write`], with the
-/// schema version and the skeletons in the file's `key_value_metadata`, so the file describes
-/// itself. Streams: only the row group being encoded is in memory.
+/// properties of [`shard_properties`]. Streams: only the row group being encoded is in memory.
+///
+/// A row group's leaf columns are encoded in parallel on the current rayon pool (arrow-rs's
+/// `ArrowColumnWriter`s, one per leaf), then appended in schema order: the bytes are those
+/// `ArrowWriter` writes encoding them one after the other, whatever the number of threads.
 pub struct ShardWriter<W: Write + Send> {
-    writer: ArrowWriter<W>,
+    file: SerializedFileWriter<W>,
+    columns: ArrowRowGroupWriterFactory,
+    schema: SchemaRef,
 }
 
 impl<W: Write + Send> ShardWriter<W> {
@@ -905,23 +940,16 @@ impl<W: Write + Send> ShardWriter<W> {
         skeletons_json: &str,
         zstd_level: i32,
     ) -> Result<ShardWriter<W>, TableError> {
-        let props = float_encoding(&clip_schema(), WriterProperties::builder())?
-            .set_compression(Compression::ZSTD(ZstdLevel::try_new(zstd_level)?))
-            .set_max_row_group_row_count(Some(ROWS_PER_GROUP))
-            .set_data_page_size_limit(PAGE_BYTES)
-            .set_key_value_metadata(Some(vec![
-                KeyValue::new(
-                    "motionforge.schema_version".to_string(),
-                    SCHEMA_VERSION.to_string(),
-                ),
-                KeyValue::new(
-                    "motionforge.skeletons".to_string(),
-                    skeletons_json.to_string(),
-                ),
-            ]))
-            .build();
+        let props = shard_properties(skeletons_json, zstd_level)?;
+        let schema = Arc::new(clip_schema());
+        // ArrowWriter sets the file up (the Parquet schema, the embedded Arrow schema in the
+        // key-value metadata) exactly as it would for itself; the row groups are then ours.
+        let (file, columns) = ArrowWriter::try_new(out, Arc::clone(&schema), Some(props))?
+            .into_serialized_writer()?;
         Ok(ShardWriter {
-            writer: ArrowWriter::try_new(out, Arc::new(clip_schema()), Some(props))?,
+            file,
+            columns,
+            schema,
         })
     }
 
@@ -930,17 +958,70 @@ impl<W: Write + Send> ShardWriter<W> {
         self.write_batch(&rows_to_batch(rows)?)
     }
 
-    /// Encodes `batch` (from [`rows_to_batch`], at most [`ROWS_PER_GROUP`] rows) as one row
-    /// group: the caller can let the rows go before the encoder's buffers grow.
+    /// Encodes `batch` (from [`rows_to_batch`]) as row groups of at most [`ROWS_PER_GROUP`]
+    /// rows, as `ArrowWriter` cuts it: the caller can let the rows go before the encoder's
+    /// buffers grow.
     pub fn write_batch(&mut self, batch: &RecordBatch) -> Result<(), TableError> {
-        self.writer.write(batch)?;
-        self.writer.flush()?;
+        let mut start = 0;
+        while start < batch.num_rows() {
+            let rows = ROWS_PER_GROUP.min(batch.num_rows() - start);
+            self.write_group(&batch.slice(start, rows))?;
+            start += rows;
+        }
+        Ok(())
+    }
+
+    /// One row group: the leaves' levels and the leaves' encoding (zstd included) on all the
+    /// pool's threads, the chunks appended in schema order on this one.
+    fn write_group(&mut self, batch: &RecordBatch) -> Result<(), TableError> {
+        use rayon::prelude::*;
+        let fields = self.schema.fields();
+        if batch.num_columns() != fields.len() {
+            return Err(ParquetError::General(format!(
+                "a batch of {} columns for a table of {}",
+                batch.num_columns(),
+                fields.len()
+            ))
+            .into());
+        }
+        let writers = self
+            .columns
+            .create_column_writers(self.file.flushed_row_groups().len())?;
+        let leaves = fields
+            .as_ref()
+            .par_iter()
+            .zip(batch.columns().par_iter())
+            .map(|(field, column)| compute_leaves(field, column))
+            .collect::<Result<Vec<Vec<ArrowLeafColumn>>, ParquetError>>()?;
+        let leaves: Vec<ArrowLeafColumn> = leaves.into_iter().flatten().collect();
+        if leaves.len() != writers.len() {
+            return Err(ParquetError::General(format!(
+                "{} leaf columns for {} column writers",
+                leaves.len(),
+                writers.len()
+            ))
+            .into());
+        }
+        let chunks = writers
+            .into_par_iter()
+            .zip(leaves.par_iter())
+            .map(|(mut writer, leaf)| {
+                writer.write(leaf)?;
+                writer.close()
+            })
+            .collect::<Result<Vec<ArrowColumnChunk>, ParquetError>>()?;
+        drop(leaves);
+        let mut group = self.file.next_row_group()?;
+        for chunk in chunks {
+            chunk.append_to_row_group(&mut group)?;
+        }
+        group.close()?;
         Ok(())
     }
 
     /// Writes the footer and gives the output back.
     pub fn finish(self) -> Result<W, TableError> {
-        Ok(self.writer.into_inner()?)
+        Ok(self.file.into_inner()?)
     }
 }
 
