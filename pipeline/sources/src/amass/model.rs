@@ -86,31 +86,8 @@ macro_rules! hand {
     };
 }
 
-/// SMPL's 22 body joints, the first joints of both families.
-pub const BODY_JOINTS: [&str; 22] = [
-    "pelvis",
-    "left_hip",
-    "right_hip",
-    "spine1",
-    "left_knee",
-    "right_knee",
-    "spine2",
-    "left_ankle",
-    "right_ankle",
-    "spine3",
-    "left_foot",
-    "right_foot",
-    "neck",
-    "left_collar",
-    "right_collar",
-    "head",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-];
+/// SMPL's 22 body joints, the first joints of both families: the joints HumanML3D keeps.
+pub const BODY_JOINTS: [&str; 22] = motionforge_core::humanml3d::JOINTS;
 
 const fn concat_names<const N: usize>(parts: [&[&'static str]; 4]) -> [&'static str; N] {
     let mut out = [""; N];
