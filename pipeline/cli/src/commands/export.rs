@@ -13,7 +13,7 @@ use crate::ui::Ui;
 /// Export a built dataset in another layout, from its shards alone (no rebuild).
 #[derive(clap::Args)]
 #[command(after_help = examples!(
-    "  motionforge export humanml3d --dataset out/demo"
+    "  motionforge export humanml3d out/demo"
 ))]
 pub(crate) struct ExportArgs {
     #[command(subcommand)]
@@ -29,8 +29,8 @@ enum ExportCommand {
     /// 20 fps, and HumanML3D's 263 numbers per frame computed as HumanML3D computes them
     /// (docs/humanml3d.md). Mirrored rows are named M<name>, in their original's split.
     #[command(after_help = examples_then_exit_codes!(
-        "  motionforge export humanml3d --dataset out/demo
-  motionforge export humanml3d --dataset out/demo --out /data/HumanML3D-demo --force"
+        "  motionforge export humanml3d out/demo
+  motionforge export humanml3d out/demo -o /data/HumanML3D-demo --force"
     ))]
     Humanml3d(Humanml3dArgs),
 }
@@ -38,11 +38,17 @@ enum ExportCommand {
 #[derive(clap::Args)]
 struct Humanml3dArgs {
     /// The dataset folder (`<output>/<name>`, holding data/ and skeletons.json).
-    #[arg(long, short)]
-    dataset: PathBuf,
+    #[arg(required_unless_present = "old_dataset")]
+    dataset: Option<PathBuf>,
     /// The folder to write; default `<dataset>/humanml3d`.
     #[arg(long, short)]
-    out: Option<PathBuf>,
+    output: Option<PathBuf>,
+    /// Deprecated spelling of the DATASET argument.
+    #[arg(long = "dataset", short = 'd', hide = true, conflicts_with = "dataset")]
+    old_dataset: Option<PathBuf>,
+    /// Deprecated spelling of `--output`.
+    #[arg(long = "out", hide = true, conflicts_with = "output")]
+    old_out: Option<PathBuf>,
     /// Replace the output folder if it exists.
     #[arg(long)]
     force: bool,
@@ -60,9 +66,14 @@ pub(crate) fn run(args: ExportArgs, ui: &Ui) -> Result<ExitCode> {
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         profiles.push(ProfileSpec::from_toml(&path.display().to_string(), &text)?);
     }
-    let dataset = args.dataset;
-    let out = args
-        .out
+    let dataset = super::deprecated(
+        args.dataset,
+        args.old_dataset,
+        "--dataset",
+        "motionforge export humanml3d <DATASET>",
+    )
+    .unwrap_or_default();
+    let out = super::deprecated(args.output, args.old_out, "--out", "--output (-o)")
         .unwrap_or_else(|| dataset.join(motionforge::export::humanml3d::DEFAULT_DIR));
     let options = motionforge::export::ExportOptions {
         force: args.force,

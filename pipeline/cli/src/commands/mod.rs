@@ -75,3 +75,17 @@ pub(crate) fn load_checked(path: &Path, output: Option<std::path::PathBuf>) -> R
     }
     Ok(config)
 }
+
+/// The value of an argument given in its new spelling or in its `old` one, which still works for
+/// one release but warns on standard error, naming the new spelling.
+pub(crate) fn deprecated<T>(
+    new: Option<T>,
+    old: Option<T>,
+    old_name: &str,
+    instead: &str,
+) -> Option<T> {
+    if old.is_some() {
+        tracing::warn!("`{old_name}` is deprecated and goes in the next release; use {instead}");
+    }
+    new.or(old)
+}

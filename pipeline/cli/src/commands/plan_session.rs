@@ -16,8 +16,8 @@ Examples:
   # a session for the living room, balanced only within itself
   motionforge plan-session --scene schemas/scenes/living-room.toml --seed 7 -o sessions
   # steered toward what the built dataset lacks, under a name of your choice
-  motionforge plan-session --scene schemas/scenes/living-room.toml --seed 8 \\
-      --dataset out/demo --capture living-room-0008 -o sessions
+  motionforge plan-session out/demo --scene schemas/scenes/living-room.toml --seed 8 \\
+      --capture living-room-0008 -o sessions
 
 Exit codes:
   0  success
@@ -29,18 +29,20 @@ Exit codes:
 ///
 /// A Markov chain over the scene's interactions (LINGO's Motion Planner) emits only
 /// instructions whose requirements hold (posture, place, free or holding hands) and ends in
-/// the scene's end state. With --dataset, it favours the motion types the built dataset has
+/// the scene's end state. Given a DATASET, it favours the motion types the built dataset has
 /// fewest clips of, toward the scene's target (docs/planner.md). The same scene, dataset and
 /// seed give the same session.
 #[derive(clap::Args)]
 #[command(after_help = PLAN_SESSION_HELP)]
 pub(crate) struct PlanSessionArgs {
+    /// A built dataset folder (`<output>/<name>`) whose clips per motion type to balance.
+    dataset: Option<PathBuf>,
     /// The scene file (TOML; schemas/scene.md, schemas/scenes/living-room.toml).
     #[arg(long)]
     scene: PathBuf,
-    /// A built dataset folder (`<output>/<name>`) whose clips per motion type to balance.
-    #[arg(long)]
-    dataset: Option<PathBuf>,
+    /// Deprecated spelling of the DATASET argument.
+    #[arg(long = "dataset", hide = true, conflicts_with = "dataset")]
+    old_dataset: Option<PathBuf>,
     /// Seed of the chain.
     #[arg(long)]
     seed: u64,
@@ -73,8 +75,14 @@ fn parse_capture(name: &str) -> Result<String, String> {
 /// `motionforge plan-session`.
 pub(crate) fn run(args: PlanSessionArgs, ui: &Ui) -> Result<ExitCode> {
     let (json, status) = (ui.json(), ui.status());
+    let dataset = super::deprecated(
+        args.dataset,
+        args.old_dataset,
+        "--dataset",
+        "motionforge plan-session <DATASET>",
+    );
     let scene = Scene::load(&args.scene)?;
-    let counts = match &args.dataset {
+    let counts = match &dataset {
         Some(dir) => DatasetCounts::read(dir)
             .with_context(|| format!("reading the dataset {}", dir.display()))?,
         None => DatasetCounts::default(),
@@ -116,7 +124,7 @@ pub(crate) fn run(args: PlanSessionArgs, ui: &Ui) -> Result<ExitCode> {
             (Some(b), Some(a)) => writeln!(
                 out,
                 "KL to the target: {b:.4} in {} -> {a:.4} with this session",
-                show(args.dataset.as_deref())
+                show(dataset.as_deref())
             )?,
             (None, Some(a)) => writeln!(out, "KL of the session alone to the target: {a:.4}")?,
             _ => {}
