@@ -1119,3 +1119,185 @@ fn report_and_export_bvh_answer_json_with_json() {
     assert!(value["frames"].as_u64().unwrap() > 0, "{value}");
     assert!(dir.path().join("cmu_01_01_115-1315.bvh").is_file());
 }
+
+// ---- one command grammar ---------------------------------------------------------------------
+
+/// The commands that read a built dataset folder, each with what else it needs to run.
+const DATASET_COMMANDS: [&[&str]; 6] = [
+    &["clips"],
+    &["preview", "--limit", "1"],
+    &["export-bvh"],
+    &["report"],
+    &["export", "humanml3d"],
+    &[
+        "plan-session",
+        "--scene",
+        "schemas/scenes/living-room.toml",
+        "--seed",
+        "8",
+    ],
+];
+
+#[test]
+fn every_command_takes_the_dataset_first_and_writes_where_o_says() {
+    // --help: the dataset folder is the first positional argument, `-o, --output` is listed by
+    // every command that writes or looks at a build's output, and no old spelling is shown.
+    for command in DATASET_COMMANDS {
+        let mut args = vec![command[0]];
+        if command[0] == "export" {
+            args.push("humanml3d");
+        }
+        args.push("--help");
+        let help = text(&run(&args, &repo()).stdout);
+        let (_, arguments) = help.split_once("Arguments:\n").unwrap_or_default();
+        let first = arguments.split_whitespace().next().unwrap_or_default();
+        assert!(
+            first.trim_matches(['<', '>', '[', ']']) == "DATASET",
+            "`{}`: the first positional argument is the dataset folder:\n{help}",
+            args.join(" ")
+        );
+        assert!(
+            !help.contains("--dataset") && !help.contains("--out "),
+            "`{}` shows no old spelling:\n{help}",
+            args.join(" ")
+        );
+    }
+    for command in [
+        &["build"][..],
+        &["run"],
+        &["plan"],
+        &["status"],
+        &["clean"],
+        &["config", "check"],
+        &["export-bvh"],
+        &["preview"],
+        &["report"],
+        &["export", "humanml3d"],
+        &["plan-session"],
+    ] {
+        let mut args = command.to_vec();
+        args.push("--help");
+        let help = text(&run(&args, &repo()).stdout);
+        assert!(
+            help.contains("  -o, --output <"),
+            "`{}` has -o/--output:\n{help}",
+            args.join(" ")
+        );
+    }
+
+    // Run: each command given the dataset first, and -o where it writes.
+    let (out, dataset) = built_demo();
+    let d = dataset.display().to_string();
+    let listed = run(&["clips", &d, "--json", "--limit", "1"], &repo());
+    assert!(listed.status.success(), "{}", text(&listed.stderr));
+    let clips: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+    let clip = clips[0]["clip_id"].as_str().unwrap().to_string();
+    let target = |name: &str| out.path().join(name).display().to_string();
+    for command in DATASET_COMMANDS {
+        let mut args: Vec<String> = command[..1].iter().map(|s| s.to_string()).collect();
+        let mut rest: Vec<String> = command[1..].iter().map(|s| s.to_string()).collect();
+        if command[0] == "export" {
+            args.push(rest.remove(0));
+        }
+        args.push(d.clone());
+        args.extend(rest);
+        let written = match command[0] {
+            "clips" => None,
+            "export-bvh" => {
+                args.extend(["--clip".to_string(), clip.clone()]);
+                Some(target("clip.bvh"))
+            }
+            name => Some(target(name)),
+        };
+        if let Some(path) = &written {
+            args.extend(["-o".to_string(), path.clone()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let output = run(&args, &repo());
+        assert!(
+            output.status.success(),
+            "`{}`: {}",
+            args.join(" "),
+            text(&output.stderr)
+        );
+        assert!(
+            !text(&output.stderr).contains("deprecated"),
+            "`{}`: {}",
+            args.join(" "),
+            text(&output.stderr)
+        );
+        if let Some(path) = written {
+            assert!(
+                Path::new(&path).exists(),
+                "`{}` wrote {path}",
+                args.join(" ")
+            );
+        }
+    }
+}
+
+#[test]
+fn the_old_spellings_still_work_and_warn_naming_the_new_one() {
+    let (out, dataset) = built_demo();
+    let d = dataset.display().to_string();
+    let old = out.path().join("old").display().to_string();
+    let new = out.path().join("new").display().to_string();
+    let exported = run(
+        &["export", "humanml3d", "--dataset", &d, "--out", &old],
+        &repo(),
+    );
+    assert!(exported.status.success(), "{}", text(&exported.stderr));
+    let stderr = text(&exported.stderr);
+    assert!(
+        stderr.contains("`--dataset` is deprecated")
+            && stderr.contains("motionforge export humanml3d <DATASET>")
+            && stderr.contains("`--out` is deprecated")
+            && stderr.contains("--output"),
+        "{stderr}"
+    );
+    let again = run(&["export", "humanml3d", &d, "-o", &new], &repo());
+    assert!(again.status.success(), "{}", text(&again.stderr));
+    for file in ["Mean.npy", "train.txt", "all.txt"] {
+        assert_eq!(
+            std::fs::read(Path::new(&old).join(file)).unwrap(),
+            std::fs::read(Path::new(&new).join(file)).unwrap(),
+            "{file}: the old spelling does what the new one does"
+        );
+    }
+
+    let session = |dir: &str, dataset_args: &[&str]| {
+        let mut args = vec!["plan-session"];
+        args.extend_from_slice(dataset_args);
+        args.extend([
+            "--scene",
+            "schemas/scenes/living-room.toml",
+            "--seed",
+            "8",
+            "-o",
+            dir,
+        ]);
+        run(&args, &repo())
+    };
+    let old_dir = out.path().join("s-old").display().to_string();
+    let new_dir = out.path().join("s-new").display().to_string();
+    let planned = session(&old_dir, &["--dataset", &d]);
+    assert!(planned.status.success(), "{}", text(&planned.stderr));
+    let stderr = text(&planned.stderr);
+    assert!(
+        stderr.contains("`--dataset` is deprecated")
+            && stderr.contains("motionforge plan-session <DATASET>"),
+        "{stderr}"
+    );
+    let planned = session(&new_dir, &[&d]);
+    assert!(planned.status.success(), "{}", text(&planned.stderr));
+    assert_eq!(
+        std::fs::read(Path::new(&old_dir).join("living-room-8.csv")).unwrap(),
+        std::fs::read(Path::new(&new_dir).join("living-room-8.csv")).unwrap()
+    );
+    // Both spellings at once is a usage error.
+    let both = run(
+        &["export", "humanml3d", &d, "--dataset", &d, "-o", &new],
+        &repo(),
+    );
+    assert_eq!(both.status.code(), Some(2), "{}", text(&both.stderr));
+}

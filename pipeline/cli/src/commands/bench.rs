@@ -1,91 +1,106 @@
-//! Commands that work on captures and clips directly: mirror-text, calibrate-mirror, bench,
-//! export-bvh.
+//! `bench`: throughput of reading, forward kinematics and mirroring; with its options, of
+//! writing shards, of a whole build (`bench_build`), of previews or of the caption tagger.
 
-use crate::{Ui, load_checked};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
 use anyhow::{Context, Result, bail};
 use motionforge::build::BuildOptions;
 use motionforge::config::Config;
-use motionforge::motion::{MirrorPlan, OffsetPolicy, ProfileSpec, calibrate, read_bvh};
-use std::io::{BufRead, Write};
-use std::path::{Path, PathBuf};
-use std::time::Duration;
+use motionforge::motion::{MirrorPlan, OffsetPolicy, read_bvh};
 
-pub(crate) fn mirror_text(file: Option<&Path>) -> Result<()> {
-    let stdin = std::io::stdin();
-    let reader: Box<dyn BufRead> = match file {
-        Some(p) => Box::new(std::io::BufReader::new(
-            std::fs::File::open(p).with_context(|| format!("cannot open {}", p.display()))?,
-        )),
-        None => Box::new(stdin.lock()),
-    };
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    for line in reader.lines() {
-        let line = line.context("reading text")?;
-        writeln!(out, "{}", motionforge::text::mirror_text(&line))?;
-    }
-    out.flush()?;
-    Ok(())
+use super::bench_build::{BuildBench, bench_build};
+use super::mirror::load_profile;
+use crate::ui::Ui;
+
+/// Measure BVH read, forward kinematics and mirroring throughput on a folder of captures; or,
+/// with --build, a whole build of the folder stage by stage beside a bare number scan.
+///
+/// `bench --build` writes a config (file-name labels and sidecars as in fixtures/demo.toml,
+/// mirror and synthetic pairs on, default features, 30 fps) into a temporary folder and runs:
+/// full builds from scratch (wall time per stage), no-op rebuilds, `plan`, and a single-thread
+/// scan that parses every number of the same bytes into f64. It prints the ratio of the build
+/// to the scan, frames/s per core, peak memory, and the stage cache and shard bytes.
+#[derive(clap::Args)]
+#[command(after_help = examples!(
+    "  motionforge bench --repeat 1
+  motionforge bench --build --data ../shared/data/bandai-namco-1/data --repeat 1
+  motionforge bench --captions ../shared/data/sinc/clean_labels.txt"
+))]
+pub(crate) struct BenchArgs {
+    /// Folder of BVH files (all must share one skeleton profile).
+    #[arg(long, default_value = "../shared/data/bandai-namco-1/data")]
+    data: PathBuf,
+    /// Skeleton profile of the captures.
+    #[arg(long, default_value = "bandai-namco")]
+    profile: String,
+    /// Repeat the whole folder this many times and keep the fastest pass; with --build, run
+    /// each measurement (full build, no-op rebuild, plan, scan) this many times.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Instead, measure writing Parquet shards of at least this many frames (the folder's
+    /// clips and mirrors, repeated), with the write's peak memory.
+    #[arg(long, conflicts_with = "build")]
+    write_frames: Option<usize>,
+    /// Instead, time a whole build of the folder stage by stage, beside a bare single-thread
+    /// scan of the same bytes into f64.
+    #[arg(long)]
+    build: bool,
+    /// With --build: list the folder under this many source names (`bn2-1`..`bn2-N`), so the
+    /// build has N times the captures; the scan reads the bytes N times.
+    #[arg(long, default_value_t = 1, requires = "build")]
+    copies: usize,
+    /// With --build: build in this folder (new, empty, or an earlier run's) and keep the
+    /// config and dataset there, instead of a temporary folder removed at the end.
+    #[arg(long, value_name = "DIR", requires = "build")]
+    keep: Option<PathBuf>,
+    /// With --build: the file-name pattern of the labels; default
+    /// `<prefix>_{content}_{style}_{take}` with the prefix of the first file name (Bandai
+    /// Namco: `dataset-2_{content}_{style}_{take}`).
+    #[arg(long, requires = "build")]
+    pattern: Option<String>,
+    /// With --build: run the builds and the plan on a pool of this many threads (1 to measure
+    /// one core, 2 for two...); default one per CPU (or `RAYON_NUM_THREADS`).
+    #[arg(long, value_name = "N", requires = "build", value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
+    /// Instead, time `preview` (GIF and filmstrip, one thread) on the first 100 original
+    /// clips of this built dataset folder, written to a temporary folder: previews per second.
+    #[arg(long, value_name = "DATASET", conflicts_with_all = ["build", "write_frames"])]
+    previews: Option<PathBuf>,
+    /// Instead, time the HumanML3D caption tagger (spaCy's network) on the distinct captions
+    /// of this text file, one a line, on one thread: captions per second.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["build", "write_frames", "previews"])]
+    captions: Option<PathBuf>,
 }
 
-pub(crate) fn load_profile(name: &str) -> Result<ProfileSpec> {
-    if name.ends_with(".toml") {
-        let text =
-            std::fs::read_to_string(name).with_context(|| format!("cannot read profile {name}"))?;
-        Ok(ProfileSpec::from_toml(name, &text)?)
+/// `motionforge bench`.
+pub(crate) fn run(args: BenchArgs, ui: &Ui) -> Result<ExitCode> {
+    if let Some(file) = &args.captions {
+        bench_captions(file)?;
+    } else if let Some(dataset) = &args.previews {
+        super::preview::bench_previews(dataset)?;
+    } else if let Some(frames) = args.write_frames {
+        bench_write(&args.data, &args.profile, frames)?;
+    } else if args.build {
+        let bench = BuildBench {
+            data: args.data,
+            profile: args.profile,
+            repeat: args.repeat,
+            copies: args.copies,
+            keep: args.keep,
+            pattern: args.pattern,
+            threads: args.threads.map(usize::from),
+        };
+        bench_build(&bench, ui)?;
     } else {
-        Ok(ProfileSpec::bundled(name)?)
+        bench(&args.data, &args.profile, args.repeat.max(1))?;
     }
+    Ok(ExitCode::SUCCESS)
 }
 
-pub(crate) fn read_capture(path: &Path) -> Result<motionforge::motion::Bvh> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    read_bvh(&text).with_context(|| format!("{}", path.display()))
-}
-
-pub(crate) fn calibrate_mirror(profile: &str, captures: &[PathBuf]) -> Result<()> {
-    let spec = load_profile(profile)?;
-    let bvhs: Vec<_> = captures
-        .iter()
-        .map(|p| read_capture(p))
-        .collect::<Result<_>>()?;
-    let skeleton = &bvhs[0].skeleton;
-    if let Some((p, _)) = captures
-        .iter()
-        .zip(&bvhs)
-        .find(|(_, b)| b.skeleton.names().ne(skeleton.names()))
-    {
-        bail!(
-            "{} has a different skeleton from {}",
-            p.display(),
-            captures[0].display()
-        );
-    }
-    let bound = spec.bind(skeleton)?;
-    let motions: Vec<_> = bvhs.iter().map(|b| &b.motion).collect();
-    let reflections = calibrate(skeleton, &bound, &motions);
-    let names: Vec<String> = captures
-        .iter()
-        .filter_map(|p| p.file_name())
-        .map(|n| n.to_string_lossy().into_owned())
-        .collect();
-    writeln!(
-        std::io::stdout(),
-        "# Calibrated on {} with `motionforge calibrate-mirror`.\n[reflections]",
-        names.join(", ")
-    )?;
-    for (joint, r) in skeleton.joints.iter().zip(&reflections) {
-        writeln!(
-            std::io::stdout(),
-            "{} = \"{}\"",
-            joint.name,
-            serde_json::to_value(r)?.as_str().unwrap_or_default()
-        )?;
-    }
-    Ok(())
-}
-
-pub(crate) fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
+/// Read, forward kinematics and mirroring of every capture in `data`, best of `repeat` passes.
+fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
     let spec = load_profile(profile)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(data)
         .with_context(|| format!("cannot list {}", data.display()))?
@@ -159,42 +174,6 @@ pub(crate) fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
     Ok(())
 }
 
-pub(crate) fn export_bvh(
-    path: &Path,
-    clip_id: &str,
-    output: Option<PathBuf>,
-    offline: bool,
-    wait: Option<Duration>,
-    ui: &Ui,
-) -> Result<()> {
-    let config = load_checked(path, None)?;
-    // The stages read and refresh the dataset's stage cache, which a running build is writing.
-    let _lock = motionforge::build::lock::WorkspaceLock::acquire(&config.dataset_dir(), wait)?;
-    let (found, ids) = motionforge::build::find_clip(
-        &config,
-        &BuildOptions {
-            offline,
-            ..BuildOptions::default()
-        },
-        clip_id,
-    )?;
-    let Some((clip, profile)) = found else {
-        let hint = motionforge::dataset::near_clip_ids(clip_id, &ids);
-        bail!(
-            "no clip `{clip_id}` in this build ({} clips){hint}",
-            ids.len()
-        );
-    };
-    // The clip as the dataset stores it, so this route and `export-bvh <dataset>` write the same
-    // file.
-    let motion = motionforge::build::stored_motion(&clip, &profile);
-    let text =
-        motionforge::motion::write_bvh(&motion).with_context(|| format!("clip `{clip_id}`"))?;
-    let path = output.unwrap_or_else(|| crate::cli::browse::default_bvh_path(clip_id));
-    motionforge::build::write_atomic(&path, text.as_bytes())?;
-    crate::cli::browse::say_bvh_written(&path, &clip.motion, &clip.clip.profile, ui)
-}
-
 /// Peak resident memory of this process in kB (Linux `VmHWM`), if readable.
 pub(crate) fn peak_rss_kb() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -204,7 +183,7 @@ pub(crate) fn peak_rss_kb() -> Option<u64> {
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
 }
 
-pub(crate) fn bench_write(data: &Path, profile: &str, target_frames: usize) -> Result<()> {
+fn bench_write(data: &Path, profile: &str, target_frames: usize) -> Result<()> {
     let work = std::env::temp_dir().join(format!("motionforge-bench-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
     let data = std::path::absolute(data)?;
@@ -286,7 +265,7 @@ pub(crate) fn bench_write(data: &Path, profile: &str, target_frames: usize) -> R
 
 /// `bench --captions FILE`: tags each distinct caption of the file (one a line) for a HumanML3D
 /// caption line, once on one thread, then all of them again (remembered by `caption::tokens`).
-pub(crate) fn bench_captions(path: &Path) -> Result<()> {
+fn bench_captions(path: &Path) -> Result<()> {
     use motionforge::caption::tokens;
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;

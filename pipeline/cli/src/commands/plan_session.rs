@@ -3,22 +3,60 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use motionforge::planner::{DatasetCounts, Scene, plan, write_session};
 
-/// What `plan-session` was asked for.
+use crate::ui::Ui;
+
+/// Examples and exit codes of `plan-session`.
+const PLAN_SESSION_HELP: &str = "\
+Examples:
+  # a session for the living room, balanced only within itself
+  motionforge plan-session --scene schemas/scenes/living-room.toml --seed 7 -o sessions
+  # steered toward what the built dataset lacks, under a name of your choice
+  motionforge plan-session out/demo --scene schemas/scenes/living-room.toml --seed 8 \\
+      --capture living-room-0008 -o sessions
+
+Exit codes:
+  0  success
+  1  a file that cannot be read or written (the dataset's shards, the output folder)
+  2  a scene that does not parse, fails its checks, or has no valid session";
+
+/// Plan the next capture session for a scene: the instructions an actor performs, as an
+/// event log to time during the capture and a sheet for the operator.
+///
+/// A Markov chain over the scene's interactions (LINGO's Motion Planner) emits only
+/// instructions whose requirements hold (posture, place, free or holding hands) and ends in
+/// the scene's end state. Given a DATASET, it favours the motion types the built dataset has
+/// fewest clips of, toward the scene's target (docs/planner.md). The same scene, dataset and
+/// seed give the same session.
+#[derive(clap::Args)]
+#[command(after_help = PLAN_SESSION_HELP)]
 pub(crate) struct PlanSessionArgs {
-    pub scene: PathBuf,
-    pub dataset: Option<PathBuf>,
-    pub seed: u64,
-    pub output: PathBuf,
-    pub capture: Option<String>,
+    /// A built dataset folder (`<output>/<name>`) whose clips per motion type to balance.
+    dataset: Option<PathBuf>,
+    /// The scene file (TOML; schemas/scene.md, schemas/scenes/living-room.toml).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Deprecated spelling of the DATASET argument.
+    #[arg(long = "dataset", hide = true, conflicts_with = "dataset")]
+    old_dataset: Option<PathBuf>,
+    /// Seed of the chain.
+    #[arg(long)]
+    seed: u64,
+    /// Folder to write `<capture>.csv` (the event log) and `<capture>.md` (the sheet) into.
+    #[arg(long, short, default_value = ".")]
+    output: PathBuf,
+    /// The capture's name, and so the files' stem; default `<scene name>-<seed>`.
+    #[arg(long, value_parser = parse_capture)]
+    capture: Option<String>,
 }
 
 /// `--capture` values: letters, digits, `-`, `_` and `.` only (not first), so the name is a
 /// file stem on any system and the event log's capture key.
-pub(crate) fn parse_capture(name: &str) -> Result<String, String> {
+fn parse_capture(name: &str) -> Result<String, String> {
     let ok = !name.is_empty()
         && !name.starts_with('.')
         && name
@@ -34,9 +72,17 @@ pub(crate) fn parse_capture(name: &str) -> Result<String, String> {
     }
 }
 
-pub(crate) fn plan_session(args: PlanSessionArgs, json: bool, status: bool) -> Result<()> {
+/// `motionforge plan-session`.
+pub(crate) fn run(args: PlanSessionArgs, ui: &Ui) -> Result<ExitCode> {
+    let (json, status) = (ui.json(), ui.status());
+    let dataset = super::deprecated(
+        args.dataset,
+        args.old_dataset,
+        "--dataset",
+        "motionforge plan-session <DATASET>",
+    );
     let scene = Scene::load(&args.scene)?;
-    let counts = match &args.dataset {
+    let counts = match &dataset {
         Some(dir) => DatasetCounts::read(dir)
             .with_context(|| format!("reading the dataset {}", dir.display()))?,
         None => DatasetCounts::default(),
@@ -78,7 +124,7 @@ pub(crate) fn plan_session(args: PlanSessionArgs, json: bool, status: bool) -> R
             (Some(b), Some(a)) => writeln!(
                 out,
                 "KL to the target: {b:.4} in {} -> {a:.4} with this session",
-                show(args.dataset.as_deref())
+                show(dataset.as_deref())
             )?,
             (None, Some(a)) => writeln!(out, "KL of the session alone to the target: {a:.4}")?,
             _ => {}
@@ -93,7 +139,7 @@ pub(crate) fn plan_session(args: PlanSessionArgs, json: bool, status: bool) -> R
             written.sheet.display()
         )?;
     }
-    Ok(())
+    Ok(ExitCode::SUCCESS)
 }
 
 fn show(dataset: Option<&Path>) -> String {

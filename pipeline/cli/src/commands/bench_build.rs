@@ -12,8 +12,9 @@ use anyhow::{Context, Result, bail};
 use motionforge::build::{BuildOptions, BuildReport, DATA_DIR, build, plan};
 use motionforge::progress::{Progress, ProgressSink};
 
-use crate::cli::tools::peak_rss_kb;
-use crate::{Ui, load_checked};
+use super::bench::peak_rss_kb;
+use super::load_checked;
+use crate::ui::Ui;
 
 /// What `bench --build` is asked to do.
 pub(crate) struct BuildBench {
@@ -84,7 +85,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
                 "the build wrote 0 clips from {} captures ({} rejected: {}); does `--pattern {pattern}` match the file names?",
                 r.captures,
                 r.rejects.len(),
-                crate::cli::summary::counts(&r.rejects_by_reason)
+                crate::summary::counts(&r.rejects_by_reason)
             );
         }
         if r.stages.iter().any(|s| s.reused > 0) {
@@ -974,184 +975,219 @@ impl Results<'_> {
             "stage", "seconds", "range", "share", "cores", "peak MB", "ran/reused", "no-op"
         )?;
         if let Some(best) = self.best() {
-            for phase in &best.phases {
-                let noop_gap = Self::phase_range(&self.noop, &phase.name).map_or(0.0, |r| r.1);
-                // Gaps of a few milliseconds are noise; the JSON keeps them.
-                if phase.gap && phase.seconds.max(noop_gap) < 0.005 {
-                    continue;
-                }
-                let (plo, phi) = Self::phase_range(&self.full, &phase.name)
-                    .unwrap_or((phase.seconds, phase.seconds));
-                let noop = Self::phase_range(&self.noop, &phase.name)
-                    .map_or_else(|| "-".to_string(), |(n, _)| format!("{n:.2}"));
-                let counts = if phase.gap {
-                    String::new()
-                } else {
-                    format!("{}/{}", phase.ran, phase.reused)
-                };
-                let cores = if phase.seconds > 0.05 {
-                    format!("{:.1}", phase.cpu_seconds / phase.seconds)
-                } else {
-                    "-".to_string()
-                };
-                let peak = phase.peak_kb.map_or_else(
-                    || "-".to_string(),
-                    |kb| format!("{:.0}", kb as f64 / 1024.0),
-                );
-                writeln!(
-                    out,
-                    "{:<30} {:>8.2} {:>13} {:>5.1}% {:>5} {:>8} {:>11} {:>7}",
-                    phase.name,
-                    phase.seconds,
-                    format!("{plo:.2}-{phi:.2}"),
-                    100.0 * phase.seconds / best.total,
-                    cores,
-                    peak,
-                    counts,
-                    noop
-                )?;
+            self.print_stages(&mut out, best, (lo, hi))?;
+            self.print_against_scan(&mut out, best, lo)?;
+            self.print_outputs(&mut out)?;
+        }
+        Ok(())
+    }
+
+    /// The table of the fastest full build's stretches, with their no-op rebuild times.
+    fn print_stages(
+        &self,
+        out: &mut impl Write,
+        best: &BuildRun,
+        (lo, hi): (f64, f64),
+    ) -> std::io::Result<()> {
+        for phase in &best.phases {
+            let noop_gap = Self::phase_range(&self.noop, &phase.name).map_or(0.0, |r| r.1);
+            // Gaps of a few milliseconds are noise; the JSON keeps them.
+            if phase.gap && phase.seconds.max(noop_gap) < 0.005 {
+                continue;
             }
-            let (nlo, nhi) = min_max(self.noop.iter().map(|r| r.total));
+            let (plo, phi) = Self::phase_range(&self.full, &phase.name)
+                .unwrap_or((phase.seconds, phase.seconds));
+            let noop = Self::phase_range(&self.noop, &phase.name)
+                .map_or_else(|| "-".to_string(), |(n, _)| format!("{n:.2}"));
+            let counts = if phase.gap {
+                String::new()
+            } else {
+                format!("{}/{}", phase.ran, phase.reused)
+            };
+            let cores = if phase.seconds > 0.05 {
+                format!("{:.1}", phase.cpu_seconds / phase.seconds)
+            } else {
+                "-".to_string()
+            };
+            let peak = phase.peak_kb.map_or_else(
+                || "-".to_string(),
+                |kb| format!("{:.0}", kb as f64 / 1024.0),
+            );
             writeln!(
                 out,
-                "{:<30} {:>8.2} {:>13} {:>6} {:>5} {:>8} {:>11} {:>7.2}",
-                "total",
-                best.total,
-                format!("{lo:.2}-{hi:.2}"),
-                "100%",
-                format!("{:.1}", best.cpu_seconds / best.total.max(1e-9)),
-                best.peak_rss_kb.map_or_else(
-                    || "-".to_string(),
-                    |kb| format!("{:.0}", kb as f64 / 1024.0)
-                ),
-                "",
-                nlo
+                "{:<30} {:>8.2} {:>13} {:>5.1}% {:>5} {:>8} {:>11} {:>7}",
+                phase.name,
+                phase.seconds,
+                format!("{plo:.2}-{phi:.2}"),
+                100.0 * phase.seconds / best.total,
+                cores,
+                peak,
+                counts,
+                noop
             )?;
-            writeln!(out)?;
-            let (slo, shi) = self.scan_range();
+        }
+        let (nlo, _) = min_max(self.noop.iter().map(|r| r.total));
+        writeln!(
+            out,
+            "{:<30} {:>8.2} {:>13} {:>6} {:>5} {:>8} {:>11} {:>7.2}",
+            "total",
+            best.total,
+            format!("{lo:.2}-{hi:.2}"),
+            "100%",
+            format!("{:.1}", best.cpu_seconds / best.total.max(1e-9)),
+            best.peak_rss_kb.map_or_else(
+                || "-".to_string(),
+                |kb| format!("{:.0}", kb as f64 / 1024.0)
+            ),
+            "",
+            nlo
+        )?;
+        Ok(())
+    }
+
+    /// The encode reference, the write stage's CPU and the build against the floor (scan plus
+    /// encode reference).
+    fn print_against_floor(&self, out: &mut impl Write, best: &BuildRun) -> std::io::Result<()> {
+        let (elo, ehi) = min_max(self.encode.cpu_seconds.iter().copied());
+        let (ewlo, _) = min_max(self.encode.seconds.iter().copied());
+        writeln!(
+            out,
+            "encode reference: {elo:.3} s CPU (range {elo:.3}-{ehi:.3}), {ewlo:.3} s wall: arrow-rs's ArrowWriter on one thread re-encoding the {} shards ({} rows, read into memory first, not timed) with the shard writer's properties, {:.1} MB; the same bytes as the build's: {}",
+            self.encode.shards,
+            grouped(self.encode.rows as u64),
+            mb(self.encode.bytes),
+            if self.encode.identical { "yes" } else { "no" }
+        )?;
+        if let Some(write) = self.best_phase("write") {
             writeln!(
                 out,
-                "bare scan: {slo:.3} s (range {slo:.3}-{shi:.3}, best of {}), one thread, {} numbers from {:.1} MB, {:.0} MB/s",
-                self.repeat,
-                grouped(self.scan.numbers),
-                mb(self.scan.bytes),
-                mb(self.scan.bytes) / slo
-            )?;
-            writeln!(
-                out,
-                "ratio: {:.1}x the bare scan (full build {lo:.2} s on {} threads / scan {slo:.3} s on one)",
-                self.ratio(),
+                "write stage: {:.2} s wall, {:.2} s CPU, {:.2} cores (a pool of {} threads)",
+                write.seconds,
+                write.cpu_seconds,
+                write.cpu_seconds / write.seconds.max(1e-9),
                 self.threads
             )?;
-            let (elo, ehi) = min_max(self.encode.cpu_seconds.iter().copied());
-            let (ewlo, _) = min_max(self.encode.seconds.iter().copied());
-            writeln!(
-                out,
-                "encode reference: {elo:.3} s CPU (range {elo:.3}-{ehi:.3}), {ewlo:.3} s wall: arrow-rs's ArrowWriter on one thread re-encoding the {} shards ({} rows, read into memory first, not timed) with the shard writer's properties, {:.1} MB; the same bytes as the build's: {}",
-                self.encode.shards,
-                grouped(self.encode.rows as u64),
-                mb(self.encode.bytes),
-                if self.encode.identical { "yes" } else { "no" }
-            )?;
-            if let Some(write) = self.best_phase("write") {
-                writeln!(
-                    out,
-                    "write stage: {:.2} s wall, {:.2} s CPU, {:.2} cores (a pool of {} threads)",
-                    write.seconds,
-                    write.cpu_seconds,
-                    write.cpu_seconds / write.seconds.max(1e-9),
-                    self.threads
-                )?;
+        }
+        let (scan_cpu, _) = min_max(self.scan.cpu_seconds.iter().copied());
+        writeln!(
+            out,
+            "against the floor: build {:.2} s CPU / (scan {scan_cpu:.3} + encode reference {elo:.3} s CPU) = {}x (target at most 1.5x); wall {:.2} s = build CPU / {:.2} (target: at most CPU / 1.8 = {:.2} s)",
+            best.cpu_seconds,
+            self.floor_ratio()
+                .map_or_else(|| "n/a".to_string(), |r| format!("{r:.2}")),
+            best.total,
+            best.cpu_seconds / best.total.max(1e-9),
+            best.cpu_seconds / 1.8
+        )
+    }
+
+    /// The build against the bare scan, the no-op rebuild and plan, and peak memory.
+    fn print_against_scan(
+        &self,
+        out: &mut impl Write,
+        best: &BuildRun,
+        lo: f64,
+    ) -> std::io::Result<()> {
+        let (nlo, nhi) = min_max(self.noop.iter().map(|r| r.total));
+        writeln!(out)?;
+        let (slo, shi) = self.scan_range();
+        writeln!(
+            out,
+            "bare scan: {slo:.3} s (range {slo:.3}-{shi:.3}, best of {}), one thread, {} numbers from {:.1} MB, {:.0} MB/s",
+            self.repeat,
+            grouped(self.scan.numbers),
+            mb(self.scan.bytes),
+            mb(self.scan.bytes) / slo
+        )?;
+        writeln!(
+            out,
+            "ratio: {:.1}x the bare scan (full build {lo:.2} s on {} threads / scan {slo:.3} s on one)",
+            self.ratio(),
+            self.threads
+        )?;
+        self.print_against_floor(out, best)?;
+        writeln!(
+            out,
+            "frames/s per core: {} ({} frames / {lo:.2} s / {} cores)",
+            grouped(self.frames_per_core().round() as u64),
+            grouped(self.input_frames()),
+            self.threads
+        )?;
+        writeln!(
+            out,
+            "no-op rebuild: {nlo:.2} s (range {nlo:.2}-{nhi:.2}){}",
+            if self.noop_ran.is_empty() {
+                ", nothing ran".to_string()
+            } else {
+                format!("; not a no-op: {}", self.noop_ran.join(", "))
             }
-            let (scan_cpu, _) = min_max(self.scan.cpu_seconds.iter().copied());
-            writeln!(
-                out,
-                "against the floor: build {:.2} s CPU / (scan {scan_cpu:.3} + encode reference {elo:.3} s CPU) = {}x (target at most 1.5x); wall {:.2} s = build CPU / {:.2} (target: at most CPU / 1.8 = {:.2} s)",
-                best.cpu_seconds,
-                self.floor_ratio()
-                    .map_or_else(|| "n/a".to_string(), |r| format!("{r:.2}")),
-                best.total,
-                best.cpu_seconds / best.total.max(1e-9),
-                best.cpu_seconds / 1.8
-            )?;
-            writeln!(
-                out,
-                "frames/s per core: {} ({} frames / {lo:.2} s / {} cores)",
-                grouped(self.frames_per_core().round() as u64),
-                grouped(self.input_frames()),
-                self.threads
-            )?;
-            writeln!(
-                out,
-                "no-op rebuild: {nlo:.2} s (range {nlo:.2}-{nhi:.2}){}",
-                if self.noop_ran.is_empty() {
-                    ", nothing ran".to_string()
-                } else {
-                    format!("; not a no-op: {}", self.noop_ran.join(", "))
-                }
-            )?;
-            let (plo, phi) = min_max(self.plans.iter().map(|p| p.seconds));
-            writeln!(
-                out,
-                "plan: {plo:.2} s (range {plo:.2}-{phi:.2}){}",
-                if self.plan_stale {
-                    "; the plan found stages to run"
-                } else {
-                    ", nothing to run"
-                }
-            )?;
-            let noop_peak = self.noop.iter().filter_map(|r| r.peak_rss_kb).max();
-            let noop_start = self.noop.iter().filter_map(|r| r.start_rss_kb).max();
-            let plan_peak = self.plans.iter().filter_map(|p| p.peak_rss_kb).max();
-            let plan_start = self.plans.iter().filter_map(|p| p.start_rss_kb).max();
-            writeln!(
-                out,
-                "peak RSS: full build {} (first run; highest of all runs {}); in this process after the builds, so above what they leave held: no-op rebuild {} (held {} at its start), plan {} (held {}), scan {}",
-                rss_mb(self.full.first().and_then(|r| r.peak_rss_kb)),
-                rss_mb(self.full.iter().filter_map(|r| r.peak_rss_kb).max()),
-                rss_mb(noop_peak),
-                rss_mb(noop_start),
-                rss_mb(plan_peak),
-                rss_mb(plan_start),
-                rss_mb(self.scan.peak_rss_kb)
-            )?;
-            let cache_total: u64 = self.cache.values().sum();
-            let per_stage: Vec<String> = self
-                .cache
-                .iter()
-                .map(|(k, v)| format!("{k} {:.1}", mb(*v)))
-                .collect();
-            writeln!(
-                out,
-                "stage cache: {:.1} MB ({:.2}x the {:.1} MB of input): {} (MB)",
-                mb(cache_total),
-                cache_total as f64 / self.input_bytes() as f64,
-                mb(self.input_bytes()),
-                per_stage.join(", ")
-            )?;
-            let shard_total: u64 = self.shards.iter().sum();
-            writeln!(
-                out,
-                "shards: {:.1} MB in {} files (data/*.parquet), {:.2}x the input",
-                mb(shard_total),
-                self.shards.len(),
-                shard_total as f64 / self.input_bytes() as f64
-            )?;
-            let others: Vec<String> = self
-                .full
-                .iter()
-                .map(|r| format!("{:.0}%", 100.0 * r.cpu.others))
-                .collect();
-            writeln!(
-                out,
-                "machine: load average {} at start, {} at end; other processes used {} of the CPUs during the full builds",
-                self.load.0.as_deref().unwrap_or("n/a"),
-                self.load.1.as_deref().unwrap_or("n/a"),
-                others.join(", ")
-            )?;
-            if let Some(dir) = &self.kept {
-                writeln!(out, "kept: {}", dir.display())?;
+        )?;
+        let (plo, phi) = min_max(self.plans.iter().map(|p| p.seconds));
+        writeln!(
+            out,
+            "plan: {plo:.2} s (range {plo:.2}-{phi:.2}){}",
+            if self.plan_stale {
+                "; the plan found stages to run"
+            } else {
+                ", nothing to run"
             }
+        )?;
+        let noop_peak = self.noop.iter().filter_map(|r| r.peak_rss_kb).max();
+        let noop_start = self.noop.iter().filter_map(|r| r.start_rss_kb).max();
+        let plan_peak = self.plans.iter().filter_map(|p| p.peak_rss_kb).max();
+        let plan_start = self.plans.iter().filter_map(|p| p.start_rss_kb).max();
+        writeln!(
+            out,
+            "peak RSS: full build {} (first run; highest of all runs {}); in this process after the builds, so above what they leave held: no-op rebuild {} (held {} at its start), plan {} (held {}), scan {}",
+            rss_mb(self.full.first().and_then(|r| r.peak_rss_kb)),
+            rss_mb(self.full.iter().filter_map(|r| r.peak_rss_kb).max()),
+            rss_mb(noop_peak),
+            rss_mb(noop_start),
+            rss_mb(plan_peak),
+            rss_mb(plan_start),
+            rss_mb(self.scan.peak_rss_kb)
+        )?;
+        Ok(())
+    }
+
+    /// What the build left on disk, and the machine's load meanwhile.
+    fn print_outputs(&self, out: &mut impl Write) -> std::io::Result<()> {
+        let cache_total: u64 = self.cache.values().sum();
+        let per_stage: Vec<String> = self
+            .cache
+            .iter()
+            .map(|(k, v)| format!("{k} {:.1}", mb(*v)))
+            .collect();
+        writeln!(
+            out,
+            "stage cache: {:.1} MB ({:.2}x the {:.1} MB of input): {} (MB)",
+            mb(cache_total),
+            cache_total as f64 / self.input_bytes() as f64,
+            mb(self.input_bytes()),
+            per_stage.join(", ")
+        )?;
+        let shard_total: u64 = self.shards.iter().sum();
+        writeln!(
+            out,
+            "shards: {:.1} MB in {} files (data/*.parquet), {:.2}x the input",
+            mb(shard_total),
+            self.shards.len(),
+            shard_total as f64 / self.input_bytes() as f64
+        )?;
+        let others: Vec<String> = self
+            .full
+            .iter()
+            .map(|r| format!("{:.0}%", 100.0 * r.cpu.others))
+            .collect();
+        writeln!(
+            out,
+            "machine: load average {} at start, {} at end; other processes used {} of the CPUs during the full builds",
+            self.load.0.as_deref().unwrap_or("n/a"),
+            self.load.1.as_deref().unwrap_or("n/a"),
+            others.join(", ")
+        )?;
+        if let Some(dir) = &self.kept {
+            writeln!(out, "kept: {}", dir.display())?;
         }
         Ok(())
     }

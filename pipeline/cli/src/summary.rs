@@ -292,10 +292,18 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
     if !report.notes_by_kind.is_empty() {
         writeln!(out, "annotation notes: {}", counts(&report.notes_by_kind))?;
     }
-    let l = &report.labels;
-    if !ran(motionforge::build::Stage::Label) {
-        return print_tail(&mut out, report);
+    if ran(motionforge::build::Stage::Label) {
+        print_labels(&mut out, report)?;
+        if ran(motionforge::build::Stage::Compose) {
+            print_synthetic(&mut out, report)?;
+        }
     }
+    print_tail(&mut out, report)
+}
+
+/// The summary's lines on part labels, paraphrases and task plans.
+fn print_labels(out: &mut impl Write, report: &BuildReport) -> std::io::Result<()> {
+    let l = &report.labels;
     writeln!(
         out,
         "part labels: {} ({} texts, {} requests, {} cache hits, {} flagged)",
@@ -336,10 +344,12 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
             writeln!(out, "  checks: {line}")?;
         }
     }
+    Ok(())
+}
+
+/// The summary's lines on synthetic pairs, labels the motion contradicts and the pair check.
+fn print_synthetic(out: &mut impl Write, report: &BuildReport) -> std::io::Result<()> {
     let c = &report.synthetic;
-    if !ran(motionforge::build::Stage::Compose) {
-        return print_tail(&mut out, report);
-    }
     writeln!(
         out,
         "synthetic pairs: {} candidates, {} compatible pairs, {} sampled, {} composed, dropped: {}",
@@ -380,7 +390,7 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
             }
         )?;
     }
-    print_tail(&mut out, report)
+    Ok(())
 }
 
 /// The summary's last lines: rejects, and whether anything changed.
