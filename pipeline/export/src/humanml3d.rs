@@ -167,6 +167,48 @@ pub fn export_humanml3d(
     out: &Path,
     options: &ExportOptions,
 ) -> Result<ExportSummary, ExportError> {
+    check_out(dataset, out, options)?;
+    let shards = clip_tables(dataset)?;
+    let placements = placements(dataset, options)?;
+    let mut entries = Vec::new();
+    for (i, shard) in shards.iter().enumerate() {
+        read_entries(shard, i, &mut entries)?;
+    }
+    let names = assign_names(&entries);
+
+    // Everything goes to a staging folder beside `out`, renamed into place at the end: an
+    // interrupted export leaves no folder that looks complete.
+    let staging = staging_path(out);
+    if staging.exists() {
+        fs::remove_dir_all(&staging).map_err(io_err(&staging))?;
+    }
+    for dir in ["new_joint_vecs", "new_joints", "joints", "texts"] {
+        let path = staging.join(dir);
+        fs::create_dir_all(&path).map_err(io_err(&path))?;
+    }
+    let export = ClipExport {
+        staging: &staging,
+        placements: &placements,
+        names: &names,
+    };
+    let mut tally = Tally {
+        summary: ExportSummary {
+            clips: entries.len(),
+            ..ExportSummary::default()
+        },
+        moments: Moments::default(),
+        exported: Vec::new(),
+    };
+    for (i, shard) in shards.iter().enumerate() {
+        let rows: Vec<&Entry> = entries.iter().filter(|e| e.shard == i).collect();
+        export.shard(shard, &rows, &mut tally)?;
+    }
+    tally.finish(&staging, out)
+}
+
+/// `out` may be written: not the dataset or the working folder, and either absent or (with
+/// `--force`) an earlier export. An interrupted replacement is restored first.
+fn check_out(dataset: &Path, out: &Path, options: &ExportOptions) -> Result<(), ExportError> {
     let kept = Kept::working_folder().and(dataset, "the dataset folder it exports", &[DEFAULT_DIR]);
     check_replaceable(out, &kept, "pass another --out")?;
     motionforge_core::base::restore_replaced(out).map_err(|e| ExportError::Io {
@@ -185,6 +227,11 @@ pub fn export_humanml3d(
             });
         }
     }
+    Ok(())
+}
+
+/// The dataset's clip tables; at least one.
+fn clip_tables(dataset: &Path) -> Result<Vec<PathBuf>, ExportError> {
     let shards =
         motionforge_report::find_clip_tables(dataset).map_err(|e| ExportError::NotADataset {
             path: dataset.to_path_buf(),
@@ -196,34 +243,27 @@ pub fn export_humanml3d(
             message: "no clip table (data/*.parquet); build the dataset first".into(),
         });
     }
-    let placements = placements(dataset, options)?;
-    let mut entries = Vec::new();
-    for (i, shard) in shards.iter().enumerate() {
-        read_entries(shard, i, &mut entries)?;
-    }
-    let names = assign_names(&entries);
+    Ok(shards)
+}
 
-    // Everything goes to a staging folder beside `out`, renamed into place at the end: an
-    // interrupted export leaves no folder that looks complete.
-    let staging = staging_path(out);
-    if staging.exists() {
-        fs::remove_dir_all(&staging).map_err(io_err(&staging))?;
-    }
-    for dir in ["new_joint_vecs", "new_joints", "joints", "texts"] {
-        let path = staging.join(dir);
-        fs::create_dir_all(&path).map_err(io_err(&path))?;
-    }
+/// What every clip's export reads: where it writes, the skeletons' SMPL placements and the
+/// clips' HumanML3D names.
+struct ClipExport<'a> {
+    staging: &'a Path,
+    placements: &'a BTreeMap<String, Result<SmplPlacement, String>>,
+    names: &'a BTreeMap<String, String>,
+}
 
-    let mut summary = ExportSummary {
-        clips: entries.len(),
-        ..ExportSummary::default()
-    };
-    let mut moments = Moments::default();
-    let mut exported: Vec<(String, &Entry)> = Vec::new();
-    for (i, shard) in shards.iter().enumerate() {
-        let rows: Vec<&Entry> = entries.iter().filter(|e| e.shard == i).collect();
-        // A row group at a time: converted and written on all cores, then counted in row order
-        // (so Mean and Std do not depend on scheduling).
+impl ClipExport<'_> {
+    /// Exports the clips of one shard (`rows`, its entries in row order). A row group at a
+    /// time: converted and written on all cores, then counted in row order (so Mean and Std do
+    /// not depend on scheduling).
+    fn shard<'e>(
+        &self,
+        shard: &Path,
+        rows: &[&'e Entry],
+        tally: &mut Tally<'e>,
+    ) -> Result<(), ExportError> {
         let mut next = 0;
         for frames in read_frames(shard)? {
             let frames = frames?;
@@ -234,74 +274,98 @@ pub fn export_humanml3d(
             let done: Vec<Result<Result<Done, Skipped>, ExportError>> = group
                 .par_iter()
                 .zip(&frames)
-                .map(|(entry, frames)| {
-                    if let Err(why) = usable_split(&entry.split) {
-                        return Ok(Err(Skipped {
-                            clip_id: entry.clip_id.clone(),
-                            reason: why,
-                        }));
-                    }
-                    let converted = match convert(entry, frames, &placements) {
-                        Ok(c) => c,
-                        Err(skipped) => return Ok(Err(skipped)),
-                    };
-                    let (text, refused) = caption_lines(entry);
-                    if text.is_empty() {
-                        // An empty texts file makes every loader drop the clip without a word.
-                        let why: Vec<String> = refused.into_iter().map(|r| r.reason).collect();
-                        return Ok(Err(Skipped {
-                            clip_id: entry.clip_id.clone(),
-                            reason: format!("no caption could be written: {}", why.join("; ")),
-                        }));
-                    }
-                    let name = names.get(&entry.clip_id).cloned().unwrap_or_default();
-                    write_clip(&staging, &name, &converted)?;
-                    let path = staging.join("texts").join(format!("{name}.txt"));
-                    fs::write(&path, text).map_err(io_err(&path))?;
-                    Ok(Ok(Done {
-                        refused,
-                        name,
-                        moments: Moments::of(&converted.vectors),
-                    }))
-                })
+                .map(|(entry, frames)| self.clip(entry, frames))
                 .collect();
             for (entry, done) in group.iter().zip(done) {
-                let done = match done? {
-                    Ok(d) => d,
-                    Err(skipped) => {
-                        summary.skipped.push(skipped);
-                        continue;
-                    }
-                };
-                summary.rows += done.moments.rows;
-                summary.captions_refused.extend(done.refused);
-                if !LOADER_ROWS.contains(&done.moments.rows) {
-                    summary.filtered_by_loaders.push(done.name.clone());
+                match done? {
+                    Ok(done) => tally.add(entry, done),
+                    Err(skipped) => tally.summary.skipped.push(skipped),
                 }
-                moments.merge(&done.moments);
-                exported.push((done.name, entry));
             }
         }
+        Ok(())
     }
-    exported.sort_by(|a, b| name_order(&a.0).cmp(&name_order(&b.0)));
-    summary.exported = exported.len();
-    summary
-        .filtered_by_loaders
-        .sort_by(|a, b| name_order(a).cmp(&name_order(b)));
-    write_lists(&staging, &exported, &mut summary)?;
-    if let Some((mean, std)) = moments.mean_std() {
-        write_npy(&staging.join("Mean.npy"), &[DIM], &mean)?;
-        write_npy(&staging.join("Std.npy"), &[DIM], &std)?;
+
+    /// Converts and writes one clip, or says why it is skipped.
+    fn clip(&self, entry: &Entry, frames: &Frames) -> Result<Result<Done, Skipped>, ExportError> {
+        if let Err(why) = usable_split(&entry.split) {
+            return Ok(Err(Skipped {
+                clip_id: entry.clip_id.clone(),
+                reason: why,
+            }));
+        }
+        let converted = match convert(entry, frames, self.placements) {
+            Ok(c) => c,
+            Err(skipped) => return Ok(Err(skipped)),
+        };
+        let (text, refused) = caption_lines(entry);
+        if text.is_empty() {
+            // An empty texts file makes every loader drop the clip without a word.
+            let why: Vec<String> = refused.into_iter().map(|r| r.reason).collect();
+            return Ok(Err(Skipped {
+                clip_id: entry.clip_id.clone(),
+                reason: format!("no caption could be written: {}", why.join("; ")),
+            }));
+        }
+        let name = self.names.get(&entry.clip_id).cloned().unwrap_or_default();
+        write_clip(self.staging, &name, &converted)?;
+        let path = self.staging.join("texts").join(format!("{name}.txt"));
+        fs::write(&path, text).map_err(io_err(&path))?;
+        Ok(Ok(Done {
+            refused,
+            name,
+            moments: Moments::of(&converted.vectors),
+        }))
     }
-    let json = serde_json::to_vec_pretty(&summary).unwrap_or_default();
-    // The marker last, then one swap: `out` is always the old export or the new one.
-    let path = staging.join(EXPORT_MARKER);
-    fs::write(&path, json).map_err(io_err(&path))?;
-    motionforge_core::base::replace_dir(&staging, out).map_err(|e| ExportError::Io {
-        path: out.to_path_buf(),
-        source: std::io::Error::other(e.to_string()),
-    })?;
-    Ok(summary)
+}
+
+/// What the export has written so far: the summary, the vectors' moments and the exported
+/// clips by name.
+struct Tally<'e> {
+    summary: ExportSummary,
+    moments: Moments,
+    exported: Vec<(String, &'e Entry)>,
+}
+
+impl<'e> Tally<'e> {
+    fn add(&mut self, entry: &'e Entry, done: Done) {
+        self.summary.rows += done.moments.rows;
+        self.summary.captions_refused.extend(done.refused);
+        if !LOADER_ROWS.contains(&done.moments.rows) {
+            self.summary.filtered_by_loaders.push(done.name.clone());
+        }
+        self.moments.merge(&done.moments);
+        self.exported.push((done.name, entry));
+    }
+
+    /// Writes the split lists, Mean and Std and the marker into `staging`, then swaps it in as
+    /// `out`.
+    fn finish(self, staging: &Path, out: &Path) -> Result<ExportSummary, ExportError> {
+        let Tally {
+            mut summary,
+            moments,
+            mut exported,
+        } = self;
+        exported.sort_by(|a, b| name_order(&a.0).cmp(&name_order(&b.0)));
+        summary.exported = exported.len();
+        summary
+            .filtered_by_loaders
+            .sort_by(|a, b| name_order(a).cmp(&name_order(b)));
+        write_lists(staging, &exported, &mut summary)?;
+        if let Some((mean, std)) = moments.mean_std() {
+            write_npy(&staging.join("Mean.npy"), &[DIM], &mean)?;
+            write_npy(&staging.join("Std.npy"), &[DIM], &std)?;
+        }
+        let json = serde_json::to_vec_pretty(&summary).unwrap_or_default();
+        // The marker last, then one swap: `out` is always the old export or the new one.
+        let path = staging.join(EXPORT_MARKER);
+        fs::write(&path, json).map_err(io_err(&path))?;
+        motionforge_core::base::replace_dir(staging, out).map_err(|e| ExportError::Io {
+            path: out.to_path_buf(),
+            source: std::io::Error::other(e.to_string()),
+        })?;
+        Ok(summary)
+    }
 }
 
 /// True when `dir` is a finished export (it has the marker) or an empty folder.

@@ -793,81 +793,185 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "scene".into())
     });
-
-    // Places and objects: distinct, non-empty, not the reserved word. Looked up by name in a
-    // map: a scene's lists are checked in time linear in their lengths.
-    let mut places: Vec<String> = Vec::new();
-    let mut place_ids: HashMap<String, usize> = HashMap::new();
-    for (i, p) in file.places.iter().enumerate() {
-        let p = p.trim();
-        if p.is_empty() || p == NO_PLACE || p.contains(['{', '}', '\n']) {
-            problems.push(
-                &[k("places"), Seg::I(i)],
-                format!("`{p}`: expected a place name (not empty, not `{NO_PLACE}`, no braces)"),
-            );
-        } else if place_ids.contains_key(p) {
-            problems.push(&[k("places"), Seg::I(i)], format!("`{p}` is listed twice"));
-        } else {
-            place_ids.insert(p.to_string(), places.len());
-            places.push(p.to_string());
-        }
+    let names = SceneNames::resolve(&file.places, &file.objects, problems);
+    let start_at = resolve_start_at(&file.start, &names, problems);
+    let start_posture = file.start.posture.unwrap_or(Posture::Standing);
+    let end = resolve_end(
+        file.end.unwrap_or_default(),
+        start_posture,
+        &names,
+        problems,
+    );
+    let limit = resolve_limit(&file.limits, problems);
+    let default_secs = file.limits.default_seconds;
+    check_seconds(&file.limits, taxonomy, problems);
+    let candidates = resolve_interactions(&file.interactions, &names, taxonomy, problems);
+    let strength = file.balance.strength;
+    let target = resolve_balance(&file.balance, &candidates, taxonomy, problems);
+    let movable = movable_objects(&candidates, problems);
+    let SceneNames {
+        places,
+        objects,
+        object_start,
+        ..
+    } = names;
+    let start = State {
+        posture: start_posture,
+        at: start_at,
+        objects: movable
+            .iter()
+            .filter_map(|&o| object_start.get(o).map(|&p| Loc::Place(p)))
+            .collect(),
+    };
+    Scene {
+        name,
+        places,
+        objects,
+        object_start,
+        movable,
+        start,
+        end,
+        limit,
+        seconds: file.limits.seconds,
+        default_seconds: default_secs,
+        strength,
+        target,
+        candidates,
     }
-    let place_index = |name: &str| place_ids.get(name).copied();
-    let places_listed = listing(&places);
-    // `none` is the open room; anything else must be a listed place.
-    let at_value = |name: &str| -> Result<Option<usize>, String> {
+}
+
+/// The scene's places and objects as the checks look them up. Places are found by name in a
+/// map and objects by binary search: a scene's lists are checked in time linear in their
+/// lengths.
+struct SceneNames {
+    /// Distinct places, in file order.
+    places: Vec<String>,
+    place_ids: HashMap<String, usize>,
+    /// The places joined for messages.
+    places_listed: String,
+    /// Objects, sorted (read from a sorted map).
+    objects: Vec<String>,
+    /// The place each object of `objects` starts at.
+    object_start: Vec<usize>,
+    /// The objects joined for messages.
+    objects_listed: String,
+}
+
+impl SceneNames {
+    /// Places and objects: distinct, non-empty, not the reserved word; every object starts at a
+    /// place.
+    fn resolve(
+        place_list: &[String],
+        object_list: &BTreeMap<String, String>,
+        problems: &mut Problems,
+    ) -> SceneNames {
+        let mut places: Vec<String> = Vec::new();
+        let mut place_ids: HashMap<String, usize> = HashMap::new();
+        for (i, p) in place_list.iter().enumerate() {
+            let p = p.trim();
+            if p.is_empty() || p == NO_PLACE || p.contains(['{', '}', '\n']) {
+                problems.push(
+                    &[k("places"), Seg::I(i)],
+                    format!(
+                        "`{p}`: expected a place name (not empty, not `{NO_PLACE}`, no braces)"
+                    ),
+                );
+            } else if place_ids.contains_key(p) {
+                problems.push(&[k("places"), Seg::I(i)], format!("`{p}` is listed twice"));
+            } else {
+                place_ids.insert(p.to_string(), places.len());
+                places.push(p.to_string());
+            }
+        }
+        let places_listed = listing(&places);
+        let mut names = SceneNames {
+            places,
+            place_ids,
+            places_listed,
+            objects: Vec::new(),
+            object_start: Vec::new(),
+            objects_listed: String::new(),
+        };
+        for (object, at) in object_list {
+            let key = [k("objects"), k(object)];
+            if object.trim().is_empty()
+                || object.contains(['{', '}', '\n'])
+                || names.place_ids.contains_key(object.as_str())
+            {
+                problems.push(
+                    &key,
+                    format!(
+                        "`{object}`: expected an object name (not empty, no braces, not a place)"
+                    ),
+                );
+                continue;
+            }
+            match names.place_index(at) {
+                Some(p) => {
+                    names.objects.push(object.clone());
+                    names.object_start.push(p);
+                }
+                None => problems.push(
+                    &key,
+                    format!(
+                        "`{at}`: an object starts at one of the places ({})",
+                        names.places_listed
+                    ),
+                ),
+            }
+        }
+        names.objects_listed = listing(&names.objects);
+        names
+    }
+
+    fn place_index(&self, name: &str) -> Option<usize> {
+        self.place_ids.get(name).copied()
+    }
+
+    fn object_index(&self, name: &str) -> Option<usize> {
+        self.objects.binary_search_by(|o| o.as_str().cmp(name)).ok()
+    }
+
+    /// An `at` value: `none` is the open room; anything else must be a listed place.
+    fn at_value(&self, name: &str) -> Result<Option<usize>, String> {
         if name == NO_PLACE {
             return Ok(None);
         }
-        place_index(name).map(Some).ok_or_else(|| {
+        self.place_index(name).map(Some).ok_or_else(|| {
             format!(
-                "`{name}` is not a place of the scene (places: {places_listed}; or `{NO_PLACE}`)"
+                "`{name}` is not a place of the scene (places: {}; or `{NO_PLACE}`)",
+                self.places_listed
             )
         })
-    };
-
-    let mut objects: Vec<String> = Vec::new();
-    let mut object_start: Vec<usize> = Vec::new();
-    for (object, at) in &file.objects {
-        let key = [k("objects"), k(object)];
-        if object.trim().is_empty()
-            || object.contains(['{', '}', '\n'])
-            || place_ids.contains_key(object.as_str())
-        {
-            problems.push(
-                &key,
-                format!("`{object}`: expected an object name (not empty, no braces, not a place)"),
-            );
-            continue;
-        }
-        match place_index(at) {
-            Some(p) => {
-                objects.push(object.clone());
-                object_start.push(p);
-            }
-            None => problems.push(
-                &key,
-                format!("`{at}`: an object starts at one of the places ({places_listed})"),
-            ),
-        }
     }
-    // `objects` is sorted (read from a sorted map): found by binary search.
-    let object_index = |name: &str| objects.binary_search_by(|o| o.as_str().cmp(name)).ok();
-    let objects_listed = listing(&objects);
+}
 
-    // Start and end.
-    let start_at = match file.start.at.as_deref() {
+/// The actor's start place (`start.at`), the open room where unset or wrong.
+fn resolve_start_at(
+    start: &StartFile,
+    names: &SceneNames,
+    problems: &mut Problems,
+) -> Option<usize> {
+    match start.at.as_deref() {
         None => None,
-        Some(a) => match at_value(a) {
+        Some(a) => match names.at_value(a) {
             Ok(p) => p,
             Err(e) => {
                 problems.push(&[k("start"), k("at")], e);
                 None
             }
         },
-    };
-    let start_posture = file.start.posture.unwrap_or(Posture::Standing);
-    let end_file = file.end.unwrap_or_default();
+    }
+}
+
+/// What a valid final state must meet: a posture (the start's, by default), a place where
+/// `end.at` names some, and empty hands unless `end.hands = "any"`.
+fn resolve_end(
+    end_file: EndFile,
+    start_posture: Posture,
+    names: &SceneNames,
+    problems: &mut Problems,
+) -> Vec<Requirement> {
     let mut end = Vec::new();
     end.push(Requirement::Posture(
         end_file
@@ -878,11 +982,11 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
     ));
     // A list of places holds each once (`["sofa", "sofa"]` is `["sofa"]`): a requirement is
     // at most the places long, however long the file's list.
-    let mut seen = vec![false; places.len() + 1];
+    let mut seen = vec![false; names.places.len() + 1];
     if let Some(at) = &end_file.at {
         let mut list = Vec::new();
         for (i, a) in at.as_slice().iter().enumerate() {
-            match at_value(a) {
+            match names.at_value(a) {
                 Ok(p) => {
                     if first_time(&mut seen, p) {
                         list.push(p);
@@ -896,9 +1000,12 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
     if end_file.hands == EndHands::Empty {
         end.push(Requirement::EmptyHands);
     }
+    end
+}
 
-    // Limits.
-    let limit = match (file.limits.instructions, file.limits.minutes) {
+/// The session's limit: exactly one of `instructions` and `minutes`, in range.
+fn resolve_limit(limits: &LimitsFile, problems: &mut Problems) -> Limit {
+    match (limits.instructions, limits.minutes) {
         (Some(n), None) if (1..=10_000).contains(&n) => Limit::Instructions(n),
         (Some(n), None) => {
             problems.push(
@@ -931,15 +1038,19 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             );
             Limit::Instructions(1)
         }
-    };
-    let default_secs = file.limits.default_seconds;
+    }
+}
+
+/// `limits.default_seconds` and every `limits.seconds` entry: a known type, a duration in range.
+fn check_seconds(limits: &LimitsFile, taxonomy: &Taxonomy, problems: &mut Problems) {
+    let default_secs = limits.default_seconds;
     if !(finite_positive(default_secs) && default_secs <= 3600.0) {
         problems.push(
             &[k("limits"), k("default_seconds")],
             format!("{default_secs}: expected seconds above 0, at most 3600"),
         );
     }
-    for (t, s) in &file.limits.seconds {
+    for (t, s) in &limits.seconds {
         let key = [k("limits"), k("seconds"), k(t)];
         if let Err(e) = check_type(taxonomy, t) {
             problems.push(&key, e);
@@ -948,18 +1059,73 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             problems.push(&key, format!("{s}: expected seconds above 0, at most 3600"));
         }
     }
+}
 
-    // Interactions, expanded.
+/// Every interaction, checked and expanded into candidates in file order; an interaction with
+/// a problem adds none.
+fn resolve_interactions(
+    interactions: &[InteractionFile],
+    names: &SceneNames,
+    taxonomy: &Taxonomy,
+    problems: &mut Problems,
+) -> Vec<Candidate> {
     let mut candidates = Vec::new();
-    if file.interactions.is_empty() {
+    if interactions.is_empty() {
         problems.push(
             &[k("interactions")],
             "empty: expected at least one interaction".into(),
         );
     }
-    for (i, inter) in file.interactions.iter().enumerate() {
-        let key = |field: &str| vec![k("interactions"), Seg::I(i), k(field)];
+    for (i, inter) in interactions.iter().enumerate() {
         let before = problems.count();
+        let bound = Interaction::resolve(i, inter, names, taxonomy, problems);
+        if problems.count() > before {
+            continue;
+        }
+        // Counted before expanding, so a long list cannot make the reader allocate its product.
+        let expansion = bound.places.len() * bound.objects.len() * bound.hands.len();
+        if candidates.len() + expansion > MAX_CANDIDATES {
+            problems.push(
+                &[k("interactions"), Seg::I(i)],
+                format!(
+                    "the scene expands into more than {MAX_CANDIDATES} instructions (places x \
+                     objects x hands of every interaction); split it into smaller scenes"
+                ),
+            );
+            break;
+        }
+        bound.expand_into(&mut candidates);
+    }
+    candidates
+}
+
+/// One interaction with its names resolved: what it expands over (each list at least one
+/// entry, `None` for "not bound") and its requirements and effect before binding `{place}`.
+struct Interaction<'f> {
+    index: usize,
+    file: &'f InteractionFile,
+    text: &'f str,
+    places: Vec<Option<usize>>,
+    objects: Vec<Option<usize>>,
+    hands: Vec<Option<Hand>>,
+    hold: Option<Hold>,
+    requires_at: Option<Vec<AtName>>,
+    requires_not_at: Option<Vec<AtName>>,
+    requires_posture: Option<Vec<Posture>>,
+    leaves_at: Option<AtName>,
+}
+
+impl<'f> Interaction<'f> {
+    /// Checks `interactions[index]`, recording its problems; the result is expanded only when
+    /// there are none.
+    fn resolve(
+        index: usize,
+        inter: &'f InteractionFile,
+        names: &SceneNames,
+        taxonomy: &Taxonomy,
+        problems: &mut Problems,
+    ) -> Interaction<'f> {
+        let key = |field: &str| vec![k("interactions"), Seg::I(index), k(field)];
         if let Err(e) = check_type(taxonomy, &inter.motion_type) {
             problems.push(&key("type"), e);
         }
@@ -973,83 +1139,15 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         if text.is_empty() || text.contains(['\n', '\r']) {
             problems.push(&key("text"), "expected one line of instruction text".into());
         }
-        // Placeholders: each must have something to fill it.
-        let mut rest = text;
-        while let Some(open) = rest.find('{') {
-            let after = &rest[open + 1..];
-            let Some(close) = after.find('}') else {
-                problems.push(&key("text"), format!("`{text}`: a `{{` is never closed"));
-                break;
-            };
-            let name = &after[..close];
-            let filled = match name {
-                "place" => !inter.places.is_empty(),
-                "object" => !inter.objects.is_empty(),
-                "hand" => inter.hands != HandsFile::None,
-                _ => {
-                    problems.push(
-                        &key("text"),
-                        format!("`{{{name}}}`: expected `{{place}}`, `{{object}}` or `{{hand}}`"),
-                    );
-                    true
-                }
-            };
-            if !filled {
-                let needs = match name {
-                    "place" => "a `places` list",
-                    "object" => "an `objects` list",
-                    _ => "`hands` other than `none`",
-                };
-                problems.push(
-                    &key("text"),
-                    format!("`{{{name}}}` needs {needs} on the interaction"),
-                );
-            }
-            rest = &after[close + 1..];
+        check_placeholders(text, inter, &key("text"), problems);
+        let mut places = bind_names(index, NameList::Places, &inter.places, names, problems);
+        let mut objects = bind_names(index, NameList::Objects, &inter.objects, names, problems);
+        let hold = resolve_hold(inter, &key, problems);
+        if places.is_empty() {
+            places.push(None);
         }
-        let mut bound_places: Vec<Option<usize>> = Vec::new();
-        for (j, p) in inter.places.iter().enumerate() {
-            match place_index(p) {
-                Some(x) => bound_places.push(Some(x)),
-                None => problems.push(
-                    &[k("interactions"), Seg::I(i), k("places"), Seg::I(j)],
-                    format!("`{p}` is not a place of the scene (places: {places_listed})"),
-                ),
-            }
-        }
-        let mut bound_objects: Vec<Option<usize>> = Vec::new();
-        for (j, o) in inter.objects.iter().enumerate() {
-            match object_index(o) {
-                Some(x) => bound_objects.push(Some(x)),
-                None => problems.push(
-                    &[k("interactions"), Seg::I(i), k("objects"), Seg::I(j)],
-                    format!("`{o}` is not an object of the scene (objects: {objects_listed})"),
-                ),
-            }
-        }
-        let hold = match (inter.hold, inter.objects.is_empty()) {
-            (Some(_), true) => {
-                problems.push(
-                    &key("hold"),
-                    "`hold` needs an `objects` list on the interaction".into(),
-                );
-                None
-            }
-            (None, true) => None,
-            (h, false) => Some(h.unwrap_or(Hold::Keep)),
-        };
-        if matches!(hold, Some(Hold::Take | Hold::Release)) && inter.hands == HandsFile::None {
-            problems.push(
-                &key("hands"),
-                "`none`: taking or putting down an object needs `left`, `right`, `one` or `both`"
-                    .into(),
-            );
-        }
-        if bound_places.is_empty() {
-            bound_places.push(None);
-        }
-        if bound_objects.is_empty() {
-            bound_objects.push(None);
+        if objects.is_empty() {
+            objects.push(None);
         }
         let hands: Vec<Option<Hand>> = match inter.hands {
             HandsFile::None => vec![None],
@@ -1062,11 +1160,12 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
         // instructions (`{place}` is each one's bound place).
         let has_places = !inter.places.is_empty();
         let mut resolve_list = |list: &[String], field: &str| {
-            let (names, errors) = at_names(list, &at_value, has_places, places.len());
+            let at_value = |name: &str| names.at_value(name);
+            let (found, errors) = at_names(list, &at_value, has_places, names.places.len());
             for e in errors {
                 problems.push(&key(field), e);
             }
-            names
+            found
         };
         let requires_at = inter
             .requires
@@ -1083,67 +1182,189 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             .at
             .as_ref()
             .and_then(|a| resolve_list(std::slice::from_ref(a), "leaves").pop());
-        let requires_posture = inter.requires.posture.as_ref().map(OneOrMany::distinct);
-        if problems.count() > before {
-            continue;
+        Interaction {
+            index,
+            file: inter,
+            text,
+            places,
+            objects,
+            hands,
+            hold,
+            requires_at,
+            requires_not_at,
+            requires_posture: inter.requires.posture.as_ref().map(OneOrMany::distinct),
+            leaves_at,
         }
-        // Counted before expanding, so a long list cannot make the reader allocate its product.
-        let expansion = bound_places.len() * bound_objects.len() * hands.len();
-        if candidates.len() + expansion > MAX_CANDIDATES {
-            problems.push(
-                &[k("interactions"), Seg::I(i)],
-                format!(
-                    "the scene expands into more than {MAX_CANDIDATES} instructions (places x \
-                     objects x hands of every interaction); split it into smaller scenes"
-                ),
-            );
-            break;
-        }
-        for &place in &bound_places {
-            for &object in &bound_objects {
-                for &hand in &hands {
-                    let bind = |names: &[AtName]| -> Vec<Option<usize>> {
-                        names.iter().map(|n| n.bind(place)).collect()
-                    };
-                    let mut requires = Vec::new();
-                    if let Some(p) = &requires_posture {
-                        requires.push(Requirement::Posture(p.clone()));
-                    }
-                    if let Some(at) = &requires_at {
-                        requires.push(Requirement::At(bind(at)));
-                    }
-                    if let Some(not_at) = &requires_not_at {
-                        requires.push(Requirement::NotAt(bind(not_at)));
-                    }
-                    if inter.requires.empty_hands {
-                        requires.push(Requirement::EmptyHands);
-                    }
-                    requires.extend(Requirement::for_hands(hand, hold, object));
-                    candidates.push(Candidate {
-                        interaction: i,
-                        motion_type: inter.motion_type.clone(),
-                        template: text.to_string(),
-                        place,
-                        object,
-                        hand,
-                        hold,
-                        requires,
-                        effect: Effect {
-                            posture: inter.leaves.posture,
-                            at: leaves_at.map(|n| n.bind(place)),
-                            hold: hold
-                                .zip(object)
-                                .zip(hand)
-                                .map(|((h, o), hand)| (h, o, hand)),
-                        },
-                        weight: inter.weight,
-                    });
+    }
+
+    /// One candidate per bound place, object and hand, in that order.
+    fn expand_into(&self, candidates: &mut Vec<Candidate>) {
+        for &place in &self.places {
+            for &object in &self.objects {
+                for &hand in &self.hands {
+                    candidates.push(self.candidate(place, object, hand));
                 }
             }
         }
     }
-    // Balance.
-    let strength = file.balance.strength;
+
+    fn candidate(
+        &self,
+        place: Option<usize>,
+        object: Option<usize>,
+        hand: Option<Hand>,
+    ) -> Candidate {
+        let inter = self.file;
+        let hold = self.hold;
+        let bind = |names: &[AtName]| -> Vec<Option<usize>> {
+            names.iter().map(|n| n.bind(place)).collect()
+        };
+        let mut requires = Vec::new();
+        if let Some(p) = &self.requires_posture {
+            requires.push(Requirement::Posture(p.clone()));
+        }
+        if let Some(at) = &self.requires_at {
+            requires.push(Requirement::At(bind(at)));
+        }
+        if let Some(not_at) = &self.requires_not_at {
+            requires.push(Requirement::NotAt(bind(not_at)));
+        }
+        if inter.requires.empty_hands {
+            requires.push(Requirement::EmptyHands);
+        }
+        requires.extend(Requirement::for_hands(hand, hold, object));
+        Candidate {
+            interaction: self.index,
+            motion_type: inter.motion_type.clone(),
+            template: self.text.to_string(),
+            place,
+            object,
+            hand,
+            hold,
+            requires,
+            effect: Effect {
+                posture: inter.leaves.posture,
+                at: self.leaves_at.map(|n| n.bind(place)),
+                hold: hold
+                    .zip(object)
+                    .zip(hand)
+                    .map(|((h, o), hand)| (h, o, hand)),
+            },
+            weight: inter.weight,
+        }
+    }
+}
+
+/// Each `{...}` of an instruction text must be a known placeholder with something to fill it.
+fn check_placeholders(text: &str, inter: &InteractionFile, key: &[Seg], problems: &mut Problems) {
+    let mut rest = text;
+    while let Some(open) = rest.find('{') {
+        let after = &rest[open + 1..];
+        let Some(close) = after.find('}') else {
+            problems.push(key, format!("`{text}`: a `{{` is never closed"));
+            break;
+        };
+        let name = &after[..close];
+        let filled = match name {
+            "place" => !inter.places.is_empty(),
+            "object" => !inter.objects.is_empty(),
+            "hand" => inter.hands != HandsFile::None,
+            _ => {
+                problems.push(
+                    key,
+                    format!("`{{{name}}}`: expected `{{place}}`, `{{object}}` or `{{hand}}`"),
+                );
+                true
+            }
+        };
+        if !filled {
+            let needs = match name {
+                "place" => "a `places` list",
+                "object" => "an `objects` list",
+                _ => "`hands` other than `none`",
+            };
+            problems.push(
+                key,
+                format!("`{{{name}}}` needs {needs} on the interaction"),
+            );
+        }
+        rest = &after[close + 1..];
+    }
+}
+
+/// Which of the scene's lists an interaction's names are looked up in.
+#[derive(Clone, Copy)]
+enum NameList {
+    Places,
+    Objects,
+}
+
+/// The interaction's `places` or `objects` (`list`, from the file), each a name of the scene.
+fn bind_names(
+    index: usize,
+    which: NameList,
+    list: &[String],
+    names: &SceneNames,
+    problems: &mut Problems,
+) -> Vec<Option<usize>> {
+    let (field, what, listed) = match which {
+        NameList::Places => ("places", "a place", &names.places_listed),
+        NameList::Objects => ("objects", "an object", &names.objects_listed),
+    };
+    let mut bound = Vec::new();
+    for (j, name) in list.iter().enumerate() {
+        let found = match which {
+            NameList::Places => names.place_index(name),
+            NameList::Objects => names.object_index(name),
+        };
+        match found {
+            Some(x) => bound.push(Some(x)),
+            None => problems.push(
+                &[k("interactions"), Seg::I(index), k(field), Seg::I(j)],
+                format!("`{name}` is not {what} of the scene ({field}: {listed})"),
+            ),
+        }
+    }
+    bound
+}
+
+/// What the interaction does with its objects (`keep` by default when it has some); taking or
+/// putting down needs a hand.
+fn resolve_hold(
+    inter: &InteractionFile,
+    key: &dyn Fn(&str) -> Vec<Seg>,
+    problems: &mut Problems,
+) -> Option<Hold> {
+    let hold = match (inter.hold, inter.objects.is_empty()) {
+        (Some(_), true) => {
+            problems.push(
+                &key("hold"),
+                "`hold` needs an `objects` list on the interaction".into(),
+            );
+            None
+        }
+        (None, true) => None,
+        (h, false) => Some(h.unwrap_or(Hold::Keep)),
+    };
+    if matches!(hold, Some(Hold::Take | Hold::Release)) && inter.hands == HandsFile::None {
+        problems.push(
+            &key("hands"),
+            "`none`: taking or putting down an object needs `left`, `right`, `one` or `both`"
+                .into(),
+        );
+    }
+    hold
+}
+
+/// The balance target's shares, normalised to sum to 1; by default uniform over the scene's
+/// types. Checks `balance.strength` too.
+fn resolve_balance(
+    balance: &BalanceFile,
+    candidates: &[Candidate],
+    taxonomy: &Taxonomy,
+    problems: &mut Problems,
+) -> BTreeMap<String, f64> {
+    let strength = balance.strength;
     if !(strength.is_finite() && (0.0..=10.0).contains(&strength)) {
         problems.push(
             &[k("balance"), k("strength")],
@@ -1152,12 +1373,12 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
     }
     let scene_types: BTreeSet<&str> = candidates.iter().map(|c| c.motion_type.as_str()).collect();
     let mut target = BTreeMap::new();
-    if file.balance.target.is_empty() {
+    if balance.target.is_empty() {
         for t in &scene_types {
             target.insert(t.to_string(), 1.0);
         }
     } else {
-        for (t, w) in &file.balance.target {
+        for (t, w) in &balance.target {
             let key = [k("balance"), k("target"), k(t)];
             if let Err(e) = check_type(taxonomy, t) {
                 problems.push(&key, e);
@@ -1179,9 +1400,12 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             *v /= total;
         }
     }
+    target
+}
 
-    // The objects some instruction takes are the only ones that ever move (an object is put
-    // down only from a hand): the states carry where those are, and nothing of the others.
+/// The objects some instruction takes, ascending: the only ones that ever move (an object is
+/// put down only from a hand), so the states carry where those are, and nothing of the others.
+fn movable_objects(candidates: &[Candidate], problems: &mut Problems) -> Vec<usize> {
     let mut movable: Vec<usize> = candidates
         .iter()
         .filter(|c| c.hold == Some(Hold::Take))
@@ -1199,28 +1423,5 @@ fn resolve(file: SceneFile, path: &Path, taxonomy: &Taxonomy, problems: &mut Pro
             ),
         );
     }
-    let start = State {
-        posture: start_posture,
-        at: start_at,
-        objects: movable
-            .iter()
-            .filter_map(|&o| object_start.get(o).map(|&p| Loc::Place(p)))
-            .collect(),
-    };
-
-    Scene {
-        name,
-        places,
-        objects,
-        object_start,
-        movable,
-        start,
-        end,
-        limit,
-        seconds: file.limits.seconds,
-        default_seconds: default_secs,
-        strength,
-        target,
-        candidates,
-    }
+    movable
 }

@@ -15,8 +15,8 @@ use plotters::style::{FontStyle, FontTransform, register_font};
 use svg2pdf::usvg;
 
 use super::stats::{
-    Stats, kde, lengths_by_type, metric_values, quantile, silverman_bandwidth,
-    types_in_report_order, whiskers,
+    MetricInfo, SplitComposition, Stats, kde, lengths_by_type, metric_values, quantile,
+    silverman_bandwidth, types_in_report_order, whiskers,
 };
 use super::{ClipRow, ReportError};
 use motionforge_core::base::write_atomic;
@@ -992,6 +992,9 @@ fn heat_color(t: f64) -> RGBColor {
     RGBColor(m(a.0, b.0), m(a.1, b.1), m(a.2, b.2))
 }
 
+/// A chart on two [`Axis`]: every figure's plot.
+type AxisChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<Axis, Axis>>;
+
 fn goal_locations<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, rows: &[ClipRow]) -> DrawResult
 where
     DB::ErrorType: 'static,
@@ -1011,31 +1014,8 @@ where
     let (mw, mh) = main.dim_in_pixel();
     let pw = f64::from(mw.saturating_sub(2 * margin + y_area).max(1));
     let ph = f64::from(mh.saturating_sub(2 * margin + x_area).max(1));
-
-    // The extent always holds the start (0, 0); equal axes: one metre is as long on x as on y,
-    // so the range of the shorter side grows to the plot's pixel aspect.
-    let fold = |f: fn(f64, f64) -> f64, init: f64, pick: fn(&(f64, f64)) -> f64| {
-        goals.iter().map(pick).fold(init, f)
-    };
-    let (mut x0, mut x1) = (fold(f64::min, 0.0, |g| g.0), fold(f64::max, 0.0, |g| g.0));
-    let (mut y0, mut y1) = (fold(f64::min, 0.0, |g| g.1), fold(f64::max, 0.0, |g| g.1));
-    // At least 2 m each way, so a few nearby goals (or none) do not zoom in to centimetres.
-    for (lo, hi) in [(&mut x0, &mut x1), (&mut y0, &mut y1)] {
-        let grow = (2.0 - (*hi - *lo)).max(0.0) / 2.0;
-        *lo -= grow;
-        *hi += grow;
-    }
-    let span = (x1 - x0).max(y1 - y0);
-    let pad = 0.08 * span;
-    x0 -= pad;
-    x1 += pad;
-    y0 -= pad;
-    y1 += pad;
-    let scale = ((x1 - x0) / pw).max((y1 - y0) / ph);
-    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
-    let (hx, hy) = (scale * pw / 2.0, scale * ph / 2.0);
-    let (x0, x1, y0, y1) = (cx - hx, cx + hx, cy - hy, cy + hy);
-
+    let view = GoalView::of(&goals, pw, ph);
+    let (x0, x1, y0, y1) = (view.x.0, view.x.1, view.y.0, view.y.1);
     let step = nice_step((x1 - x0).max(y1 - y0) / (pw.max(ph) / dots(34.0)));
     let ticks = |lo: f64, hi: f64| -> Vec<f64> {
         ((lo / step).ceil() as i64..=(hi / step).floor() as i64)
@@ -1052,21 +1032,8 @@ where
         )?;
 
     // Histogram bins: square, about 30 across the larger data extent, aligned to the origin.
-    let bin = nice_step(span / 30.0);
-    let mut bins: std::collections::BTreeMap<(i64, i64), usize> = Default::default();
-    for (x, y) in &goals {
-        *bins
-            .entry(((x / bin).floor() as i64, (y / bin).floor() as i64))
-            .or_insert(0) += 1;
-    }
-    let max_count = bins.values().copied().max().unwrap_or(1).max(1);
-    chart.draw_series(bins.iter().map(|(&(i, j), &c)| {
-        let (bx, by) = (i as f64 * bin, j as f64 * bin);
-        Rectangle::new(
-            [(bx, by), (bx + bin, by + bin)],
-            heat_color(c as f64 / max_count as f64).filled(),
-        )
-    }))?;
+    let bin = nice_step(view.span / 30.0);
+    let max_count = draw_goal_bins(&mut chart, &goals, bin)?;
     chart
         .configure_mesh()
         .set_all_tick_mark_size(udots(TICK_MARK))
@@ -1079,7 +1046,93 @@ where
         .x_desc("lateral (m, + right)")
         .y_desc("forward (m)")
         .draw()?;
+    draw_goal_points(&mut chart, &goals, y1 - y0)?;
+    if goals.is_empty() {
+        draw_note(
+            &chart.plotting_area().strip_coord_spec(),
+            "no clips with a goal_pelvis",
+            0.3,
+        )?;
+    }
+    draw_heat_bar(&bar, margin, x_area, max_count, bin)
+}
 
+/// The goal plot's extent in metres: x and y ranges of equal scale that fit the plot's pixels.
+struct GoalView {
+    x: (f64, f64),
+    y: (f64, f64),
+    /// The larger side of the data's extent (with the start and the minimum), before padding.
+    span: f64,
+}
+
+impl GoalView {
+    /// The extent always holds the start (0, 0); equal axes: one metre is as long on x as on y,
+    /// so the range of the shorter side grows to the plot's pixel aspect (`pw` by `ph`).
+    fn of(goals: &[(f64, f64)], pw: f64, ph: f64) -> GoalView {
+        let fold = |f: fn(f64, f64) -> f64, init: f64, pick: fn(&(f64, f64)) -> f64| {
+            goals.iter().map(pick).fold(init, f)
+        };
+        let (mut x0, mut x1) = (fold(f64::min, 0.0, |g| g.0), fold(f64::max, 0.0, |g| g.0));
+        let (mut y0, mut y1) = (fold(f64::min, 0.0, |g| g.1), fold(f64::max, 0.0, |g| g.1));
+        // At least 2 m each way, so a few nearby goals (or none) do not zoom in to centimetres.
+        for (lo, hi) in [(&mut x0, &mut x1), (&mut y0, &mut y1)] {
+            let grow = (2.0 - (*hi - *lo)).max(0.0) / 2.0;
+            *lo -= grow;
+            *hi += grow;
+        }
+        let span = (x1 - x0).max(y1 - y0);
+        let pad = 0.08 * span;
+        x0 -= pad;
+        x1 += pad;
+        y0 -= pad;
+        y1 += pad;
+        let scale = ((x1 - x0) / pw).max((y1 - y0) / ph);
+        let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+        let (hx, hy) = (scale * pw / 2.0, scale * ph / 2.0);
+        GoalView {
+            x: (cx - hx, cx + hx),
+            y: (cy - hy, cy + hy),
+            span,
+        }
+    }
+}
+
+/// Draws the goals' 2D histogram in `bin`-metre squares; returns the largest count (at least 1).
+fn draw_goal_bins<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    goals: &[(f64, f64)],
+    bin: f64,
+) -> DrawResult<usize>
+where
+    DB::ErrorType: 'static,
+{
+    let mut bins: std::collections::BTreeMap<(i64, i64), usize> = Default::default();
+    for (x, y) in goals {
+        *bins
+            .entry(((x / bin).floor() as i64, (y / bin).floor() as i64))
+            .or_insert(0) += 1;
+    }
+    let max_count = bins.values().copied().max().unwrap_or(1).max(1);
+    chart.draw_series(bins.iter().map(|(&(i, j), &c)| {
+        let (bx, by) = (i as f64 * bin, j as f64 * bin);
+        Rectangle::new(
+            [(bx, by), (bx + bin, by + bin)],
+            heat_color(c as f64 / max_count as f64).filled(),
+        )
+    }))?;
+    Ok(max_count)
+}
+
+/// Draws the goals as points over the bins, the start as a triangle (sized to the plot's
+/// `height` in metres) and the legend.
+fn draw_goal_points<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    goals: &[(f64, f64)],
+    height: f64,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
     // Points over the bins; a very large set is thinned by a fixed stride (the bins count all).
     let stride = goals.len().div_ceil(MAX_SCATTER).max(1);
     let shown: Vec<(f64, f64)> = goals.iter().copied().step_by(stride).collect();
@@ -1113,7 +1166,7 @@ where
                 .map(|p| Circle::new(*p, radius, stroke(BLACK, 0.3))),
         )?;
     }
-    let s = 0.02 * (y1 - y0);
+    let s = 0.02 * height;
     chart
         .draw_series(std::iter::once(Polygon::new(
             vec![(0.0, 2.0 * s), (-s, -s), (s, -s)],
@@ -1136,16 +1189,22 @@ where
         .border_style(stroke(GREY, GRID_LINE))
         .label_font(font(NOTE))
         .draw()?;
-    if goals.is_empty() {
-        draw_note(
-            &chart.plotting_area().strip_coord_spec(),
-            "no clips with a goal_pelvis",
-            0.3,
-        )?;
-    }
+    Ok(())
+}
 
-    // Colour bar, aligned with the plot's vertical extent.
-    let mut cbar = ChartBuilder::on(&bar)
+/// The histogram's colour bar, aligned with the plot's vertical extent (the plot's `margin` and
+/// x label area `x_area`).
+fn draw_heat_bar<DB: DrawingBackend>(
+    bar: &DrawingArea<DB, Shift>,
+    margin: u32,
+    x_area: u32,
+    max_count: usize,
+    bin: f64,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let mut cbar = ChartBuilder::on(bar)
         .margin_top(margin)
         .margin_bottom(margin + x_area)
         .margin_left(udots(3.0))
@@ -1189,28 +1248,10 @@ where
     let splits = &stats.composition;
     let area = plot_area(root);
     let n = splits.len().max(1);
-    // The kinds with rows in some split, in the table's order: a kind with no data gets neither
-    // bars nor a legend entry (the table still lists it, with its zeros).
-    let kinds: Vec<&str> = splits
-        .first()
-        .map(|s| {
-            s.kinds
-                .iter()
-                .map(|k| k.source_kind.as_str())
-                .filter(|kind| {
-                    splits.iter().any(|s| {
-                        s.kinds
-                            .iter()
-                            .any(|k| k.source_kind == *kind && k.total > 0)
-                    })
-                })
-                .collect()
-        })
-        .unwrap_or_default();
+    let kinds = kinds_with_rows(splits);
     let any_mirrored = splits
         .iter()
         .any(|s| s.kinds.iter().any(|k| k.mirrored > 0));
-    let k = kinds.len().max(1);
     let max = splits
         .iter()
         .flat_map(|s| s.kinds.iter().map(|c| c.total))
@@ -1265,13 +1306,51 @@ where
         .draw()?;
     if kinds.is_empty() {
         draw_note(&area, "no clips", 0.45)?;
-        let anchors: Vec<(i32, i32)> = (0..splits.len())
-            .map(|i| chart.backend_coord(&(i as f64, 0.0)))
-            .collect();
-        draw_categories(root, &anchors, &cats)?;
-        return Ok(());
+    } else {
+        draw_kind_bars(&mut chart, &area, splits, &kinds, slot)?;
+        draw_kind_legend(&mut chart, &kinds, any_mirrored)?;
     }
-    let width = 0.8 / k as f64;
+    let anchors: Vec<(i32, i32)> = (0..splits.len())
+        .map(|i| chart.backend_coord(&(i as f64, 0.0)))
+        .collect();
+    draw_categories(root, &anchors, &cats)?;
+    Ok(())
+}
+
+/// The kinds with rows in some split, in the table's order: a kind with no data gets neither
+/// bars nor a legend entry (the table still lists it, with its zeros).
+fn kinds_with_rows(splits: &[SplitComposition]) -> Vec<&str> {
+    splits
+        .first()
+        .map(|s| {
+            s.kinds
+                .iter()
+                .map(|k| k.source_kind.as_str())
+                .filter(|kind| {
+                    splits.iter().any(|s| {
+                        s.kinds
+                            .iter()
+                            .any(|k| k.source_kind == *kind && k.total > 0)
+                    })
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// One bar per split and shown kind, originals dark and mirrored copies lighter on top, with
+/// its count above when the counts fit the bars (`slot`: a split's width in drawing units).
+fn draw_kind_bars<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    area: &DrawingArea<DB, Shift>,
+    splits: &[SplitComposition],
+    kinds: &[&str],
+    slot: f64,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let width = 0.8 / kinds.len().max(1) as f64;
     let bar_x = |s: usize, j: usize| s as f64 - 0.4 + (j as f64 + 0.5) * width;
     // Counts above the bars when the widest fits a bar's slot (the table has them all).
     let style = font(NOTE).pos(Pos::new(HPos::Center, VPos::Bottom));
@@ -1305,8 +1384,20 @@ where
             }
         }
     }
+    Ok(())
+}
+
+/// The legend: a swatch per shown kind, and one for the mirrored copies when there are some.
+fn draw_kind_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    kinds: &[&str],
+    any_mirrored: bool,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
     let swatch = udots(NOTE) as i32;
-    for kind in &kinds {
+    for kind in kinds {
         let color = kind_color(kind);
         chart
             .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
@@ -1338,10 +1429,6 @@ where
         .border_style(stroke(GREY, GRID_LINE))
         .label_font(font(NOTE))
         .draw()?;
-    let anchors: Vec<(i32, i32)> = (0..splits.len())
-        .map(|i| chart.backend_coord(&(i as f64, 0.0)))
-        .collect();
-    draw_categories(root, &anchors, &cats)?;
     Ok(())
 }
 
@@ -1360,122 +1447,164 @@ where
     // One row of panels: a figure* across both columns, each panel a metric.
     let panels = area.split_evenly((1, 4));
     for (k, (panel, metric)) in panels.iter().zip(&stats.plausibility).enumerate() {
-        let info = &metric.info;
-        let groups = [
-            ("real", metric_values(rows, k, false).0, BLUE),
-            ("synthetic", metric_values(rows, k, true).0, GREEN),
-        ];
-        let max = groups
+        plausibility_panel(root, panel, rows, k, &metric.info)?;
+    }
+    Ok(())
+}
+
+/// One metric's panel (metric `k` of the rows): real and synthetic box plots, with the values
+/// as points when few, and the build's threshold.
+fn plausibility_panel<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    panel: &DrawingArea<DB, Shift>,
+    rows: &[ClipRow],
+    k: usize,
+    info: &MetricInfo,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let groups = [
+        ("real", metric_values(rows, k, false).0, BLUE),
+        ("synthetic", metric_values(rows, k, true).0, GREEN),
+    ];
+    let max = groups
+        .iter()
+        .flat_map(|g| g.1.last().copied())
+        .fold(0.0, f64::max);
+    // The build's default threshold, drawn so the distance to it shows; the axis reaches it.
+    let threshold = info
+        .threshold
+        .split_whitespace()
+        .last()
+        .and_then(|t| t.parse::<f64>().ok())
+        .filter(|t| t.is_finite());
+    let reach = max.max(threshold.unwrap_or(0.0));
+    // An all-zero metric (no penetration anywhere) still gets a readable axis.
+    let top = if reach > 0.0 { reach * 1.15 } else { 0.01 };
+    let (ticks, step) = nice_ticks(0.0, top, 5);
+    let margin = udots(3.0);
+    let y_area = y_label_area(
+        panel,
+        &ticks
             .iter()
-            .flat_map(|g| g.1.last().copied())
-            .fold(0.0, f64::max);
-        // The build's default threshold, drawn so the distance to it shows; the axis reaches it.
-        let threshold = info
-            .threshold
-            .split_whitespace()
-            .last()
-            .and_then(|t| t.parse::<f64>().ok())
-            .filter(|t| t.is_finite());
-        let reach = max.max(threshold.unwrap_or(0.0));
-        // An all-zero metric (no penetration anywhere) still gets a readable axis.
-        let top = if reach > 0.0 { reach * 1.15 } else { 0.01 };
-        let (ticks, step) = nice_ticks(0.0, top, 5);
-        let margin = udots(3.0);
-        let y_area = y_label_area(
-            panel,
-            &ticks
-                .iter()
-                .map(|v| tick_label(*v, step))
-                .collect::<Vec<_>>(),
-            false,
-        )?;
-        let slot = f64::from(
-            panel
-                .dim_in_pixel()
-                .0
-                .saturating_sub(2 * margin + y_area)
-                .max(1),
-        ) / 2.0;
-        let labels: Vec<(String, Option<String>)> = groups
-            .iter()
-            .map(|(name, v, _)| (name.to_string(), Some(format!("(n = {})", v.len()))))
-            .collect();
-        let cats = layout_categories(panel, &labels, slot)?;
-        // The panel's title says what and in which unit, in words (as the table's rows).
-        let mut chart = ChartBuilder::on(panel)
-            .caption(format!("{} ({})", info.name, info.unit), font(DESC))
-            .margin(margin)
-            .x_label_area_size(cats.height)
-            .y_label_area_size(y_area)
-            .build_cartesian_2d(Axis::categories(2), Axis::new(0.0..top, ticks))?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .set_all_tick_mark_size(udots(TICK_MARK))
-            .axis_style(stroke(BLACK, AXIS_LINE))
-            .bold_line_style(stroke(GRID, GRID_LINE))
-            .x_label_formatter(&|_| String::new())
-            .y_label_formatter(&|v| tick_label(*v, step))
-            .label_style(font(TICK))
-            .draw()?;
-        if let Some(t) = threshold {
-            chart.draw_series(DashedLineSeries::new(
-                [(-0.5, t), (1.5, t)],
-                udots(3.0),
-                udots(2.0),
-                stroke(RED, DATA_LINE),
-            ))?;
-            // `<=` set as in the tables: `≤`.
-            let bound = info.threshold.replace("<=", "≤").replace(">=", "≥");
-            chart.draw_series(std::iter::once(
-                EmptyElement::at((1.45, t))
-                    + Text::new(
-                        format!("threshold {bound}"),
-                        (0, -(udots(1.0) as i32)),
-                        font(NOTE)
-                            .color(&RED)
-                            .pos(Pos::new(HPos::Right, VPos::Bottom)),
-                    ),
-            ))?;
-        }
-        if max == 0.0 && groups.iter().any(|g| !g.1.is_empty()) {
-            // A flat panel is a result, not a drawing error: say what it means.
-            chart.draw_series(std::iter::once(Text::new(
-                format!("every clip: 0 {}", info.unit),
-                (0.5, top * 0.5),
+            .map(|v| tick_label(*v, step))
+            .collect::<Vec<_>>(),
+        false,
+    )?;
+    let slot = f64::from(
+        panel
+            .dim_in_pixel()
+            .0
+            .saturating_sub(2 * margin + y_area)
+            .max(1),
+    ) / 2.0;
+    let labels: Vec<(String, Option<String>)> = groups
+        .iter()
+        .map(|(name, v, _)| (name.to_string(), Some(format!("(n = {})", v.len()))))
+        .collect();
+    let cats = layout_categories(panel, &labels, slot)?;
+    // The panel's title says what and in which unit, in words (as the table's rows).
+    let mut chart = ChartBuilder::on(panel)
+        .caption(format!("{} ({})", info.name, info.unit), font(DESC))
+        .margin(margin)
+        .x_label_area_size(cats.height)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(Axis::categories(2), Axis::new(0.0..top, ticks))?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
+        .bold_line_style(stroke(GRID, GRID_LINE))
+        .x_label_formatter(&|_| String::new())
+        .y_label_formatter(&|v| tick_label(*v, step))
+        .label_style(font(TICK))
+        .draw()?;
+    if let Some(t) = threshold {
+        draw_threshold(&mut chart, info, t)?;
+    }
+    if max == 0.0 && groups.iter().any(|g| !g.1.is_empty()) {
+        // A flat panel is a result, not a drawing error: say what it means.
+        chart.draw_series(std::iter::once(Text::new(
+            format!("every clip: 0 {}", info.unit),
+            (0.5, top * 0.5),
+            font(NOTE)
+                .color(&GREY)
+                .pos(Pos::new(HPos::Center, VPos::Center)),
+        )))?;
+    }
+    for (g, (_, values, color)) in groups.iter().enumerate() {
+        draw_metric_group(&mut chart, values, g as f64, *color, top)?;
+    }
+    let anchors: Vec<(i32, i32)> = (0..2)
+        .map(|i| chart.backend_coord(&(f64::from(i), 0.0)))
+        .collect();
+    draw_categories(root, &anchors, &cats)
+}
+
+/// The build's default threshold `t` of a metric, dashed across the panel and labelled.
+fn draw_threshold<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    info: &MetricInfo,
+    t: f64,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    chart.draw_series(DashedLineSeries::new(
+        [(-0.5, t), (1.5, t)],
+        udots(3.0),
+        udots(2.0),
+        stroke(RED, DATA_LINE),
+    ))?;
+    // `<=` set as in the tables: `≤`.
+    let bound = info.threshold.replace("<=", "≤").replace(">=", "≥");
+    chart.draw_series(std::iter::once(
+        EmptyElement::at((1.45, t))
+            + Text::new(
+                format!("threshold {bound}"),
+                (0, -(udots(1.0) as i32)),
                 font(NOTE)
-                    .color(&GREY)
-                    .pos(Pos::new(HPos::Center, VPos::Center)),
-            )))?;
-        }
-        for (g, (_, values, color)) in groups.iter().enumerate() {
-            let x = g as f64;
-            if values.is_empty() {
-                chart.draw_series(std::iter::once(Text::new(
-                    "no values",
-                    (x, top / 2.0),
-                    font(NOTE)
-                        .color(&GREY)
-                        .pos(Pos::new(HPos::Center, VPos::Center)),
-                )))?;
-                continue;
-            }
-            let points = values.len() <= MAX_STRIP;
-            draw_box(&mut chart, values, x, 0.12, *color, !points)?;
-            if points {
-                chart.draw_series(values.iter().enumerate().map(|(i, v)| {
-                    Circle::new(
-                        (x + 0.3 + jitter(i, 0.16), *v),
-                        udots(DOT),
-                        lighten(*color, 0.3).filled(),
-                    )
-                }))?;
-            }
-        }
-        let anchors: Vec<(i32, i32)> = (0..2)
-            .map(|i| chart.backend_coord(&(f64::from(i), 0.0)))
-            .collect();
-        draw_categories(root, &anchors, &cats)?;
+                    .color(&RED)
+                    .pos(Pos::new(HPos::Right, VPos::Bottom)),
+            ),
+    ))?;
+    Ok(())
+}
+
+/// One group's ascending `values` at `x`: a box plot, the values beside it when few, or a note
+/// when there are none (halfway up to `top`).
+fn draw_metric_group<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    values: &[f64],
+    x: f64,
+    color: RGBColor,
+    top: f64,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    if values.is_empty() {
+        chart.draw_series(std::iter::once(Text::new(
+            "no values",
+            (x, top / 2.0),
+            font(NOTE)
+                .color(&GREY)
+                .pos(Pos::new(HPos::Center, VPos::Center)),
+        )))?;
+        return Ok(());
+    }
+    let points = values.len() <= MAX_STRIP;
+    draw_box(chart, values, x, 0.12, color, !points)?;
+    if points {
+        chart.draw_series(values.iter().enumerate().map(|(i, v)| {
+            Circle::new(
+                (x + 0.3 + jitter(i, 0.16), *v),
+                udots(DOT),
+                lighten(color, 0.3).filled(),
+            )
+        }))?;
     }
     Ok(())
 }

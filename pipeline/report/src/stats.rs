@@ -470,7 +470,32 @@ pub(crate) fn metric_values(rows: &[ClipRow], k: usize, synthetic: bool) -> (Vec
 /// counts. Independent of the order of `rows`.
 pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
     let rows = sorted_rows(rows);
+    let (motion_types, motion_types_total) = motion_type_stats(&rows);
+    let overview = overview(&rows, motion_types_total.clips);
+    let composition = composition_by_split(&rows, &overview.splits);
+    Stats {
+        title: input.title.clone(),
+        text: text_statistics(&rows),
+        tables: table_names(input),
+        overview,
+        motion_types,
+        motion_types_total,
+        composition,
+        label_sources: label_sources(&rows),
+        goals: goal_stats(&rows),
+        plausibility: plausibility_stats(&rows),
+        drops: input.drops.clone(),
+        rejects: input.rejects.clone(),
+        label_contradictions: {
+            let mut listed = input.contradictions.clone();
+            listed.sort_by(|a, b| (&a.clip_id, &a.claim).cmp(&(&b.clip_id, &b.claim)));
+            listed
+        },
+    }
+}
 
+/// Rows, originals, splits and hours; `typed_clips` is the count of original single clips.
+fn overview(rows: &[ClipRow], typed_clips: usize) -> Overview {
     let originals = rows.iter().filter(|r| r.is_original()).count();
     let seconds_all = sorted_finite(&rows.iter().map(|r| r.seconds).collect::<Vec<_>>());
     let seconds_orig = sorted_finite(
@@ -487,38 +512,52 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
         .into_iter()
         .collect();
     splits.sort_by(|a, b| split_order(a, b));
+    Overview {
+        rows: rows.len(),
+        originals,
+        mirrored: rows.len() - originals,
+        splits,
+        hours: round6(seconds_all.iter().sum::<f64>() / 3600.0),
+        hours_originals: round6(seconds_orig.iter().sum::<f64>() / 3600.0),
+        typed_clips,
+    }
+}
 
-    let motion_types: Vec<TypeStats> = {
-        let mut frames: BTreeMap<String, u64> = BTreeMap::new();
-        for r in typed_rows(&rows) {
-            let t = r
-                .motion_type
-                .clone()
-                .unwrap_or_else(|| UNMAPPED.to_string());
-            *frames.entry(t).or_default() += r.frames as u64;
-        }
-        lengths_by_type(&rows)
-            .into_iter()
-            .map(|(t, secs)| TypeStats {
-                clips: secs.len(),
-                total_frames: frames.get(&t).copied().unwrap_or(0),
-                total_seconds: round6(secs.iter().sum()),
-                seconds: Summary::of(&secs),
-                motion_type: t,
-            })
-            .collect()
-    };
-    let typed: Vec<&ClipRow> = typed_rows(&rows).collect();
+/// Clips, frames and lengths per motion type of the original single clips, and over all types.
+fn motion_type_stats(rows: &[ClipRow]) -> (Vec<TypeStats>, TypeStats) {
+    let mut frames: BTreeMap<String, u64> = BTreeMap::new();
+    for r in typed_rows(rows) {
+        let t = r
+            .motion_type
+            .clone()
+            .unwrap_or_else(|| UNMAPPED.to_string());
+        *frames.entry(t).or_default() += r.frames as u64;
+    }
+    let motion_types = lengths_by_type(rows)
+        .into_iter()
+        .map(|(t, secs)| TypeStats {
+            clips: secs.len(),
+            total_frames: frames.get(&t).copied().unwrap_or(0),
+            total_seconds: round6(secs.iter().sum()),
+            seconds: Summary::of(&secs),
+            motion_type: t,
+        })
+        .collect();
+    let typed: Vec<&ClipRow> = typed_rows(rows).collect();
     let typed_seconds: Vec<f64> =
         sorted_finite(&typed.iter().map(|r| r.seconds).collect::<Vec<_>>());
-    let motion_types_total = TypeStats {
+    let total = TypeStats {
         motion_type: "all types".to_string(),
         clips: typed.len(),
         total_frames: typed.iter().map(|r| r.frames as u64).sum(),
         total_seconds: round6(typed_seconds.iter().sum()),
         seconds: Summary::of(&typed_seconds),
     };
+    (motion_types, total)
+}
 
+/// Rows per split and source kind (the known kinds first, then any other in name order).
+fn composition_by_split(rows: &[ClipRow], splits: &[String]) -> Vec<SplitComposition> {
     let mut kinds: Vec<String> = KNOWN_KINDS.iter().map(|k| k.to_string()).collect();
     let extra: BTreeSet<&str> = rows
         .iter()
@@ -526,45 +565,51 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
         .filter(|k| !KNOWN_KINDS.contains(k))
         .collect();
     kinds.extend(extra.into_iter().map(str::to_string));
-    let composition = splits
+    splits
         .iter()
         .map(|split| {
             let in_split: Vec<&ClipRow> = rows.iter().filter(|r| &r.split == split).collect();
-            let total = in_split.len();
             SplitComposition {
                 split: split.clone(),
-                total,
+                total: in_split.len(),
                 kinds: kinds
                     .iter()
-                    .map(|kind| {
-                        let of_kind = in_split.iter().filter(|r| &r.source_kind == kind);
-                        let (mut originals, mut mirrored) = (0, 0);
-                        for r in of_kind {
-                            if r.mirrored {
-                                mirrored += 1;
-                            } else {
-                                originals += 1;
-                            }
-                        }
-                        let all = originals + mirrored;
-                        KindCount {
-                            source_kind: kind.clone(),
-                            total: all,
-                            originals,
-                            mirrored,
-                            share: if total == 0 {
-                                0.0
-                            } else {
-                                round6(all as f64 / total as f64)
-                            },
-                        }
-                    })
+                    .map(|kind| kind_count(&in_split, kind))
                     .collect(),
             }
         })
-        .collect();
+        .collect()
+}
 
-    // Real clips only: a synthetic pair's `composed` label is its sources' labels again.
+/// The rows of one split of one source kind, originals and mirrored copies.
+fn kind_count(in_split: &[&ClipRow], kind: &str) -> KindCount {
+    let total = in_split.len();
+    let of_kind = in_split.iter().filter(|r| r.source_kind == kind);
+    let (mut originals, mut mirrored) = (0, 0);
+    for r in of_kind {
+        if r.mirrored {
+            mirrored += 1;
+        } else {
+            originals += 1;
+        }
+    }
+    let all = originals + mirrored;
+    KindCount {
+        source_kind: kind.to_string(),
+        total: all,
+        originals,
+        mirrored,
+        share: if total == 0 {
+            0.0
+        } else {
+            round6(all as f64 / total as f64)
+        },
+    }
+}
+
+/// Original clips per label source. Real clips only: a synthetic pair's `composed` label is its
+/// sources' labels again.
+fn label_sources(rows: &[ClipRow]) -> BTreeMap<String, usize> {
     let mut label_sources = BTreeMap::new();
     for r in rows.iter().filter(|r| r.is_original() && !r.is_synthetic()) {
         let key = r
@@ -573,7 +618,11 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
             .unwrap_or_else(|| NO_LABEL.to_string());
         *label_sources.entry(key).or_insert(0) += 1;
     }
+    label_sources
+}
 
+/// Where the original clips with a finite `goal_pelvis` end, and how many per motion type.
+fn goal_stats(rows: &[ClipRow]) -> GoalStats {
     let goal_rows: Vec<(&ClipRow, [f64; 2])> = rows
         .iter()
         .filter(|r| r.is_original())
@@ -591,7 +640,7 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
             .unwrap_or_else(|| UNMAPPED.to_string());
         *per_type.entry(t).or_insert(0) += 1;
     }
-    let goals = GoalStats {
+    GoalStats {
         clips: goal_rows.len(),
         per_type,
         x: Summary::of(&goal_rows.iter().map(|(_, g)| g[0]).collect::<Vec<_>>()),
@@ -602,14 +651,17 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
                 .map(|(_, g)| g[0].hypot(g[1]))
                 .collect::<Vec<_>>(),
         ),
-    };
+    }
+}
 
-    let plausibility = METRICS
+/// Every plausibility metric's summary, real versus synthetic originals.
+fn plausibility_stats(rows: &[ClipRow]) -> Vec<MetricStats> {
+    METRICS
         .iter()
         .enumerate()
         .map(|(k, info)| {
-            let (real, real_missing) = metric_values(&rows, k, false);
-            let (synthetic, synthetic_missing) = metric_values(&rows, k, true);
+            let (real, real_missing) = metric_values(rows, k, false);
+            let (synthetic, synthetic_missing) = metric_values(rows, k, true);
             MetricStats {
                 info: *info,
                 real: Summary::of(&real),
@@ -618,8 +670,11 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
                 synthetic_missing,
             }
         })
-        .collect();
+        .collect()
+}
 
+/// The file names of the tables read, sorted.
+fn table_names(input: &ReportInput) -> Vec<String> {
     let mut tables: Vec<String> = input
         .tables
         .iter()
@@ -630,34 +685,7 @@ pub fn statistics(rows: &[ClipRow], input: &ReportInput) -> Stats {
         })
         .collect();
     tables.sort();
-
-    Stats {
-        title: input.title.clone(),
-        text: text_statistics(&rows),
-        tables,
-        overview: Overview {
-            rows: rows.len(),
-            originals,
-            mirrored: rows.len() - originals,
-            splits,
-            hours: round6(seconds_all.iter().sum::<f64>() / 3600.0),
-            hours_originals: round6(seconds_orig.iter().sum::<f64>() / 3600.0),
-            typed_clips: typed.len(),
-        },
-        motion_types,
-        motion_types_total,
-        composition,
-        label_sources,
-        goals,
-        plausibility,
-        drops: input.drops.clone(),
-        rejects: input.rejects.clone(),
-        label_contradictions: {
-            let mut listed = input.contradictions.clone();
-            listed.sort_by(|a, b| (&a.clip_id, &a.claim).cmp(&(&b.clip_id, &b.claim)));
-            listed
-        },
-    }
+    tables
 }
 
 #[cfg(test)]

@@ -182,9 +182,19 @@ pub(crate) fn latex(stats: &Stats) -> String {
     let mut out = String::new();
     out.push_str("% Dataset statistics written by motionforge's report module.\n");
     out.push_str("% Needs \\usepackage{booktabs}; place the tables with \\input{tables.tex}.\n\n");
+    tex_motion_types(&mut out, stats, &title);
+    tex_composition(&mut out, stats, &title);
+    tex_label_sources(&mut out, stats, &title);
+    tex_text(&mut out, stats, &title);
+    tex_plausibility(&mut out, stats, &title);
+    tex_drops(&mut out, stats, &title);
+    out
+}
 
-    // Motion types: LAMA Table 3's columns (segment length range, count, total frames) with the
-    // quartiles in between.
+/// Motion types: clips, length quartiles and total frames.
+fn tex_motion_types(out: &mut String, stats: &Stats, title: &str) {
+    // LAMA Table 3's columns (segment length range, count, total frames) with the quartiles in
+    // between.
     let mut body = String::new();
     body.push_str(" & & \\multicolumn{5}{c}{Length (s)} & \\\\\n\\cmidrule(lr){3-7}\n");
     body.push_str("Motion type & Clips & Min & $Q_1$ & Median & $Q_3$ & Max & Total frames \\\\\n");
@@ -195,7 +205,7 @@ pub(crate) fn latex(stats: &Stats) -> String {
     body.push_str("\\midrule\n");
     body.push_str(&tex_type_row(&stats.motion_types_total, "All types"));
     tex_table(
-        &mut out,
+        out,
         &format!(
             "Motion types of {title}: clip count, motion length and total frames (original single clips; mirrored copies not counted)."
         ),
@@ -203,8 +213,11 @@ pub(crate) fn latex(stats: &Stats) -> String {
         "lrrrrrrr",
         &body,
     );
+}
 
-    // Composition: one row per split, one column per source kind.
+/// Composition: clips per split and source kind.
+fn tex_composition(out: &mut String, stats: &Stats, title: &str) {
+    // One row per split, one column per source kind.
     let kinds: Vec<String> = stats
         .composition
         .first()
@@ -224,7 +237,7 @@ pub(crate) fn latex(stats: &Stats) -> String {
         let _ = writeln!(body, " & {} \\\\", s.total);
     }
     tex_table(
-        &mut out,
+        out,
         &format!(
             "Composition of {title} by source kind: clips per split, mirrored copies included (share of the split in parentheses)."
         ),
@@ -232,13 +245,16 @@ pub(crate) fn latex(stats: &Stats) -> String {
         &format!("l{}r", "r".repeat(kinds.len())),
         &body,
     );
+}
 
+/// Clips per label source.
+fn tex_label_sources(out: &mut String, stats: &Stats, title: &str) {
     let mut body = String::from("Label source & Clips \\\\\n\\midrule\n");
     for (source, n) in &stats.label_sources {
         let _ = writeln!(body, "{} & {n} \\\\", latex_escape(source));
     }
     tex_table(
-        &mut out,
+        out,
         &format!(
             "Sources of the body-part labels of {title} (original real clips; synthetic pairs take their sources' labels)."
         ),
@@ -246,7 +262,10 @@ pub(crate) fn latex(stats: &Stats) -> String {
         "lr",
         &body,
     );
+}
 
+/// Caption statistics and the most frequent verbs.
+fn tex_text(out: &mut String, stats: &Stats, title: &str) {
     let mut body = String::from("Statistic & Value \\\\\n\\midrule\n");
     for (name, value) in text_rows(&stats.text) {
         let _ = writeln!(body, "{name} & {value} \\\\");
@@ -259,13 +278,16 @@ pub(crate) fn latex(stats: &Stats) -> String {
         let _ = writeln!(body, "{} & {n} \\\\", latex_escape(verb));
     }
     tex_table(
-        &mut out,
+        out,
         &format!("Captions of {title} (original real clips)."),
         "tab:mf-text",
         "lr",
         &body,
     );
+}
 
+/// Plausibility metrics, real versus synthetic.
+fn tex_plausibility(out: &mut String, stats: &Stats, title: &str) {
     let mut body = String::new();
     body.push_str(
         "Metric & Clips & $n$ & Min & $Q_1$ & Median & $Q_3$ & Max & Threshold \\\\\n\\midrule\n",
@@ -277,7 +299,7 @@ pub(crate) fn latex(stats: &Stats) -> String {
         body.push_str(&tex_metric_rows(m));
     }
     tex_table(
-        &mut out,
+        out,
         &format!(
             "Plausibility of real and synthetic clips of {title} (originals). Thresholds are the build's defaults."
         ),
@@ -285,19 +307,21 @@ pub(crate) fn latex(stats: &Stats) -> String {
         "llrrrrrrl",
         &body,
     );
+}
 
+/// Drops and rejects by reason.
+fn tex_drops(out: &mut String, stats: &Stats, title: &str) {
     let mut body = String::from("Reason & Count \\\\\n\\midrule\n");
     tex_counts(&mut body, "Dropped segments", &stats.drops);
     body.push_str("\\midrule\n");
     tex_counts(&mut body, "Rejected items", &stats.rejects);
     tex_table(
-        &mut out,
+        out,
         &format!("Segments dropped and items rejected while building {title}, by reason."),
         "tab:mf-drops",
         "lr",
         &body,
     );
-    out
 }
 
 /// `figures.tex`: every figure of [`FIGURES`] as a float with its caption and `fig:mf-*` label,
@@ -406,8 +430,21 @@ fn md_counts(out: &mut String, heading: &str, counts: &BTreeMap<String, usize>) 
 /// `report.md`: overview, the tables, and every figure of [`FIGURES`] embedded as PNG with a link
 /// to its SVG.
 pub(crate) fn markdown(stats: &Stats) -> String {
-    let o = &stats.overview;
     let mut out = String::new();
+    md_title(&mut out, stats);
+    md_overview(&mut out, stats);
+    md_motion_types(&mut out, stats);
+    md_goals(&mut out, stats);
+    md_composition(&mut out, stats);
+    md_label_sources(&mut out, stats);
+    md_captions(&mut out, stats);
+    md_plausibility(&mut out, stats);
+    md_drops(&mut out, stats);
+    out
+}
+
+/// Title and where the numbers come from.
+fn md_title(out: &mut String, stats: &Stats) {
     let _ = writeln!(
         out,
         "# {}: dataset statistics\n",
@@ -426,9 +463,13 @@ pub(crate) fn markdown(stats: &Stats) -> String {
             tables.join(", ")
         }
     );
+}
 
+/// The overview table: rows, originals, splits, hours.
+fn md_overview(out: &mut String, stats: &Stats) {
+    let o = &stats.overview;
     out.push_str("## Overview\n\n");
-    md_header(&mut out, &["", "value"], 1);
+    md_header(out, &["", "value"], 1);
     let splits: Vec<String> = o.splits.iter().map(|s| markdown_escape(s)).collect();
     for (k, v) in [
         ("rows (clips)", o.rows.to_string()),
@@ -445,9 +486,12 @@ pub(crate) fn markdown(stats: &Stats) -> String {
             o.typed_clips.to_string(),
         ),
     ] {
-        md_row(&mut out, &[k.to_string(), v]);
+        md_row(out, &[k.to_string(), v]);
     }
+}
 
+/// Clips and lengths per motion type, with their figures.
+fn md_motion_types(out: &mut String, stats: &Stats) {
     out.push_str(
         "\n## Motion types\n\nOriginal `real_single` clips per motion type (pairs and synthetic \
          compositions carry no type; mirrored copies would double every count). Lengths in \
@@ -455,7 +499,7 @@ pub(crate) fn markdown(stats: &Stats) -> String {
          added.\n\n",
     );
     md_header(
-        &mut out,
+        out,
         &[
             "motion type",
             "clips",
@@ -476,16 +520,15 @@ pub(crate) fn markdown(stats: &Stats) -> String {
         md_row(out, &cells);
     };
     for t in types_in_report_order(stats) {
-        type_row(&mut out, t, markdown_escape(&t.motion_type));
+        type_row(out, t, markdown_escape(&t.motion_type));
     }
-    type_row(
-        &mut out,
-        &stats.motion_types_total,
-        "**all types**".to_string(),
-    );
-    md_figure(&mut out, "motion_type_counts");
-    md_figure(&mut out, "motion_lengths");
+    type_row(out, &stats.motion_types_total, "**all types**".to_string());
+    md_figure(out, "motion_type_counts");
+    md_figure(out, "motion_lengths");
+}
 
+/// Where locomotion clips end (`goal_pelvis`), with its figure.
+fn md_goals(out: &mut String, stats: &Stats) {
     let g = &stats.goals;
     let _ = writeln!(
         out,
@@ -494,14 +537,14 @@ pub(crate) fn markdown(stats: &Stats) -> String {
         g.clips
     );
     if let (Some(x), Some(y), Some(d)) = (&g.x, &g.y, &g.distance) {
-        md_header(&mut out, &["", "min", "median", "max"], 1);
+        md_header(out, &["", "min", "median", "max"], 1);
         for (name, s) in [
             ("lateral x (m)", x),
             ("forward y (m)", y),
             ("distance (m)", d),
         ] {
             md_row(
-                &mut out,
+                out,
                 &[
                     name.to_string(),
                     format!("{:.2}", s.min),
@@ -518,8 +561,11 @@ pub(crate) fn markdown(stats: &Stats) -> String {
             .collect();
         let _ = writeln!(out, "Per motion type: {}.", per.join(", "));
     }
-    md_figure(&mut out, "goal_locations");
+    md_figure(out, "goal_locations");
+}
 
+/// Rows per split and source kind, with its figure.
+fn md_composition(out: &mut String, stats: &Stats) {
     out.push_str(
         "## Composition\n\nRows per split and source kind, mirrored copies included (their \
          share of the split in parentheses).\n\n",
@@ -532,7 +578,7 @@ pub(crate) fn markdown(stats: &Stats) -> String {
     let mut header: Vec<&str> = vec!["split"];
     header.extend(kinds.iter().map(String::as_str));
     header.push("total");
-    md_header(&mut out, &header, 1);
+    md_header(out, &header, 1);
     for s in &stats.composition {
         let mut cells = vec![markdown_escape(&s.split)];
         cells.extend(
@@ -541,37 +587,46 @@ pub(crate) fn markdown(stats: &Stats) -> String {
                 .map(|k| format!("{} ({}%; {} mirrored)", k.total, pct(k.share), k.mirrored)),
         );
         cells.push(s.total.to_string());
-        md_row(&mut out, &cells);
+        md_row(out, &cells);
     }
-    md_figure(&mut out, "composition");
+    md_figure(out, "composition");
+}
 
+/// Original real clips per label source.
+fn md_label_sources(out: &mut String, stats: &Stats) {
     out.push_str(
         "## Label sources\n\nOriginal real clips per `label_source` (`(none)`: unlabelled); synthetic pairs are left out: their `composed` labels are their sources' labels.\n\n",
     );
-    md_header(&mut out, &["label source", "clips"], 1);
+    md_header(out, &["label source", "clips"], 1);
     for (source, n) in &stats.label_sources {
-        md_row(&mut out, &[markdown_escape(source), n.to_string()]);
+        md_row(out, &[markdown_escape(source), n.to_string()]);
     }
+}
 
+/// Caption statistics and the most frequent verbs.
+fn md_captions(out: &mut String, stats: &Stats) {
     out.push_str(
         "\n## Captions\n\nThe captions (`texts`) of the original real clips: words are lowercase runs of letters, digits and `'`; verbs are lemmas tagged by the HumanML3D caption tagger, counted once per caption.\n\n",
     );
-    md_header(&mut out, &["statistic", "value"], 1);
+    md_header(out, &["statistic", "value"], 1);
     for (name, value) in text_rows(&stats.text) {
-        md_row(&mut out, &[name, value]);
+        md_row(out, &[name, value]);
     }
     out.push('\n');
-    md_header(&mut out, &["most frequent verb", "captions"], 1);
+    md_header(out, &["most frequent verb", "captions"], 1);
     for (verb, n) in &stats.text.top_verbs {
-        md_row(&mut out, &[markdown_escape(verb), n.to_string()]);
+        md_row(out, &[markdown_escape(verb), n.to_string()]);
     }
+}
 
+/// Plausibility metrics, real versus synthetic, with its figure.
+fn md_plausibility(out: &mut String, stats: &Stats) {
     out.push_str(
         "\n## Plausibility\n\nReal (`real_single`, `real_pair`) versus synthetic original clips. \
          The threshold is the build's default (`quality::Thresholds`).\n\n",
     );
     md_header(
-        &mut out,
+        out,
         &[
             "metric",
             "clips",
@@ -602,7 +657,7 @@ pub(crate) fn markdown(stats: &Stats) -> String {
                 c[0].clone()
             };
             md_row(
-                &mut out,
+                out,
                 &[
                     name,
                     g.to_string(),
@@ -621,11 +676,14 @@ pub(crate) fn markdown(stats: &Stats) -> String {
             );
         }
     }
-    md_figure(&mut out, "plausibility");
+    md_figure(out, "plausibility");
+}
 
+/// Drops and rejects by reason, and labels that contradict the motion.
+fn md_drops(out: &mut String, stats: &Stats) {
     out.push_str("## Drops and rejects\n\n");
-    md_counts(&mut out, "Dropped segments", &stats.drops);
-    md_counts(&mut out, "Rejected items", &stats.rejects);
+    md_counts(out, "Dropped segments", &stats.drops);
+    md_counts(out, "Rejected items", &stats.rejects);
     if !stats.label_contradictions.is_empty() {
         // Listed for the reader to judge, never fixed: a label may be wrong, or the take.
         out.push_str(
@@ -646,7 +704,6 @@ pub(crate) fn markdown(stats: &Stats) -> String {
         }
         out.push('\n');
     }
-    out
 }
 
 #[cfg(test)]

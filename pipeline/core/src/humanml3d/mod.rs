@@ -272,17 +272,29 @@ pub fn vectors(positions: &[DVec3]) -> Result<Vec<f32>, Hml3dError> {
             joint: i % NUM_JOINTS,
         });
     }
-    let frame = |t: usize| &positions[t * NUM_JOINTS..(t + 1) * NUM_JOINTS];
-    let direction = |p: &[DVec3], t: usize, j: usize| -> Result<DVec3, Hml3dError> {
-        let parent = PARENTS[j].unwrap_or(0);
-        (p[t * NUM_JOINTS + j] - p[t * NUM_JOINTS + parent])
-            .try_normalize()
-            .ok_or(Hml3dError::ZeroBone { frame: t, joint: j })
-    };
+    let p = retarget(positions, frames)?;
+    let global = on_floor_facing_z(p)?;
+    let root = root_rotations(&global, frames)?;
+    let local = local_rotations(&global, &root, frames)?;
+    let mut out = Vec::with_capacity((frames - 1) * DIM);
+    for t in 0..frames - 1 {
+        push_row(&mut out, &global, &root, &local, t);
+    }
+    Ok(out)
+}
 
-    // Retarget to the reference bone lengths: each bone keeps its direction, the root its path
-    // scaled by the ratio of leg lengths (what the reference's IK followed by FK amounts to).
-    let first = frame(0);
+/// The unit direction of joint `j`'s bone at frame `t` of `p` (`frames × 22`).
+fn bone_direction(p: &[DVec3], t: usize, j: usize) -> Result<DVec3, Hml3dError> {
+    let parent = PARENTS[j].unwrap_or(0);
+    (p[t * NUM_JOINTS + j] - p[t * NUM_JOINTS + parent])
+        .try_normalize()
+        .ok_or(Hml3dError::ZeroBone { frame: t, joint: j })
+}
+
+/// Retarget to the reference bone lengths: each bone keeps its direction, the root its path
+/// scaled by the ratio of leg lengths (what the reference's IK followed by FK amounts to).
+fn retarget(positions: &[DVec3], frames: usize) -> Result<Vec<DVec3>, Hml3dError> {
+    let first = &positions[..NUM_JOINTS];
     let leg = |lengths: &dyn Fn(usize) -> f64| LEG_BONES.iter().map(|&j| lengths(j)).sum::<f64>();
     let source_leg = leg(&|j| {
         // The reference keeps offsets in float32.
@@ -296,14 +308,18 @@ pub fn vectors(positions: &[DVec3]) -> Result<Vec<f32>, Hml3dError> {
         for chain in CHAINS {
             for link in chain.windows(2) {
                 let (parent, child) = (link[0], link[1]);
-                let d = direction(positions, t, child)?;
+                let d = bone_direction(positions, t, child)?;
                 p[t * NUM_JOINTS + child] =
                     p[t * NUM_JOINTS + parent] + d * REFERENCE_LENGTHS[child];
             }
         }
     }
+    Ok(p)
+}
 
-    // On the floor, the first frame's root over the origin, facing +z.
+/// On the floor, the first frame's root over the origin, facing +z; from here the reference
+/// holds positions in float32, so they are rounded to it.
+fn on_floor_facing_z(mut p: Vec<DVec3>) -> Result<Vec<DVec3>, Hml3dError> {
     let floor = p.iter().map(|v| v.y).fold(f64::INFINITY, f64::min);
     let origin = DVec3::new(p[0].x, 0.0, p[0].z);
     for v in &mut p {
@@ -315,9 +331,7 @@ pub fn vectors(positions: &[DVec3]) -> Result<Vec<f32>, Hml3dError> {
         .and_then(|a| facing(a).try_normalize())
         .ok_or(Hml3dError::NoFacing { frame: 0 })?;
     let face = between(forward0, DVec3::Z);
-    // From here the reference holds positions in float32.
-    let global: Vec<DVec3> = p
-        .iter()
+    Ok(p.iter()
         .map(|v| {
             let r = face * *v;
             DVec3::new(
@@ -326,25 +340,14 @@ pub fn vectors(positions: &[DVec3]) -> Result<Vec<f32>, Hml3dError> {
                 f64::from(r.z as f32),
             )
         })
-        .collect();
-    let at = |t: usize, j: usize| global[t * NUM_JOINTS + j];
+        .collect())
+}
 
-    // Foot contacts, compared in float32 like the reference so borderline frames agree.
-    let contact = |t: usize, j: usize| -> f32 {
-        let (a, b) = (at(t, j).as_vec3(), at(t + 1, j).as_vec3());
-        let d = b - a;
-        let squared = d.x * d.x + d.y * d.y + d.z * d.z;
-        if squared < CONTACT_THRESHOLD as f32 {
-            1.0
-        } else {
-            0.0
-        }
-    };
-
-    // Root rotation per frame from the smoothed facing. The reference's IK unpacks its face
-    // joints in another order than `process_file` does, so its left-right direction is the
-    // shoulders' minus the hips' (reproduced: evaluators were trained on it); the first frame's
-    // root rotation is the identity.
+/// Root rotation per frame from the smoothed facing. The reference's IK unpacks its face
+/// joints in another order than `process_file` does, so its left-right direction is the
+/// shoulders' minus the hips' (reproduced: evaluators were trained on it); the first frame's
+/// root rotation is the identity.
+fn root_rotations(global: &[DVec3], frames: usize) -> Result<Vec<DQuat>, Hml3dError> {
     let facings: Vec<DVec3> = (0..frames)
         .map(|t| {
             across(&global[t * NUM_JOINTS..(t + 1) * NUM_JOINTS], 1, 2)
@@ -363,17 +366,24 @@ pub fn vectors(positions: &[DVec3]) -> Result<Vec<f32>, Hml3dError> {
         let f = f.try_normalize().ok_or(Hml3dError::NoFacing { frame: t })?;
         root.push(between(f, DVec3::Z));
     }
+    Ok(root)
+}
 
-    // Local rotations along each chain, each chain starting from the root rotation (also for
-    // the arms, which start at spine3: the reference does not carry the spine's rotation).
-    let mut local = vec![DQuat::IDENTITY; positions.len()];
+/// Local rotations along each chain, each chain starting from the root rotation (also for
+/// the arms, which start at spine3: the reference does not carry the spine's rotation).
+fn local_rotations(
+    global: &[DVec3],
+    root: &[DQuat],
+    frames: usize,
+) -> Result<Vec<DQuat>, Hml3dError> {
+    let mut local = vec![DQuat::IDENTITY; global.len()];
     for t in 0..frames {
         local[t * NUM_JOINTS] = root[t];
         for chain in CHAINS {
             let mut r = root[t];
             for link in chain.windows(2) {
                 let child = link[1];
-                let v = direction(&global, t, child)?;
+                let v = bone_direction(global, t, child)?;
                 let swing = between(DVec3::from_array(REST_DIRECTIONS[child]), v);
                 let l = r.conjugate() * swing;
                 local[t * NUM_JOINTS + child] = l;
@@ -381,42 +391,58 @@ pub fn vectors(positions: &[DVec3]) -> Result<Vec<f32>, Hml3dError> {
             }
         }
     }
+    Ok(local)
+}
 
-    let mut out = Vec::with_capacity((frames - 1) * DIM);
-    for t in 0..frames - 1 {
-        let heading = root[t];
-        // Root: rotation velocity, linear velocity (in the next frame's heading), height.
-        let turn = root[t + 1] * root[t].conjugate();
-        let step = root[t + 1] * (at(t + 1, 0) - at(t, 0));
-        out.extend([
-            turn.y.clamp(-1.0, 1.0).asin() as f32,
-            step.x as f32,
-            step.z as f32,
-            at(t, 0).y as f32,
-        ]);
-        // Joints relative to the root on the ground plane, in this frame's heading.
-        let base = DVec3::new(at(t, 0).x, 0.0, at(t, 0).z);
-        for j in 1..NUM_JOINTS {
-            let v = heading * (at(t, j) - base);
-            out.extend([v.x as f32, v.y as f32, v.z as f32]);
-        }
-        for j in 1..NUM_JOINTS {
-            let m = DMat3::from_quat(local[t * NUM_JOINTS + j]);
-            out.extend([
-                m.x_axis.x as f32,
-                m.x_axis.y as f32,
-                m.x_axis.z as f32,
-                m.y_axis.x as f32,
-                m.y_axis.y as f32,
-                m.y_axis.z as f32,
-            ]);
-        }
-        for j in 0..NUM_JOINTS {
-            let v = heading * (at(t + 1, j) - at(t, j));
-            out.extend([v.x as f32, v.y as f32, v.z as f32]);
-        }
-        out.extend(FEET_LEFT.map(|j| contact(t, j)));
-        out.extend(FEET_RIGHT.map(|j| contact(t, j)));
+/// Appends frame `t`'s [`DIM`] numbers (it needs frame `t + 1` too): root velocities and
+/// height, joint positions, rotations and velocities, foot contacts.
+fn push_row(out: &mut Vec<f32>, global: &[DVec3], root: &[DQuat], local: &[DQuat], t: usize) {
+    let at = |t: usize, j: usize| global[t * NUM_JOINTS + j];
+    let heading = root[t];
+    // Root: rotation velocity, linear velocity (in the next frame's heading), height.
+    let turn = root[t + 1] * root[t].conjugate();
+    let step = root[t + 1] * (at(t + 1, 0) - at(t, 0));
+    out.extend([
+        turn.y.clamp(-1.0, 1.0).asin() as f32,
+        step.x as f32,
+        step.z as f32,
+        at(t, 0).y as f32,
+    ]);
+    // Joints relative to the root on the ground plane, in this frame's heading.
+    let base = DVec3::new(at(t, 0).x, 0.0, at(t, 0).z);
+    for j in 1..NUM_JOINTS {
+        let v = heading * (at(t, j) - base);
+        out.extend([v.x as f32, v.y as f32, v.z as f32]);
     }
-    Ok(out)
+    for j in 1..NUM_JOINTS {
+        let m = DMat3::from_quat(local[t * NUM_JOINTS + j]);
+        out.extend([
+            m.x_axis.x as f32,
+            m.x_axis.y as f32,
+            m.x_axis.z as f32,
+            m.y_axis.x as f32,
+            m.y_axis.y as f32,
+            m.y_axis.z as f32,
+        ]);
+    }
+    for j in 0..NUM_JOINTS {
+        let v = heading * (at(t + 1, j) - at(t, j));
+        out.extend([v.x as f32, v.y as f32, v.z as f32]);
+    }
+    out.extend(FEET_LEFT.map(|j| foot_contact(global, t, j)));
+    out.extend(FEET_RIGHT.map(|j| foot_contact(global, t, j)));
+}
+
+/// Foot contact of joint `j` between frames `t` and `t + 1`, compared in float32 like the
+/// reference so borderline frames agree.
+fn foot_contact(global: &[DVec3], t: usize, j: usize) -> f32 {
+    let at = |t: usize| global[t * NUM_JOINTS + j];
+    let (a, b) = (at(t).as_vec3(), at(t + 1).as_vec3());
+    let d = b - a;
+    let squared = d.x * d.x + d.y * d.y + d.z * d.z;
+    if squared < CONTACT_THRESHOLD as f32 {
+        1.0
+    } else {
+        0.0
+    }
 }

@@ -629,76 +629,41 @@ fn read_motion(
         if fields.peek().is_none() {
             continue;
         }
+        let at = FrameLine {
+            line: line_no,
+            frame,
+        };
         if frame == declared {
             // Count every frame line, so the reject says how many the file really holds.
             let extra = lines
                 .filter(|(_, (_, l))| l.split_ascii_whitespace().next().is_some())
                 .count();
-            return Err(BvhError {
-                line: line_no,
-                frame: Some(frame),
-                kind: BvhErrorKind::ExtraFrames {
-                    declared,
-                    header_line: frames_line,
-                    found: declared + 1 + extra,
-                },
-            });
+            return Err(at.error(BvhErrorKind::ExtraFrames {
+                declared,
+                header_line: frames_line,
+                found: declared + 1 + extra,
+            }));
         }
         if (frame + 1).saturating_mul(n) > MAX_JOINT_FRAMES {
-            return Err(BvhError {
-                line: line_no,
-                frame: Some(frame),
-                kind: BvhErrorKind::TooLarge {
-                    frames: declared,
-                    joints: n,
-                },
-            });
+            return Err(at.error(BvhErrorKind::TooLarge {
+                frames: declared,
+                joints: n,
+            }));
         }
-        values.clear();
-        for tok in fields {
-            let v = parse_finite(tok).ok_or_else(|| BvhError {
-                line: line_no,
-                frame: Some(frame),
-                kind: BvhErrorKind::BadNumber {
-                    what: "a channel value",
-                    found: excerpt(tok),
-                },
-            })?;
-            if v.abs() > MAX_MAGNITUDE {
-                return Err(BvhError {
-                    line: line_no,
-                    frame: Some(frame),
-                    kind: BvhErrorKind::OutOfRange {
-                        what: layout.channel_name(skeleton, values.len()),
-                        value: v,
-                    },
-                });
-            }
-            values.push(v);
-        }
-        if values.len() != layout.total {
-            return Err(BvhError {
-                line: line_no,
-                frame: Some(frame),
-                kind: BvhErrorKind::ValueCount {
-                    expected: layout.total,
-                    found: values.len(),
-                },
-            });
-        }
+        at.read_values(fields, &layout, skeleton, &mut values)?;
         layout.decode(&values, &mut rotations, &mut translations);
         channels.extend_from_slice(&values);
         frame += 1;
     }
     if frame < declared {
-        return Err(BvhError {
+        let at = FrameLine {
             line: last_line,
-            frame: Some(frame),
-            kind: BvhErrorKind::Truncated {
-                declared,
-                found: frame,
-            },
-        });
+            frame,
+        };
+        return Err(at.error(BvhErrorKind::Truncated {
+            declared,
+            found: frame,
+        }));
     }
     let motion = Motion {
         skeleton: Arc::clone(skeleton),
@@ -707,6 +672,59 @@ fn read_motion(
         translations,
     };
     Ok((motion, channels))
+}
+
+/// Where a frame line is: its line number and frame, for its errors.
+#[derive(Clone, Copy)]
+struct FrameLine {
+    line: usize,
+    frame: usize,
+}
+
+impl FrameLine {
+    fn error(self, kind: BvhErrorKind) -> BvhError {
+        BvhError {
+            line: self.line,
+            frame: Some(self.frame),
+            kind,
+        }
+    }
+
+    /// Parses the line's `fields` into `values` (cleared first): finite numbers within
+    /// [`MAX_MAGNITUDE`], exactly one per channel of `layout`. Inlined: it runs once per
+    /// frame of every capture read.
+    #[inline]
+    fn read_values<'t>(
+        self,
+        fields: impl Iterator<Item = &'t str>,
+        layout: &ChannelLayout,
+        skeleton: &Skeleton,
+        values: &mut Vec<f64>,
+    ) -> Result<(), BvhError> {
+        values.clear();
+        for tok in fields {
+            let v = parse_finite(tok).ok_or_else(|| {
+                self.error(BvhErrorKind::BadNumber {
+                    what: "a channel value",
+                    found: excerpt(tok),
+                })
+            })?;
+            if v.abs() > MAX_MAGNITUDE {
+                return Err(self.error(BvhErrorKind::OutOfRange {
+                    what: layout.channel_name(skeleton, values.len()),
+                    value: v,
+                }));
+            }
+            values.push(v);
+        }
+        if values.len() != layout.total {
+            return Err(self.error(BvhErrorKind::ValueCount {
+                expected: layout.total,
+                found: values.len(),
+            }));
+        }
+        Ok(())
+    }
 }
 
 /// Why a motion cannot be written as BVH.

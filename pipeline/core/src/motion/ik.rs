@@ -179,141 +179,256 @@ pub fn motion_from_positions(
     fps: f64,
     tolerance: f64,
 ) -> Result<(Motion, Fit), IkError> {
-    let n = layout.names.len();
-    if n == 0 || !positions.len().is_multiple_of(n) || positions.is_empty() {
-        return Err(IkError::Shape {
-            values: positions.len(),
-            joints: n,
-        });
-    }
-    for (j, parent) in layout.parents.iter().enumerate() {
-        let ok = match parent {
-            None => j == 0,
-            Some(p) => *p < j,
-        };
-        if !ok {
-            return Err(IkError::Hierarchy {
-                joint: j,
-                name: layout.names[j].clone(),
-            });
-        }
-    }
-    let frames = positions.len() / n;
-    let at = |t: usize, j: usize| positions[t * n + j];
-    let bone = |t: usize, j: usize| at(t, j) - layout.parents[j].map_or(DVec3::ZERO, |p| at(t, p));
-    let children: Vec<Vec<usize>> = (0..n)
-        .map(|j| (0..n).filter(|&c| layout.parents[c] == Some(j)).collect())
-        .collect();
-
-    // Bone lengths: each bone's mean, and every frame checked against it.
-    let mut lengths = vec![0.0; n];
+    let clip = Positions::new(layout, positions)?;
     let mut fit = Fit::default();
-    for (j, mean) in lengths.iter_mut().enumerate().skip(1) {
-        for t in 0..frames {
-            let l = bone(t, j).length();
-            if l.is_nan() || l <= 1e-9 {
-                return Err(IkError::ZeroBone {
-                    frame: t,
-                    name: layout.names[j].clone(),
-                });
-            }
-            *mean += l / frames as f64;
+    let lengths = clip.bone_lengths(tolerance, &mut fit)?;
+    let (world, offsets) = clip.world_rotations(&lengths);
+    let (rotations, translations) = clip.local_channels(&world, &offsets);
+    let motion = Motion {
+        skeleton: skeleton_of(layout, &offsets),
+        fps,
+        rotations,
+        translations,
+    };
+    let n = clip.n;
+    let pose = motion.forward_kinematics();
+    for (i, (a, b)) in pose.positions.iter().zip(positions).enumerate() {
+        let d = a.distance(*b);
+        if d > fit.max_residual {
+            fit.max_residual = d;
+            fit.worst = (i / n, i % n);
         }
-        for t in 0..frames {
-            let l = bone(t, j).length();
-            let change = (l - *mean).abs() / *mean;
-            // NaN (an overflowing length or mean) fails the check too.
-            if change.is_nan() || change > tolerance {
-                return Err(IkError::BoneLength {
-                    frame: t,
+    }
+    Ok((motion, fit))
+}
+
+/// A checked position array with its layout: whole frames of a tree rooted at joint 0.
+struct Positions<'a> {
+    layout: &'a PositionLayout,
+    positions: &'a [DVec3],
+    /// Joints per frame.
+    n: usize,
+    frames: usize,
+    /// Each joint's children, in joint order.
+    children: Vec<Vec<usize>>,
+    /// The capture's lateral (leftward) axis.
+    lateral: DVec3,
+    /// The rest frame: columns lateral, up and forward (the capture's own axes, facing forward).
+    rest: DMat3,
+}
+
+impl<'a> Positions<'a> {
+    fn new(layout: &'a PositionLayout, positions: &'a [DVec3]) -> Result<Self, IkError> {
+        let n = layout.names.len();
+        if n == 0 || !positions.len().is_multiple_of(n) || positions.is_empty() {
+            return Err(IkError::Shape {
+                values: positions.len(),
+                joints: n,
+            });
+        }
+        for (j, parent) in layout.parents.iter().enumerate() {
+            let ok = match parent {
+                None => j == 0,
+                Some(p) => *p < j,
+            };
+            if !ok {
+                return Err(IkError::Hierarchy {
+                    joint: j,
                     name: layout.names[j].clone(),
-                    length: l,
-                    mean: *mean,
-                    tolerance,
                 });
             }
-            fit.max_length_change = fit.max_length_change.max(change);
+        }
+        let lateral = layout.up.cross(layout.forward).normalize();
+        Ok(Positions {
+            layout,
+            positions,
+            n,
+            frames: positions.len() / n,
+            children: (0..n)
+                .map(|j| (0..n).filter(|&c| layout.parents[c] == Some(j)).collect())
+                .collect(),
+            lateral,
+            rest: DMat3::from_cols(lateral, layout.up, layout.forward),
+        })
+    }
+
+    fn at(&self, t: usize, j: usize) -> DVec3 {
+        self.positions[t * self.n + j]
+    }
+
+    /// The bone ending at joint `j` at frame `t` (the root's position for the root).
+    fn bone(&self, t: usize, j: usize) -> DVec3 {
+        self.at(t, j) - self.layout.parents[j].map_or(DVec3::ZERO, |p| self.at(t, p))
+    }
+
+    /// Bone lengths: each bone's mean, and every frame checked against it.
+    fn bone_lengths(&self, tolerance: f64, fit: &mut Fit) -> Result<Vec<f64>, IkError> {
+        let (frames, layout) = (self.frames, self.layout);
+        let mut lengths = vec![0.0; self.n];
+        for (j, mean) in lengths.iter_mut().enumerate().skip(1) {
+            for t in 0..frames {
+                let l = self.bone(t, j).length();
+                if l.is_nan() || l <= 1e-9 {
+                    return Err(IkError::ZeroBone {
+                        frame: t,
+                        name: layout.names[j].clone(),
+                    });
+                }
+                *mean += l / frames as f64;
+            }
+            for t in 0..frames {
+                let l = self.bone(t, j).length();
+                let change = (l - *mean).abs() / *mean;
+                // NaN (an overflowing length or mean) fails the check too.
+                if change.is_nan() || change > tolerance {
+                    return Err(IkError::BoneLength {
+                        frame: t,
+                        name: layout.names[j].clone(),
+                        length: l,
+                        mean: *mean,
+                        tolerance,
+                    });
+                }
+                fit.max_length_change = fit.max_length_change.max(change);
+            }
+        }
+        Ok(lengths)
+    }
+
+    /// World rotation of every joint at every frame, and rest offsets in the rest frame, joint
+    /// by joint from the root (a joint's turn starts from its parent's).
+    fn world_rotations(&self, lengths: &[f64]) -> (Vec<DQuat>, Vec<DVec3>) {
+        let mut world = vec![DQuat::IDENTITY; self.positions.len()];
+        let mut offsets = vec![DVec3::ZERO; self.n];
+        for j in 0..self.n {
+            let kids = &self.children[j];
+            if kids.len() >= 2 {
+                self.turn_rigid_group(j, &mut world, &mut offsets);
+            } else if let [c] = kids.as_slice() {
+                self.swing_to_child(j, *c, lengths[*c], &mut world, &mut offsets);
+            } else {
+                for t in 0..self.frames {
+                    world[t * self.n + j] = world_of(&world, self.n, self.layout.parents[j], t);
+                }
+            }
+        }
+        (world, offsets)
+    }
+
+    /// A joint with several children turns as a rigid group: by the frame its children span
+    /// (left-right and up when a pair and a midline child are there, else the first two
+    /// children). Its children's offsets are their mean bones in that frame.
+    fn turn_rigid_group(&self, j: usize, world: &mut [DQuat], offsets: &mut [DVec3]) {
+        let (layout, n) = (self.layout, self.n);
+        let kids = &self.children[j];
+        let pair = kids.iter().find_map(|&a| {
+            let b = layout.partners[a];
+            (b != a && kids.contains(&b) && layout.left[a] == Some(true)).then_some((a, b))
+        });
+        let up_child = kids
+            .iter()
+            .copied()
+            .find(|&c| layout.left[c].is_none())
+            .unwrap_or(kids[0]);
+        let spans = |t: usize| match pair {
+            Some((l, r)) => (self.bone(t, l) - self.bone(t, r), self.bone(t, up_child)),
+            None => (self.bone(t, kids[0]), self.bone(t, kids[1])),
+        };
+        let mut sum = vec![DVec3::ZERO; kids.len()];
+        for t in 0..self.frames {
+            let (side, up) = spans(t);
+            let frame = body_frame(&self.rest, side, up)
+                // Degenerate spans: keep the parent's orientation for this frame.
+                .unwrap_or_else(|| world_of(world, n, layout.parents[j], t));
+            world[t * n + j] = frame;
+            for (s, &c) in sum.iter_mut().zip(kids) {
+                *s += frame.inverse() * self.bone(t, c);
+            }
+        }
+        for (s, &c) in sum.iter().zip(kids) {
+            offsets[c] = *s / self.frames as f64;
         }
     }
 
-    let lateral = layout.up.cross(layout.forward).normalize();
-    let rest = DMat3::from_cols(lateral, layout.up, layout.forward);
-    // World rotation of every joint at every frame, and rest offsets in the rest frame (the
-    // capture's own axes, facing forward).
-    let mut world = vec![DQuat::IDENTITY; positions.len()];
-    let mut offsets = vec![DVec3::ZERO; n];
-    for j in 0..n {
-        let kids = &children[j];
-        if kids.len() >= 2 {
-            // A rigid group: the frame its children span (left-right and up when a pair and a
-            // midline child are there, else the first two children).
-            let pair = kids.iter().find_map(|&a| {
-                let b = layout.partners[a];
-                (b != a && kids.contains(&b) && layout.left[a] == Some(true)).then_some((a, b))
-            });
-            let up_child = kids
-                .iter()
-                .copied()
-                .find(|&c| layout.left[c].is_none())
-                .unwrap_or(kids[0]);
-            let spans = |t: usize| match pair {
-                Some((l, r)) => (bone(t, l) - bone(t, r), bone(t, up_child)),
-                None => (bone(t, kids[0]), bone(t, kids[1])),
-            };
-            let mut sum = vec![DVec3::ZERO; kids.len()];
-            for t in 0..frames {
-                let (side, up) = spans(t);
-                let frame = body_frame(&rest, side, up)
-                    // Degenerate spans: keep the parent's orientation for this frame.
-                    .unwrap_or_else(|| world_of(&world, n, layout.parents[j], t));
-                world[t * n + j] = frame;
-                for (s, &c) in sum.iter_mut().zip(kids) {
-                    *s += frame.inverse() * bone(t, c);
+    /// A joint with one child `c` turns by the swing taking the child's rest direction to where
+    /// the child is.
+    fn swing_to_child(
+        &self,
+        j: usize,
+        c: usize,
+        length: f64,
+        world: &mut [DQuat],
+        offsets: &mut [DVec3],
+    ) {
+        let (layout, n) = (self.layout, self.n);
+        let d = self.rest_direction(c, world);
+        offsets[c] = d * length;
+        for t in 0..self.frames {
+            let pw = world_of(world, n, layout.parents[j], t);
+            let s = swing(pw * d, self.bone(t, c).normalize());
+            world[t * n + j] = s * pw;
+        }
+    }
+
+    /// Rest direction of a single child `c`: the mean direction in the parent's frame, made a
+    /// mirror image of the partner's so mirrored motions stay on the skeleton; the swing is
+    /// exact for any.
+    fn rest_direction(&self, c: usize, world: &[DQuat]) -> DVec3 {
+        let (layout, positions, frames, lateral) =
+            (self.layout, self.positions, self.frames, self.lateral);
+        let own = mean_direction(layout, positions, world, c, frames);
+        match layout.left[c] {
+            None => {
+                let flat = mirror(own, lateral) + own;
+                flat.try_normalize().unwrap_or(own)
+            }
+            Some(_) if layout.partners[c] != c && layout.partners[c] < self.n => {
+                // The partner's bone hangs from the partner of this joint, computed from the
+                // same kind of frame: average the two, mirrored.
+                let other = layout.partners[c];
+                if layout.parents[other].is_some_and(|op| self.children[op].len() == 1) {
+                    let theirs = mean_direction(layout, positions, world, other, frames);
+                    (own + mirror(theirs, lateral))
+                        .try_normalize()
+                        .unwrap_or(own)
+                } else {
+                    own
                 }
             }
-            for (s, &c) in sum.iter().zip(kids) {
-                offsets[c] = *s / frames as f64;
-            }
-        } else if let [c] = kids.as_slice() {
-            let c = *c;
-            // Rest direction: the mean direction in the parent's frame, made a mirror image of
-            // the partner's so mirrored motions stay on the skeleton; the swing is exact for any.
-            let own = mean_direction(layout, positions, &world, c, frames);
-            let d = match layout.left[c] {
-                None => {
-                    let flat = mirror(own, lateral) + own;
-                    flat.try_normalize().unwrap_or(own)
-                }
-                Some(_) if layout.partners[c] != c && layout.partners[c] < n => {
-                    // The partner's bone hangs from the partner of this joint, computed from the
-                    // same kind of frame: average the two, mirrored.
-                    let other = layout.partners[c];
-                    if layout.parents[other].is_some_and(|op| children[op].len() == 1) {
-                        let theirs = mean_direction(layout, positions, &world, other, frames);
-                        (own + mirror(theirs, lateral))
-                            .try_normalize()
-                            .unwrap_or(own)
-                    } else {
-                        own
+            Some(_) => own,
+        }
+    }
+
+    /// Each joint's rotation relative to its parent, frame-major; the root also moves (its
+    /// position), the other joints keep their rest offsets.
+    fn local_channels(&self, world: &[DQuat], offsets: &[DVec3]) -> (Vec<DQuat>, Vec<DVec3>) {
+        let n = self.n;
+        let mut rotations = Vec::with_capacity(self.positions.len());
+        let mut translations = Vec::with_capacity(self.positions.len());
+        for t in 0..self.frames {
+            for j in 0..n {
+                let w = world[t * n + j];
+                match self.layout.parents[j] {
+                    None => {
+                        rotations.push(w);
+                        translations.push(self.at(t, j));
+                    }
+                    Some(p) => {
+                        rotations.push(world[t * n + p].inverse() * w);
+                        translations.push(offsets[j]);
                     }
                 }
-                Some(_) => own,
-            };
-            offsets[c] = d * lengths[c];
-            for t in 0..frames {
-                let pw = world_of(&world, n, layout.parents[j], t);
-                let s = swing(pw * d, bone(t, c).normalize());
-                world[t * n + j] = s * pw;
-            }
-        } else {
-            for t in 0..frames {
-                world[t * n + j] = world_of(&world, n, layout.parents[j], t);
             }
         }
+        (rotations, translations)
     }
+}
 
-    let skeleton = Arc::new(Skeleton {
-        joints: (0..n)
+/// The skeleton of the layout with the solved rest offsets: the root with position and
+/// rotation channels, every other joint with rotations.
+fn skeleton_of(layout: &PositionLayout, offsets: &[DVec3]) -> Arc<Skeleton> {
+    Arc::new(Skeleton {
+        joints: (0..layout.names.len())
             .map(|j| Joint {
                 name: layout.names[j].clone(),
                 parent: layout.parents[j],
@@ -333,39 +448,7 @@ pub fn motion_from_positions(
                 end_site: None,
             })
             .collect(),
-    });
-    let mut rotations = Vec::with_capacity(positions.len());
-    let mut translations = Vec::with_capacity(positions.len());
-    for t in 0..frames {
-        for j in 0..n {
-            let w = world[t * n + j];
-            match layout.parents[j] {
-                None => {
-                    rotations.push(w);
-                    translations.push(at(t, j));
-                }
-                Some(p) => {
-                    rotations.push(world[t * n + p].inverse() * w);
-                    translations.push(offsets[j]);
-                }
-            }
-        }
-    }
-    let motion = Motion {
-        skeleton,
-        fps,
-        rotations,
-        translations,
-    };
-    let pose = motion.forward_kinematics();
-    for (i, (a, b)) in pose.positions.iter().zip(positions).enumerate() {
-        let d = a.distance(*b);
-        if d > fit.max_residual {
-            fit.max_residual = d;
-            fit.worst = (i / n, i % n);
-        }
-    }
-    Ok((motion, fit))
+    })
 }
 
 /// World rotation of `joint` (the identity for none) at frame `t`.

@@ -534,6 +534,35 @@ pub fn render_scaled(
     scaling: PanelScale,
 ) -> Result<Preview, DatasetError> {
     ensure_font()?;
+    check_panels(panels, options)?;
+    let size = options.size.clamp(64, 2048);
+    let scenes: Vec<Scene> = panels.iter().map(|p| scene(p, options.fps)).collect();
+    let scales: Vec<f64> = match scaling {
+        PanelScale::Shared => vec![common_scale(&scenes, size); scenes.len()],
+        PanelScale::Own => scenes
+            .iter()
+            .map(|s| common_scale(std::slice::from_ref(s), size))
+            .collect(),
+    };
+    let view = PanelView {
+        scenes: &scenes,
+        scales: &scales,
+        size,
+        bar: scaling == PanelScale::Own,
+    };
+    let (frame_size, frames) = view.animation(options.animate)?;
+    let (strip_size, strip) = view.filmstrip(options.strip_frames)?;
+    Ok(Preview {
+        frame_size,
+        frames,
+        fps: options.fps,
+        strip_size,
+        strip,
+    })
+}
+
+/// Something to draw, at a preview rate in range, each skeleton with the row's joints.
+fn check_panels(panels: &[Panel], options: &PreviewOptions) -> Result<(), DatasetError> {
     if panels.is_empty() {
         return Err(render_err("nothing to draw"));
     }
@@ -554,103 +583,115 @@ pub fn render_scaled(
             )));
         }
     }
-    let size = options.size.clamp(64, 2048);
-    let scenes: Vec<Scene> = panels.iter().map(|p| scene(p, options.fps)).collect();
-    let scales: Vec<f64> = match scaling {
-        PanelScale::Shared => vec![common_scale(&scenes, size); scenes.len()],
-        PanelScale::Own => scenes
+    Ok(())
+}
+
+/// Width and height of an image, in pixels.
+type ImageSize = (u32, u32);
+
+/// The panels' scenes as drawn: each on its scale, in square cells of `size` pixels; `bar`
+/// draws each panel's own scale bar.
+struct PanelView<'a> {
+    scenes: &'a [Scene<'a>],
+    scales: &'a [f64],
+    size: u32,
+    bar: bool,
+}
+
+impl PanelView<'_> {
+    /// The GIF: the panels side by side under their titles, a frame per preview frame (none
+    /// unless `animate`); a shorter clip holds its last pose. Returns the frame size and frames.
+    fn animation(&self, animate: bool) -> Result<(ImageSize, Vec<Vec<u8>>), DatasetError> {
+        let (scenes, scales, size) = (self.scenes, self.scales, self.size);
+        let count = scenes.iter().map(Scene::frames).max().unwrap_or(0);
+        // The GIF's titles fit their panel; the filmstrip's, the whole row.
+        let titles: Vec<_> = scenes
             .iter()
-            .map(|s| common_scale(std::slice::from_ref(s), size))
-            .collect(),
-    };
-    let bar = scaling == PanelScale::Own;
-    let count = scenes.iter().map(Scene::frames).max().unwrap_or(0);
-    // The GIF's titles fit their panel; the filmstrip's, the whole row.
-    let titles: Vec<_> = scenes
-        .iter()
-        .map(|s| title_lines(&s.panel.frames.info, size - 8))
-        .collect();
-    let band = title_band(&titles);
-    let (w, h) = (size * scenes.len() as u32, size + band);
-    let mut background = vec![255u8; (w * h * 3) as usize];
-    for (k, s) in scenes.iter().enumerate() {
-        let title = TitleBand {
-            lines: &titles[k],
-            height: band,
-        };
-        draw_background(
-            &mut background,
-            (w, h),
-            ((size * k as u32) as i32, band as i32),
-            s,
-            scales[k],
-            size,
-            &title,
-            bar,
-        )
-        .map_err(render_err)?;
-    }
-    let count = if options.animate { count } else { 0 };
-    let mut frames = Vec::with_capacity(count);
-    for f in 0..count {
-        let mut buf = background.clone();
+            .map(|s| title_lines(&s.panel.frames.info, size - 8))
+            .collect();
+        let band = title_band(&titles);
+        let (w, h) = (size * scenes.len() as u32, size + band);
+        let mut background = vec![255u8; (w * h * 3) as usize];
         for (k, s) in scenes.iter().enumerate() {
-            // A shorter clip holds its last pose.
-            let at = f.min(s.frames().saturating_sub(1));
-            draw_pose(
-                &mut buf,
+            let title = TitleBand {
+                lines: &titles[k],
+                height: band,
+            };
+            draw_background(
+                &mut background,
                 (w, h),
                 ((size * k as u32) as i32, band as i32),
                 s,
-                at,
                 scales[k],
                 size,
+                &title,
+                self.bar,
             )
             .map_err(render_err)?;
         }
-        frames.push(buf);
+        let count = if animate { count } else { 0 };
+        let mut frames = Vec::with_capacity(count);
+        for f in 0..count {
+            let mut buf = background.clone();
+            for (k, s) in scenes.iter().enumerate() {
+                // A shorter clip holds its last pose.
+                let at = f.min(s.frames().saturating_sub(1));
+                draw_pose(
+                    &mut buf,
+                    (w, h),
+                    ((size * k as u32) as i32, band as i32),
+                    s,
+                    at,
+                    scales[k],
+                    size,
+                )
+                .map_err(render_err)?;
+            }
+            frames.push(buf);
+        }
+        Ok(((w, h), frames))
     }
-    // The filmstrip: one row per panel, `strip_frames` poses each, on the same scale.
-    let cells = options.strip_frames.clamp(1, 32) as u32;
-    let row_titles: Vec<_> = scenes
-        .iter()
-        .map(|s| title_lines(&s.panel.frames.info, size * cells - 8))
-        .collect();
-    let row_band = title_band(&row_titles);
-    let (sw, sh) = (size * cells, (size + row_band) * scenes.len() as u32);
-    let mut strip = vec![255u8; (sw * sh * 3) as usize];
-    for (r, s) in scenes.iter().enumerate() {
-        let scale = scales[r];
-        let y0 = (r as u32 * (size + row_band) + row_band) as i32;
-        let title = TitleBand {
-            lines: &row_titles[r],
-            height: row_band,
-        };
-        let n = s.frames();
-        for c in 0..cells {
-            let at = if cells == 1 || n < 2 {
-                0
-            } else {
-                (c as usize * (n - 1)) / (cells as usize - 1)
+
+    /// The filmstrip: one row per panel, `strip_frames` poses each (1 to 32) evenly over the
+    /// clip, on the same scale. Returns its size and pixels.
+    fn filmstrip(&self, strip_frames: usize) -> Result<(ImageSize, Vec<u8>), DatasetError> {
+        let (scenes, size, bar) = (self.scenes, self.size, self.bar);
+        let cells = strip_frames.clamp(1, 32) as u32;
+        let row_titles: Vec<_> = scenes
+            .iter()
+            .map(|s| title_lines(&s.panel.frames.info, size * cells - 8))
+            .collect();
+        let row_band = title_band(&row_titles);
+        let (sw, sh) = (size * cells, (size + row_band) * scenes.len() as u32);
+        let mut strip = vec![255u8; (sw * sh * 3) as usize];
+        for (r, s) in scenes.iter().enumerate() {
+            let scale = self.scales[r];
+            let y0 = (r as u32 * (size + row_band) + row_band) as i32;
+            let title = TitleBand {
+                lines: &row_titles[r],
+                height: row_band,
             };
-            let x0 = (c * size) as i32;
-            if c == 0 {
-                draw_background(&mut strip, (sw, sh), (x0, y0), s, scale, size, &title, bar)
-                    .map_err(render_err)?;
-            } else {
-                draw_grid_cell(&mut strip, (sw, sh), (x0, y0), s, scale, size)
+            let n = s.frames();
+            for c in 0..cells {
+                let at = if cells == 1 || n < 2 {
+                    0
+                } else {
+                    (c as usize * (n - 1)) / (cells as usize - 1)
+                };
+                let x0 = (c * size) as i32;
+                if c == 0 {
+                    draw_background(&mut strip, (sw, sh), (x0, y0), s, scale, size, &title, bar)
+                        .map_err(render_err)?;
+                } else {
+                    draw_grid_cell(&mut strip, (sw, sh), (x0, y0), s, scale, size)
+                        .map_err(render_err)?;
+                }
+                draw_pose(&mut strip, (sw, sh), (x0, y0), s, at, scale, size)
                     .map_err(render_err)?;
             }
-            draw_pose(&mut strip, (sw, sh), (x0, y0), s, at, scale, size).map_err(render_err)?;
         }
+        Ok(((sw, sh), strip))
     }
-    Ok(Preview {
-        frame_size: (w, h),
-        frames,
-        fps: options.fps,
-        strip_size: (sw, sh),
-        strip,
-    })
 }
 
 /// The ground grid of a filmstrip cell after the first, with the cell's time.

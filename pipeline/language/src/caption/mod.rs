@@ -977,67 +977,73 @@ impl Tagger {
         before_conj: Option<Upos>,
         next: Option<&Word>,
     ) -> Upos {
-        use Upos::{Adj, Adp, Adv, Det, Noun, Num, Part, Verb};
         if !w.alpha {
             return if w
                 .text
                 .chars()
                 .all(|c| c.is_ascii_digit() || c == '.' || c == ',')
             {
-                Num
+                Upos::Num
             } else {
                 Upos::Punct
             };
         }
-        let next_np = next.is_some_and(Word::starts_noun_phrase);
-        let next_nominal = next.is_some_and(Word::nominal);
-        let clause_start = matches!(prev, None | Some(Upos::Cconj | Upos::Sconj | Upos::Punct));
-        let after_function_word = matches!(prev, Some(Adp | Det | Adj | Num));
+        let around = Around {
+            prev,
+            plural_before,
+            before_conj,
+            next,
+        };
         if self.context.sides.contains(&w.lower) {
-            if w.form(Verb) == Some(Form::Past) {
-                let ends_after_verb = prev == Some(Verb) && next.is_none();
-                return if after_function_word || ends_after_verb {
-                    Adj
-                } else {
-                    Verb
-                };
-            }
-            return if next_nominal {
-                Adj
-            } else if matches!(prev, Some(Det | Adp)) {
-                Noun
-            } else {
-                Adv
-            };
+            return side_tag(w, &around);
         }
+        if let Some(t) = self.closed_tag(w, next) {
+            return t;
+        }
+        self.open_tag(w, &around)
+    }
+
+    /// A word of a closed class ("to", "her", "his", the closed lists), else `None`.
+    fn closed_tag(&self, w: &Word, next: Option<&Word>) -> Option<Upos> {
+        let next_np = next.is_some_and(Word::starts_noun_phrase);
         match w.lower.as_str() {
             "to" => {
                 // spaCy reads a bare word that can be a verb after "to" as an infinitive.
                 let verb_next = next.is_some_and(|n| {
                     n.closed.is_empty()
-                        && n.form(Verb) == Some(Form::Base)
+                        && n.form(Upos::Verb) == Some(Form::Base)
                         && !self.context.sides.contains(&n.lower)
                 });
-                return if verb_next { Part } else { Adp };
+                return Some(if verb_next { Upos::Part } else { Upos::Adp });
             }
-            "her" | "his" => return if next_np { Det } else { Upos::Pron },
+            "her" | "his" => return Some(if next_np { Upos::Det } else { Upos::Pron }),
             _ => {}
         }
-        if let Some(&first) = w.closed.first() {
-            return if w.closed.contains(&Adp) && next_np {
-                Adp
-            } else {
-                first
-            };
-        }
+        let &first = w.closed.first()?;
+        Some(if w.closed.contains(&Upos::Adp) && next_np {
+            Upos::Adp
+        } else {
+            first
+        })
+    }
+
+    /// A word of the open classes: its only reading, else the rules by its neighbours.
+    fn open_tag(&self, w: &Word, around: &Around) -> Upos {
+        use Upos::{Adj, Adv, Det, Noun, Num, Verb};
+        let (prev, next) = (around.prev, around.next);
         let candidates: Vec<Upos> = OPEN.into_iter().filter(|&t| w.can(t)).collect();
         if let [only] = candidates[..] {
             return only;
         }
         // Coordination: "walk and turn", "arms and legs".
-        if let Some(t) = before_conj.filter(|&t| w.can(t) && matches!(t, Noun | Verb | Adj)) {
+        if let Some(t) = around
+            .before_conj
+            .filter(|&t| w.can(t) && matches!(t, Noun | Verb | Adj))
+        {
             return t;
         }
+        let next_np = next.is_some_and(Word::starts_noun_phrase);
+        let next_nominal = next.is_some_and(Word::nominal);
         let (noun, verb, adj) = (w.weight(Noun), w.weight(Verb), w.weight(Adj));
         let verb_form = w.form(Verb);
         // An adjective before its noun, when the adjective is the word's usual reading.
@@ -1047,56 +1053,108 @@ impl Tagger {
             return Adv;
         }
         // An imperative action label or clause starts with its verb: "kick ball", "then walk".
+        let clause_start = matches!(prev, None | Some(Upos::Cconj | Upos::Sconj | Upos::Punct));
         if clause_start && matches!(verb_form, Some(Form::Base | Form::Ing)) && !attributive {
             let ratio = self.context.noun_over_verb_at_start;
             if noun <= ratio * verb || next_np && !next_nominal {
                 return Verb;
             }
         }
-        match prev {
-            // Inside a noun phrase: an adjective before its noun, else the noun.
-            Some(Det | Num | Adj | Adp) => {
-                if attributive || (w.can(Adj) && next_nominal && !w.can(Noun)) {
-                    return Adj;
-                }
-                if prev == Some(Adp) && verb_form == Some(Form::Ing) {
-                    return Verb;
-                }
-                if w.can(Noun) {
-                    return Noun;
-                }
-            }
-            // After a verb: its object, or an adverb of manner or direction.
-            Some(Verb | Upos::Aux) => {
-                if prev == Some(Upos::Aux) && verb_form.is_some() {
-                    return Verb;
-                }
-                if attributive {
-                    return Adj;
-                }
-                // The object noun, unless the word is rather an adjective or adverb ("hold still").
-                let best = [Noun, Adj, Adv].into_iter().filter(|&t| w.can(t));
-                if let Some(t) = best.max_by(|&a, &b| w.weight(a).total_cmp(&w.weight(b))) {
-                    return t;
-                }
-            }
-            // After a noun or pronoun: its finite verb ("a man kicks", "he walks"), or the head
-            // of a compound ("arm swing").
-            Some(Noun | Upos::Pron | Upos::Propn) => match verb_form {
-                Some(Form::S) if verb >= noun || prev == Some(Upos::Pron) => return Verb,
-                Some(Form::Base) if plural_before || prev == Some(Upos::Pron) => return Verb,
-                Some(Form::Past | Form::Ing) => return Verb,
-                _ if w.can(Noun) => return Noun,
-                _ => {}
-            },
-            Some(Part) if verb_form.is_some() => return Verb,
-            _ => {}
+        if let Some(t) = tag_after_previous(w, around, attributive) {
+            return t;
         }
         if attributive {
             return Adj;
         }
         w.likeliest().unwrap_or(Noun)
     }
+}
+
+/// What a token's tag decision sees around it: the tags already given and the next word.
+struct Around<'w> {
+    /// The previous token's tag.
+    prev: Option<Upos>,
+    /// The previous token is a plural noun.
+    plural_before: bool,
+    /// The tag before a coordinating conjunction just before.
+    before_conj: Option<Upos>,
+    next: Option<&'w Word>,
+}
+
+/// A side word ("left", "right", ...): a past participle after a function word or ending the
+/// caption after a verb is an adjective, else a verb; otherwise an adjective before a noun, a
+/// noun after a determiner or adposition, an adverb elsewhere.
+fn side_tag(w: &Word, around: &Around) -> Upos {
+    use Upos::{Adj, Adp, Adv, Det, Noun, Num, Verb};
+    let (prev, next) = (around.prev, around.next);
+    if w.form(Verb) == Some(Form::Past) {
+        let after_function_word = matches!(prev, Some(Adp | Det | Adj | Num));
+        let ends_after_verb = prev == Some(Verb) && next.is_none();
+        return if after_function_word || ends_after_verb {
+            Adj
+        } else {
+            Verb
+        };
+    }
+    if next.is_some_and(Word::nominal) {
+        Adj
+    } else if matches!(prev, Some(Det | Adp)) {
+        Noun
+    } else {
+        Adv
+    }
+}
+
+/// The rules by the previous tag, for an open-class word that is `attributive` (an adjective
+/// before its noun) or not; `None` where they do not decide.
+fn tag_after_previous(w: &Word, around: &Around, attributive: bool) -> Option<Upos> {
+    use Upos::{Adj, Adp, Adv, Det, Noun, Num, Part, Verb};
+    let prev = around.prev;
+    let next_nominal = around.next.is_some_and(Word::nominal);
+    let (noun, verb) = (w.weight(Noun), w.weight(Verb));
+    let verb_form = w.form(Verb);
+    match prev {
+        // Inside a noun phrase: an adjective before its noun, else the noun.
+        Some(Det | Num | Adj | Adp) => {
+            if attributive || (w.can(Adj) && next_nominal && !w.can(Noun)) {
+                return Some(Adj);
+            }
+            if prev == Some(Adp) && verb_form == Some(Form::Ing) {
+                return Some(Verb);
+            }
+            if w.can(Noun) {
+                return Some(Noun);
+            }
+        }
+        // After a verb: its object, or an adverb of manner or direction.
+        Some(Verb | Upos::Aux) => {
+            if prev == Some(Upos::Aux) && verb_form.is_some() {
+                return Some(Verb);
+            }
+            if attributive {
+                return Some(Adj);
+            }
+            // The object noun, unless the word is rather an adjective or adverb ("hold still").
+            let best = [Noun, Adj, Adv].into_iter().filter(|&t| w.can(t));
+            if let Some(t) = best.max_by(|&a, &b| w.weight(a).total_cmp(&w.weight(b))) {
+                return Some(t);
+            }
+        }
+        // After a noun or pronoun: its finite verb ("a man kicks", "he walks"), or the head
+        // of a compound ("arm swing").
+        Some(Noun | Upos::Pron | Upos::Propn) => match verb_form {
+            Some(Form::S) if verb >= noun || prev == Some(Upos::Pron) => return Some(Verb),
+            Some(Form::Base) if around.plural_before || prev == Some(Upos::Pron) => {
+                return Some(Verb);
+            }
+            Some(Form::Past | Form::Ing) => return Some(Verb),
+            _ if w.can(Noun) => return Some(Noun),
+            _ => {}
+        },
+        Some(Part) if verb_form.is_some() => return Some(Verb),
+        _ => {}
+    }
+    None
 }
 
 /// The inflection a word's ending shows for a part of speech.

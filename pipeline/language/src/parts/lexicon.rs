@@ -710,8 +710,26 @@ pub fn label_text(text: &str) -> TextLabel {
     let tokens = tokenize(text);
     let hits = find_hits(&tokens);
     let clauses = tokens.last().map(|t| t.clause + 1).unwrap_or(0);
+    let roles = noun_roles(&tokens, &hits, clauses);
+    let mut label = Labelling::default();
+    for clause in 0..clauses {
+        let in_clause: Vec<usize> = (0..hits.len())
+            .filter(|&k| tokens[hits[k].start].clause == clause)
+            .collect();
+        let words = ClauseWords {
+            tokens: &tokens,
+            hits: &hits,
+            roles: &roles,
+            in_clause: &in_clause,
+        };
+        words.label(clause, &mut label);
+    }
+    label.finish()
+}
 
-    // Roles of the part nouns.
+/// The role of each hit: a part noun moves or is a target (touched, pointed at); every other hit
+/// is ignored here.
+fn noun_roles(tokens: &[Token], hits: &[Hit], clauses: usize) -> Vec<Role> {
     let mut roles = vec![Role::Ignored; hits.len()];
     let mut previous_part_is_arm = vec![false; clauses];
     for (k, hit) in hits.iter().enumerate() {
@@ -725,36 +743,7 @@ pub fn label_text(text: &str) -> TextLabel {
             roles[k] = Role::Ignored;
             continue;
         }
-        let before = word_before_phrase(&tokens, hit.start)
-            .filter(|&j| tokens[j].clause == clause)
-            .map(|j| (tokens[j].raw.as_str(), j));
-        // The verb this noun is the object of: the action just before it, or before a particle
-        // (`lift up left leg`, `shake off right foot`), which then is not a place.
-        let verb = before.and_then(|(w, j)| {
-            hits.iter().find(|h| {
-                matches!(h.kind, Kind::Act { .. })
-                    && (h.end == j + 1 || (h.end == j && lexicon().particles.contains(w)))
-            })
-        });
-        // `hold left leg up`: a limb held in a pose moves itself; `hold left leg` is touched.
-        let posed = lexicon().particles.contains(next);
-        let after_contact = !posed
-            && verb.is_some_and(|h| {
-                matches!(h.kind, Kind::Act { contact: true, .. })
-                    && before.is_some_and(|(_, j)| h.end == j + 1)
-            });
-        let after_location =
-            verb.is_none() && before.is_some_and(|(w, _)| lexicon().location.contains(w));
-        let support = before.is_some_and(|(w, _)| w == "on" || w == "onto")
-            && matches!(
-                hit.kind,
-                Kind::Limb {
-                    limb: Limb::Leg,
-                    ..
-                }
-            )
-            && !previous_part_is_arm[clause];
-        let target = (after_contact || after_location) && !support;
+        let target = is_target(tokens, hits, hit, next, previous_part_is_arm[clause]);
         roles[k] = match hit.kind {
             Kind::Limb {
                 self_moving: true, ..
@@ -766,41 +755,141 @@ pub fn label_text(text: &str) -> TextLabel {
             previous_part_is_arm[clause] = limb == Limb::Arm;
         }
     }
+    roles
+}
 
-    let mut parts = PartSet::EMPTY;
-    let mut matched: Vec<String> = Vec::new();
-    let mut weak = PartSet::EMPTY;
-    let mut weak_matched: Vec<String> = Vec::new();
+/// Whether a part noun is touched or pointed at rather than moved: the object of a contact
+/// verb, or after a location word, but not a leg stood on (`on the left leg`) unless an arm
+/// came just before in the clause.
+fn is_target(tokens: &[Token], hits: &[Hit], hit: &Hit, next: &str, after_arm: bool) -> bool {
+    let clause = tokens[hit.start].clause;
+    let before = word_before_phrase(tokens, hit.start)
+        .filter(|&j| tokens[j].clause == clause)
+        .map(|j| (tokens[j].raw.as_str(), j));
+    // The verb this noun is the object of: the action just before it, or before a particle
+    // (`lift up left leg`, `shake off right foot`), which then is not a place.
+    let verb = before.and_then(|(w, j)| {
+        hits.iter().find(|h| {
+            matches!(h.kind, Kind::Act { .. })
+                && (h.end == j + 1 || (h.end == j && lexicon().particles.contains(w)))
+        })
+    });
+    // `hold left leg up`: a limb held in a pose moves itself; `hold left leg` is touched.
+    let posed = lexicon().particles.contains(next);
+    let after_contact = !posed
+        && verb.is_some_and(|h| {
+            matches!(h.kind, Kind::Act { contact: true, .. })
+                && before.is_some_and(|(_, j)| h.end == j + 1)
+        });
+    let after_location =
+        verb.is_none() && before.is_some_and(|(w, _)| lexicon().location.contains(w));
+    let support = before.is_some_and(|(w, _)| w == "on" || w == "onto")
+        && matches!(
+            hit.kind,
+            Kind::Limb {
+                limb: Limb::Leg,
+                ..
+            }
+        )
+        && !after_arm;
+    (after_contact || after_location) && !support
+}
 
-    for clause in 0..clauses {
-        let in_clause: Vec<usize> = (0..hits.len())
-            .filter(|&k| tokens[hits[k].start].clause == clause)
-            .collect();
-        let mut moving_limb = false;
-        let mut moving_any = false;
-        let mut acted = false;
-        // "with the left" / "use the right": an instrument side for the clause's limb action.
-        let mut instrument_side: Option<Side> = None;
-        // `scratch right ear`, `touch left shoulder`: with no hand named, the target's side
-        // says which hand; the same side, except for a shoulder, which the other hand reaches.
+/// The parts a text's clauses add up to, with the phrases that gave them; weak actions' parts
+/// are kept apart and used only for a text with nothing else.
+#[derive(Default)]
+struct Labelling {
+    parts: PartSet,
+    matched: Vec<String>,
+    weak: PartSet,
+    weak_matched: Vec<String>,
+}
+
+impl Labelling {
+    fn add(&mut self, set: PartSet, name: &str) {
+        add(set, name, &mut self.matched, &mut self.parts);
+    }
+
+    fn finish(self) -> TextLabel {
+        let Labelling {
+            mut parts,
+            mut matched,
+            weak,
+            weak_matched,
+        } = self;
+        if parts.is_empty() && !weak.is_empty() {
+            parts = weak;
+            matched = weak_matched;
+        }
+        let known = !parts.is_empty();
+        TextLabel {
+            parts: if known { parts } else { UNKNOWN_DEFAULT },
+            matched,
+            known,
+        }
+    }
+}
+
+/// What moved in a clause so far: its actions' limbs depend on it.
+#[derive(Default, Clone, Copy)]
+struct Moving {
+    /// A limb noun moves (`raise left arm`).
+    limb: bool,
+    /// Any part noun moves.
+    any: bool,
+}
+
+/// One clause of a text: its tokens and hits, with the hits' roles, and which hits are in it.
+struct ClauseWords<'a> {
+    tokens: &'a [Token],
+    hits: &'a [Hit],
+    roles: &'a [Role],
+    /// Indices into `hits` of the clause's hits.
+    in_clause: &'a [usize],
+}
+
+impl ClauseWords<'_> {
+    /// Adds the clause's parts: its moving part nouns, then its actions, then a handled object
+    /// when nothing else acted.
+    fn label(&self, clause: usize, label: &mut Labelling) {
+        let sides = Sides {
+            instrument: self.instrument_side(clause),
+            target: self.target_side(),
+        };
+        let moving = self.add_moving_nouns(label);
+        let object = self.handled_object();
+        let acted = self.add_actions(label, moving, object, sides);
+        if !acted
+            && !moving.any
+            && let Some(k) = object
+        {
+            let set = Limb::Arm.parts(sides.instrument.unwrap_or(Side::Both));
+            label.add(set, &self.hits[k].phrase);
+        }
+    }
+
+    /// `scratch right ear`, `touch left shoulder`: with no hand named, the target's side says
+    /// which hand; the same side, except for a shoulder, which the other hand reaches.
+    fn target_side(&self) -> Option<Side> {
+        let tokens = self.tokens;
         let mut target_side: Option<Side> = None;
-        for &k in &in_clause {
-            let hit = &hits[k];
+        for &k in self.in_clause {
+            let hit = &self.hits[k];
             let shoulder = match hit.kind {
                 Kind::Feature => false,
                 Kind::Limb {
                     self_moving: false,
                     limb: Limb::Arm,
                     ..
-                } if roles[k] == Role::Target => true,
-                Kind::Limb { .. } | Kind::Trunk { .. } if roles[k] == Role::Target => false,
+                } if self.roles[k] == Role::Target => true,
+                Kind::Limb { .. } | Kind::Trunk { .. } if self.roles[k] == Role::Target => false,
                 _ => continue,
             };
-            let side = side_before(&tokens, hit.start, &lexicon().modifiers).or_else(|| {
+            let side = side_before(tokens, hit.start, &lexicon().modifiers).or_else(|| {
                 // `right side of face`
-                let j = word_before_phrase(&tokens, hit.start)?;
+                let j = word_before_phrase(tokens, hit.start)?;
                 (j >= 1 && tokens[j].raw == "of" && tokens[j - 1].raw == "side")
-                    .then(|| side_before(&tokens, j - 1, &lexicon().modifiers))
+                    .then(|| side_before(tokens, j - 1, &lexicon().modifiers))
                     .flatten()
             });
             let side = match (side, shoulder) {
@@ -814,6 +903,14 @@ pub fn label_text(text: &str) -> TextLabel {
                 _ => Some(side),
             };
         }
+        target_side
+    }
+
+    /// "with the left" / "use the right": an instrument side for the clause's limb action (the
+    /// last one the clause names; not one followed by a noun, which takes the side).
+    fn instrument_side(&self, clause: usize) -> Option<Side> {
+        let tokens = self.tokens;
+        let mut instrument_side: Option<Side> = None;
         for (i, t) in tokens.iter().enumerate() {
             if t.clause != clause || !matches!(t.raw.as_str(), "with" | "use" | "using") {
                 continue;
@@ -823,7 +920,7 @@ pub fn label_text(text: &str) -> TextLabel {
                 j += 1;
             }
             let side_word = tokens.get(j).map(|t| t.raw.as_str());
-            let then_noun = hits.iter().any(|h| h.start == j + 1);
+            let then_noun = self.hits.iter().any(|h| h.start == j + 1);
             if !then_noun {
                 instrument_side = match side_word {
                     Some("left") => Some(Side::Left),
@@ -833,10 +930,16 @@ pub fn label_text(text: &str) -> TextLabel {
                 };
             }
         }
+        instrument_side
+    }
 
-        for &k in &in_clause {
-            let hit = &hits[k];
-            if roles[k] != Role::Moving {
+    /// Adds the clause's moving part nouns, each with its side.
+    fn add_moving_nouns(&self, label: &mut Labelling) -> Moving {
+        let tokens = self.tokens;
+        let mut moving = Moving::default();
+        for &k in self.in_clause {
+            let hit = &self.hits[k];
+            if self.roles[k] != Role::Moving {
                 continue;
             }
             match hit.kind {
@@ -844,37 +947,51 @@ pub fn label_text(text: &str) -> TextLabel {
                     let side = if plural {
                         Side::Both
                     } else {
-                        side_before(&tokens, hit.start, &lexicon().modifiers).unwrap_or(Side::Both)
+                        side_before(tokens, hit.start, &lexicon().modifiers).unwrap_or(Side::Both)
                     };
                     let name = side_name(side, plural, &hit.phrase);
-                    add(limb.parts(side), &name, &mut matched, &mut parts);
-                    moving_limb = true;
-                    moving_any = true;
+                    label.add(limb.parts(side), &name);
+                    moving.limb = true;
+                    moving.any = true;
                 }
                 Kind::Trunk { parts: p, hip } => {
                     let mut set = PartSet(p);
                     let mut name = hit.phrase.clone();
-                    if hip && let Some(side) = side_before(&tokens, hit.start, &lexicon().modifiers)
+                    if hip && let Some(side) = side_before(tokens, hit.start, &lexicon().modifiers)
                     {
                         set |= Limb::Leg.parts(side);
                         name = side_name(side, false, &hit.phrase);
                     }
-                    add(set, &name, &mut matched, &mut parts);
-                    moving_any = true;
+                    label.add(set, &name);
+                    moving.any = true;
                 }
                 _ => {}
             }
         }
+        moving
+    }
 
-        // An object handled in the clause (`move item`, `roll the ball`): a generic verb then
-        // means the hands, not its whole-body default.
-        let object = in_clause.iter().copied().find(|&k| {
-            hits[k].kind == Kind::Object
-                && word_before_phrase(&tokens, hits[k].start)
-                    .is_none_or(|j| !lexicon().location.contains(tokens[j].raw.as_str()))
-        });
-        for &k in &in_clause {
-            let hit = &hits[k];
+    /// An object handled in the clause (`move item`, `roll the ball`), not a place: a generic
+    /// verb then means the hands, not its whole-body default.
+    fn handled_object(&self) -> Option<usize> {
+        self.in_clause.iter().copied().find(|&k| {
+            self.hits[k].kind == Kind::Object
+                && word_before_phrase(self.tokens, self.hits[k].start)
+                    .is_none_or(|j| !lexicon().location.contains(self.tokens[j].raw.as_str()))
+        })
+    }
+
+    /// Adds the clause's actions by strength; true when a strong or generic one acted.
+    fn add_actions(
+        &self,
+        label: &mut Labelling,
+        moving: Moving,
+        object: Option<usize>,
+        sides: Sides,
+    ) -> bool {
+        let mut acted = false;
+        for &k in self.in_clause {
+            let hit = &self.hits[k];
             let Kind::Act {
                 strength,
                 limb,
@@ -884,70 +1001,73 @@ pub fn label_text(text: &str) -> TextLabel {
             else {
                 continue;
             };
-            let limb_parts = |absorbed: bool| -> PartSet {
-                match limb {
-                    Some(l) if !absorbed => {
-                        // A side after a locomotion-like limb action (`hop right`) is a
-                        // direction, after a pure limb action (`kick right`) the limb.
-                        let after = if extra == 0 {
-                            side_after(&tokens, &hits, hit.end)
-                        } else {
-                            None
-                        };
-                        let side = side_before(&tokens, hit.start, &lexicon().act_modifiers)
-                            .or(after)
-                            .or(instrument_side)
-                            .or(if l == Limb::Arm { target_side } else { None })
-                            .unwrap_or(Side::Both);
-                        l.parts(side)
-                    }
-                    _ => PartSet::EMPTY,
-                }
-            };
+            let limb_parts =
+                |absorbed: bool| self.action_limb_parts(hit, limb, extra, absorbed, sides);
             match strength {
                 Strength::Strong => {
-                    let set = PartSet(extra) | limb_parts(moving_limb);
-                    add(set, &hit.phrase, &mut matched, &mut parts);
+                    let set = PartSet(extra) | limb_parts(moving.limb);
+                    label.add(set, &hit.phrase);
                     acted = true;
                 }
                 Strength::Generic => {
-                    if !moving_any && object.is_some() && limb.is_none() {
-                        let side = instrument_side.unwrap_or(Side::Both);
-                        add(Limb::Arm.parts(side), &hit.phrase, &mut matched, &mut parts);
-                    } else if !moving_any {
+                    if !moving.any && object.is_some() && limb.is_none() {
+                        let side = sides.instrument.unwrap_or(Side::Both);
+                        label.add(Limb::Arm.parts(side), &hit.phrase);
+                    } else if !moving.any {
                         let set = PartSet(extra) | limb_parts(false);
-                        add(set, &hit.phrase, &mut matched, &mut parts);
+                        label.add(set, &hit.phrase);
                     }
                     acted = true;
                 }
                 Strength::Weak => {
-                    weak |= PartSet(extra) | limb_parts(moving_limb);
-                    if !weak_matched.contains(&hit.phrase) {
-                        weak_matched.push(hit.phrase.clone());
+                    label.weak |= PartSet(extra) | limb_parts(moving.limb);
+                    if !label.weak_matched.contains(&hit.phrase) {
+                        label.weak_matched.push(hit.phrase.clone());
                     }
                 }
             }
         }
+        acted
+    }
 
-        if !acted
-            && !moving_any
-            && let Some(k) = object
-        {
-            let set = Limb::Arm.parts(instrument_side.unwrap_or(Side::Both));
-            add(set, &hits[k].phrase, &mut matched, &mut parts);
+    /// The limb parts of an action on a limb, on its side; none when a moving limb noun of the
+    /// clause already took them (`absorbed`) or the action names no limb.
+    fn action_limb_parts(
+        &self,
+        hit: &Hit,
+        limb: Option<Limb>,
+        extra: u8,
+        absorbed: bool,
+        sides: Sides,
+    ) -> PartSet {
+        match limb {
+            Some(l) if !absorbed => {
+                // A side after a locomotion-like limb action (`hop right`) is a direction, after
+                // a pure limb action (`kick right`) the limb.
+                let after = if extra == 0 {
+                    side_after(self.tokens, self.hits, hit.end)
+                } else {
+                    None
+                };
+                let side = side_before(self.tokens, hit.start, &lexicon().act_modifiers)
+                    .or(after)
+                    .or(sides.instrument)
+                    .or(if l == Limb::Arm { sides.target } else { None })
+                    .unwrap_or(Side::Both);
+                l.parts(side)
+            }
+            _ => PartSet::EMPTY,
         }
     }
+}
 
-    if parts.is_empty() && !weak.is_empty() {
-        parts = weak;
-        matched = weak_matched;
-    }
-    let known = !parts.is_empty();
-    TextLabel {
-        parts: if known { parts } else { UNKNOWN_DEFAULT },
-        matched,
-        known,
-    }
+/// The sides a clause gives its limb actions that name none themselves.
+#[derive(Clone, Copy)]
+struct Sides {
+    /// From "with the left", "use the right".
+    instrument: Option<Side>,
+    /// From a touched part's side (`scratch right ear`).
+    target: Option<Side>,
 }
 
 /// A side word right after a limb action that ends its clause or precedes no noun: `kick right`,

@@ -180,123 +180,62 @@ impl BodyModel {
         bytes: &[u8],
         num_betas: usize,
     ) -> Result<BodyModel, ModelError> {
-        let npz_err = |source| ModelError::Npz {
-            path: path.to_path_buf(),
-            source,
+        let file = ModelFile {
+            path,
+            npz: Npz::new(bytes).map_err(|e| npz_error(path, e))?,
         };
-        let shape_err = |key, message: String| ModelError::Shape {
-            path: path.to_path_buf(),
-            key,
-            message,
-        };
-        let npz = Npz::new(bytes).map_err(npz_err)?;
-        if let Some(key) = MODEL_KEYS.iter().find(|k| !npz.has(k)) {
-            return Err(npz_err(NpzError::Missing {
-                key: key.to_string(),
-            }));
+        if let Some(key) = MODEL_KEYS.iter().find(|k| !file.npz.has(k)) {
+            return Err(npz_error(
+                path,
+                NpzError::Missing {
+                    key: key.to_string(),
+                },
+            ));
         }
-        let floats = |key: &'static str| {
-            let array = npz.array(key).map_err(npz_err)?;
-            let values = array
-                .floats()
-                .ok_or_else(|| shape_err(key, format!("{} values, not numbers", array.kind())))?
-                .into_owned();
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(shape_err(key, format!("value {i} is not finite")));
-            }
-            Ok((array.shape, values))
-        };
-        let (shape, v_template) = floats("v_template")?;
+        let (shape, v_template) = file.floats("v_template")?;
         let vertices = match shape.as_slice() {
             [v, 3] if *v > 0 => *v,
             _ => {
-                return Err(shape_err(
+                return Err(file.shape_err(
                     "v_template",
                     format!("shape {shape:?}; expected (vertices, 3)"),
                 ));
             }
         };
-        let (shape, regressor) = floats("J_regressor")?;
+        let (shape, regressor) = file.floats("J_regressor")?;
         let joints = match shape.as_slice() {
             [j, v] if *v == vertices && *j > 0 => *j,
             _ => {
-                return Err(shape_err(
+                return Err(file.shape_err(
                     "J_regressor",
                     format!("shape {shape:?}; expected (joints, {vertices})"),
                 ));
             }
         };
-        let (shape, shapedirs) = floats("shapedirs")?;
+        let (shape, shapedirs) = file.floats("shapedirs")?;
         let stored = match shape.as_slice() {
             [v, 3, b] if *v == vertices => *b,
             _ => {
-                return Err(shape_err(
+                return Err(file.shape_err(
                     "shapedirs",
                     format!("shape {shape:?}; expected ({vertices}, 3, betas)"),
                 ));
             }
         };
         if num_betas > stored {
-            return Err(shape_err(
+            return Err(file.shape_err(
                 "shapedirs",
                 format!("holds {stored} shape directions; num_betas = {num_betas} needs that many"),
             ));
         }
-        let kintree = npz.array("kintree_table").map_err(npz_err)?;
-        let table = match (&kintree.values, kintree.shape.as_slice()) {
-            (super::npz::Values::Int(v), [2, j]) if *j == joints => v,
-            _ => {
-                return Err(shape_err(
-                    "kintree_table",
-                    format!(
-                        "{} values of shape {:?}; expected integers of shape (2, {joints})",
-                        kintree.kind(),
-                        kintree.shape
-                    ),
-                ));
-            }
+        let parents = file.parents(joints)?;
+        let mesh = ShapeArrays {
+            vertices,
+            v_template: &v_template,
+            shapedirs: &shapedirs,
+            stored,
         };
-        let mut parents = Vec::with_capacity(joints);
-        for (j, &p) in table[..joints].iter().enumerate() {
-            if j == 0 {
-                parents.push(None);
-                continue;
-            }
-            match usize::try_from(p) {
-                Ok(p) if p < j => parents.push(Some(p)),
-                _ => {
-                    return Err(shape_err(
-                        "kintree_table",
-                        format!("joint {j} has parent {p}; expected a joint before it"),
-                    ));
-                }
-            }
-        }
-        // Regrouped sums: J_template = R · v_template, J_dirs[b] = R · shapedirs[.., b].
-        let mut template = vec![DVec3::ZERO; joints];
-        let mut directions = vec![DVec3::ZERO; joints * num_betas];
-        for (j, row) in regressor.chunks_exact(vertices).enumerate() {
-            let mut acc = DVec3::ZERO;
-            let mut dirs = vec![DVec3::ZERO; num_betas];
-            for (v, &w) in row.iter().enumerate() {
-                if w == 0.0 {
-                    continue;
-                }
-                acc += w * DVec3::from_slice(&v_template[3 * v..3 * v + 3]);
-                for (b, d) in dirs.iter_mut().enumerate() {
-                    let at = v * 3 * stored + b;
-                    *d += w * DVec3::new(
-                        shapedirs[at],
-                        shapedirs[at + stored],
-                        shapedirs[at + 2 * stored],
-                    );
-                }
-            }
-            template[j] = acc;
-            for (b, d) in dirs.into_iter().enumerate() {
-                directions[b * joints + j] = d;
-            }
-        }
+        let (template, directions) = mesh.regress(&regressor, joints, num_betas);
         Ok(BodyModel {
             path: path.to_path_buf(),
             parents,
@@ -322,5 +261,128 @@ impl BodyModel {
             }
         }
         out
+    }
+}
+
+fn npz_error(path: &Path, source: NpzError) -> ModelError {
+    ModelError::Npz {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// A body model file being read: its path for errors and its archive.
+struct ModelFile<'a> {
+    path: &'a Path,
+    npz: Npz<'a>,
+}
+
+impl ModelFile<'_> {
+    fn shape_err(&self, key: &'static str, message: String) -> ModelError {
+        ModelError::Shape {
+            path: self.path.to_path_buf(),
+            key,
+            message,
+        }
+    }
+
+    /// The array `key` as finite numbers, with its shape.
+    fn floats(&self, key: &'static str) -> Result<(Vec<usize>, Vec<f64>), ModelError> {
+        let array = self.npz.array(key).map_err(|e| npz_error(self.path, e))?;
+        let values = array
+            .floats()
+            .ok_or_else(|| self.shape_err(key, format!("{} values, not numbers", array.kind())))?
+            .into_owned();
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(self.shape_err(key, format!("value {i} is not finite")));
+        }
+        Ok((array.shape, values))
+    }
+
+    /// Each joint's parent from `kintree_table[0]`: `None` for joint 0, else a joint before it.
+    fn parents(&self, joints: usize) -> Result<Vec<Option<usize>>, ModelError> {
+        let kintree = self
+            .npz
+            .array("kintree_table")
+            .map_err(|e| npz_error(self.path, e))?;
+        let table = match (&kintree.values, kintree.shape.as_slice()) {
+            (super::npz::Values::Int(v), [2, j]) if *j == joints => v,
+            _ => {
+                return Err(self.shape_err(
+                    "kintree_table",
+                    format!(
+                        "{} values of shape {:?}; expected integers of shape (2, {joints})",
+                        kintree.kind(),
+                        kintree.shape
+                    ),
+                ));
+            }
+        };
+        let mut parents = Vec::with_capacity(joints);
+        for (j, &p) in table[..joints].iter().enumerate() {
+            if j == 0 {
+                parents.push(None);
+                continue;
+            }
+            match usize::try_from(p) {
+                Ok(p) if p < j => parents.push(Some(p)),
+                _ => {
+                    return Err(self.shape_err(
+                        "kintree_table",
+                        format!("joint {j} has parent {p}; expected a joint before it"),
+                    ));
+                }
+            }
+        }
+        Ok(parents)
+    }
+}
+
+/// The model's checked vertex arrays: the template mesh and its shape directions.
+struct ShapeArrays<'a> {
+    vertices: usize,
+    /// `vertices × 3`.
+    v_template: &'a [f64],
+    /// `vertices × 3 × stored`.
+    shapedirs: &'a [f64],
+    /// Shape directions the file holds.
+    stored: usize,
+}
+
+impl ShapeArrays<'_> {
+    /// Regrouped sums through the joint regressor (`joints × vertices`): J_template =
+    /// R · v_template, J_dirs[b] = R · shapedirs[.., b] (per coefficient then joint).
+    fn regress(
+        &self,
+        regressor: &[f64],
+        joints: usize,
+        num_betas: usize,
+    ) -> (Vec<DVec3>, Vec<DVec3>) {
+        let (stored, shapedirs) = (self.stored, self.shapedirs);
+        let mut template = vec![DVec3::ZERO; joints];
+        let mut directions = vec![DVec3::ZERO; joints * num_betas];
+        for (j, row) in regressor.chunks_exact(self.vertices).enumerate() {
+            let mut acc = DVec3::ZERO;
+            let mut dirs = vec![DVec3::ZERO; num_betas];
+            for (v, &w) in row.iter().enumerate() {
+                if w == 0.0 {
+                    continue;
+                }
+                acc += w * DVec3::from_slice(&self.v_template[3 * v..3 * v + 3]);
+                for (b, d) in dirs.iter_mut().enumerate() {
+                    let at = v * 3 * stored + b;
+                    *d += w * DVec3::new(
+                        shapedirs[at],
+                        shapedirs[at + stored],
+                        shapedirs[at + 2 * stored],
+                    );
+                }
+            }
+            template[j] = acc;
+            for (b, d) in dirs.into_iter().enumerate() {
+                directions[b * joints + j] = d;
+            }
+        }
+        (template, directions)
     }
 }

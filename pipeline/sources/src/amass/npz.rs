@@ -348,22 +348,7 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
         key: key.to_string(),
         message,
     };
-    let rest = bytes
-        .strip_prefix(b"\x93NUMPY")
-        .ok_or_else(|| npy("not a NumPy .npy array (no magic string)".into()))?;
-    let (header_len, rest) = match rest {
-        [1, _, a, b, rest @ ..] => (usize::from(u16::from_le_bytes([*a, *b])), rest),
-        [2 | 3, _, a, b, c, d, rest @ ..] => (u32::from_le_bytes([*a, *b, *c, *d]) as usize, rest),
-        _ => return Err(npy("unknown .npy version".into())),
-    };
-    let header = rest
-        .get(..header_len)
-        .ok_or_else(|| npy("the header is cut short".into()))?;
-    let data = &rest[header_len..];
-    let header = std::str::from_utf8(header)
-        .ok()
-        .and_then(parse_header)
-        .ok_or_else(|| npy("the header does not parse".into()))?;
+    let (header, data) = npy_header(bytes).map_err(|m| npy(m.into()))?;
     if header.fortran && header.shape.iter().filter(|&&d| d > 1).count() > 1 {
         return Err(npy("stored in Fortran order; expected C order".into()));
     }
@@ -373,16 +358,7 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
         .try_fold(1u64, |n, &d| n.checked_mul(d))
         .ok_or_else(|| npy(format!("shape {:?} overflows", header.shape)))?;
     let descr = header.descr.as_str();
-    let (order, kind, width) = {
-        let (order, rest) = match descr.as_bytes().first() {
-            Some(b'<' | b'|' | b'=') => ('<', &descr[1..]),
-            Some(b'>') => ('>', &descr[1..]),
-            _ => ('<', descr),
-        };
-        let kind = rest.chars().next().unwrap_or('?');
-        let width: u64 = rest.get(1..).and_then(|w| w.parse().ok()).unwrap_or(0);
-        (order, kind, width)
-    };
+    let dtype = Dtype::of(descr);
     let unreadable = || {
         npy(format!(
             "values of type `{descr}`; expected floats (`<f4`, `<f8`), integers or a string{}",
@@ -393,6 +369,7 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
             }
         ))
     };
+    let (kind, width) = (dtype.kind, dtype.width);
     // A string's characters are its width; its count is one value.
     let (unit, values) = match kind {
         'U' => (4, count.saturating_mul(width)),
@@ -413,11 +390,62 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
             found: data.len() as u64,
         });
     }
-    let data = &data[..expected as usize];
-    let big = order == '>';
-    let word = |chunk: &[u8]| -> u64 {
+    let values = dtype.decode(&data[..expected as usize]);
+    let shape = header
+        .shape
+        .iter()
+        .map(|&d| usize::try_from(d).unwrap_or(usize::MAX))
+        .collect();
+    Ok(Array { shape, values })
+}
+
+/// The parsed header of a `.npy` file and the data after it, or what is wrong.
+fn npy_header(bytes: &[u8]) -> Result<(Header, &[u8]), &'static str> {
+    let rest = bytes
+        .strip_prefix(b"\x93NUMPY")
+        .ok_or("not a NumPy .npy array (no magic string)")?;
+    let (header_len, rest) = match rest {
+        [1, _, a, b, rest @ ..] => (usize::from(u16::from_le_bytes([*a, *b])), rest),
+        [2 | 3, _, a, b, c, d, rest @ ..] => (u32::from_le_bytes([*a, *b, *c, *d]) as usize, rest),
+        _ => return Err("unknown .npy version"),
+    };
+    let header = rest.get(..header_len).ok_or("the header is cut short")?;
+    let data = &rest[header_len..];
+    let header = std::str::from_utf8(header)
+        .ok()
+        .and_then(parse_header)
+        .ok_or("the header does not parse")?;
+    Ok((header, data))
+}
+
+/// A `.npy` value type (`descr`): byte order, kind letter and width in bytes (characters for
+/// a string).
+struct Dtype {
+    big_endian: bool,
+    kind: char,
+    width: u64,
+}
+
+impl Dtype {
+    fn of(descr: &str) -> Dtype {
+        let (order, rest) = match descr.as_bytes().first() {
+            Some(b'<' | b'|' | b'=') => ('<', &descr[1..]),
+            Some(b'>') => ('>', &descr[1..]),
+            _ => ('<', descr),
+        };
+        let kind = rest.chars().next().unwrap_or('?');
+        let width: u64 = rest.get(1..).and_then(|w| w.parse().ok()).unwrap_or(0);
+        Dtype {
+            big_endian: order == '>',
+            kind,
+            width,
+        }
+    }
+
+    /// One value's bytes as an unsigned number in the file's byte order.
+    fn word(&self, chunk: &[u8]) -> u64 {
         let mut b = [0u8; 8];
-        if big {
+        if self.big_endian {
             for (i, x) in chunk.iter().rev().enumerate() {
                 b[i] = *x;
             }
@@ -425,51 +453,51 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
             b[..chunk.len()].copy_from_slice(chunk);
         }
         u64::from_le_bytes(b)
-    };
-    let values = match kind {
-        'f' if width == 8 => Values::Float(
-            data.chunks_exact(8)
-                .map(|c| f64::from_bits(word(c)))
-                .collect(),
-        ),
-        'f' => Values::Float(
-            data.chunks_exact(4)
-                .map(|c| f64::from(f32::from_bits(word(c) as u32)))
-                .collect(),
-        ),
-        'i' => {
-            let bits = 64 - 8 * width as u32;
-            Values::Int(
-                data.chunks_exact(width as usize)
-                    .map(|c| ((word(c) << bits) as i64) >> bits)
+    }
+
+    /// The values of `data`, exactly the bytes of a readable type's values (checked by
+    /// [`parse_npy`]).
+    fn decode(&self, data: &[u8]) -> Values {
+        let width = self.width;
+        match self.kind {
+            'f' if width == 8 => Values::Float(
+                data.chunks_exact(8)
+                    .map(|c| f64::from_bits(self.word(c)))
                     .collect(),
-            )
+            ),
+            'f' => Values::Float(
+                data.chunks_exact(4)
+                    .map(|c| f64::from(f32::from_bits(self.word(c) as u32)))
+                    .collect(),
+            ),
+            'i' => {
+                let bits = 64 - 8 * width as u32;
+                Values::Int(
+                    data.chunks_exact(width as usize)
+                        .map(|c| ((self.word(c) << bits) as i64) >> bits)
+                        .collect(),
+                )
+            }
+            'u' | 'b' => Values::Int(
+                data.chunks_exact(width as usize)
+                    .map(|c| i64::try_from(self.word(c)).unwrap_or(-1))
+                    .collect(),
+            ),
+            'U' => {
+                let text: String = data
+                    .chunks_exact(4)
+                    .map(|c| self.word(c) as u32)
+                    .take_while(|&c| c != 0)
+                    .map(|c| char::from_u32(c).unwrap_or(char::REPLACEMENT_CHARACTER))
+                    .collect();
+                Values::Text(text)
+            }
+            _ => {
+                let end = data.iter().position(|&b| b == 0).unwrap_or(data.len());
+                Values::Bytes(String::from_utf8_lossy(&data[..end]).into_owned())
+            }
         }
-        'u' | 'b' => Values::Int(
-            data.chunks_exact(width as usize)
-                .map(|c| i64::try_from(word(c)).unwrap_or(-1))
-                .collect(),
-        ),
-        'U' => {
-            let text: String = data
-                .chunks_exact(4)
-                .map(|c| word(c) as u32)
-                .take_while(|&c| c != 0)
-                .map(|c| char::from_u32(c).unwrap_or(char::REPLACEMENT_CHARACTER))
-                .collect();
-            Values::Text(text)
-        }
-        _ => {
-            let end = data.iter().position(|&b| b == 0).unwrap_or(data.len());
-            Values::Bytes(String::from_utf8_lossy(&data[..end]).into_owned())
-        }
-    };
-    let shape = header
-        .shape
-        .iter()
-        .map(|&d| usize::try_from(d).unwrap_or(usize::MAX))
-        .collect();
-    Ok(Array { shape, values })
+    }
 }
 
 #[cfg(test)]

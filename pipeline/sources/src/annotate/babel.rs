@@ -56,163 +56,43 @@ pub fn read_babel(text: &str, file: &str) -> Result<Vec<BabelRecord>, Annotation
 }
 
 fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
-    let mut notes = Vec::new();
+    let mut read = RecordReader {
+        sid,
+        spans: Vec::new(),
+        notes: Vec::new(),
+        nulls: 0,
+    };
     let feat_p = string(record.get("feat_p"));
     let duration = record.get("dur").and_then(number);
-    let mut spans = Vec::new();
-    let mut nulls = 0;
     // BABEL's extra files hold several annotators' work per sequence, as lists `frame_anns` and
     // `seq_anns`: the first is read, like the main files' single `frame_ann` and `seq_ann`.
-    let frame_ann = one_annotation(record, "frame_ann", "frame_anns", sid, &mut notes);
-    let seq_ann = one_annotation(record, "seq_ann", "seq_anns", sid, &mut notes);
+    let frame_ann = one_annotation(record, "frame_ann", "frame_anns", sid, &mut read.notes);
+    let seq_ann = one_annotation(record, "seq_ann", "seq_anns", sid, &mut read.notes);
     let labels = frame_ann
         .and_then(|f| f.get("labels"))
         .and_then(Value::as_array);
     if let Some(labels) = labels {
-        for (i, label) in labels.iter().enumerate() {
-            let raw = string(label.get("raw_label"));
-            let proc = string(label.get("proc_label"));
-            let (Some(start), Some(end)) = (
-                label.get("start_t").and_then(number),
-                label.get("end_t").and_then(number),
-            ) else {
-                notes.push(Note::new(
-                    "bad_times",
-                    format!("sid {sid}: label {i} has no numeric start_t/end_t"),
-                ));
-                continue;
-            };
-            let Some(text) = raw.clone().or_else(|| proc.clone()) else {
-                nulls += 1;
-                continue;
-            };
-            if label.get("start_t").is_some_and(Value::is_u64)
-                || label.get("end_t").is_some_and(Value::is_u64)
-            {
-                notes.push(Note::new(
-                    "integer_times",
-                    format!("sid {sid}: label `{text}` has integer times"),
-                ));
-            }
-            let categories = label
-                .get("act_cat")
-                .and_then(Value::as_array)
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|c| c.as_str().map(str::to_string))
-                        .collect()
-                })
-                .unwrap_or_default();
-            spans.push(Span {
-                start: Time::Seconds(start),
-                end: Time::Seconds(end),
-                raw_text: text.clone(),
-                label: proc.unwrap_or(text),
-                categories,
-                motion_type: None,
-                hand: None,
-                object: None,
-                grasp: None,
-                id: string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-{i}")),
-                alternatives: Vec::new(),
-            });
-        }
+        read.frame_labels(labels);
     } else if let Some(rows) = record
         .get("frame_labels_raw_start_end")
         .and_then(Value::as_array)
     {
-        // Saved notebook outputs keep frame labels as `[raw_label, start_t, end_t]` rows.
-        for (i, row) in rows.iter().enumerate() {
-            let cells = row.as_array();
-            let text = cells.and_then(|c| c.first()).and_then(Value::as_str);
-            let start = cells.and_then(|c| c.get(1)).and_then(number);
-            let end = cells.and_then(|c| c.get(2)).and_then(number);
-            match (text, start, end) {
-                (Some(t), Some(s), Some(e)) => spans.push(Span {
-                    start: Time::Seconds(s),
-                    end: Time::Seconds(e),
-                    raw_text: t.to_string(),
-                    label: t.to_string(),
-                    categories: Vec::new(),
-                    motion_type: None,
-                    hand: None,
-                    object: None,
-                    grasp: None,
-                    id: format!("{sid}-{i}"),
-                    alternatives: Vec::new(),
-                }),
-                (None, Some(_), Some(_)) => nulls += 1,
-                _ => notes.push(Note::new(
-                    "bad_times",
-                    format!("sid {sid}: row {i} is not [label, start, end]"),
-                )),
-            }
-        }
+        read.notebook_rows(rows);
     } else if let Some(seq) = seq_ann
         .and_then(|s| s.get("labels"))
         .and_then(Value::as_array)
     {
-        // No frame labels: the sequence label covers the whole capture (SINC's `seq`).
-        for (i, label) in seq.iter().enumerate() {
-            match string(label.get("raw_label")).or_else(|| string(label.get("proc_label"))) {
-                Some(text) => spans.push(Span {
-                    start: Time::Seconds(0.0),
-                    end: Time::End,
-                    raw_text: text.clone(),
-                    label: string(label.get("proc_label")).unwrap_or(text),
-                    categories: Vec::new(),
-                    motion_type: None,
-                    hand: None,
-                    object: None,
-                    grasp: None,
-                    id: string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-seq-{i}")),
-                    alternatives: Vec::new(),
-                }),
-                None => nulls += 1,
-            }
-        }
+        read.sequence_labels(seq);
     } else {
-        notes.push(Note::new(
+        read.notes.push(Note::new(
             "no_labels",
             format!("sid {sid}: record has neither frame_ann nor seq_ann labels"),
         ));
     }
-    if nulls > 0 {
-        notes.push(Note::new(
-            "null_label",
-            format!("sid {sid}: skipped {nulls} labels with null text"),
-        ));
-    }
-    let sorted = spans
-        .windows(2)
-        .all(|w| start_secs(&w[0]) <= start_secs(&w[1]));
-    if !sorted {
-        notes.push(Note::new(
-            "unsorted",
-            format!("sid {sid}: labels are not in time order (sorted on read)"),
-        ));
-        spans.sort_by(|a, b| {
-            start_secs(a)
-                .total_cmp(&start_secs(b))
-                .then(a.id.cmp(&b.id))
-        });
-    }
-    if let Some(dur) = duration {
-        for s in &mut spans {
-            if let Time::Seconds(e) = s.end
-                && e > dur
-            {
-                notes.push(Note::new(
-                    "end_past_duration",
-                    format!(
-                        "sid {sid}: `{}` ends at {e} s, past the {dur} s duration (clamped)",
-                        s.raw_text
-                    ),
-                ));
-                s.end = Time::Seconds(dur);
-            }
-        }
-    }
+    read.finish(duration);
+    let RecordReader {
+        spans, mut notes, ..
+    } = read;
     if feat_p.is_none() {
         notes.push(Note::new(
             "no_feat_p",
@@ -230,6 +110,177 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
             notes,
             attributes: BTreeMap::from([("babel_sid".to_string(), sid.to_string())]),
         },
+    }
+}
+
+/// A span of BABEL text: no motion type, hand, object or grasp yet.
+fn babel_span(
+    start: Time,
+    end: Time,
+    raw_text: String,
+    label: String,
+    categories: Vec<String>,
+    id: String,
+) -> Span {
+    Span {
+        start,
+        end,
+        raw_text,
+        label,
+        categories,
+        motion_type: None,
+        hand: None,
+        object: None,
+        grasp: None,
+        id,
+        alternatives: Vec::new(),
+    }
+}
+
+/// One record's spans as they are read, with the notes on them and the labels without text.
+struct RecordReader<'a> {
+    sid: &'a str,
+    spans: Vec<Span>,
+    notes: Vec<Note>,
+    /// Labels skipped for having no text.
+    nulls: usize,
+}
+
+impl RecordReader<'_> {
+    /// `frame_ann.labels`: one span per label with numeric times and some text.
+    fn frame_labels(&mut self, labels: &[Value]) {
+        let sid = self.sid;
+        for (i, label) in labels.iter().enumerate() {
+            let raw = string(label.get("raw_label"));
+            let proc = string(label.get("proc_label"));
+            let (Some(start), Some(end)) = (
+                label.get("start_t").and_then(number),
+                label.get("end_t").and_then(number),
+            ) else {
+                self.notes.push(Note::new(
+                    "bad_times",
+                    format!("sid {sid}: label {i} has no numeric start_t/end_t"),
+                ));
+                continue;
+            };
+            let Some(text) = raw.clone().or_else(|| proc.clone()) else {
+                self.nulls += 1;
+                continue;
+            };
+            if label.get("start_t").is_some_and(Value::is_u64)
+                || label.get("end_t").is_some_and(Value::is_u64)
+            {
+                self.notes.push(Note::new(
+                    "integer_times",
+                    format!("sid {sid}: label `{text}` has integer times"),
+                ));
+            }
+            let categories = label
+                .get("act_cat")
+                .and_then(Value::as_array)
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|c| c.as_str().map(str::to_string))
+                        .collect()
+                })
+                .unwrap_or_default();
+            self.spans.push(babel_span(
+                Time::Seconds(start),
+                Time::Seconds(end),
+                text.clone(),
+                proc.unwrap_or(text),
+                categories,
+                string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-{i}")),
+            ));
+        }
+    }
+
+    /// Saved notebook outputs keep frame labels as `[raw_label, start_t, end_t]` rows.
+    fn notebook_rows(&mut self, rows: &[Value]) {
+        let sid = self.sid;
+        for (i, row) in rows.iter().enumerate() {
+            let cells = row.as_array();
+            let text = cells.and_then(|c| c.first()).and_then(Value::as_str);
+            let start = cells.and_then(|c| c.get(1)).and_then(number);
+            let end = cells.and_then(|c| c.get(2)).and_then(number);
+            match (text, start, end) {
+                (Some(t), Some(s), Some(e)) => self.spans.push(babel_span(
+                    Time::Seconds(s),
+                    Time::Seconds(e),
+                    t.to_string(),
+                    t.to_string(),
+                    Vec::new(),
+                    format!("{sid}-{i}"),
+                )),
+                (None, Some(_), Some(_)) => self.nulls += 1,
+                _ => self.notes.push(Note::new(
+                    "bad_times",
+                    format!("sid {sid}: row {i} is not [label, start, end]"),
+                )),
+            }
+        }
+    }
+
+    /// No frame labels: the sequence label covers the whole capture (SINC's `seq`).
+    fn sequence_labels(&mut self, seq: &[Value]) {
+        let sid = self.sid;
+        for (i, label) in seq.iter().enumerate() {
+            match string(label.get("raw_label")).or_else(|| string(label.get("proc_label"))) {
+                Some(text) => self.spans.push(babel_span(
+                    Time::Seconds(0.0),
+                    Time::End,
+                    text.clone(),
+                    string(label.get("proc_label")).unwrap_or(text),
+                    Vec::new(),
+                    string(label.get("seg_id")).unwrap_or_else(|| format!("{sid}-seq-{i}")),
+                )),
+                None => self.nulls += 1,
+            }
+        }
+    }
+
+    /// Notes the labels without text, sorts the spans by start time when they are not, and
+    /// clamps ends past the record's `duration`, each with a note.
+    fn finish(&mut self, duration: Option<f64>) {
+        let sid = self.sid;
+        let nulls = self.nulls;
+        if nulls > 0 {
+            self.notes.push(Note::new(
+                "null_label",
+                format!("sid {sid}: skipped {nulls} labels with null text"),
+            ));
+        }
+        let sorted = self
+            .spans
+            .windows(2)
+            .all(|w| start_secs(&w[0]) <= start_secs(&w[1]));
+        if !sorted {
+            self.notes.push(Note::new(
+                "unsorted",
+                format!("sid {sid}: labels are not in time order (sorted on read)"),
+            ));
+            self.spans.sort_by(|a, b| {
+                start_secs(a)
+                    .total_cmp(&start_secs(b))
+                    .then(a.id.cmp(&b.id))
+            });
+        }
+        if let Some(dur) = duration {
+            for s in &mut self.spans {
+                if let Time::Seconds(e) = s.end
+                    && e > dur
+                {
+                    self.notes.push(Note::new(
+                        "end_past_duration",
+                        format!(
+                            "sid {sid}: `{}` ends at {e} s, past the {dur} s duration (clamped)",
+                            s.raw_text
+                        ),
+                    ));
+                    s.end = Time::Seconds(dur);
+                }
+            }
+        }
     }
 }
 
