@@ -100,36 +100,8 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let cache = folder_sizes(&dataset.join(".motionforge").join("cache"))?;
     let shards = shard_sizes(&dataset.join(DATA_DIR))?;
 
-    let mut noop = Vec::new();
-    let mut noop_ran = Vec::new();
-    for _ in 0..repeat {
-        let (run, r) = pool.install(|| timed_build(&config, ui))?;
-        noop_ran.extend(
-            r.stages
-                .iter()
-                .filter(|s| s.ran > 0)
-                .map(|s| format!("{} ran {}", s.stage, s.ran)),
-        );
-        noop.push(run);
-    }
-
-    let mut plans = Vec::new();
-    let mut plan_stale = false;
-    for _ in 0..repeat {
-        reset_peak_rss();
-        let start_rss_kb = rss_kb();
-        let cpu = CpuSnapshot::now();
-        let t0 = Instant::now();
-        let p = pool.install(|| plan(&config, &BuildOptions::default()))?;
-        let seconds = t0.elapsed().as_secs_f64();
-        plan_stale |= !p.nothing_to_run();
-        plans.push(Timed {
-            seconds,
-            peak_rss_kb: peak_rss_kb(),
-            start_rss_kb,
-            cpu: cpu.since(),
-        });
-    }
+    let (noop, noop_ran) = noop_builds(&pool, &config, repeat, ui)?;
+    let (plans, plan_stale) = timed_plans(&pool, &config, repeat)?;
 
     let scan = scan(&input, copies, repeat)?;
     let encode = encode_reference(&dataset.join(DATA_DIR), config.dataset.zstd_level, repeat)?;
@@ -166,6 +138,55 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         result.print()?;
     }
     Ok(())
+}
+
+/// The no-op rebuilds of a built dataset, `repeat` times, and the stages that ran in them
+/// (none, unless a rebuild is not the no-op it should be).
+fn noop_builds(
+    pool: &rayon::ThreadPool,
+    config: &motionforge::config::Config,
+    repeat: usize,
+    ui: &Ui,
+) -> Result<(Vec<BuildRun>, Vec<String>)> {
+    let mut noop = Vec::new();
+    let mut noop_ran = Vec::new();
+    for _ in 0..repeat {
+        let (run, r) = pool.install(|| timed_build(config, ui))?;
+        noop_ran.extend(
+            r.stages
+                .iter()
+                .filter(|s| s.ran > 0)
+                .map(|s| format!("{} ran {}", s.stage, s.ran)),
+        );
+        noop.push(run);
+    }
+    Ok((noop, noop_ran))
+}
+
+/// `plan` on the built dataset, `repeat` times, and whether any plan found work to do.
+fn timed_plans(
+    pool: &rayon::ThreadPool,
+    config: &motionforge::config::Config,
+    repeat: usize,
+) -> Result<(Vec<Timed>, bool)> {
+    let mut plans = Vec::new();
+    let mut plan_stale = false;
+    for _ in 0..repeat {
+        reset_peak_rss();
+        let start_rss_kb = rss_kb();
+        let cpu = CpuSnapshot::now();
+        let t0 = Instant::now();
+        let p = pool.install(|| plan(config, &BuildOptions::default()))?;
+        let seconds = t0.elapsed().as_secs_f64();
+        plan_stale |= !p.nothing_to_run();
+        plans.push(Timed {
+            seconds,
+            peak_rss_kb: peak_rss_kb(),
+            start_rss_kb,
+            cpu: cpu.since(),
+        });
+    }
+    Ok((plans, plan_stale))
 }
 
 // ---- input -----------------------------------------------------------------------------------

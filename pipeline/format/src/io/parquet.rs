@@ -607,7 +607,20 @@ fn contact_column(rows: &[Row<'_>]) -> Result<ArrayRef, ArrowError> {
 pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
     let schema = Arc::new(clip_schema());
     let clips: Vec<&Clip> = rows.iter().map(|r| r.clip).collect();
-    let clips = clips.as_slice();
+    // Columns by name: the schema decides their order, so writer and schema cannot drift apart.
+    let mut named = clip_columns(&clips)?;
+    named.extend(row_columns(rows)?);
+    let columns = crate::io::schema::in_schema_order(
+        &schema,
+        named.into_iter().map(|(c, a)| (c.name(), a)).collect(),
+    )?;
+    let batch = RecordBatch::try_new(schema, columns)?;
+    check_finite(&batch, &clips)?;
+    Ok(batch)
+}
+
+/// The columns of the clips' metadata: provenance, texts, labels, goals, attributes.
+fn clip_columns(clips: &[&Clip]) -> Result<Vec<(Column, ArrayRef)>, TableError> {
     let strings = |f: &dyn Fn(&Clip) -> &str| -> ArrayRef {
         Arc::new(StringArray::from_iter_values(clips.iter().map(|c| f(c))))
     };
@@ -620,47 +633,9 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
         let values: Vec<Option<Vec<f32>>> = clips.iter().map(|c| goal(c)).collect();
         fixed_per_row(&values, n, 0.0, floats)
     };
-    let frame_range = StructArray::try_new(
-        Fields::from(vec![
-            Field::new("start", DataType::Int64, false),
-            Field::new("end", DataType::Int64, false),
-        ]),
-        vec![
-            Arc::new(Int64Array::from_iter_values(
-                clips.iter().map(|c| c.frame_range.0 as i64),
-            )) as ArrayRef,
-            Arc::new(Int64Array::from_iter_values(
-                clips.iter().map(|c| c.frame_range.1 as i64),
-            )),
-        ],
-        None,
-    )?;
-    let entry = StructBuilder::new(
-        crate::io::schema::attribute_fields(),
-        vec![
-            Box::new(StringBuilder::new()) as Box<dyn arrow_array::builder::ArrayBuilder>,
-            Box::new(StringBuilder::new()),
-        ],
-    );
-    let mut attributes = ListBuilder::new(entry).with_field(Arc::new(Field::new(
-        "item",
-        DataType::Struct(crate::io::schema::attribute_fields()),
-        false,
-    )));
-    for clip in clips {
-        let entries = attributes.values();
-        for (k, v) in clip.attributes.iter() {
-            for (i, text) in [k, v].into_iter().enumerate() {
-                if let Some(b) = entries.field_builder::<StringBuilder>(i) {
-                    b.append_value(text);
-                }
-            }
-            entries.append(true);
-        }
-        attributes.append(true);
-    }
-    // Columns by name: the schema decides their order, so writer and schema cannot drift apart.
-    let named: Vec<(Column, ArrayRef)> = vec![
+    let frame_range = frame_range_column(clips)?;
+    let attributes = attributes_column(clips);
+    Ok(vec![
         (Column::ClipId, strings(&|c| &c.clip_id)),
         (Column::SourceKind, strings(&|c| c.kind.as_str())),
         (Column::SourceName, strings(&|c| &c.capture.source)),
@@ -731,6 +706,13 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             Column::ComposedParts,
             nested_part_lists(clips.iter().map(|c| c.composed_parts.as_slice()))?,
         ),
+        (Column::Attributes, attributes),
+    ])
+}
+
+/// The columns made per row from its motion: plausibility, skeleton, and the per-frame arrays.
+fn row_columns(rows: &[Row<'_>]) -> Result<Vec<(Column, ArrayRef)>, TableError> {
+    Ok(vec![
         (Column::FootSkate, metric(rows, |p| p.foot_skate)),
         (
             Column::GroundPenetration,
@@ -738,7 +720,6 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
         ),
         (Column::SelfDistance, metric(rows, |p| p.self_distance)),
         (Column::Lean, metric(rows, |p| p.lean)),
-        (Column::Attributes, Arc::new(attributes.finish())),
         (
             Column::Skeleton,
             Arc::new(StringArray::from_iter_values(
@@ -796,14 +777,60 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             Column::CanonicalPositions,
             f32_frames(Column::CanonicalPositions, rows, |r| Some(&r.canonical))?,
         ),
-    ];
-    let columns = crate::io::schema::in_schema_order(
-        &schema,
-        named.into_iter().map(|(c, a)| (c.name(), a)).collect(),
-    )?;
-    let batch = RecordBatch::try_new(schema, columns)?;
-    // Upstream checks (value bounds at ingest) keep every number finite; this is the last guard,
-    // so that a missed case fails the write instead of putting NaN or infinity in a dataset.
+    ])
+}
+
+/// `frame_range`: each clip's first and last frame in its capture.
+fn frame_range_column(clips: &[&Clip]) -> Result<StructArray, TableError> {
+    Ok(StructArray::try_new(
+        Fields::from(vec![
+            Field::new("start", DataType::Int64, false),
+            Field::new("end", DataType::Int64, false),
+        ]),
+        vec![
+            Arc::new(Int64Array::from_iter_values(
+                clips.iter().map(|c| c.frame_range.0 as i64),
+            )) as ArrayRef,
+            Arc::new(Int64Array::from_iter_values(
+                clips.iter().map(|c| c.frame_range.1 as i64),
+            )),
+        ],
+        None,
+    )?)
+}
+
+/// `attributes`: each clip's key-value pairs, as a list of structs.
+fn attributes_column(clips: &[&Clip]) -> ArrayRef {
+    let entry = StructBuilder::new(
+        crate::io::schema::attribute_fields(),
+        vec![
+            Box::new(StringBuilder::new()) as Box<dyn arrow_array::builder::ArrayBuilder>,
+            Box::new(StringBuilder::new()),
+        ],
+    );
+    let mut attributes = ListBuilder::new(entry).with_field(Arc::new(Field::new(
+        "item",
+        DataType::Struct(crate::io::schema::attribute_fields()),
+        false,
+    )));
+    for clip in clips {
+        let entries = attributes.values();
+        for (k, v) in clip.attributes.iter() {
+            for (i, text) in [k, v].into_iter().enumerate() {
+                if let Some(b) = entries.field_builder::<StringBuilder>(i) {
+                    b.append_value(text);
+                }
+            }
+            entries.append(true);
+        }
+        attributes.append(true);
+    }
+    Arc::new(attributes.finish())
+}
+
+/// Upstream checks (value bounds at ingest) keep every number finite; this is the last guard,
+/// so that a missed case fails the write instead of putting NaN or infinity in a dataset.
+fn check_finite(batch: &RecordBatch, clips: &[&Clip]) -> Result<(), TableError> {
     for (c, column) in batch.columns().iter().enumerate() {
         if all_finite(column.as_ref()) {
             continue;
@@ -817,7 +844,7 @@ pub fn rows_to_batch(rows: &[Row<'_>]) -> Result<RecordBatch, TableError> {
             }
         }
     }
-    Ok(batch)
+    Ok(())
 }
 
 /// True when every float in `array` (nested lists and structs included) is finite.
