@@ -93,138 +93,168 @@ impl Shared<'_> {
 
 /// Runs ingest and segment for one capture, reusing cached outputs.
 pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result<Item, BuildError> {
-    let config = shared.config;
-    let source = &config.sources[file.source];
-    let spec = &shared.specs[file.source];
     let mut item = Item {
         key: file.display.clone(),
         ..Item::default()
     };
-    let cannot_read = |e: std::io::Error| {
-        ingest::reject(
-            ingest::NAME,
-            file,
-            RejectReason::Io,
-            format!("cannot read: {e}"),
-            None,
-            None,
-        )
-    };
-    let meta = match std::fs::metadata(&file.path) {
-        Ok(m) => m,
-        Err(e) => {
-            item.rejects.push(cannot_read(e));
+    let mut read = match CaptureRead::open(shared, file) {
+        Ok(read) => read,
+        Err(reject) => {
+            item.rejects.push(reject);
             return Ok(item);
         }
     };
-    // The bytes are read only when the digest is not known or a stage must run.
-    let path_key = file.path.to_string_lossy();
-    let mut bytes: Option<Vec<u8>> = None;
-    let sha256 = match shared.digests.known(&path_key, &meta) {
-        Some(sha) => sha,
-        None => match std::fs::read(&file.path) {
-            Ok(b) => {
+    let mut parsed: Option<ingest::IngestOutput> = None;
+    if let Ingested::Read(header, ingest_fp) =
+        ingest_capture(shared, &mut read, &mut parsed, &mut item)?
+    {
+        segment_ingested(shared, &mut read, parsed, &ingest_fp, &header, &mut item)?;
+    }
+    Ok(item)
+}
+
+/// One capture file as its ingest and segment stages read it: its source, its content digest,
+/// and its bytes once read (at most once per build).
+struct CaptureRead<'s> {
+    file: &'s CaptureFile,
+    source: &'s crate::config::SourceConfig,
+    spec: &'s ProfileSpec,
+    fps_override: Option<f64>,
+    sha256: String,
+    /// Read only when the digest is not known or a stage must run.
+    bytes: Option<Vec<u8>>,
+}
+
+impl<'s> CaptureRead<'s> {
+    /// The capture's digest, remembered from its stat data or read from its bytes; a reject when
+    /// the file cannot be read.
+    fn open(shared: &'s Shared<'_>, file: &'s CaptureFile) -> Result<CaptureRead<'s>, Reject> {
+        let cannot_read = |e: std::io::Error| {
+            ingest::reject(
+                ingest::NAME,
+                file,
+                RejectReason::Io,
+                format!("cannot read: {e}"),
+                None,
+                None,
+            )
+        };
+        let meta = std::fs::metadata(&file.path).map_err(cannot_read)?;
+        let path_key = file.path.to_string_lossy();
+        let mut bytes: Option<Vec<u8>> = None;
+        let sha256 = match shared.digests.known(&path_key, &meta) {
+            Some(sha) => sha,
+            None => {
+                let b = std::fs::read(&file.path).map_err(cannot_read)?;
                 let sha = sha256_hex(&b);
                 bytes = Some(b);
                 sha
             }
-            Err(e) => {
-                item.rejects.push(cannot_read(e));
-                return Ok(item);
-            }
-        },
-    };
-    shared.digests.record(&path_key, &meta, &sha256);
-    let fps_override = source::fps_override(source, &shared.fps_tables[file.source], file);
-    // Reads (when not read yet) and parses the capture: at most once per build, here on an
-    // ingest miss or in the segment stage on a capture whose ingest record is cached.
-    let parse = |bytes: &mut Option<Vec<u8>>| -> Result<ingest::IngestOutput, BuildError> {
-        if bytes.is_none() {
+        };
+        shared.digests.record(&path_key, &meta, &sha256);
+        let source = &shared.config.sources[file.source];
+        Ok(CaptureRead {
+            file,
+            source,
+            spec: &shared.specs[file.source],
+            fps_override: source::fps_override(source, &shared.fps_tables[file.source], file),
+            sha256,
+            bytes,
+        })
+    }
+
+    /// What the ingest stage reads, with the capture's `bytes`.
+    fn input<'i>(&'i self, bytes: &'i [u8]) -> ingest::CaptureInput<'i> {
+        ingest::CaptureInput {
+            file: self.file,
+            bytes,
+            sha256: &self.sha256,
+            source: &self.source.name,
+            profile: self.spec,
+            fps_override: self.fps_override,
+            positions: self.source.positions.as_ref(),
+            amass: self.source.amass.as_ref(),
+        }
+    }
+
+    /// Reads (when not read yet) and parses the capture: at most once per build, on an ingest
+    /// miss or in the segment stage on a capture whose ingest record is cached.
+    fn parse(&mut self) -> Result<ingest::IngestOutput, BuildError> {
+        if self.bytes.is_none() {
+            let file = self.file;
             let read = std::fs::read(&file.path).map_err(super::workspace::io_err(&file.path))?;
-            if sha256_hex(&read) != sha256 {
+            if sha256_hex(&read) != self.sha256 {
                 return Err(BuildError::Motion(format!(
                     "{}: the file changed during the build; run the build again",
                     file.display
                 )));
             }
-            *bytes = Some(read);
+            self.bytes = Some(read);
         }
-        Ok(ingest::run(&ingest::CaptureInput {
-            file,
-            bytes: bytes.as_deref().unwrap_or_default(),
-            sha256: &sha256,
-            source: &source.name,
-            profile: spec,
-            fps_override,
-            positions: source.positions.as_ref(),
-            amass: source.amass.as_ref(),
-        }))
-    };
-    let ingest_fp = ingest::fingerprint(&ingest::CaptureInput {
-        file,
-        bytes: &[],
-        sha256: &sha256,
-        source: &source.name,
-        profile: spec,
-        fps_override,
-        positions: source.positions.as_ref(),
-        amass: source.amass.as_ref(),
-    });
-    let mut parsed: Option<ingest::IngestOutput> = None;
+        Ok(ingest::run(
+            &self.input(self.bytes.as_deref().unwrap_or_default()),
+        ))
+    }
+}
+
+/// What the ingest stage of one capture leaves for its segment stage.
+enum Ingested {
+    /// Probe mode: the ingest output is not cached (the item says so).
+    Pending,
+    /// The capture was refused (its rejects are on the item).
+    Refused,
+    /// The capture without its frames, and the ingest fingerprint.
+    Read(ingest::CaptureHeader, String),
+}
+
+/// The ingest stage of one capture, cached by its content. A capture parsed here is left in
+/// `parsed` for the segment stage.
+fn ingest_capture(
+    shared: &Shared<'_>,
+    read: &mut CaptureRead<'_>,
+    parsed: &mut Option<ingest::IngestOutput>,
+    item: &mut Item,
+) -> Result<Ingested, BuildError> {
+    let ingest_fp = ingest::fingerprint(&read.input(&[]));
     let Some((ingested, ran)) =
         shared
             .workspace
             .try_item(ingest::NAME, &item.key, &ingest_fp, || {
-                let out = parse(&mut bytes)?;
+                let out = read.parse()?;
                 let record = out.record();
-                parsed = Some(out);
+                *parsed = Some(out);
                 Ok::<_, BuildError>(record)
             })?
     else {
         item.pending = Some(Stage::Ingest);
-        return Ok(item);
+        return Ok(Ingested::Pending);
     };
     let ingest_fp = ingest_fp.fingerprint;
     item.done.push((Stage::Ingest, ingest_fp.clone(), ran));
     item.rejects.extend(ingested.rejects);
-    let Some(header) = ingested.capture else {
-        return Ok(item);
-    };
+    Ok(match ingested.capture {
+        Some(header) => Ingested::Read(header, ingest_fp),
+        None => Ingested::Refused,
+    })
+}
 
-    let annotation = match shared.annotations[file.source].for_capture(
-        &header.stem,
-        &file.path,
-        source.labels.kind(),
-    ) {
-        Ok(a) => a,
-        Err(refusal) => {
-            item.rejects.push(ingest::reject(
-                segment::NAME,
-                file,
-                refusal.reason,
-                refusal.message,
-                None,
-                None,
-            ));
-            return Ok(item);
-        }
-    };
-    let profile = match shared.bound.bind(spec, &header.skeleton) {
-        Ok(p) => p,
-        Err(e) => {
-            item.rejects.push(ingest::reject(
-                segment::NAME,
-                file,
-                RejectReason::Profile,
-                e.to_string(),
-                None,
-                None,
-            ));
-            return Ok(item);
-        }
+/// The segment stage of one ingested capture: its annotation and bound profile, then its clips,
+/// cached without their frames (those go to frame chunks as they are made).
+fn segment_ingested(
+    shared: &Shared<'_>,
+    read: &mut CaptureRead<'_>,
+    mut parsed: Option<ingest::IngestOutput>,
+    ingest_fp: &str,
+    header: &ingest::CaptureHeader,
+    item: &mut Item,
+) -> Result<(), BuildError> {
+    let config = shared.config;
+    let (file, source) = (read.file, read.source);
+    let Some((annotation, profile)) = annotation_and_profile(shared, read, header, item) else {
+        return Ok(());
     };
     let seg_fp = segment::fingerprint(
-        &ingest_fp,
+        ingest_fp,
         &annotation,
         source.labels.kind(),
         &source.segment,
@@ -245,7 +275,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         .try_item_where(segment::NAME, &item.key, &seg_fp, chunks_present, || {
             let capture = match parsed.take() {
                 Some(out) => out.capture,
-                None => parse(&mut bytes)?.capture,
+                None => read.parse()?.capture,
             };
             let Some(capture) = capture else {
                 return Err(BuildError::Motion(format!(
@@ -268,7 +298,7 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
         })?
     else {
         item.pending = Some(Stage::Segment);
-        return Ok(item);
+        return Ok(());
     };
 
     let mut segmented = segmented;
@@ -279,7 +309,53 @@ pub(super) fn segment_capture(shared: &Shared<'_>, file: &CaptureFile) -> Result
     item.refs = refs;
     item.done.push((Stage::Segment, seg_fp.fingerprint, ran));
     item.segment = segmented;
-    Ok(item)
+    Ok(())
+}
+
+/// The capture's annotation and its skeleton's bound profile; a reject on the item when either
+/// is missing.
+fn annotation_and_profile(
+    shared: &Shared<'_>,
+    read: &CaptureRead<'_>,
+    header: &ingest::CaptureHeader,
+    item: &mut Item,
+) -> Option<(
+    motionforge_sources::annotate::span::CaptureAnnotation,
+    motionforge_core::motion::Profile,
+)> {
+    let (file, source) = (read.file, read.source);
+    let annotation = match shared.annotations[file.source].for_capture(
+        &header.stem,
+        &file.path,
+        source.labels.kind(),
+    ) {
+        Ok(a) => a,
+        Err(refusal) => {
+            item.rejects.push(ingest::reject(
+                segment::NAME,
+                file,
+                refusal.reason,
+                refusal.message,
+                None,
+                None,
+            ));
+            return None;
+        }
+    };
+    match shared.bound.bind(read.spec, &header.skeleton) {
+        Ok(profile) => Some((annotation, profile)),
+        Err(e) => {
+            item.rejects.push(ingest::reject(
+                segment::NAME,
+                file,
+                RejectReason::Profile,
+                e.to_string(),
+                None,
+                None,
+            ));
+            None
+        }
+    }
 }
 
 /// Mirrors a capture's labelled clips, reusing the cached copies when the clips are unchanged.

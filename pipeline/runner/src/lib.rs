@@ -315,21 +315,333 @@ fn run_stages<'a>(
     options: &BuildOptions,
     probe: bool,
 ) -> Result<Staged<'a>, BuildError> {
-    let output = config.dataset_dir();
-    let through = options.through.unwrap_or(Stage::Report);
-    let progress = &options.progress;
-    let workspace = if probe {
-        Workspace::probing(&output)
-    } else {
-        Workspace::new(&output)
-    };
-    if options.force && !probe {
-        let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
+    let mut build = BuildState::open(config, options, probe)?;
+    build.ingest_and_segment()?;
+    let text = build.text_stages()?;
+    let run_mirror = build.mirror(&text)?;
+    let mirror_pending = build.items.iter().any(|i| i.pending == Some(Stage::Mirror));
+    let first_pending = items_pending_stage(&build.items);
+    build.prune_stage_caches();
+    if run_mirror {
+        let run = capture_run(&build.items, Stage::Mirror, &options.progress);
+        build.stages.push(run);
     }
-    motionforge_language::parts::lexicon::check_lexicon()?;
-    motionforge_language::compose_text::check_words()?;
-    motionforge_llm::paraphrase::check_words()?;
-    let files = source::discover(config)?;
+    let mut gathered = build.gather(&text);
+    let mut blocked = if build.upstream_pending {
+        first_pending
+    } else if text.pending {
+        Some(Stage::Label)
+    } else if mirror_pending {
+        Some(Stage::Mirror)
+    } else {
+        None
+    };
+    let (compose, pair_check) = build.compose(&mut gathered, &mut blocked)?;
+    Ok(Staged {
+        output: build.output,
+        files: build.files.len(),
+        stages: build.stages,
+        clips: gathered.clips,
+        rejects: gathered.rejects,
+        notes: gathered.notes,
+        drops_by_reason: gathered.drops_by_reason,
+        drops: gathered.drops,
+        unmapped_labels: gathered.unmapped_labels,
+        text,
+        compose,
+        pair_check,
+        blocked,
+        index: gathered.index,
+        shared: build.shared,
+    })
+}
+
+/// What a build carries from stage to stage: what every stage shares, each capture's item, and
+/// the stage runs so far.
+struct BuildState<'a, 'o> {
+    config: &'a Config,
+    options: &'o BuildOptions,
+    /// Plan mode: nothing that is not cached runs.
+    probe: bool,
+    /// The last stage to run.
+    through: Stage,
+    /// The dataset folder.
+    output: PathBuf,
+    files: Vec<source::CaptureFile>,
+    shared: Shared<'a>,
+    /// Where the held clips' frames are read from.
+    motions: motions::MotionSource,
+    /// One per capture file, in discovery order.
+    items: Vec<Item>,
+    /// In probe mode: some capture's ingest or segment output is not cached, so what follows
+    /// depends on outputs that do not exist yet.
+    upstream_pending: bool,
+    stages: Vec<StageRun>,
+}
+
+/// Every clip of the captures, originals and mirrors, with where their frames are, and what
+/// the stages dropped, noted and rejected, in their report order.
+struct Gathered {
+    clips: Vec<Clip>,
+    index: MotionIndex,
+    rejects: Vec<Reject>,
+    drops_by_reason: BTreeMap<String, usize>,
+    drops: Vec<Dropped>,
+    unmapped_labels: BTreeMap<String, usize>,
+    notes: Vec<Note>,
+}
+
+impl<'a, 'o> BuildState<'a, 'o> {
+    /// The workspace (its stage cache cleared by `--force`), the checked word lists, the capture
+    /// files, and what every stage shares: profiles, annotations, frame-rate tables, motion types
+    /// and remembered file digests.
+    fn open(
+        config: &'a Config,
+        options: &'o BuildOptions,
+        probe: bool,
+    ) -> Result<BuildState<'a, 'o>, BuildError> {
+        let output = config.dataset_dir();
+        let workspace = if probe {
+            Workspace::probing(&output)
+        } else {
+            Workspace::new(&output)
+        };
+        if options.force && !probe {
+            let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
+        }
+        motionforge_language::parts::lexicon::check_lexicon()?;
+        motionforge_language::compose_text::check_words()?;
+        motionforge_llm::paraphrase::check_words()?;
+        let files = source::discover(config)?;
+        // `--force` trusts nothing remembered: every capture is read and hashed again.
+        let shared = load_shared(config, workspace, options.force && !probe)?;
+        let motions = shared.motions();
+        Ok(BuildState {
+            config,
+            options,
+            probe,
+            through: options.through.unwrap_or(Stage::Report),
+            output,
+            files,
+            shared,
+            motions,
+            items: Vec::new(),
+            upstream_pending: false,
+            stages: Vec::new(),
+        })
+    }
+
+    /// Ingest and segment, capture by capture on all cores; then each clip's split, by capture,
+    /// set before labelling so every later copy (mirror, pair) inherits it.
+    fn ingest_and_segment(&mut self) -> Result<(), BuildError> {
+        let progress = &self.options.progress;
+        progress.stage_started(ingest::NAME, self.files.len() as u64);
+        let shared = &self.shared;
+        let mut items: Vec<Item> = self
+            .files
+            .par_iter()
+            .map(|file| {
+                let item = capture::segment_capture(shared, file);
+                progress.advanced(ingest::NAME, 1);
+                item
+            })
+            .collect::<Result<_, _>>()?;
+        std::mem::take(&mut self.shared.digests).save(&self.shared.workspace)?;
+        self.upstream_pending = items.iter().any(|i| i.pending.is_some());
+        let splits = crate::stages::split::Splits::from_config(self.config)?;
+        for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+            splits.assign(clip);
+        }
+        self.stages
+            .push(capture_run(&items, Stage::Ingest, progress));
+        if self.through >= Stage::Segment {
+            self.stages
+                .push(capture_run(&items, Stage::Segment, progress));
+        }
+        self.items = items;
+        Ok(())
+    }
+
+    /// The text stages (labels, paraphrases, plans), unless a capture's upstream output is
+    /// pending.
+    fn text_stages(&mut self) -> Result<text::TextOutcome, BuildError> {
+        let progress = &self.options.progress;
+        let text = if self.through >= Stage::Label && !self.upstream_pending {
+            text::run(
+                &self.shared,
+                &self.motions,
+                &mut self.items,
+                self.options.offline || self.probe,
+                self.through,
+                progress,
+            )?
+        } else {
+            text::TextOutcome {
+                pending: self.upstream_pending,
+                ..Default::default()
+            }
+        };
+        for run in &text.runs {
+            progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+        }
+        self.stages.extend(text.runs.iter().cloned());
+        Ok(text)
+    }
+
+    /// Mirrored copies of every capture's labelled clips, on all cores; true when the stage ran
+    /// (mirroring on, reached, and the labels known).
+    fn mirror(&mut self, text: &text::TextOutcome) -> Result<bool, BuildError> {
+        let run_mirror =
+            self.config.mirror.enabled && self.through >= Stage::Mirror && !text.pending;
+        if run_mirror {
+            let progress = &self.options.progress;
+            let shared = &self.shared;
+            progress.stage_started(mirror::NAME, self.items.len() as u64);
+            self.items
+                .par_iter_mut()
+                .map(|item| {
+                    let done = capture::mirror_capture(shared, item);
+                    progress.advanced(mirror::NAME, 1);
+                    done
+                })
+                .collect::<Result<Vec<()>, _>>()?;
+        }
+        Ok(run_mirror)
+    }
+
+    /// Removes from the stage cache the per-capture outputs and frame chunks no capture of this
+    /// build uses.
+    fn prune_stage_caches(&self) {
+        let workspace = &self.shared.workspace;
+        for stage in [Stage::Ingest, Stage::Segment, Stage::Mirror] {
+            let live: BTreeSet<String> = self
+                .items
+                .iter()
+                .filter_map(|i| i.fingerprint(stage))
+                .map(str::to_string)
+                .collect();
+            workspace.prune(stage.name(), &live);
+        }
+
+        // Frame chunks that no held clip points to belong to outputs that are gone.
+        let live: BTreeSet<String> = self
+            .items
+            .iter()
+            .flat_map(|i| i.refs.iter().chain(&i.mirrored_refs))
+            .flat_map(|r| r.chunks())
+            .map(|(_, fingerprint)| fingerprint.to_string())
+            .collect();
+        workspace.prune(motions::SEGMENT_CHUNKS, &live);
+        for retired in motions::RETIRED_CHUNKS {
+            workspace.prune(retired, &BTreeSet::new());
+        }
+    }
+
+    /// Takes every capture's clips, drops, notes and rejects (with the text stages' rejects),
+    /// each sorted so the outputs do not depend on scheduling or glob order.
+    fn gather(&mut self, text: &text::TextOutcome) -> Gathered {
+        let items = std::mem::take(&mut self.items);
+        // Exactly: grown by doubling, the list kept up to a third of its capacity (a `Clip` is a few
+        // hundred bytes before its strings) unused until the synthetic pairs are added.
+        let mut clips: Vec<Clip> =
+            Vec::with_capacity(items.iter().map(|i| i.clips.len() + i.mirrored.len()).sum());
+        let mut index = MotionIndex::new();
+        let mut rejects: Vec<Reject> = Vec::new();
+        let mut drops_by_reason = BTreeMap::new();
+        let mut drops: Vec<Dropped> = Vec::new();
+        let mut unmapped_labels = BTreeMap::new();
+        let mut notes: Vec<Note> = Vec::new();
+        for item in items {
+            for (clip, at) in item
+                .clips
+                .iter()
+                .zip(item.refs)
+                .chain(item.mirrored.iter().zip(item.mirrored_refs))
+            {
+                index.insert(motions::key(clip), at);
+            }
+            clips.extend(item.clips);
+            clips.extend(item.mirrored);
+            rejects.extend(item.rejects);
+            add_counts(&mut drops_by_reason, item.segment.drops);
+            drops.extend(item.segment.dropped);
+            add_counts(&mut unmapped_labels, item.segment.unmapped);
+            notes.extend(item.segment.notes);
+        }
+        notes.extend(source::annotation_notes(
+            self.config,
+            &self.shared.annotations,
+            &self.files,
+        ));
+
+        rejects.extend(text.rejects.iter().cloned());
+        let mut rejects: Vec<Reject> = rejects.into_iter().map(Reject::bounded).collect();
+        // Row order: by clip id, so the table does not depend on scheduling or glob order.
+        clips.sort_by(|a, b| {
+            a.clip_id
+                .cmp(&b.clip_id)
+                .then(a.capture.path.cmp(&b.capture.path))
+        });
+        rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
+        notes.sort();
+        drops.sort();
+        Gathered {
+            clips,
+            index,
+            rejects,
+            drops_by_reason,
+            drops,
+            unmapped_labels,
+            notes,
+        }
+    }
+
+    /// Synthetic pairs from the labelled originals and mirrors, unless an earlier stage is
+    /// `blocked` (probe mode), which it becomes when the pairs themselves are not cached.
+    fn compose(
+        &mut self,
+        gathered: &mut Gathered,
+        blocked: &mut Option<Stage>,
+    ) -> Result<
+        (
+            crate::stages::compose::ComposeReport,
+            crate::stages::augment::AugmentReport,
+        ),
+        BuildError,
+    > {
+        let mut compose_report = crate::stages::compose::ComposeReport::default();
+        let mut pair_check = crate::stages::augment::AugmentReport::default();
+        if self.through >= Stage::Compose && blocked.is_none() {
+            let progress = &self.options.progress;
+            progress.stage_started(crate::stages::compose::NAME, gathered.clips.len() as u64);
+            match synthetic::compose(
+                &self.shared,
+                &self.motions,
+                &mut gathered.clips,
+                &mut gathered.index,
+                self.options.offline || self.probe,
+                progress,
+            )? {
+                Some((report, check, run)) => {
+                    progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+                    compose_report = report;
+                    pair_check = check;
+                    self.stages.push(run);
+                }
+                None => *blocked = Some(Stage::Compose),
+            }
+        }
+        Ok((compose_report, pair_check))
+    }
+}
+
+/// What every stage shares: each source's profile, annotations and frame-rate table, the motion
+/// types, and the file digests remembered from earlier builds (unless `forget_digests`).
+fn load_shared(
+    config: &Config,
+    workspace: Workspace,
+    forget_digests: bool,
+) -> Result<Shared<'_>, BuildError> {
     let specs: Vec<ProfileSpec> = config
         .sources
         .iter()
@@ -346,13 +658,12 @@ fn run_stages<'a>(
         .map(|s| source::load_fps_table(config, s))
         .collect::<Result<_, _>>()?;
     let (types, types_digest) = load_types(config)?;
-    // `--force` trusts nothing remembered: every capture is read and hashed again.
-    let digests = if options.force && !probe {
+    let digests = if forget_digests {
         digests::FileDigests::default()
     } else {
         digests::FileDigests::load(&workspace)
     };
-    let mut shared = Shared {
+    Ok(Shared {
         config,
         workspace,
         specs,
@@ -363,183 +674,6 @@ fn run_stages<'a>(
         types,
         types_digest,
         digests,
-    };
-    let motions = shared.motions();
-
-    progress.stage_started(ingest::NAME, files.len() as u64);
-    let mut items: Vec<Item> = files
-        .par_iter()
-        .map(|file| {
-            let item = capture::segment_capture(&shared, file);
-            progress.advanced(ingest::NAME, 1);
-            item
-        })
-        .collect::<Result<_, _>>()?;
-    std::mem::take(&mut shared.digests).save(&shared.workspace)?;
-    // In probe mode, a capture whose ingest or segment output is not cached stops there: what
-    // follows depends on outputs that do not exist yet.
-    let upstream_pending = items.iter().any(|i| i.pending.is_some());
-    // Splits by capture: set before labelling so every later copy (mirror, pair) inherits it.
-    let splits = crate::stages::split::Splits::from_config(config)?;
-    for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
-        splits.assign(clip);
-    }
-    let mut stages = vec![capture_run(&items, Stage::Ingest, progress)];
-    if through >= Stage::Segment {
-        stages.push(capture_run(&items, Stage::Segment, progress));
-    }
-    let run_text = through >= Stage::Label && !upstream_pending;
-    let text = if run_text {
-        text::run(
-            &shared,
-            &motions,
-            &mut items,
-            options.offline || probe,
-            through,
-            progress,
-        )?
-    } else {
-        text::TextOutcome {
-            pending: upstream_pending,
-            ..Default::default()
-        }
-    };
-    for run in &text.runs {
-        progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-    }
-    stages.extend(text.runs.iter().cloned());
-    let run_mirror = config.mirror.enabled && through >= Stage::Mirror && !text.pending;
-    if run_mirror {
-        progress.stage_started(mirror::NAME, items.len() as u64);
-        items
-            .par_iter_mut()
-            .map(|item| {
-                let done = capture::mirror_capture(&shared, item);
-                progress.advanced(mirror::NAME, 1);
-                done
-            })
-            .collect::<Result<Vec<()>, _>>()?;
-    }
-    let mirror_pending = items.iter().any(|i| i.pending == Some(Stage::Mirror));
-    let first_pending = items_pending_stage(&items);
-
-    for stage in [Stage::Ingest, Stage::Segment, Stage::Mirror] {
-        let live: BTreeSet<String> = items
-            .iter()
-            .filter_map(|i| i.fingerprint(stage))
-            .map(str::to_string)
-            .collect();
-        shared.workspace.prune(stage.name(), &live);
-    }
-
-    // Frame chunks that no held clip points to belong to outputs that are gone.
-    let live: BTreeSet<String> = items
-        .iter()
-        .flat_map(|i| i.refs.iter().chain(&i.mirrored_refs))
-        .flat_map(|r| r.chunks())
-        .map(|(_, fingerprint)| fingerprint.to_string())
-        .collect();
-    shared.workspace.prune(motions::SEGMENT_CHUNKS, &live);
-    for retired in motions::RETIRED_CHUNKS {
-        shared.workspace.prune(retired, &BTreeSet::new());
-    }
-
-    if run_mirror {
-        stages.push(capture_run(&items, Stage::Mirror, progress));
-    }
-
-    // Exactly: grown by doubling, the list kept up to a third of its capacity (a `Clip` is a few
-    // hundred bytes before its strings) unused until the synthetic pairs are added.
-    let mut clips: Vec<Clip> =
-        Vec::with_capacity(items.iter().map(|i| i.clips.len() + i.mirrored.len()).sum());
-    let mut index = MotionIndex::new();
-    let mut rejects: Vec<Reject> = Vec::new();
-    let mut drops_by_reason = BTreeMap::new();
-    let mut drops: Vec<Dropped> = Vec::new();
-    let mut unmapped_labels = BTreeMap::new();
-    let mut notes: Vec<Note> = Vec::new();
-    for item in items {
-        for (clip, at) in item
-            .clips
-            .iter()
-            .zip(item.refs)
-            .chain(item.mirrored.iter().zip(item.mirrored_refs))
-        {
-            index.insert(motions::key(clip), at);
-        }
-        clips.extend(item.clips);
-        clips.extend(item.mirrored);
-        rejects.extend(item.rejects);
-        add_counts(&mut drops_by_reason, item.segment.drops);
-        drops.extend(item.segment.dropped);
-        add_counts(&mut unmapped_labels, item.segment.unmapped);
-        notes.extend(item.segment.notes);
-    }
-    notes.extend(source::annotation_notes(
-        config,
-        &shared.annotations,
-        &files,
-    ));
-
-    rejects.extend(text.rejects.iter().cloned());
-    let mut rejects: Vec<Reject> = rejects.into_iter().map(Reject::bounded).collect();
-    // Row order: by clip id, so the table does not depend on scheduling or glob order.
-    clips.sort_by(|a, b| {
-        a.clip_id
-            .cmp(&b.clip_id)
-            .then(a.capture.path.cmp(&b.capture.path))
-    });
-    rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
-    notes.sort();
-    drops.sort();
-
-    // Synthetic pairs from the labelled originals and mirrors.
-    let mut compose_report = crate::stages::compose::ComposeReport::default();
-    let mut pair_check = crate::stages::augment::AugmentReport::default();
-    let mut blocked = if upstream_pending {
-        first_pending
-    } else if text.pending {
-        Some(Stage::Label)
-    } else if mirror_pending {
-        Some(Stage::Mirror)
-    } else {
-        None
-    };
-    if through >= Stage::Compose && blocked.is_none() {
-        progress.stage_started(crate::stages::compose::NAME, clips.len() as u64);
-        match synthetic::compose(
-            &shared,
-            &motions,
-            &mut clips,
-            &mut index,
-            options.offline || probe,
-            progress,
-        )? {
-            Some((report, check, run)) => {
-                progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-                compose_report = report;
-                pair_check = check;
-                stages.push(run);
-            }
-            None => blocked = Some(Stage::Compose),
-        }
-    }
-    Ok(Staged {
-        output,
-        files: files.len(),
-        stages,
-        clips,
-        rejects,
-        notes,
-        drops_by_reason,
-        drops,
-        unmapped_labels,
-        text,
-        compose: compose_report,
-        pair_check,
-        blocked,
-        index,
-        shared,
     })
 }
 
@@ -598,12 +732,14 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     // One build per dataset folder at a time; released when this function returns.
     let _lock = lock::WorkspaceLock::acquire(&config.dataset_dir(), options.lock_wait)
         .map_err(WorkspaceError::from)?;
+    let mut staged = run_stages(config, options, false)?;
+    let written = write_and_report(config, options, &mut staged)?;
     let Staged {
         shared,
         output,
         files,
-        mut stages,
-        clips,
+        stages,
+        clips: _,
         rejects,
         notes,
         drops_by_reason,
@@ -613,33 +749,98 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         compose,
         pair_check,
         blocked: _,
-        index,
-    } = run_stages(config, options, false)?;
+        index: _,
+    } = staged;
+    let (notes_by_kind, notes) = counted_notes(notes);
+    let counts = written.counts;
+    let report = BuildReport {
+        label_contradictions: written.label_contradictions,
+        label_contradictions_dropped: written.label_contradictions_dropped,
+        dataset: config.dataset.name.clone(),
+        output: output.clone(),
+        stages,
+        captures: files,
+        clips: written.clips,
+        mirrored: written.mirrored,
+        kinds: counts.source_kind,
+        actions: written.actions,
+        motion_types: counts.motion_type,
+        unmapped_labels,
+        drops_by_reason,
+        drops,
+        notes_by_kind,
+        notes,
+        rejects_by_reason: counts.reject_reason,
+        rejects,
+        labels: text.label,
+        paraphrases: text.paraphrase,
+        plans: text.plan,
+        synthetic: compose,
+        pair_check,
+        table_fingerprint: written.table_fingerprint,
+        report_error: written.report_error,
+    };
+    // A partial run (`run <stage>`) leaves the last full build's report in place.
+    if options.through.unwrap_or(Stage::Report) == Stage::Report {
+        let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
+        write_atomic(&output.join(REPORT_FILE), &json)?;
+    }
+    save_ledger(&shared.workspace, &report.stages, written.stamps)?;
+    match report.report_error {
+        Some(e) => Err(BuildError::Report(e)),
+        None => Ok(report),
+    }
+}
+
+/// What the write and report stages leave for the build report and the ledger.
+struct Written {
+    label_contradictions: Vec<motionforge_core::quality::Contradiction>,
+    label_contradictions_dropped: usize,
+    table_fingerprint: String,
+    counts: motionforge_format::io::manifest::Counts,
+    /// Rows of the table, and of them mirrored copies.
+    clips: usize,
+    mirrored: usize,
+    actions: BTreeMap<String, usize>,
+    report_error: Option<String>,
+    /// Every stamp this build saw, the table's among them when it was written.
+    stamps: SeenStamps,
+}
+
+/// The check of texts against motions (dropping contradicting rows with `label_check.drop`),
+/// then the write stage (shards, manifest, card, normalisation) and the report stage, as far as
+/// the build goes. The staged clips are taken (written).
+fn write_and_report(
+    config: &Config,
+    options: &BuildOptions,
+    staged: &mut Staged<'_>,
+) -> Result<Written, BuildError> {
+    let shared = &staged.shared;
+    let mut clips = std::mem::take(&mut staged.clips);
+    let index = std::mem::take(&mut staged.index);
     let motions = shared.motions();
-    let label_contradictions =
-        label_check::contradicting_labels(&shared, &motions, &clips, &index)?;
-    let mut clips = clips;
+    let label_contradictions = label_check::contradicting_labels(shared, &motions, &clips, &index)?;
     let label_contradictions_dropped = if config.label_check.drop {
         label_check::drop_contradicting(&mut clips, &label_contradictions)
     } else {
         0
     };
     let workspace = &shared.workspace;
-    let (profiles, skeletons) = companions::skeletons_of(&shared, &clips);
-    let table_stamp = table_stamp(config, &clips, &index, &text.plans)?;
+    let (profiles, skeletons) = companions::skeletons_of(shared, &clips);
+    let table_stamp = table_stamp(config, &clips, &index, &staged.text.plans)?;
     let table_fingerprint = table_stamp.fingerprint.clone();
     let table = Table {
-        plans: &text.plans,
+        plans: &staged.text.plans,
         profiles: &profiles,
         skeletons: &skeletons,
-        rejects: &rejects,
+        rejects: &staged.rejects,
         motions: &motions,
     };
     let companions = companions::Companions::of(
         config,
         &clips,
-        &rejects,
-        drops_by_reason.clone(),
+        &staged.rejects,
+        staged.drops_by_reason.clone(),
         &label_contradictions,
         &table_fingerprint,
     );
@@ -655,99 +856,102 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         options.progress.stage_started(Stage::Write.name(), 1);
         let write_ran = write_outputs(
             options.force,
-            &output,
+            &staged.output,
             workspace,
             &table_fingerprint,
             &table,
             &companions,
             output::Rows { clips, index },
         )?;
-        stages.push(single_run(options, Stage::Write, write_ran));
+        staged
+            .stages
+            .push(single_run(options, Stage::Write, write_ran));
         stamps.push(Miss {
             stage: Stage::Write.name().into(),
             key: "*".into(),
             stamp: table_stamp,
         });
-        if through >= Stage::Report && n_clips == 0 {
-            // Nothing to describe: a report of an earlier build would describe rows that are gone.
-            let stale = output.join("report");
-            if stale.exists() {
-                std::fs::remove_dir_all(&stale).map_err(workspace::io_err(&stale))?;
-            }
-            let _ = std::fs::remove_file(workspace.root().join(REPORT_MARKER));
-            options.progress.stage_started(Stage::Report.name(), 0);
-            options.progress.stage_finished(Stage::Report.name(), 0, 0);
-            stages.push(StageRun {
-                stage: Stage::Report.name().into(),
-                items: 0,
-                ran: 0,
-                reused: 0,
-            });
-        } else if through >= Stage::Report {
-            // The report is derived from the shards: redo it when they changed or it is missing.
-            options.progress.stage_started(Stage::Report.name(), 1);
-            let report_ran =
-                options.force || !report_is_current(&output, workspace, &table_fingerprint);
-            if report_ran {
-                let marker = workspace.root().join(REPORT_MARKER);
-                let _ = std::fs::remove_file(&marker);
-                // The dataset is written by now: a failed report (a full disk) is recorded in
-                // build-report.json and fails the build after it, rather than losing both.
-                match motionforge_report::report_dataset(&output, None) {
-                    Ok(_) => write_atomic(&marker, table_fingerprint.as_bytes())?,
-                    Err(e) => report_error = Some(e.to_string()),
-                }
-            }
-            stages.push(single_run(options, Stage::Report, report_ran));
+        if through >= Stage::Report {
+            let (run, error) = report_stage(
+                options,
+                &staged.output,
+                workspace,
+                &table_fingerprint,
+                n_clips,
+            )?;
+            staged.stages.push(run);
+            report_error = error;
         }
     }
+    Ok(Written {
+        label_contradictions,
+        label_contradictions_dropped,
+        table_fingerprint,
+        counts,
+        clips: n_clips,
+        mirrored: n_mirrored,
+        actions,
+        report_error,
+        stamps,
+    })
+}
 
+/// The report stage: the statistics report of the written shards, made again when they changed
+/// or it is missing, removed when the table has no rows. A failed report is returned, not
+/// raised: the dataset is written by now, and the build report records it.
+fn report_stage(
+    options: &BuildOptions,
+    output: &std::path::Path,
+    workspace: &Workspace,
+    table_fingerprint: &str,
+    n_clips: usize,
+) -> Result<(StageRun, Option<String>), BuildError> {
+    if n_clips == 0 {
+        // Nothing to describe: a report of an earlier build would describe rows that are gone.
+        let stale = output.join("report");
+        if stale.exists() {
+            std::fs::remove_dir_all(&stale).map_err(workspace::io_err(&stale))?;
+        }
+        let _ = std::fs::remove_file(workspace.root().join(REPORT_MARKER));
+        options.progress.stage_started(Stage::Report.name(), 0);
+        options.progress.stage_finished(Stage::Report.name(), 0, 0);
+        let run = StageRun {
+            stage: Stage::Report.name().into(),
+            items: 0,
+            ran: 0,
+            reused: 0,
+        };
+        return Ok((run, None));
+    }
+    // The report is derived from the shards: redo it when they changed or it is missing.
+    options.progress.stage_started(Stage::Report.name(), 1);
+    let report_ran = options.force || !report_is_current(output, workspace, table_fingerprint);
+    let mut report_error = None;
+    if report_ran {
+        let marker = workspace.root().join(REPORT_MARKER);
+        let _ = std::fs::remove_file(&marker);
+        // The dataset is written by now: a failed report (a full disk) is recorded in
+        // build-report.json and fails the build after it, rather than losing both.
+        match motionforge_report::report_dataset(output, None) {
+            Ok(_) => write_atomic(&marker, table_fingerprint.as_bytes())?,
+            Err(e) => report_error = Some(e.to_string()),
+        }
+    }
+    Ok((single_run(options, Stage::Report, report_ran), report_error))
+}
+
+/// Annotation notes counted by kind, and listed up to a bound per kind: the report stays
+/// readable and its size bounded.
+fn counted_notes(notes: Vec<Note>) -> (BTreeMap<String, usize>, Vec<Note>) {
     let mut notes_by_kind = BTreeMap::new();
     for n in &notes {
         *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;
     }
-    // Counted whole above, listed up to a bound: the report stays readable and its size bounded.
     let notes = motionforge_sources::annotate::span::cap_per_kind(
         notes,
         motionforge_sources::annotate::span::NOTES_PER_KIND,
     );
-    let report = BuildReport {
-        label_contradictions,
-        label_contradictions_dropped,
-        dataset: config.dataset.name.clone(),
-        output: output.clone(),
-        stages,
-        captures: files,
-        clips: n_clips,
-        mirrored: n_mirrored,
-        kinds: counts.source_kind,
-        actions,
-        motion_types: counts.motion_type,
-        unmapped_labels,
-        drops_by_reason,
-        drops,
-        notes_by_kind,
-        notes,
-        rejects_by_reason: counts.reject_reason,
-        rejects,
-        labels: text.label,
-        paraphrases: text.paraphrase,
-        plans: text.plan,
-        synthetic: compose,
-        pair_check,
-        table_fingerprint,
-        report_error,
-    };
-    // A partial run (`run <stage>`) leaves the last full build's report in place.
-    if through == Stage::Report {
-        let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
-        write_atomic(&output.join(REPORT_FILE), &json)?;
-    }
-    save_ledger(workspace, &report.stages, stamps)?;
-    match report.report_error {
-        Some(e) => Err(BuildError::Report(e)),
-        None => Ok(report),
-    }
+    (notes_by_kind, notes)
 }
 
 /// The run of a stage with one item (write, report), reported as finished.

@@ -509,6 +509,9 @@ impl From<TableError> for TableOrBuild {
     }
 }
 
+/// The write stage: the shards (each skipped when its content is unchanged), normalisation
+/// statistics, skeletons, rejects, plans, manifest and card, staged then switched into the dataset
+/// folder. False when the last write recorded the same table and its outputs are intact.
 pub(super) fn write_outputs(
     force: bool,
     output: &Path,
@@ -519,13 +522,6 @@ pub(super) fn write_outputs(
     rows: Rows,
 ) -> Result<bool, BuildError> {
     let Rows { clips, index } = rows;
-    let Table {
-        plans,
-        skeletons,
-        rejects,
-        ..
-    } = *table;
-    let state_path = workspace.root().join(STATE_FILE);
     let recorded = Recorded::load(workspace);
     if !force
         && let Some(recorded) = &recorded
@@ -534,7 +530,7 @@ pub(super) fn write_outputs(
     {
         return Ok(false);
     }
-    let skeletons_json = serde_json::to_string_pretty(skeletons).unwrap_or_default();
+    let skeletons_json = serde_json::to_string_pretty(table.skeletons).unwrap_or_default();
     // From here on the clips are read a shard at a time: held compressed, they no longer grow
     // the build's memory with the dataset.
     let clips = HeldClips::new(clips, |c| index.get(&key(c)).cloned())?;
@@ -543,15 +539,7 @@ pub(super) fn write_outputs(
     // Normalisation statistics per split, gathered shard by shard as the rows pass; each
     // profile takes the training split's, or the first split's holding it (CMU in the demo).
     let with_stats = !plans_for_shards.is_empty();
-    // Everything new is written into a staging folder first; the dataset folder keeps the
-    // previous dataset, complete and valid, until the new one is fully written (a full disk
-    // fails here and leaves it untouched). Then `switch` moves the new files in, by renames only.
-    let staging = workspace.root().join(STAGING_DIR);
-    if staging.exists() {
-        std::fs::remove_dir_all(&staging).map_err(workspace::io_err(&staging))?;
-    }
-    let staged_data = staging.join(DATA_DIR);
-    std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
+    let staging = fresh_staging(workspace)?;
     let job = ShardJob {
         table,
         clips: &clips,
@@ -573,29 +561,7 @@ pub(super) fn write_outputs(
     let done = done
         .into_iter()
         .collect::<Result<Vec<ShardDone>, BuildError>>()?;
-    let mut per_split: BTreeMap<Split, NormalizationStats> = BTreeMap::new();
-    let mut shard_fingerprints = BTreeMap::new();
-    let mut shard_entries: BTreeMap<String, Vec<motionforge_format::io::manifest::Shard>> =
-        BTreeMap::new();
-    let mut split_rows: BTreeMap<Split, usize> = BTreeMap::new();
-    let mut split_bytes: BTreeMap<Split, usize> = BTreeMap::new();
-    let mut outputs = BTreeMap::new();
-    for (plan, done) in plans_for_shards.iter().zip(done) {
-        if let Some(stats) = done.stats {
-            per_split
-                .entry(plan.split.clone())
-                .or_default()
-                .merge(stats);
-        }
-        *split_rows.entry(plan.split.clone()).or_insert(0) += done.entry.rows;
-        *split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
-        outputs.insert(plan.file.clone(), done.entry.sha256.clone());
-        shard_entries
-            .entry(plan.split.to_string())
-            .or_default()
-            .push(done.entry);
-        shard_fingerprints.insert(plan.file.clone(), done.fingerprint);
-    }
+    let mut shards = WrittenShards::of(&plans_for_shards, done);
     let staged_path = |plan: &ShardPlan| {
         let staged = staging.join(&plan.file);
         if staged.is_file() {
@@ -607,19 +573,101 @@ pub(super) fn write_outputs(
     check_splits(&plans_for_shards, staged_path)?;
     if with_stats {
         // Split order: train first.
-        let splits = per_split
+        let splits = std::mem::take(&mut shards.per_split)
             .into_iter()
             .map(|(split, stats)| (split.to_string(), stats))
             .collect();
         NormalizationStats::per_profile(splits).write(&staging.join(NORMALIZATION_DIR))?;
     }
     write_atomic(&staging.join(SKELETONS_FILE), skeletons_json.as_bytes())?;
+    write_rejects(&staging, table.rejects)?;
+    write_plan_table(&staging, output, table.plans)?;
+    write_manifest_and_card(&staging, companions, &shards)?;
+    add_companion_checksums(&staging, &mut shards.outputs)?;
+    switch(output, &staging, &plans_for_shards, with_stats)?;
+    record_state(workspace, output, fingerprint, shards)?;
+    Ok(true)
+}
+
+/// An empty staging folder with its `data/` folder. Everything new is written into it first;
+/// the dataset folder keeps the previous dataset, complete and valid, until the new one is fully
+/// written (a full disk fails here and leaves it untouched). Then `switch` moves the new files
+/// in, by renames only.
+fn fresh_staging(workspace: &Workspace) -> Result<std::path::PathBuf, BuildError> {
+    let staging = workspace.root().join(STAGING_DIR);
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging).map_err(workspace::io_err(&staging))?;
+    }
+    let staged_data = staging.join(DATA_DIR);
+    std::fs::create_dir_all(&staged_data).map_err(workspace::io_err(&staged_data))?;
+    Ok(staging)
+}
+
+/// The written shards taken together, in shard order: statistics per split, manifest entries,
+/// rows and bytes per split, and each output's checksum and shard's content fingerprint.
+struct WrittenShards {
+    per_split: BTreeMap<Split, NormalizationStats>,
+    fingerprints: BTreeMap<String, String>,
+    entries: BTreeMap<String, Vec<motionforge_format::io::manifest::Shard>>,
+    split_rows: BTreeMap<Split, usize>,
+    split_bytes: BTreeMap<Split, usize>,
+    /// Checksums of the outputs by file name (the shards here; the companions are added).
+    outputs: BTreeMap<String, String>,
+}
+
+impl WrittenShards {
+    fn of(plans: &[ShardPlan], done: Vec<ShardDone>) -> WrittenShards {
+        let mut shards = WrittenShards {
+            per_split: BTreeMap::new(),
+            fingerprints: BTreeMap::new(),
+            entries: BTreeMap::new(),
+            split_rows: BTreeMap::new(),
+            split_bytes: BTreeMap::new(),
+            outputs: BTreeMap::new(),
+        };
+        for (plan, done) in plans.iter().zip(done) {
+            if let Some(stats) = done.stats {
+                shards
+                    .per_split
+                    .entry(plan.split.clone())
+                    .or_default()
+                    .merge(stats);
+            }
+            *shards.split_rows.entry(plan.split.clone()).or_insert(0) += done.entry.rows;
+            *shards.split_bytes.entry(plan.split.clone()).or_insert(0) += done.entry.bytes;
+            shards
+                .outputs
+                .insert(plan.file.clone(), done.entry.sha256.clone());
+            shards
+                .entries
+                .entry(plan.split.to_string())
+                .or_default()
+                .push(done.entry);
+            shards
+                .fingerprints
+                .insert(plan.file.clone(), done.fingerprint);
+        }
+        shards
+    }
+}
+
+/// `rejects.jsonl`: one JSON object a line.
+fn write_rejects(staging: &Path, rejects: &[Reject]) -> Result<(), BuildError> {
     let mut lines = String::new();
     for r in rejects {
         lines.push_str(&serde_json::to_string(r).unwrap_or_default());
         lines.push('\n');
     }
     write_atomic(&staging.join(REJECTS_FILE), lines.as_bytes())?;
+    Ok(())
+}
+
+/// The task-plan table; an encoding failure is named by the file it is for in the dataset.
+fn write_plan_table(
+    staging: &Path,
+    output: &Path,
+    plans: &BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
+) -> Result<(), BuildError> {
     let plans_path = staging.join(PLANS_FILE);
     let mut plans_error = None;
     write_atomic_with(&plans_path, |file| {
@@ -636,14 +684,24 @@ pub(super) fn write_outputs(
             source,
         },
         None => BuildError::Workspace(e),
-    })?;
+    })
+}
+
+/// The manifest, with each split's rows and shards, and the dataset card.
+fn write_manifest_and_card(
+    staging: &Path,
+    companions: &Companions,
+    shards: &WrittenShards,
+) -> Result<(), BuildError> {
     let mut manifest = companions.manifest.clone();
-    manifest.splits = split_rows
+    manifest.splits = shards
+        .split_rows
         .iter()
         .map(|(split, rows)| {
             let split_entry = motionforge_format::io::manifest::SplitShards {
                 rows: *rows,
-                shards: shard_entries
+                shards: shards
+                    .entries
                     .get(split.as_str())
                     .cloned()
                     .unwrap_or_default(),
@@ -655,8 +713,16 @@ pub(super) fn write_outputs(
     let name = manifest.dataset.clone();
     write_atomic(
         &staging.join(CARD_FILE),
-        card(&name, &split_rows, &split_bytes, companions).as_bytes(),
+        card(&name, &shards.split_rows, &shards.split_bytes, companions).as_bytes(),
     )?;
+    Ok(())
+}
+
+/// The checksums of the staged companion files (skeletons, rejects, plans, manifest, card).
+fn add_companion_checksums(
+    staging: &Path,
+    outputs: &mut BTreeMap<String, String>,
+) -> Result<(), BuildError> {
     for name in [
         SKELETONS_FILE,
         REJECTS_FILE,
@@ -668,22 +734,33 @@ pub(super) fn write_outputs(
         let bytes = std::fs::read(&path).map_err(workspace::io_err(&path))?;
         outputs.insert(name.to_string(), sha256_hex(&bytes));
     }
-    switch(output, &staging, &plans_for_shards, with_stats)?;
+    Ok(())
+}
+
+/// Records what this write made: the table's fingerprint, each shard's, and the outputs'
+/// checksums with their stat data.
+fn record_state(
+    workspace: &Workspace,
+    output: &Path,
+    fingerprint: &str,
+    shards: WrittenShards,
+) -> Result<(), BuildError> {
     // Stat data of the files now in place, recorded before the state file is written, so each is
     // older than the record that vouches for it.
-    let stamps = outputs
+    let stamps = shards
+        .outputs
         .keys()
         .filter_map(|name| stat_stamp(&output.join(name)).map(|s| (name.clone(), s)))
         .collect();
     let state = State {
         table_fingerprint: fingerprint.to_string(),
-        shards: shard_fingerprints,
-        outputs,
+        shards: shards.fingerprints,
+        outputs: shards.outputs,
         stamps,
     };
     write_atomic(
-        &state_path,
+        &workspace.root().join(STATE_FILE),
         &serde_json::to_vec_pretty(&state).unwrap_or_default(),
     )?;
-    Ok(true)
+    Ok(())
 }

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::capture::{Item, Shared};
 use super::motions::MotionSource;
 use super::{BuildError, Fingerprint, Reject, StageRun};
-use crate::config::Labeller;
+use crate::config::{Config, Labeller};
 use crate::stages::augment::{self, Asking, AugmentError, AugmentReport};
 use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
 use motionforge_language::parts::PartSet;
@@ -78,6 +78,15 @@ pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, B
         .map_err(|e| BuildError::Llm(format!("{}: {e}", path.display())))
 }
 
+/// What the text stages ask with: the config, the prompt templates, whether requests may be sent,
+/// and where progress goes.
+struct TextRequests<'a> {
+    config: &'a Config,
+    prompts: &'a motionforge_llm::prompt::Prompts,
+    offline: bool,
+    progress: &'a motionforge_core::progress::ProgressSink,
+}
+
 /// Runs the text stages and puts their results on the items' clips.
 pub(super) fn run(
     shared: &Shared<'_>,
@@ -92,22 +101,50 @@ pub(super) fn run(
     let prompts = config.prompts()?;
     let mut cache = open_cache(shared)?;
     let mut outcome = TextOutcome::default();
+    let asks = TextRequests {
+        config,
+        prompts: &prompts,
+        offline,
+        progress,
+    };
+    if !label_stage(shared, motions, items, &asks, cache.as_mut(), &mut outcome)? {
+        outcome.pending = true;
+        return Ok(outcome);
+    }
+    if config.paraphrases.enabled && through >= Stage::Paraphrase {
+        paraphrase_stage(items, &asks, cache.as_mut(), &mut outcome)?;
+    }
+    if config.task_plans.enabled && through >= Stage::Plan {
+        plan_stage(items, &asks, cache.as_mut(), &mut outcome)?;
+    }
+    Ok(outcome)
+}
 
-    // Part labels.
+/// Part labels: every unique text labelled once, then each clip's labels from its text and its
+/// motion (one cached item for the whole dataset). False in probe mode when that assignment is not
+/// cached.
+fn label_stage(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    items: &mut [Item],
+    asks: &TextRequests<'_>,
+    cache: Option<&mut ResponseCache>,
+    outcome: &mut TextOutcome,
+) -> Result<bool, BuildError> {
+    let config = asks.config;
     let mut report = LabelReport::default();
     let clips: Vec<&Clip> = items.iter().flat_map(|i| i.clips.iter()).collect();
     let input = LabelInput {
         config: &config.part_labels,
         llm: config.llm.as_ref(),
-        prompts: &prompts,
-        offline,
-        progress,
+        prompts: asks.prompts,
+        offline: asks.offline,
+        progress: asks.progress,
     };
-    let labels =
-        label::label_texts(&clips, &input, cache.as_mut(), &mut report).map_err(|e| match e {
-            label::LabelError::Prompt(p) => BuildError::Prompt(p),
-            other => BuildError::Llm(other.to_string()),
-        })?;
+    let labels = label::label_texts(&clips, &input, cache, &mut report).map_err(|e| match e {
+        label::LabelError::Prompt(p) => BuildError::Prompt(p),
+        other => BuildError::Llm(other.to_string()),
+    })?;
     let segment_fps: Vec<&str> = items
         .iter()
         .filter_map(|i| i.fingerprint(super::Stage::Segment))
@@ -118,74 +155,10 @@ pub(super) fn run(
         .stamp();
     let n_clips = clips.len();
     let assigned = shared.workspace.try_item(label::NAME, "*", &stamp, || {
-        // One capture's frames at a time (the velocity evidence needs the motions), captures on
-        // all cores; the per-capture results are summed afterwards in capture order, so the
-        // figures do not depend on scheduling.
-        use rayon::prelude::*;
-        type Labelled = (
-            Vec<(
-                String,
-                (
-                    Option<motionforge_language::parts::PartSet>,
-                    Option<motionforge_language::parts::LabelSources>,
-                ),
-            )>,
-            BTreeMap<String, usize>,
-            (f64, usize),
-        );
-        let per_capture: Vec<Labelled> = items
-            .par_iter()
-            .map_init(
-                || motions.sibling(),
-                |motions, item| {
-                    let mut labelled = Vec::with_capacity(item.clips.len());
-                    let mut sources = BTreeMap::new();
-                    // Per capture, summed in clip order as one call over the capture would.
-                    let mut capture_agreement = (0.0, 0usize);
-                    for (clip, at) in item.clips.iter().zip(&item.refs) {
-                        let mut full = LoadedClip {
-                            clip: clip.clone(),
-                            motion: motions.motion(at, &clip.profile)?,
-                        };
-                        let mut part = LabelReport::default();
-                        let one = std::slice::from_mut(&mut full);
-                        label::apply_labels(one, &labels, |c| shared.profile_of(c), &mut part);
-                        let full = full.clip;
-                        for (source, n) in part.sources {
-                            *sources.entry(source).or_insert(0) += n;
-                        }
-                        if let Some((value, n)) = part.velocity_agreement {
-                            capture_agreement.0 += value * n as f64;
-                            capture_agreement.1 += n;
-                        }
-                        labelled.push((full.clip_id, (full.parts, full.label_source)));
-                    }
-                    Ok::<_, BuildError>((labelled, sources, capture_agreement))
-                },
-            )
-            .collect::<Result<_, _>>()?;
-        let mut report = report.clone();
-        let mut by_clip = BTreeMap::new();
-        let mut agreement = (0.0, 0usize);
-        for (labelled, sources, capture_agreement) in per_capture {
-            by_clip.extend(labelled);
-            for (source, n) in sources {
-                *report.sources.entry(source).or_insert(0) += n;
-            }
-            if capture_agreement.1 > 0 {
-                let mean = capture_agreement.0 / capture_agreement.1 as f64;
-                agreement.0 += mean * capture_agreement.1 as f64;
-                agreement.1 += capture_agreement.1;
-            }
-        }
-        if agreement.1 > 0 {
-            report.velocity_agreement = Some((agreement.0 / agreement.1 as f64, agreement.1));
-        }
-        Ok::<_, BuildError>(ClipLabels { by_clip, report })
+        assign_labels(shared, motions, items, &labels, &report)
     })?;
     let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
-        outcome.pending = true;
-        return Ok(outcome);
+        return Ok(false);
     };
     shared
         .workspace
@@ -223,77 +196,181 @@ pub(super) fn run(
         ran: if ran { n_clips } else { report.requests },
         reused: if ran { 0 } else { n_clips },
     });
+    Ok(true)
+}
 
-    // Paraphrases of every clip's caption.
-    if config.paraphrases.enabled && through >= Stage::Paraphrase {
-        let texts: BTreeSet<String> = items
-            .iter()
-            .flat_map(|i| i.clips.iter().map(|c| normalize_text(&c.text)))
-            .collect();
-        let mut report = AugmentReport::default();
-        let found = augment::paraphrase(
-            &texts,
-            config.paraphrases.n,
-            config.paraphrases.on_invalid,
-            &prompts,
-            config.llm.as_ref(),
-            offline,
-            cache.as_mut(),
-            &mut report,
-            Asking {
-                stage: Stage::Paraphrase.name(),
-                progress,
-            },
+/// One capture's labelled clips (id, parts, their sources), its label sources counted, and its
+/// velocity agreement summed (value times clips, clips).
+type CaptureLabels = (
+    Vec<(
+        String,
+        (
+            Option<PartSet>,
+            Option<motionforge_language::parts::LabelSources>,
+        ),
+    )>,
+    BTreeMap<String, usize>,
+    (f64, usize),
+);
+
+/// Each clip's labels from the texts' `labels` and its motion, added to a copy of the texts'
+/// `report`.
+fn assign_labels(
+    shared: &Shared<'_>,
+    motions: &MotionSource,
+    items: &[Item],
+    labels: &BTreeMap<String, label::TextParts>,
+    report: &LabelReport,
+) -> Result<ClipLabels, BuildError> {
+    // One capture's frames at a time (the velocity evidence needs the motions), captures on
+    // all cores; the per-capture results are summed afterwards in capture order, so the
+    // figures do not depend on scheduling.
+    use rayon::prelude::*;
+    let per_capture: Vec<CaptureLabels> = items
+        .par_iter()
+        .map_init(
+            || motions.sibling(),
+            |motions, item| label_capture(shared, motions, item, labels),
         )
-        .map_err(augment_error)?;
-        for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
-            clip.paraphrases = found
-                .get(&normalize_text(&clip.text))
-                .cloned()
-                .unwrap_or_default();
+        .collect::<Result<_, _>>()?;
+    let mut report = report.clone();
+    let mut by_clip = BTreeMap::new();
+    let mut agreement = (0.0, 0usize);
+    for (labelled, sources, capture_agreement) in per_capture {
+        by_clip.extend(labelled);
+        for (source, n) in sources {
+            *report.sources.entry(source).or_insert(0) += n;
         }
-        outcome
-            .runs
-            .push(augment_run(Stage::Paraphrase.name(), &report));
-        outcome.paraphrase = report;
-    }
-    // Task plans of every single action.
-    if config.task_plans.enabled && through >= Stage::Plan {
-        let texts: BTreeSet<String> = items
-            .iter()
-            .flat_map(|i| {
-                i.clips
-                    .iter()
-                    .filter(|c| c.kind == SourceKind::RealSingle)
-                    .map(|c| normalize_text(&c.text))
-            })
-            .collect();
-        let mut report = AugmentReport::default();
-        outcome.plans = augment::plan(
-            &texts,
-            &prompts,
-            config.llm.as_ref(),
-            offline,
-            cache.as_mut(),
-            &mut report,
-            Asking {
-                stage: Stage::Plan.name(),
-                progress,
-            },
-        )
-        .map_err(augment_error)?;
-        for (text, reason) in &report.rejected {
-            outcome.rejects.push(text_reject(
-                Stage::Plan.name(),
-                text,
-                RejectReason::InvalidPlan,
-                reason.clone(),
-            ));
+        if capture_agreement.1 > 0 {
+            let mean = capture_agreement.0 / capture_agreement.1 as f64;
+            agreement.0 += mean * capture_agreement.1 as f64;
+            agreement.1 += capture_agreement.1;
         }
-        outcome.runs.push(augment_run(Stage::Plan.name(), &report));
-        outcome.plan = report;
     }
-    Ok(outcome)
+    if agreement.1 > 0 {
+        report.velocity_agreement = Some((agreement.0 / agreement.1 as f64, agreement.1));
+    }
+    Ok(ClipLabels { by_clip, report })
+}
+
+/// The labels of one capture's clips, read with their frames.
+fn label_capture(
+    shared: &Shared<'_>,
+    motions: &mut MotionSource,
+    item: &Item,
+    labels: &BTreeMap<String, label::TextParts>,
+) -> Result<CaptureLabels, BuildError> {
+    let mut labelled = Vec::with_capacity(item.clips.len());
+    let mut sources = BTreeMap::new();
+    // Per capture, summed in clip order as one call over the capture would.
+    let mut capture_agreement = (0.0, 0usize);
+    for (clip, at) in item.clips.iter().zip(&item.refs) {
+        let mut full = LoadedClip {
+            clip: clip.clone(),
+            motion: motions.motion(at, &clip.profile)?,
+        };
+        let mut part = LabelReport::default();
+        let one = std::slice::from_mut(&mut full);
+        label::apply_labels(one, labels, |c| shared.profile_of(c), &mut part);
+        let full = full.clip;
+        for (source, n) in part.sources {
+            *sources.entry(source).or_insert(0) += n;
+        }
+        if let Some((value, n)) = part.velocity_agreement {
+            capture_agreement.0 += value * n as f64;
+            capture_agreement.1 += n;
+        }
+        labelled.push((full.clip_id, (full.parts, full.label_source)));
+    }
+    Ok((labelled, sources, capture_agreement))
+}
+
+/// Paraphrases of every clip's caption (each unique text asked once).
+fn paraphrase_stage(
+    items: &mut [Item],
+    asks: &TextRequests<'_>,
+    cache: Option<&mut ResponseCache>,
+    outcome: &mut TextOutcome,
+) -> Result<(), BuildError> {
+    use super::Stage;
+    let config = asks.config;
+    let texts: BTreeSet<String> = items
+        .iter()
+        .flat_map(|i| i.clips.iter().map(|c| normalize_text(&c.text)))
+        .collect();
+    let mut report = AugmentReport::default();
+    let found = augment::paraphrase(
+        &texts,
+        config.paraphrases.n,
+        config.paraphrases.on_invalid,
+        asks.prompts,
+        config.llm.as_ref(),
+        asks.offline,
+        cache,
+        &mut report,
+        Asking {
+            stage: Stage::Paraphrase.name(),
+            progress: asks.progress,
+        },
+    )
+    .map_err(augment_error)?;
+    for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
+        clip.paraphrases = found
+            .get(&normalize_text(&clip.text))
+            .cloned()
+            .unwrap_or_default();
+    }
+    outcome
+        .runs
+        .push(augment_run(Stage::Paraphrase.name(), &report));
+    outcome.paraphrase = report;
+    Ok(())
+}
+
+/// Task plans of every single action's text (each unique text asked once); plans still invalid
+/// after their repair are rejects.
+fn plan_stage(
+    items: &[Item],
+    asks: &TextRequests<'_>,
+    cache: Option<&mut ResponseCache>,
+    outcome: &mut TextOutcome,
+) -> Result<(), BuildError> {
+    use super::Stage;
+    let config = asks.config;
+    let texts: BTreeSet<String> = items
+        .iter()
+        .flat_map(|i| {
+            i.clips
+                .iter()
+                .filter(|c| c.kind == SourceKind::RealSingle)
+                .map(|c| normalize_text(&c.text))
+        })
+        .collect();
+    let mut report = AugmentReport::default();
+    outcome.plans = augment::plan(
+        &texts,
+        asks.prompts,
+        config.llm.as_ref(),
+        asks.offline,
+        cache,
+        &mut report,
+        Asking {
+            stage: Stage::Plan.name(),
+            progress: asks.progress,
+        },
+    )
+    .map_err(augment_error)?;
+    for (text, reason) in &report.rejected {
+        outcome.rejects.push(text_reject(
+            Stage::Plan.name(),
+            text,
+            RejectReason::InvalidPlan,
+            reason.clone(),
+        ));
+    }
+    outcome.runs.push(augment_run(Stage::Plan.name(), &report));
+    outcome.plan = report;
+    Ok(())
 }
 
 /// A prompt error stays a prompt error (exit code 2); a server that is gone is an LLM error.

@@ -235,7 +235,7 @@ pub(crate) fn is_stop_request(signal: i32) -> bool {
 
 fn on_stdout(line: &str, log: &BuildLog, seen: &Mutex<Seen>) {
     let event = line
-        .starts_with('{')
+        .starts_with("{")
         .then(|| serde_json::from_str::<Event>(line).ok())
         .flatten();
     let Some(event) = event else {

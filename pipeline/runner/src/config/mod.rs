@@ -4,6 +4,8 @@
 //! same result whatever the working folder.
 
 mod checks;
+mod section_checks;
+mod source_checks;
 use checks::{Checks, Seg, line_of};
 
 use std::collections::BTreeMap;

@@ -415,14 +415,24 @@ pub fn texts_to_check(
 /// Pairs composed in parallel before they are kept in order.
 const PAIR_BATCH: usize = 64;
 
-/// A composed pair before it is checked and kept.
-struct Made {
+/// A sampled pair after composition, before it is checked and kept.
+// Unboxed: a batch's pairs are held in one vector, as large as when every pair is composed.
+#[allow(clippy::large_enum_variant)]
+enum Made {
+    /// The crop keeps less of the cropped clip's action than `min_action_kept` (`action_cut`).
+    ActionCut,
+    /// Composed and measured.
+    Composed(Composed),
+}
+
+/// A composed pair and its plausibility metrics.
+struct Composed {
     /// The pair's generator, after the draw of the offset (the text draw continues it).
     rng: Rng,
     trim: Trim,
     /// Share of the cropped clip's action the composite keeps.
     kept: f64,
-    composite: Option<motionforge_core::motion::compose::Composite>,
+    composite: motionforge_core::motion::compose::Composite,
     metrics: Plausibility,
 }
 
@@ -491,52 +501,7 @@ pub fn run<E: Send>(
                 let Some(profile) = bound(a) else {
                     return Ok(None);
                 };
-                let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
-                let (motion_a, motion_b) = (motion_of(a)?, motion_of(b)?);
-                let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
-                // The longer clip is cropped; its action is what its own label says it does,
-                // among the parts it gives the composite.
-                let (from_a, from_b) = contributions(mask(pa), mask(pb));
-                let frames = motion_a.num_frames().min(motion_b.num_frames());
-                let (longer, action) = if motion_a.num_frames() >= motion_b.num_frames() {
-                    (&motion_a, from_a & mask(pa))
-                } else {
-                    (&motion_b, from_b & mask(pb))
-                };
-                let (trim, kept) = if config.random_offset {
-                    let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
-                    let k = rng.below(spare + 1);
-                    (Trim::At(k), action_kept(longer, action, profile, k, frames))
-                } else if config.keep_action {
-                    let w = action_window(longer, action, profile, frames);
-                    (Trim::At(w.start), w.kept)
-                } else {
-                    (Trim::Start, action_kept(longer, action, profile, 0, frames))
-                };
-                if kept < config.min_action_kept {
-                    return Ok(Some(Made {
-                        rng,
-                        trim,
-                        kept,
-                        composite: None,
-                        metrics: Plausibility::default(),
-                    }));
-                }
-                let composite = compose(&motion_a, mask(pa), &motion_b, mask(pb), profile, trim);
-                let positions = dataset_positions(&composite.motion, profile);
-                let metrics = plausibility(
-                    &positions,
-                    composite.motion.num_joints(),
-                    composite.motion.fps,
-                    profile,
-                );
-                Ok(Some(Made {
-                    rng,
-                    trim,
-                    kept,
-                    composite: Some(composite),
-                    metrics,
-                }))
+                make_pair(a, b, profile, seed, config, &motion_of).map(Some)
             })
             .collect::<Result<_, E>>()?;
         for ((&(a, b), vetoed), made) in batch.iter().zip(vetoes).zip(made) {
@@ -544,90 +509,153 @@ pub fn run<E: Send>(
                 *out.report.dropped.entry(reason.to_string()).or_insert(0) += 1;
                 continue;
             }
-            let Some(Made {
-                mut rng,
-                trim,
-                kept,
-                composite,
-                metrics,
-            }) = made
-            else {
-                continue;
+            let made = match made {
+                None => continue,
+                Some(Made::ActionCut) => {
+                    *out.report
+                        .dropped
+                        .entry("action_cut".to_string())
+                        .or_insert(0) += 1;
+                    continue;
+                }
+                Some(Made::Composed(made)) => made,
             };
-            let Some(composite) = composite else {
-                *out.report
-                    .dropped
-                    .entry("action_cut".to_string())
-                    .or_insert(0) += 1;
-                continue;
-            };
-            let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
-            let failures = metrics.failures(&config.thresholds);
+            let failures = made.metrics.failures(&config.thresholds);
             // Counted once, under the first check it fails, so composed + dropped = sampled.
             if let Some(first) = failures.first() {
                 *out.report.dropped.entry(first.to_string()).or_insert(0) += 1;
                 continue;
             }
-            let variants = compose_variants(&a.text, &b.text);
-            let chosen = variants
-                .get(rng.below(variants.len()))
-                .map(|v| v.text.clone())
-                .unwrap_or_default();
-            let legs_from_a = composite.parts_from_first
-                & motionforge_core::motion::compose::part_bit(BodyPart::Global)
-                != 0;
-            let base = if legs_from_a { a } else { b };
-            let mut clip = Clip {
-                clip_id: format!("synthetic/{}+{}", a.clip_id, b.clip_id),
-                kind: SourceKind::Synthetic,
-                capture: base.capture.clone(),
-                frame_range: base.frame_range,
-                mirrored: false,
-                split: a.split.clone(),
-                action: format!("{} + {}", a.action, b.action),
-                text: chosen,
-                texts: variants.into_iter().map(|v| v.text).collect(),
-                labels: a.labels.iter().chain(&b.labels).cloned().collect(),
-                annotation: "synthetic".into(),
-                annotation_origin: format!("{} + {}", a.annotation_origin, b.annotation_origin),
-                attributes: motionforge_sources::clip::Attributes::from([
-                    ("start_a".to_string(), composite.starts[0].to_string()),
-                    ("start_b".to_string(), composite.starts[1].to_string()),
-                    ("action_kept".to_string(), format!("{kept:.3}")),
-                ]),
-                profile: a.profile.clone(),
-                motion_type: None,
-                hand: None,
-                object: None,
-                goal_pelvis: None,
-                goal_hand: None,
-                parts: Some(pa | pb),
-                label_source: Some(motionforge_language::parts::LabelSources::one(
-                    motionforge_language::parts::LabelSource::Composed,
-                )),
-                paraphrases: Vec::new(),
-                composed_from: vec![a.clip_id.clone(), b.clip_id.clone()],
-                composed_parts: vec![
-                    part_set(composite.parts_from_first),
-                    part_set(composite.parts_from_second),
-                ],
-                plausibility: Some(Box::new(metrics)),
-                skeleton: std::sync::Arc::clone(&composite.motion.skeleton),
-            };
-            let recipe = Recipe {
-                first: a,
-                first_parts: mask(pa),
-                second: b,
-                second_parts: mask(pb),
-                trim,
-                frames: composite.motion.num_frames(),
-            };
+            let (mut clip, recipe) = made.into_clip(a, b);
             keep(&mut clip, recipe)?;
             out.clips.push(clip);
             out.report.composed += 1;
         }
     }
     Ok(out)
+}
+
+/// One pair composed on `profile` and measured for plausibility: the longer clip cropped (at a
+/// seeded offset, to its action's window, or from its start), and left uncomposed when the crop
+/// keeps too little of its action.
+fn make_pair<E>(
+    a: &Clip,
+    b: &Clip,
+    profile: &Profile,
+    seed: u64,
+    config: &SyntheticConfig,
+    motion_of: &impl Fn(&Clip) -> Result<Motion, E>,
+) -> Result<Made, E> {
+    let mut rng = Rng::new(seed, &format!("{}+{}", a.clip_id, b.clip_id));
+    let (motion_a, motion_b) = (motion_of(a)?, motion_of(b)?);
+    let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
+    // The longer clip is cropped; its action is what its own label says it does,
+    // among the parts it gives the composite.
+    let (from_a, from_b) = contributions(mask(pa), mask(pb));
+    let frames = motion_a.num_frames().min(motion_b.num_frames());
+    let (longer, action) = if motion_a.num_frames() >= motion_b.num_frames() {
+        (&motion_a, from_a & mask(pa))
+    } else {
+        (&motion_b, from_b & mask(pb))
+    };
+    let (trim, kept) = if config.random_offset {
+        let spare = motion_a.num_frames().abs_diff(motion_b.num_frames());
+        let k = rng.below(spare + 1);
+        (Trim::At(k), action_kept(longer, action, profile, k, frames))
+    } else if config.keep_action {
+        let w = action_window(longer, action, profile, frames);
+        (Trim::At(w.start), w.kept)
+    } else {
+        (Trim::Start, action_kept(longer, action, profile, 0, frames))
+    };
+    if kept < config.min_action_kept {
+        return Ok(Made::ActionCut);
+    }
+    let composite = compose(&motion_a, mask(pa), &motion_b, mask(pb), profile, trim);
+    let positions = dataset_positions(&composite.motion, profile);
+    let metrics = plausibility(
+        &positions,
+        composite.motion.num_joints(),
+        composite.motion.fps,
+        profile,
+    );
+    Ok(Made::Composed(Composed {
+        rng,
+        trim,
+        kept,
+        composite,
+        metrics,
+    }))
+}
+
+impl Composed {
+    /// The synthetic clip of a kept pair (`a` first), its text drawn from the composed variants,
+    /// and how its frames were made.
+    fn into_clip<'c>(self, a: &'c Clip, b: &'c Clip) -> (Clip, Recipe<'c>) {
+        let Composed {
+            mut rng,
+            trim,
+            kept,
+            composite,
+            metrics,
+        } = self;
+        let (pa, pb) = (a.parts.unwrap_or_default(), b.parts.unwrap_or_default());
+        let variants = compose_variants(&a.text, &b.text);
+        let chosen = variants
+            .get(rng.below(variants.len()))
+            .map(|v| v.text.clone())
+            .unwrap_or_default();
+        let legs_from_a = composite.parts_from_first
+            & motionforge_core::motion::compose::part_bit(BodyPart::Global)
+            != 0;
+        let base = if legs_from_a { a } else { b };
+        let clip = Clip {
+            clip_id: format!("synthetic/{}+{}", a.clip_id, b.clip_id),
+            kind: SourceKind::Synthetic,
+            capture: base.capture.clone(),
+            frame_range: base.frame_range,
+            mirrored: false,
+            split: a.split.clone(),
+            action: format!("{} + {}", a.action, b.action),
+            text: chosen,
+            texts: variants.into_iter().map(|v| v.text).collect(),
+            labels: a.labels.iter().chain(&b.labels).cloned().collect(),
+            annotation: "synthetic".into(),
+            annotation_origin: format!("{} + {}", a.annotation_origin, b.annotation_origin),
+            attributes: motionforge_sources::clip::Attributes::from([
+                ("start_a".to_string(), composite.starts[0].to_string()),
+                ("start_b".to_string(), composite.starts[1].to_string()),
+                ("action_kept".to_string(), format!("{kept:.3}")),
+            ]),
+            profile: a.profile.clone(),
+            motion_type: None,
+            hand: None,
+            object: None,
+            goal_pelvis: None,
+            goal_hand: None,
+            parts: Some(pa | pb),
+            label_source: Some(motionforge_language::parts::LabelSources::one(
+                motionforge_language::parts::LabelSource::Composed,
+            )),
+            paraphrases: Vec::new(),
+            composed_from: vec![a.clip_id.clone(), b.clip_id.clone()],
+            composed_parts: vec![
+                part_set(composite.parts_from_first),
+                part_set(composite.parts_from_second),
+            ],
+            plausibility: Some(Box::new(metrics)),
+            skeleton: std::sync::Arc::clone(&composite.motion.skeleton),
+        };
+        let recipe = Recipe {
+            first: a,
+            first_parts: mask(pa),
+            second: b,
+            second_parts: mask(pb),
+            trim,
+            frames: composite.motion.num_frames(),
+        };
+        (clip, recipe)
+    }
 }
 
 #[cfg(test)]

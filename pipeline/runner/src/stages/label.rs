@@ -167,58 +167,11 @@ pub fn label_texts(
         .map(|t| input.prompts.part_labels(t, input.config.variant))
         .collect::<Result<_, _>>()?;
     let offline = input.offline || input.config.offline;
-    let mut answers: Vec<Option<(String, LabelSource)>> = Vec::with_capacity(texts.len());
-    let mut missing: Vec<(String, Unanswered)> = Vec::new();
-    if offline {
-        for (t, p) in texts.iter().zip(&prompts) {
-            match cache.get_entry(&cfg.cache_key(p)) {
-                Some(e) => {
-                    report.cache_hits += 1;
-                    answers.push(Some((e.response.clone(), source_name(&e.source, cfg))));
-                }
-                None => {
-                    missing.push((t.clone(), Unanswered::Offline));
-                    answers.push(None);
-                }
-            }
-        }
+    let (answers, missing) = if offline {
+        cached_answers(&texts, &prompts, cfg, cache, report)
     } else {
-        let client = LlmClient::new(cfg.clone()).map_err(|e| LabelError::Client(e.to_string()))?;
-        let asking = Asking {
-            stage: NAME,
-            progress: input.progress,
-        };
-        let results = client.complete_all_observed(&prompts, cache, &|e| asking.observe(e));
-        if let Some(Err(e)) = results
-            .iter()
-            .find(|r| r.as_ref().is_err_and(LlmError::stops_stage))
-        {
-            return Err(LabelError::Server(e.clone()));
-        }
-        for ((t, p), result) in texts.iter().zip(&prompts).zip(results) {
-            match result {
-                Ok(a) => {
-                    if a.from_cache {
-                        report.cache_hits += 1;
-                    } else {
-                        report.requests += 1;
-                    }
-                    let source = cache
-                        .get_entry(&cfg.cache_key(p))
-                        .map(|e| e.source.clone())
-                        .unwrap_or_default();
-                    answers.push(Some((a.text, source_name(&source, cfg))));
-                }
-                Err(e) => {
-                    if matches!(e, LlmError::Truncated { .. }) {
-                        report.checks.truncated += 1;
-                    }
-                    missing.push((t.clone(), Unanswered::RequestFailed(e.to_string())));
-                    answers.push(None);
-                }
-            }
-        }
-    }
+        asked_answers(&texts, &prompts, cfg, cache, input, report)?
+    };
     if !missing.is_empty() && input.config.on_miss == OnMiss::Fail {
         return Err(LabelError::Missing {
             reason: missing[0].1.to_string(),
@@ -228,53 +181,7 @@ pub fn label_texts(
     for (t, answer) in texts.iter().zip(answers) {
         let label = match answer {
             Some((text, source)) => {
-                let parsed = parse_part_answer(&text);
-                let flag = parsed.is_flagged().then(|| {
-                    if parsed.empty {
-                        format!("no body part in the answer `{}`", text.trim())
-                    } else {
-                        format!("words outside the list: {}", parsed.off_list.join(", "))
-                    }
-                });
-                let llm = TextParts {
-                    parts: (!parsed.empty).then_some(parsed.parts),
-                    source,
-                    flag: flag.clone(),
-                    dropped: false,
-                };
-                match flag {
-                    None => {
-                        report.checks.accepted += 1;
-                        llm
-                    }
-                    Some(f) => {
-                        report
-                            .checks
-                            .reject(if parsed.empty { "no_part" } else { "off_list" });
-                        report.flagged.push((t.clone(), f.clone()));
-                        match input.config.on_invalid {
-                            OnInvalid::Embedded => {
-                                report.checks.fell_back += 1;
-                                TextParts {
-                                    flag: Some(f),
-                                    ..embedded(t)
-                                }
-                            }
-                            OnInvalid::Drop => {
-                                report.checks.dropped += 1;
-                                TextParts {
-                                    parts: None,
-                                    dropped: true,
-                                    ..llm
-                                }
-                            }
-                            OnInvalid::Keep => {
-                                report.checks.kept += 1;
-                                llm
-                            }
-                        }
-                    }
-                }
+                checked_answer(t, &text, source, input.config.on_invalid, report)
             }
             None => embedded(t),
         };
@@ -282,6 +189,140 @@ pub fn label_texts(
     }
     report.missing = missing;
     Ok(out)
+}
+
+/// Each text's answer and its labeller, in text order (`None`: unanswered).
+type Answers = Vec<Option<(String, LabelSource)>>;
+/// The texts left unanswered, and why.
+type Missing = Vec<(String, Unanswered)>;
+
+/// Offline: each text's answer from the response cache alone.
+fn cached_answers(
+    texts: &[String],
+    prompts: &[String],
+    cfg: &LlmConfig,
+    cache: &ResponseCache,
+    report: &mut LabelReport,
+) -> (Answers, Missing) {
+    let mut answers: Answers = Vec::with_capacity(texts.len());
+    let mut missing: Missing = Vec::new();
+    for (t, p) in texts.iter().zip(prompts) {
+        match cache.get_entry(&cfg.cache_key(p)) {
+            Some(e) => {
+                report.cache_hits += 1;
+                answers.push(Some((e.response.clone(), source_name(&e.source, cfg))));
+            }
+            None => {
+                missing.push((t.clone(), Unanswered::Offline));
+                answers.push(None);
+            }
+        }
+    }
+    (answers, missing)
+}
+
+/// Each text's answer from the LLM server (through the response cache); a server that is gone
+/// stops the stage.
+fn asked_answers(
+    texts: &[String],
+    prompts: &[String],
+    cfg: &LlmConfig,
+    cache: &mut ResponseCache,
+    input: &LabelInput<'_>,
+    report: &mut LabelReport,
+) -> Result<(Answers, Missing), LabelError> {
+    let mut answers: Answers = Vec::with_capacity(texts.len());
+    let mut missing: Missing = Vec::new();
+    let client = LlmClient::new(cfg.clone()).map_err(|e| LabelError::Client(e.to_string()))?;
+    let asking = Asking {
+        stage: NAME,
+        progress: input.progress,
+    };
+    let results = client.complete_all_observed(prompts, cache, &|e| asking.observe(e));
+    if let Some(Err(e)) = results
+        .iter()
+        .find(|r| r.as_ref().is_err_and(LlmError::stops_stage))
+    {
+        return Err(LabelError::Server(e.clone()));
+    }
+    for ((t, p), result) in texts.iter().zip(prompts).zip(results) {
+        match result {
+            Ok(a) => {
+                if a.from_cache {
+                    report.cache_hits += 1;
+                } else {
+                    report.requests += 1;
+                }
+                let source = cache
+                    .get_entry(&cfg.cache_key(p))
+                    .map(|e| e.source.clone())
+                    .unwrap_or_default();
+                answers.push(Some((a.text, source_name(&source, cfg))));
+            }
+            Err(e) => {
+                if matches!(e, LlmError::Truncated { .. }) {
+                    report.checks.truncated += 1;
+                }
+                missing.push((t.clone(), Unanswered::RequestFailed(e.to_string())));
+                answers.push(None);
+            }
+        }
+    }
+    Ok((answers, missing))
+}
+
+/// The label of text `t` from the LLM's `answer`: used when it passes the checks, else flagged
+/// and replaced as `on_invalid` says (the embedded labeller's, no parts, or kept as it is).
+fn checked_answer(
+    t: &str,
+    answer: &str,
+    source: LabelSource,
+    on_invalid: OnInvalid,
+    report: &mut LabelReport,
+) -> TextParts {
+    let parsed = parse_part_answer(answer);
+    let flag = parsed.is_flagged().then(|| {
+        if parsed.empty {
+            format!("no body part in the answer `{}`", answer.trim())
+        } else {
+            format!("words outside the list: {}", parsed.off_list.join(", "))
+        }
+    });
+    let llm = TextParts {
+        parts: (!parsed.empty).then_some(parsed.parts),
+        source,
+        flag: flag.clone(),
+        dropped: false,
+    };
+    let Some(f) = flag else {
+        report.checks.accepted += 1;
+        return llm;
+    };
+    report
+        .checks
+        .reject(if parsed.empty { "no_part" } else { "off_list" });
+    report.flagged.push((t.to_string(), f.clone()));
+    match on_invalid {
+        OnInvalid::Embedded => {
+            report.checks.fell_back += 1;
+            TextParts {
+                flag: Some(f),
+                ..embedded(t)
+            }
+        }
+        OnInvalid::Drop => {
+            report.checks.dropped += 1;
+            TextParts {
+                parts: None,
+                dropped: true,
+                ..llm
+            }
+        }
+        OnInvalid::Keep => {
+            report.checks.kept += 1;
+            llm
+        }
+    }
 }
 
 /// The labeller of a response-cache entry, from the source the cache recorded with it.

@@ -131,43 +131,159 @@ pub fn run_with<E>(
             .collect(),
         ..SegmentOutput::default()
     };
-    let capture = input.capture;
-    let len = capture.motion.num_frames() as u64;
-    let fps = capture.capture.fps;
-    let offset = input.config.timeline_offset_frames as i64;
-    let trim = (input.config.trim_start_seconds * fps).ceil() as u64;
-    if let Some(stated) = input.annotation.duration
-        && fps > 0.0
-    {
+    let timeline = Timeline::of(input);
+    if let Some(note) = timeline.duration_mismatch(input) {
+        out.notes.push(note);
+    }
+    let mut drops = Drops {
+        file: input.capture.capture.path.clone(),
+        dropped: Vec::new(),
+    };
+    let kept = keep_spans(input, &timeline, &mut drops, &mut out.notes);
+    let maker = ClipMaker {
+        input,
+        capture: std::sync::Arc::new(input.capture.capture.clone()),
+    };
+    let mut clips: Vec<Clip> = Vec::new();
+    for k in &kept {
+        match maker.single(k) {
+            Ok(LoadedClip { clip, motion }) => {
+                if clip.motion_type.is_none() {
+                    *out.unmapped.entry(clip.labels[0].clone()).or_insert(0) += 1;
+                }
+                take_frames(&clip, motion)?;
+                clips.push(clip);
+            }
+            Err(reason) => drops.drop(reason, &k.span.raw_text, Some((k.start, k.end))),
+        }
+    }
+    if input.annotation.simultaneous {
+        make_pairs(&maker, &kept, &mut drops, &mut clips, &mut take_frames)?;
+    }
+    // Identical ranges (two labels on the same frames) must not share an id.
+    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
+    for clip in &mut clips {
+        let n = seen.entry(clip.clip_id.clone()).or_insert(0);
+        *n += 1;
+        if *n > 1 {
+            clip.clip_id = format!("{}~{n}", clip.clip_id);
+        }
+    }
+    for d in &drops.dropped {
+        *out.drops.entry(d.reason.to_string()).or_insert(0) += 1;
+    }
+    out.dropped = drops.dropped;
+    out.clips = clips;
+    Ok(out)
+}
+
+/// A capture's frames as the annotation's times map onto them: its length and rate, the frames
+/// before the annotation's time zero, and the frames trimmed from its start.
+struct Timeline {
+    len: u64,
+    fps: f64,
+    offset: i64,
+    trim: u64,
+}
+
+impl Timeline {
+    fn of(input: &SegmentInput<'_>) -> Timeline {
+        let fps = input.capture.capture.fps;
+        Timeline {
+            len: input.capture.motion.num_frames() as u64,
+            fps,
+            offset: input.config.timeline_offset_frames as i64,
+            trim: (input.config.trim_start_seconds * fps).ceil() as u64,
+        }
+    }
+
+    /// A note when the capture's duration is not the one its annotation states.
+    fn duration_mismatch(&self, input: &SegmentInput<'_>) -> Option<Note> {
+        let Timeline {
+            len, fps, offset, ..
+        } = *self;
+        let stated = input.annotation.duration.filter(|_| fps > 0.0)?;
         let actual = len.saturating_sub(offset.max(0) as u64) as f64 / fps;
-        if (stated - actual).abs() > DURATION_TOLERANCE {
-            out.notes.push(Note::new(
+        ((stated - actual).abs() > DURATION_TOLERANCE).then(|| {
+            Note::new(
                 "duration_mismatch",
                 format!(
                     "`{}`: {actual:.3} s long ({len} frames at {fps} fps), but {} says {stated} s; \
                      check the frame rate (fps_override, fps_table) or the file",
-                    capture.capture.path, input.annotation.origin
+                    input.capture.capture.path, input.annotation.origin
+                ),
+            )
+        })
+    }
+
+    /// The frames a span covers, clamped to the capture (noted) and past the trim; or why it is
+    /// dropped.
+    fn frames_of(&self, span: &Span, notes: &mut Vec<Note>) -> Result<(u64, u64), DropReason> {
+        let len = self.len;
+        let shift = |t: Time| match t {
+            Time::End | Time::BeforeEnd { .. } => 0,
+            _ => self.offset,
+        };
+        let start = span.start.to_frame(self.fps, len) + shift(span.start);
+        let mut end = span.end.to_frame(self.fps, len) + shift(span.end);
+        if end > len as i64 {
+            notes.push(Note::new(
+                "end_clamped",
+                format!(
+                    "`{}` ends at frame {end}, past the capture's {len} frames (clamped)",
+                    span.raw_text
                 ),
             ));
+            end = len as i64;
         }
+        if start >= len as i64 {
+            return Err(DropReason::PastEnd);
+        }
+        let start = (start.max(0) as u64).max(self.trim);
+        let end = end.max(0) as u64;
+        if end <= start {
+            return Err(if start == self.trim && self.trim > 0 {
+                DropReason::Trimmed
+            } else {
+                DropReason::EmptyRange
+            });
+        }
+        Ok((start, end))
     }
+}
+
+/// The segments dropped from one capture file, in the order they were dropped.
+struct Drops {
+    file: String,
+    dropped: Vec<Dropped>,
+}
+
+impl Drops {
+    fn drop(&mut self, reason: DropReason, text: &str, frames: Option<(u64, u64)>) {
+        self.dropped.push(Dropped {
+            file: self.file.clone(),
+            reason,
+            text: excerpt(text),
+            frames,
+        });
+    }
+}
+
+/// The annotation's spans that become clips, in annotation order: spans with a caption, a label
+/// not on the drop list and frames in the capture, each identical row kept once.
+fn keep_spans<'a>(
+    input: &'a SegmentInput<'_>,
+    timeline: &Timeline,
+    drops: &mut Drops,
+    notes: &mut Vec<Note>,
+) -> Vec<Kept<'a>> {
+    let capture = input.capture;
     let drop_labels: Vec<String> = input
         .config
         .drop_labels
         .iter()
         .map(|l| normalize_label(l))
         .collect();
-    let path = capture.capture.path.clone();
-    let mut dropped: Vec<Dropped> = Vec::new();
-    let mut drop = |reason: DropReason, text: &str, frames: Option<(u64, u64)>| {
-        dropped.push(Dropped {
-            file: path.clone(),
-            reason,
-            text: excerpt(text),
-            frames,
-        });
-    };
-
     let mut kept: Vec<Kept<'_>> = Vec::new();
     // Identical rows (same range, text, label and details) would give identical clips: each is
     // kept once, the others dropped as duplicates with one note per merged group.
@@ -176,8 +292,8 @@ pub fn run_with<E>(
     let mut groups: Vec<(usize, Vec<String>)> = Vec::new();
     for span in &input.annotation.spans {
         if span.raw_text.trim().is_empty() || span.label.trim().is_empty() {
-            drop(DropReason::EmptyText, &span.id, None);
-            out.notes.push(Note::new(
+            drops.drop(DropReason::EmptyText, &span.id, None);
+            notes.push(Note::new(
                 "empty_text",
                 format!(
                     "`{}`: annotation `{}` has an empty caption; skipped",
@@ -191,58 +307,23 @@ pub fn run_with<E>(
         // (and hold memory) in proportion to a damaged file.
         let limit = motionforge_language::caption::MAX_CAPTION_CHARS;
         if span.raw_text.chars().count() > limit || span.label.chars().count() > limit {
-            drop(DropReason::LongText, &span.raw_text, None);
+            drops.drop(DropReason::LongText, &span.raw_text, None);
             continue;
         }
         if drop_labels.contains(&normalize_label(&span.label))
             || drop_labels.contains(&normalize_label(&span.raw_text))
         {
-            drop(DropReason::DroppedLabel, &span.raw_text, None);
+            drops.drop(DropReason::DroppedLabel, &span.raw_text, None);
             continue;
         }
-        let shift = |t: Time| match t {
-            Time::End | Time::BeforeEnd { .. } => 0,
-            _ => offset,
+        let (start, end) = match timeline.frames_of(span, notes) {
+            Ok(frames) => frames,
+            Err(reason) => {
+                drops.drop(reason, &span.raw_text, None);
+                continue;
+            }
         };
-        let start = span.start.to_frame(fps, len) + shift(span.start);
-        let mut end = span.end.to_frame(fps, len) + shift(span.end);
-        if end > len as i64 {
-            out.notes.push(Note::new(
-                "end_clamped",
-                format!(
-                    "`{}` ends at frame {end}, past the capture's {len} frames (clamped)",
-                    span.raw_text
-                ),
-            ));
-            end = len as i64;
-        }
-        if start >= len as i64 {
-            drop(DropReason::PastEnd, &span.raw_text, None);
-            continue;
-        }
-        let start = (start.max(0) as u64).max(trim);
-        let end = end.max(0) as u64;
-        if end <= start {
-            let reason = if start == trim && trim > 0 {
-                DropReason::Trimmed
-            } else {
-                DropReason::EmptyRange
-            };
-            drop(reason, &span.raw_text, None);
-            continue;
-        }
-        let key = serde_json::to_string(&(
-            start,
-            end,
-            &span.raw_text,
-            &span.label,
-            &span.categories,
-            &span.motion_type,
-            &span.hand,
-            &span.object,
-            &span.grasp,
-        ))
-        .unwrap_or_default();
+        let key = row_key(span, start, end);
         match merged.get(&key) {
             Some(&at) => {
                 let (count, ids) = &mut groups[at];
@@ -250,7 +331,7 @@ pub fn run_with<E>(
                 if ids.len() < 5 {
                     ids.push(span.id.clone());
                 }
-                drop(DropReason::Duplicate, &span.raw_text, Some((start, end)));
+                drops.drop(DropReason::Duplicate, &span.raw_text, Some((start, end)));
             }
             None => {
                 merged.insert(key, kept.len());
@@ -259,14 +340,42 @@ pub fn run_with<E>(
             }
         }
     }
-    for (k, (count, ids)) in kept.iter().zip(&groups) {
+    note_duplicates(&capture.capture.path, &kept, &groups, notes);
+    kept
+}
+
+/// What makes two annotation rows identical: range, text, label and details.
+fn row_key(span: &Span, start: u64, end: u64) -> String {
+    serde_json::to_string(&(
+        start,
+        end,
+        &span.raw_text,
+        &span.label,
+        &span.categories,
+        &span.motion_type,
+        &span.hand,
+        &span.object,
+        &span.grasp,
+    ))
+    .unwrap_or_default()
+}
+
+/// One note per kept span that stands for several identical rows (`groups`: how many, the first
+/// few row ids).
+fn note_duplicates(
+    path: &str,
+    kept: &[Kept<'_>],
+    groups: &[(usize, Vec<String>)],
+    notes: &mut Vec<Note>,
+) {
+    for (k, (count, ids)) in kept.iter().zip(groups) {
         if *count > 1 {
             let shown: Vec<String> = ids.iter().map(|i| excerpt(i)).collect();
-            out.notes.push(Note::new(
+            notes.push(Note::new(
                 "duplicate_annotation",
                 format!(
                     "`{}`: `{}` on frames {}-{} appears {count} times (rows {}{}); kept once",
-                    capture.capture.path,
+                    path,
                     excerpt(&k.span.raw_text),
                     k.start,
                     k.end,
@@ -276,83 +385,60 @@ pub fn run_with<E>(
             ));
         }
     }
+}
 
-    let positions_cache = ClipMaker {
-        input,
-        capture: std::sync::Arc::new(input.capture.capture.clone()),
-    };
-    let mut clips: Vec<Clip> = Vec::new();
-    for k in &kept {
-        match positions_cache.single(k) {
+/// The `real_pair` clips of overlapping kept spans: overlaps of too many actions, or with an
+/// excluded label, are dropped.
+fn make_pairs<E>(
+    maker: &ClipMaker<'_, '_>,
+    kept: &[Kept<'_>],
+    drops: &mut Drops,
+    clips: &mut Vec<Clip>,
+    take_frames: &mut impl FnMut(&Clip, Motion) -> Result<(), E>,
+) -> Result<(), E> {
+    let config = maker.input.config;
+    let ranges: Vec<(u64, u64)> = kept.iter().map(|k| (k.start, k.end)).collect();
+    let exclude: Vec<String> = config
+        .pair_exclude
+        .iter()
+        .map(|w| normalize_label(w))
+        .collect();
+    for o in overlaps(&ranges) {
+        let texts = || {
+            o.members
+                .iter()
+                .map(|&i| kept[i].span.raw_text.as_str())
+                .collect::<Vec<_>>()
+                .join(" + ")
+        };
+        if o.members.len() > config.max_simultaneous {
+            drops.drop(
+                DropReason::TooManySimultaneous,
+                &texts(),
+                Some((o.start, o.end)),
+            );
+            continue;
+        }
+        let members: Vec<&Kept<'_>> = o.members.iter().map(|&i| &kept[i]).collect();
+        let excluded = members.iter().any(|m| {
+            let words = normalize_label(&m.span.label);
+            exclude
+                .iter()
+                .any(|x| words.split(' ').any(|w| w == x) || &words == x)
+        });
+        if excluded {
+            drops.drop(DropReason::ExcludedPair, &texts(), Some((o.start, o.end)));
+            continue;
+        }
+        match maker.pair(&members, o.start, o.end) {
             Ok(LoadedClip { clip, motion }) => {
-                if clip.motion_type.is_none() {
-                    *out.unmapped.entry(clip.labels[0].clone()).or_insert(0) += 1;
-                }
                 take_frames(&clip, motion)?;
                 clips.push(clip);
             }
-            Err(reason) => drop(reason, &k.span.raw_text, Some((k.start, k.end))),
+            Err(reason) => drops.drop(reason, &texts(), Some((o.start, o.end))),
         }
     }
-    if input.annotation.simultaneous {
-        let ranges: Vec<(u64, u64)> = kept.iter().map(|k| (k.start, k.end)).collect();
-        let exclude: Vec<String> = input
-            .config
-            .pair_exclude
-            .iter()
-            .map(|w| normalize_label(w))
-            .collect();
-        for o in overlaps(&ranges) {
-            let texts = || {
-                o.members
-                    .iter()
-                    .map(|&i| kept[i].span.raw_text.as_str())
-                    .collect::<Vec<_>>()
-                    .join(" + ")
-            };
-            if o.members.len() > input.config.max_simultaneous {
-                drop(
-                    DropReason::TooManySimultaneous,
-                    &texts(),
-                    Some((o.start, o.end)),
-                );
-                continue;
-            }
-            let members: Vec<&Kept<'_>> = o.members.iter().map(|&i| &kept[i]).collect();
-            let excluded = members.iter().any(|m| {
-                let words = normalize_label(&m.span.label);
-                exclude
-                    .iter()
-                    .any(|x| words.split(' ').any(|w| w == x) || &words == x)
-            });
-            if excluded {
-                drop(DropReason::ExcludedPair, &texts(), Some((o.start, o.end)));
-                continue;
-            }
-            match positions_cache.pair(&members, o.start, o.end) {
-                Ok(LoadedClip { clip, motion }) => {
-                    take_frames(&clip, motion)?;
-                    clips.push(clip);
-                }
-                Err(reason) => drop(reason, &texts(), Some((o.start, o.end))),
-            }
-        }
-    }
-    // Identical ranges (two labels on the same frames) must not share an id.
-    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
-    for clip in &mut clips {
-        let n = seen.entry(clip.clip_id.clone()).or_insert(0);
-        *n += 1;
-        if *n > 1 {
-            clip.clip_id = format!("{}~{n}", clip.clip_id);
-        }
-    }
-    for d in &dropped {
-        *out.drops.entry(d.reason.to_string()).or_insert(0) += 1;
-    }
-    out.dropped = dropped;
-    out.clips = clips;
-    Ok(out)
+    Ok(())
 }
 
 struct ClipMaker<'a, 'b> {
