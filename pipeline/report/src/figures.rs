@@ -684,28 +684,19 @@ where
         .map(|t| (t.motion_type.clone(), None))
         .collect();
     let cats = layout_categories(&area, &labels, slot)?;
-    let mut chart = ChartBuilder::on(&area)
-        .margin(margin)
-        .x_label_area_size(cats.height + udots(DESC + 6.0))
-        .y_label_area_size(y_area)
-        .build_cartesian_2d(
+    let mut chart = category_chart(
+        &area,
+        (
             Axis::categories(n),
             Axis::new(base..top, bold).with_light(light),
-        )?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .set_all_tick_mark_size(udots(TICK_MARK))
-        .axis_style(stroke(BLACK, AXIS_LINE))
-        .bold_line_style(stroke(GRID, GRID_LINE))
-        .light_line_style(stroke(RGBColor(242, 242, 242), GRID_LINE))
-        .x_label_formatter(&|_| String::new())
-        .y_label_formatter(&|v| tick_text(*v))
-        .label_style(font(TICK))
-        .axis_desc_style(font(DESC))
-        .x_desc("motion type")
-        .y_desc(if log { "clips (log scale)" } else { "clips" })
-        .draw()?;
+        ),
+        (margin, cats.height, y_area),
+        &|v| tick_text(*v),
+        (
+            "motion type",
+            if log { "clips (log scale)" } else { "clips" },
+        ),
+    )?;
     if types.is_empty() {
         draw_note(&area, "no original single clips", 0.45)?;
         return Ok(());
@@ -794,24 +785,13 @@ where
         .map(|(name, v)| (name.to_string(), Some(format!("(n = {})", v.len()))))
         .collect();
     let cats = layout_categories(&area, &labels, slot)?;
-    let mut chart = ChartBuilder::on(&area)
-        .margin(margin)
-        .x_label_area_size(cats.height + udots(DESC + 6.0))
-        .y_label_area_size(y_area)
-        .build_cartesian_2d(Axis::categories(n), Axis::new(0.0..top, ticks))?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .set_all_tick_mark_size(udots(TICK_MARK))
-        .axis_style(stroke(BLACK, AXIS_LINE))
-        .bold_line_style(stroke(GRID, GRID_LINE))
-        .x_label_formatter(&|_| String::new())
-        .y_label_formatter(&|v| tick_label(*v, step))
-        .label_style(font(TICK))
-        .axis_desc_style(font(DESC))
-        .x_desc("motion type")
-        .y_desc("length (s)")
-        .draw()?;
+    let mut chart = category_chart(
+        &area,
+        (Axis::categories(n), Axis::new(0.0..top, ticks)),
+        (margin, cats.height, y_area),
+        &|v| tick_label(*v, step),
+        ("motion type", "length (s)"),
+    )?;
     if data.is_empty() {
         draw_note(&area, "no original single clips", 0.45)?;
         return Ok(());
@@ -994,6 +974,44 @@ fn heat_color(t: f64) -> RGBColor {
 
 /// A chart on two [`Axis`]: every figure's plot.
 type AxisChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<Axis, Axis>>;
+
+/// The frame the category charts share (clips per motion type, lengths, composition): one slot
+/// per category along x (`n` of them, labelled below by `draw_categories`, `label_height` tall),
+/// the value axis `y` up the left, grid lines across at its ticks (light ones where it has
+/// them). `sizes` is the margin, the category labels' height and the value labels' width.
+fn category_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    (x, y): (Axis, Axis),
+    (margin, label_height, y_area): (u32, u32, u32),
+    y_label: &dyn Fn(&f64) -> String,
+    (x_desc, y_desc): (&str, &str),
+) -> DrawResult<AxisChart<'a, DB>>
+where
+    DB::ErrorType: 'static,
+{
+    let light_grid = !y.light.is_empty();
+    let mut chart = ChartBuilder::on(area)
+        .margin(margin)
+        .x_label_area_size(label_height + udots(DESC + 6.0))
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(x, y)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.disable_x_mesh()
+        .set_all_tick_mark_size(udots(TICK_MARK))
+        .axis_style(stroke(BLACK, AXIS_LINE))
+        .bold_line_style(stroke(GRID, GRID_LINE));
+    if light_grid {
+        mesh.light_line_style(stroke(RGBColor(242, 242, 242), GRID_LINE));
+    }
+    mesh.x_label_formatter(&|_| String::new())
+        .y_label_formatter(y_label)
+        .label_style(font(TICK))
+        .axis_desc_style(font(DESC))
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .draw()?;
+    Ok(chart)
+}
 
 fn goal_locations<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, rows: &[ClipRow]) -> DrawResult
 where
@@ -1286,24 +1304,13 @@ where
             .max(1),
     ) / n as f64;
     let cats = layout_categories(&area, &labels, slot)?;
-    let mut chart = ChartBuilder::on(&area)
-        .margin(margin)
-        .x_label_area_size(cats.height + udots(DESC + 6.0))
-        .y_label_area_size(y_area)
-        .build_cartesian_2d(Axis::categories(n), Axis::new(0.0..top, ticks))?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .set_all_tick_mark_size(udots(TICK_MARK))
-        .axis_style(stroke(BLACK, AXIS_LINE))
-        .bold_line_style(stroke(GRID, GRID_LINE))
-        .x_label_formatter(&|_| String::new())
-        .y_label_formatter(&|v| tick_label(*v, step))
-        .label_style(font(TICK))
-        .axis_desc_style(font(DESC))
-        .x_desc("split")
-        .y_desc("clips")
-        .draw()?;
+    let mut chart = category_chart(
+        &area,
+        (Axis::categories(n), Axis::new(0.0..top, ticks)),
+        (margin, cats.height, y_area),
+        &|v| tick_label(*v, step),
+        ("split", "clips"),
+    )?;
     if kinds.is_empty() {
         draw_note(&area, "no clips", 0.45)?;
     } else {
