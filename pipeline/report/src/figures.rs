@@ -975,6 +975,26 @@ fn heat_color(t: f64) -> RGBColor {
 /// A chart on two [`Axis`]: every figure's plot.
 type AxisChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<Axis, Axis>>;
 
+/// The legend of the series drawn with labels, boxed at `position`, in the figures' note size.
+fn draw_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut AxisChart<'a, DB>,
+    position: SeriesLabelPosition,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .margin(udots(3.0))
+        .legend_area_size(udots(NOTE + 2.0))
+        .background_style(WHITE.filled())
+        .border_style(stroke(GREY, GRID_LINE))
+        .label_font(font(NOTE))
+        .draw()?;
+    Ok(())
+}
+
 /// The frame the category charts share (clips per motion type, lengths, composition): one slot
 /// per category along x (`n` of them, labelled below by `draw_categories`, `label_height` tall),
 /// the value axis `y` up the left, grid lines across at its ticks (light ones where it has
@@ -1198,15 +1218,7 @@ where
                 BLACK.filled(),
             )
         });
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .margin(udots(3.0))
-        .legend_area_size(udots(NOTE + 2.0))
-        .background_style(WHITE.filled())
-        .border_style(stroke(GREY, GRID_LINE))
-        .label_font(font(NOTE))
-        .draw()?;
+    draw_legend(chart, SeriesLabelPosition::UpperLeft)?;
     Ok(())
 }
 
@@ -1427,15 +1439,7 @@ where
                 )
             });
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .margin(udots(3.0))
-        .legend_area_size(udots(NOTE + 2.0))
-        .background_style(WHITE.filled())
-        .border_style(stroke(GREY, GRID_LINE))
-        .label_font(font(NOTE))
-        .draw()?;
+    draw_legend(chart, SeriesLabelPosition::UpperRight)?;
     Ok(())
 }
 
