@@ -700,6 +700,34 @@ fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
     for take in ["walk_001", "jump_001", "wave_001"] {
         assert!(listed.contains(take), "{take} made no clip: {listed}");
     }
+    // Rows, not files, are counted at their real rate: each off-rate capture's clip and mirror,
+    // and every synthetic pair with such a clip among its sources.
+    let id_of = |row: &serde_json::Value| row["clip_id"].as_str().unwrap().to_string();
+    let real_at = |take: &str| {
+        rows.iter()
+            .filter(|r| !id_of(r).starts_with("synthetic/") && id_of(r).contains(take))
+            .count()
+    };
+    let pairs_off_rate = rows
+        .iter()
+        .filter(|r| id_of(r).starts_with("synthetic/"))
+        .filter(|r| id_of(r).contains("jump_001") || id_of(r).contains("wave_001"))
+        .count();
+    assert!(
+        pairs_off_rate > 0,
+        "the test needs pairs of off-rate clips: {listed}"
+    );
+    let by_rate = &report["clips_by_effective_rate"];
+    let counted = |rate: &str| by_rate[rate].as_u64().unwrap_or(0) as usize;
+    assert!(counted("20.83") >= real_at("jump_001"), "{by_rate}");
+    assert!(counted("30.00") >= real_at("wave_001"), "{by_rate}");
+    assert_eq!(real_at("jump_001"), 2, "{listed}");
+    assert_eq!(
+        counted("20.83") + counted("30.00"),
+        real_at("jump_001") + real_at("wave_001") + pairs_off_rate,
+        "{by_rate}"
+    );
+    assert_eq!(by_rate.as_object().unwrap().len(), 2, "{by_rate}");
 
     // The rows export to HumanML3D's layout, and a clip back to BVH on the model's skeleton.
     let hml = s.path("hml");
@@ -841,13 +869,92 @@ fn smpl_reflections_mirror_the_body_and_hands_on_the_models_own_skeleton() {
     }
 }
 
+/// `bench --amass` reads a folder of AMASS files (recursively, leaving out `shape.npz`) beside
+/// the BVH files of `--data`, and with `--build` builds it. Timings are not asserted: that every
+/// file and frame is counted and every figure is there.
+#[test]
+fn bench_amass_reads_and_builds_a_folder_of_amass_files() {
+    let s = Scratch::new();
+    std::fs::create_dir_all(s.path("npz/sub")).unwrap();
+    let sequences = vec![
+        s.sequence("npz/walk_poses.npz", Family::SmplH, "male", &BETAS, 120.0),
+        s.sequence(
+            "npz/sub/jump_poses.npz",
+            Family::SmplH,
+            "female",
+            &BETAS,
+            60.0,
+        ),
+        s.sequence("npz/sub/shape.npz", Family::SmplH, "male", &BETAS, 120.0),
+    ];
+    s.generate(serde_json::json!({
+        "models": [
+            s.model(Family::SmplH, "male", 3, &[]),
+            s.model(Family::SmplH, "female", 4, &[]),
+        ],
+        "sequences": sequences,
+    }));
+    let frames = std::fs::read(s.path("smplh-trans.bin")).unwrap().len() / (3 * 8);
+    let out = common::run_ok(
+        motionforge()
+            .args(["bench", "--repeat", "1", "--build", "--amass"])
+            .arg(s.path("npz"))
+            .arg("--body-model")
+            .arg(s.path("models"))
+            .arg("--data")
+            .arg(common::repo().join("fixtures/bandai-namco-1/data"))
+            .current_dir(s.dir.path()),
+    );
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        stdout.starts_with(&format!("AMASS: 2 files, {} frames", 2 * frames)),
+        "{stdout}"
+    );
+    assert!(stdout.contains("1 smplh female, 1 smplh male"), "{stdout}");
+    let bvh_files = std::fs::read_dir(common::repo().join("fixtures/bandai-namco-1/data"))
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "bvh")
+        })
+        .count();
+    assert!(
+        stdout.contains(&format!("BVH:   {bvh_files} files")),
+        "{stdout}"
+    );
+    assert!(stdout.contains("build: 4 rows from 2 files"), "{stdout}");
+    for prefix in ["read + joints", "read + fk", "(AMASS is"] {
+        let rest = stdout
+            .lines()
+            .find_map(|l| l.split_once(prefix).map(|(_, rest)| rest))
+            .unwrap_or_else(|| panic!("no `{prefix}` in {stdout}"));
+        let number: f64 = rest
+            .trim_start()
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap_or_else(|e| panic!("`{prefix}`: {e}: {stdout}"));
+        assert!(number > 0.0, "{prefix}: {stdout}");
+    }
+    for stage in ["ingest", "write", "report"] {
+        assert!(
+            stdout.lines().any(|l| l.trim_start().starts_with(stage)),
+            "no `{stage}` in {stdout}"
+        );
+    }
+}
+
 /// Reading an AMASS file and computing its joints, timed on one thread: a 2,000-frame SMPL-H
 /// sequence (the real motion, repeated) read from its bytes, put on the body model's skeleton
 /// and through forward kinematics, best of five. The body model is read once, outside the
 /// timing, as a build reads it. Run in release:
-/// `cargo test --release -p motionforge --test amass -- --ignored --nocapture`
+/// `cargo test --release --test builds amass::reading -- --ignored --nocapture`
 /// (`docs/performance.md`). With `MOTIONFORGE_AMASS_KEEP=<folder>` the body model folder and the
-/// sequence are copied there, for timing whole builds.
+/// sequence are copied there: `scripts/amass-bench-data.sh` does that for `bench --amass`.
 #[test]
 #[ignore = "a measurement: run in release"]
 fn reading_and_forward_kinematics_frames_per_second() {

@@ -289,6 +289,14 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
         )?;
     }
     writeln!(out, "dropped segments: {}", counts(&report.drops_by_reason))?;
+    if !report.clips_by_effective_rate.is_empty() {
+        let total: usize = report.clips_by_effective_rate.values().sum();
+        writeln!(
+            out,
+            "clips really at another rate than labelled: {total} (by fps: {})",
+            counts(&report.clips_by_effective_rate)
+        )?;
+    }
     if !report.notes_by_kind.is_empty() {
         writeln!(out, "annotation notes: {}", counts(&report.notes_by_kind))?;
     }

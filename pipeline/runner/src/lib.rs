@@ -253,6 +253,11 @@ pub struct BuildReport {
     pub drops_by_reason: BTreeMap<String, usize>,
     /// Every dropped segment: file, reason, text and frames.
     pub drops: Vec<Dropped>,
+    /// Rows whose frames are really at another rate than the dataset's, by that rate (fps, two
+    /// decimals): clips of AMASS files taken at HumanML3D's stride (`frame_rate = "humanml3d"`),
+    /// their mirrors and the synthetic pairs made of them. Absent when there are none.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub clips_by_effective_rate: BTreeMap<String, usize>,
     /// Annotation quirks handled (clamped ends, null labels, ...), by kind.
     pub notes_by_kind: BTreeMap<String, usize>,
     /// Every annotation quirk, for people.
@@ -762,6 +767,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         captures: files,
         clips: written.clips,
         mirrored: written.mirrored,
+        clips_by_effective_rate: written.clips_by_effective_rate,
         kinds: counts.source_kind,
         actions: written.actions,
         motion_types: counts.motion_type,
@@ -801,6 +807,7 @@ struct Written {
     /// Rows of the table, and of them mirrored copies.
     clips: usize,
     mirrored: usize,
+    clips_by_effective_rate: BTreeMap<String, usize>,
     actions: BTreeMap<String, usize>,
     report_error: Option<String>,
     /// Every stamp this build saw, the table's among them when it was written.
@@ -850,6 +857,7 @@ fn write_and_report(
     // What the build report says of the clips, taken before the write stage takes them.
     let n_clips = clips.len();
     let n_mirrored = clips.iter().filter(|c| c.mirrored).count();
+    let clips_by_effective_rate = effective_rate_counts(&clips);
     let actions = motionforge_format::io::manifest::action_counts(&clips);
     let mut report_error = None;
     if through >= Stage::Write {
@@ -890,10 +898,32 @@ fn write_and_report(
         counts,
         clips: n_clips,
         mirrored: n_mirrored,
+        clips_by_effective_rate,
         actions,
         report_error,
         stamps,
     })
+}
+
+/// Rows whose frames are at another rate than they are labelled, by that rate: clips whose
+/// capture has an effective rate, and synthetic pairs made of such a clip.
+fn effective_rate_counts(clips: &[Clip]) -> BTreeMap<String, usize> {
+    let rate_of: std::collections::HashMap<&str, f64> = clips
+        .iter()
+        .filter_map(|c| c.capture.effective_fps.map(|r| (c.clip_id.as_str(), r)))
+        .collect();
+    let mut counts = BTreeMap::new();
+    for clip in clips {
+        let rate = clip.capture.effective_fps.or_else(|| {
+            clip.composed_from
+                .iter()
+                .find_map(|id| rate_of.get(id.as_str()).copied())
+        });
+        if let Some(rate) = rate {
+            *counts.entry(format!("{rate:.2}")).or_insert(0) += 1;
+        }
+    }
+    counts
 }
 
 /// The report stage: the statistics report of the written shards, made again when they changed

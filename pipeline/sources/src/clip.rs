@@ -129,6 +129,11 @@ pub struct CaptureRef {
     pub sha256: String,
     /// Frame rate used for the file (header or override).
     pub fps: f64,
+    /// The rate the frames really have when it is not `fps`: an AMASS file taken at HumanML3D's
+    /// stride keeps every `int(rate / 20)`-th frame and labels it 20 fps, whatever rate that gives.
+    /// Every clip cut from the file, its mirror and the synthetic pairs made of it are counted by it
+    /// in the build report.
+    pub effective_fps: Option<f64>,
 }
 
 /// A parsed capture at its own frame rate, before segmentation.

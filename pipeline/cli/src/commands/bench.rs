@@ -10,6 +10,7 @@ use motionforge::build::BuildOptions;
 use motionforge::config::Config;
 use motionforge::motion::{MirrorPlan, OffsetPolicy, read_bvh};
 
+use super::bench_amass::{AmassBench, bench_amass};
 use super::bench_build::{BuildBench, bench_build};
 use super::mirror::load_profile;
 use crate::ui::Ui;
@@ -68,9 +69,19 @@ pub(crate) struct BenchArgs {
     /// clips of this built dataset folder, written to a temporary folder: previews per second.
     #[arg(long, value_name = "DATASET", conflicts_with_all = ["build", "write_frames"])]
     previews: Option<PathBuf>,
+    /// Instead, time reading the AMASS `.npz` files under this folder (recursively) and
+    /// computing their joints on one thread, beside reading the BVH files of --data in the same
+    /// run; with --build, also a whole build of the folder (one clip per file, mirrored, 30 fps).
+    /// Needs --body-model.
+    #[arg(long, value_name = "DIR", requires = "body_model", conflicts_with_all = ["write_frames", "previews"])]
+    amass: Option<PathBuf>,
+    /// With --amass: the body model folder, laid out as AMASS documents it
+    /// (`smplh/male/model.npz`, ...).
+    #[arg(long, value_name = "DIR", requires = "amass")]
+    body_model: Option<PathBuf>,
     /// Instead, time the HumanML3D caption tagger (spaCy's network) on the distinct captions
     /// of this text file, one a line, on one thread: captions per second.
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["build", "write_frames", "previews"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["build", "write_frames", "previews", "amass"])]
     captions: Option<PathBuf>,
 }
 
@@ -80,6 +91,18 @@ pub(crate) fn run(args: BenchArgs, ui: &Ui) -> Result<ExitCode> {
         bench_captions(file)?;
     } else if let Some(dataset) = &args.previews {
         super::preview::bench_previews(dataset)?;
+    } else if let (Some(dir), Some(body_model)) = (&args.amass, &args.body_model) {
+        let bench = AmassBench {
+            dir: dir.clone(),
+            body_model: body_model.clone(),
+            bvh: args.data,
+            bvh_profile: args.profile,
+            repeat: args.repeat,
+            build: args.build,
+            keep: args.keep,
+            threads: args.threads.map(usize::from),
+        };
+        bench_amass(&bench, ui)?;
     } else if let Some(frames) = args.write_frames {
         bench_write(&args.data, &args.profile, frames)?;
     } else if args.build {
@@ -99,8 +122,27 @@ pub(crate) fn run(args: BenchArgs, ui: &Ui) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Read, forward kinematics and mirroring of every capture in `data`, best of `repeat` passes.
-fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
+/// Best-of-`repeat` seconds of reading, forward kinematics and mirroring a folder of BVH files
+/// on one thread.
+pub(crate) struct BvhTimings {
+    /// Files read.
+    pub(crate) files: usize,
+    /// Frames in them.
+    pub(crate) frames: usize,
+    /// Their bytes.
+    pub(crate) bytes: usize,
+    /// Parsing the text.
+    pub(crate) read_s: f64,
+    /// World positions of every joint.
+    pub(crate) fk_s: f64,
+    /// The mirrored motion.
+    pub(crate) mirror_s: f64,
+    /// The three in one pass (the best pass, not the sum of the bests).
+    pub(crate) total_s: f64,
+}
+
+/// Reads, forward kinematics and mirrors every capture in `data`, best of `repeat` passes.
+pub(crate) fn bvh_timings(data: &Path, profile: &str, repeat: usize) -> Result<BvhTimings> {
     let spec = load_profile(profile)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(data)
         .with_context(|| format!("cannot list {}", data.display()))?
@@ -115,15 +157,20 @@ fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
         .iter()
         .map(std::fs::read_to_string)
         .collect::<std::io::Result<_>>()?;
-    let bytes: usize = texts.iter().map(String::len).sum();
     let first = read_bvh(&texts[0]).with_context(|| files[0].display().to_string())?;
     let plan = MirrorPlan::from_profile(&first.skeleton, &spec.bind(&first.skeleton)?)?;
-    let (mut parse_s, mut fk_s, mut mirror_s, mut total_s) =
-        (f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::INFINITY);
-    let mut frames = 0usize;
-    for _ in 0..repeat {
+    let mut best = BvhTimings {
+        files: files.len(),
+        frames: 0,
+        bytes: texts.iter().map(String::len).sum(),
+        read_s: f64::INFINITY,
+        fk_s: f64::INFINITY,
+        mirror_s: f64::INFINITY,
+        total_s: f64::INFINITY,
+    };
+    for _ in 0..repeat.max(1) {
         let (mut p, mut f, mut m) = (0.0, 0.0, 0.0);
-        frames = 0;
+        best.frames = 0;
         for text in &texts {
             let t0 = std::time::Instant::now();
             let bvh = read_bvh(text)?;
@@ -133,43 +180,43 @@ fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
             let mirrored = plan.mirror(&bvh.motion, OffsetPolicy::default());
             let t3 = std::time::Instant::now();
             std::hint::black_box((&pose, &mirrored));
-            frames += bvh.motion.num_frames();
+            best.frames += bvh.motion.num_frames();
             p += (t1 - t0).as_secs_f64();
             f += (t2 - t1).as_secs_f64();
             m += (t3 - t2).as_secs_f64();
         }
-        parse_s = parse_s.min(p);
-        fk_s = fk_s.min(f);
-        mirror_s = mirror_s.min(m);
-        total_s = total_s.min(p + f + m);
+        best.read_s = best.read_s.min(p);
+        best.fk_s = best.fk_s.min(f);
+        best.mirror_s = best.mirror_s.min(m);
+        best.total_s = best.total_s.min(p + f + m);
     }
-    let mb = bytes as f64 / 1e6;
+    Ok(best)
+}
+
+/// Read, forward kinematics and mirroring of every capture in `data`, best of `repeat` passes.
+fn bench(data: &Path, profile: &str, repeat: usize) -> Result<()> {
+    let t = bvh_timings(data, profile, repeat)?;
+    let frames = t.frames as f64;
+    let mb = t.bytes as f64 / 1e6;
+    let mut out = std::io::stdout();
     writeln!(
-        std::io::stdout(),
-        "{} files, {frames} frames, {mb:.1} MB, one thread, best of {repeat}",
-        files.len()
+        out,
+        "{} files, {} frames, {mb:.1} MB, one thread, best of {repeat}",
+        t.files, t.frames
     )?;
     writeln!(
-        std::io::stdout(),
+        out,
         "read      {:>10.0} frames/s  {:>7.1} MB/s",
-        frames as f64 / parse_s,
-        mb / parse_s
+        frames / t.read_s,
+        mb / t.read_s
     )?;
+    writeln!(out, "fk        {:>10.0} frames/s", frames / t.fk_s)?;
+    writeln!(out, "mirror    {:>10.0} frames/s", frames / t.mirror_s)?;
     writeln!(
-        std::io::stdout(),
-        "fk        {:>10.0} frames/s",
-        frames as f64 / fk_s
-    )?;
-    writeln!(
-        std::io::stdout(),
-        "mirror    {:>10.0} frames/s",
-        frames as f64 / mirror_s
-    )?;
-    writeln!(
-        std::io::stdout(),
+        out,
         "read+fk+mirror {:>10.0} frames/s  {:>7.1} MB/s",
-        frames as f64 / total_s,
-        mb / total_s
+        frames / t.total_s,
+        mb / t.total_s
     )?;
     Ok(())
 }

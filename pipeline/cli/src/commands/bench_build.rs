@@ -36,9 +36,9 @@ pub(crate) struct BuildBench {
 }
 
 /// The first line of the config the bench writes: marks a `--keep` folder as the bench's own.
-const CONFIG_MARKER: &str = "# written by `motionforge bench --build`";
-const CONFIG_FILE: &str = "bench.toml";
-const OUTPUT_DIR: &str = "out";
+pub(super) const CONFIG_MARKER: &str = "# written by `motionforge bench --build`";
+pub(super) const CONFIG_FILE: &str = "bench.toml";
+pub(super) const OUTPUT_DIR: &str = "out";
 
 /// Runs the benchmark and prints its table (or JSON with `--json`).
 pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
@@ -286,13 +286,13 @@ fn config_text(data: &Path, profile: &str, pattern: &str, copies: usize, work: &
 }
 
 /// The folder the bench builds in: `--keep`'s, or a temporary one removed at the end.
-struct WorkDir {
-    path: PathBuf,
+pub(super) struct WorkDir {
+    pub(super) path: PathBuf,
     remove: bool,
 }
 
 impl WorkDir {
-    fn new(keep: Option<&Path>) -> Result<WorkDir> {
+    pub(super) fn new(keep: Option<&Path>) -> Result<WorkDir> {
         let (path, remove) = match keep {
             Some(dir) => (std::path::absolute(dir)?, false),
             None => (
@@ -406,10 +406,10 @@ impl Progress for StageClock {
 /// One stretch of a build's wall time: a stage (or stages reported as one), or the time between
 /// stages that no stage reports (`gap`).
 #[derive(Debug, Clone)]
-struct Phase {
-    name: String,
-    gap: bool,
-    seconds: f64,
+pub(super) struct Phase {
+    pub(super) name: String,
+    pub(super) gap: bool,
+    pub(super) seconds: f64,
     /// Process CPU seconds over the stretch (all threads).
     cpu_seconds: f64,
     /// Peak resident memory of the process during the stretch.
@@ -419,16 +419,16 @@ struct Phase {
 }
 
 /// A timed build: its stretches, total, peak memory and the machine's CPU use meanwhile.
-struct BuildRun {
-    phases: Vec<Phase>,
-    total: f64,
+pub(super) struct BuildRun {
+    pub(super) phases: Vec<Phase>,
+    pub(super) total: f64,
     /// The highest of the stretches' peaks.
-    peak_rss_kb: Option<u64>,
+    pub(super) peak_rss_kb: Option<u64>,
     /// Resident memory when the build started.
     start_rss_kb: Option<u64>,
     cpu: CpuUse,
     /// The process's CPU seconds over the build (user + system, all threads).
-    cpu_seconds: f64,
+    pub(super) cpu_seconds: f64,
 }
 
 /// A timed call that reports no stages (plan).
@@ -439,7 +439,10 @@ struct Timed {
     cpu: CpuUse,
 }
 
-fn timed_build(config: &motionforge::config::Config, ui: &Ui) -> Result<(BuildRun, BuildReport)> {
+pub(super) fn timed_build(
+    config: &motionforge::config::Config,
+    ui: &Ui,
+) -> Result<(BuildRun, BuildReport)> {
     let clock = Arc::new(StageClock {
         inner: ui.progress(),
         events: Mutex::new(Vec::new()),
@@ -689,7 +692,7 @@ fn rss_kb() -> Option<u64> {
 }
 
 /// The 1, 5 and 15 minute load averages (`/proc/loadavg`), as written.
-fn load_average() -> Option<String> {
+pub(super) fn load_average() -> Option<String> {
     let text = std::fs::read_to_string("/proc/loadavg").ok()?;
     Some(
         text.split_whitespace()
@@ -871,7 +874,7 @@ fn mb(bytes: u64) -> f64 {
     bytes as f64 / 1e6
 }
 
-fn rss_mb(kb: Option<u64>) -> String {
+pub(super) fn rss_mb(kb: Option<u64>) -> String {
     kb.map_or_else(
         || "n/a".to_string(),
         |kb| format!("{:.0} MB", kb as f64 / 1024.0),
@@ -879,7 +882,7 @@ fn rss_mb(kb: Option<u64>) -> String {
 }
 
 /// Thousands separated by commas, as the docs write counts.
-fn grouped(n: u64) -> String {
+pub(super) fn grouped(n: u64) -> String {
     let digits = n.to_string();
     let mut out = String::new();
     for (i, c) in digits.chars().enumerate() {

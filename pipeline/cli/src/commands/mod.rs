@@ -9,6 +9,7 @@ use motionforge::build::Stage;
 use motionforge::config::Config;
 
 pub(crate) mod bench;
+mod bench_amass;
 mod bench_build;
 pub(crate) mod build;
 pub(crate) mod clean;

@@ -14,8 +14,9 @@ use motionforge_sources::clip::{Capture, CaptureRef};
 
 /// Stage name.
 pub const NAME: &str = "ingest";
-/// Bump when the stage's output for the same input changes.
-pub const VERSION: u32 = 4;
+/// Bump when the stage's output for the same input changes (5: a capture records its effective
+/// frame rate).
+pub const VERSION: u32 = 5;
 
 /// Kind of the note that an AMASS file's frames, taken at HumanML3D's stride, are at another
 /// rate than the 20 fps they are labelled with (counted in the build report's `notes_by_kind`).
@@ -224,7 +225,7 @@ pub fn run(input: &CaptureInput<'_>) -> IngestOutput {
     let fps = input.fps_override.unwrap_or(bvh.header_fps);
     let mut motion = bvh.motion;
     motion.fps = fps;
-    accepted(input, fps, motion, Vec::new())
+    accepted(input, fps, None, motion, Vec::new())
 }
 
 /// The joint-position array of one frame in the layout's first 22 joints, in HumanML3D's axes
@@ -342,7 +343,7 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
             ),
         ));
     }
-    accepted(input, fps, motion, notes)
+    accepted(input, fps, None, motion, notes)
 }
 
 /// Ingest of an AMASS `.npz`: the sequence read, its body model found (by family and gender) and
@@ -427,11 +428,12 @@ fn run_amass(input: &CaptureInput<'_>, config: &AmassConfig) -> IngestOutput {
         Err(e) => return refuse(RejectReason::Amass, e.to_string(), None),
     };
     let mut notes = Vec::new();
-    let (stride, label_fps) = match config.frame_rate {
-        FrameRateMode::Resample => (1, fps),
+    let (stride, label_fps, effective_fps) = match config.frame_rate {
+        FrameRateMode::Resample => (1, fps, None),
         FrameRateMode::Humanml3d => {
             let (stride, effective) = humanml3d_stride(fps);
-            if (effective - HUMANML3D_FPS).abs() > 1e-6 {
+            let off_rate = (effective - HUMANML3D_FPS).abs() > 1e-6;
+            if off_rate {
                 notes.push(Note::new(
                     EFFECTIVE_RATE_NOTE,
                     format!(
@@ -440,7 +442,7 @@ fn run_amass(input: &CaptureInput<'_>, config: &AmassConfig) -> IngestOutput {
                     ),
                 ));
             }
-            (stride, HUMANML3D_FPS)
+            (stride, HUMANML3D_FPS, off_rate.then_some(effective))
         }
     };
     let motion = match motionforge_sources::amass::to_motion(&sequence, &model, stride, label_fps) {
@@ -453,11 +455,18 @@ fn run_amass(input: &CaptureInput<'_>, config: &AmassConfig) -> IngestOutput {
     if let Err(e) = input.profile.bind(&motion.skeleton) {
         return refuse(RejectReason::Profile, e.to_string(), None);
     }
-    accepted(input, label_fps, motion, notes)
+    accepted(input, label_fps, effective_fps, motion, notes)
 }
 
-/// A capture read: its motion at `fps`, with what the reader noted.
-fn accepted(input: &CaptureInput<'_>, fps: f64, motion: Motion, notes: Vec<Note>) -> IngestOutput {
+/// A capture read: its motion at `fps` (really at `effective_fps` when that is given), with what
+/// the reader noted.
+fn accepted(
+    input: &CaptureInput<'_>,
+    fps: f64,
+    effective_fps: Option<f64>,
+    motion: Motion,
+    notes: Vec<Note>,
+) -> IngestOutput {
     let file = input.file;
     IngestOutput {
         capture: Some(Capture {
@@ -466,6 +475,7 @@ fn accepted(input: &CaptureInput<'_>, fps: f64, motion: Motion, notes: Vec<Note>
                 path: file.display.clone(),
                 sha256: input.sha256.to_string(),
                 fps,
+                effective_fps,
             },
             stem: file.stem(),
             profile: input.profile.name.clone(),
