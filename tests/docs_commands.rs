@@ -314,13 +314,12 @@ fn json_shown_in(shown: &serde_json::Value, actual: &serde_json::Value) -> bool 
 
 /// One shown line against one printed line: JSON objects field by field, `...` as any text.
 fn line_matches(shown: &str, actual: &str) -> bool {
-    if shown.starts_with('{') {
-        if let (Ok(s), Ok(a)) = (
-            serde_json::from_str::<serde_json::Value>(shown),
-            serde_json::from_str::<serde_json::Value>(actual),
-        ) {
-            return json_shown_in(&s, &a);
-        }
+    if let (true, Ok(s), Ok(a)) = (
+        shown.starts_with("{"),
+        serde_json::from_str::<serde_json::Value>(shown),
+        serde_json::from_str::<serde_json::Value>(actual),
+    ) {
+        return json_shown_in(&s, &a);
     }
     if !shown.contains("...") {
         return shown == actual;
@@ -392,7 +391,16 @@ fn run_page(page: &str) -> (Tally, Sandbox) {
     let all = blocks(&run.markdown);
     let started = Instant::now();
     for block in &all {
+        let block_started = Instant::now();
         run_block(&mut run, block);
+        let seconds = block_started.elapsed().as_secs_f64();
+        if seconds > 1.0 {
+            // CI has 2 cores: the slow blocks are the ones to keep an eye on.
+            eprintln!(
+                "{page}:{}: {} block took {seconds:.1} s",
+                block.line, block.info
+            );
+        }
     }
     // Every arm of run_block either handled its block or failed the test.
     assert_eq!(
@@ -897,14 +905,12 @@ fn run_curl(run: &mut PageRun, body: &str, at: &str) {
         .port;
     let default = default_bind();
     let mut prelude = String::new();
+    let assignment = regex::Regex::new(r"^[A-Z_]+=").unwrap();
     for command in commands(body) {
         let bare = without_comment(&command);
         if !bare.starts_with("curl ") {
             // `NAME=value` lines the curl lines use.
-            assert!(
-                regex::Regex::new(r"^[A-Z_]+=").unwrap().is_match(bare),
-                "{at}: `{bare}` in a curl block"
-            );
+            assert!(assignment.is_match(bare), "{at}: `{bare}` in a curl block");
             prelude.push_str(bare);
             prelude.push('\n');
             continue;
@@ -1298,6 +1304,7 @@ fn check_csv_excerpt(sandbox: &Sandbox, file: &str, body: &str, at: &str) {
 
 /// Crontab lines, unit files and systemctl lines: their form, and the motionforge they run.
 fn check_system(page: &str, kind: &str, body: &str, at: &str) {
+    let time = regex::Regex::new(r"^[\d*/,-]+$").unwrap();
     for line in body.lines().map(str::trim) {
         if line.is_empty() || line.starts_with('#') {
             continue;
@@ -1306,7 +1313,6 @@ fn check_system(page: &str, kind: &str, body: &str, at: &str) {
             "cron" => {
                 let fields: Vec<&str> = line.split_whitespace().collect();
                 assert!(fields.len() > 5, "{at}: {line}");
-                let time = regex::Regex::new(r"^[\d*/,-]+$").unwrap();
                 assert!(fields[..5].iter().all(|f| time.is_match(f)), "{at}: {line}");
                 check_invocation(&fields[5..].join(" "), at);
             }
