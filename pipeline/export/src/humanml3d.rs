@@ -33,6 +33,7 @@ use motionforge_core::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
 use motionforge_core::motion::profile::SmplPlacement;
 use motionforge_core::motion::{Motion, ProfileSpec};
 use motionforge_format::io::schema::Column;
+use motionforge_format::io::skeletons::{SkeletonsError, read_skeletons};
 use motionforge_sources::clip::Split;
 
 /// Rows the HumanML3D loaders keep: `Text2MotionDatasetV2` drops motions shorter than 40 rows or
@@ -122,6 +123,9 @@ pub enum ExportError {
         /// The folder.
         path: PathBuf,
     },
+    /// `skeletons.json` cannot be read.
+    #[error(transparent)]
+    Skeletons(#[from] SkeletonsError),
     /// The output folder is, holds or lies inside a folder the export must keep.
     #[error(transparent)]
     Refused(#[from] motionforge_core::base::guard::Refused),
@@ -424,37 +428,21 @@ fn placements(
     dataset: &Path,
     options: &ExportOptions,
 ) -> Result<BTreeMap<String, Result<SmplPlacement, String>>, ExportError> {
-    let path = dataset.join(motionforge_core::base::layout::SKELETONS_FILE);
-    let text = fs::read_to_string(&path).map_err(io_err(&path))?;
-    let json: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| ExportError::NotADataset {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
+    let skeletons = read_skeletons(dataset)?;
     let mut out = BTreeMap::new();
-    let Some(skeletons) = json.as_object() else {
-        return Err(ExportError::NotADataset {
-            path,
-            message: "expected an object of skeletons".into(),
-        });
-    };
     for (id, skeleton) in skeletons {
-        let profile = id.split(':').next().unwrap_or_default();
-        let names: Vec<&str> = skeleton["joints"]
-            .as_array()
-            .map(|joints| joints.iter().filter_map(|j| j["name"].as_str()).collect())
-            .unwrap_or_default();
+        let names: Vec<&str> = skeleton.joints.iter().map(|j| j.name.as_str()).collect();
         let spec = options
             .profiles
             .iter()
-            .find(|p| p.name == profile)
+            .find(|p| p.name == skeleton.profile)
             .cloned()
             .map(Ok)
-            .unwrap_or_else(|| ProfileSpec::bundled(profile));
+            .unwrap_or_else(|| ProfileSpec::bundled(&skeleton.profile));
         let placement = spec
             .and_then(|spec| spec.smpl_placement(&hml3d::JOINTS, &names))
             .map_err(|e| e.to_string());
-        out.insert(id.clone(), placement);
+        out.insert(id, placement);
     }
     Ok(out)
 }

@@ -93,7 +93,7 @@ impl Recorded {
 pub(super) struct Table<'a> {
     pub(super) plans: &'a BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
     pub(super) profiles: &'a BTreeMap<String, Profile>,
-    pub(super) skeletons: &'a BTreeMap<String, serde_json::Value>,
+    pub(super) skeletons: &'a motionforge_format::io::skeletons::Skeletons,
     pub(super) rejects: &'a [Reject],
     /// Reads them back.
     pub(super) motions: &'a MotionSource,
@@ -530,7 +530,7 @@ pub(super) fn write_outputs(
     {
         return Ok(false);
     }
-    let skeletons_json = serde_json::to_string_pretty(table.skeletons).unwrap_or_default();
+    let skeletons_json = motionforge_format::io::skeletons::skeletons_json(table.skeletons);
     // From here on the clips are read a shard at a time: held compressed, they no longer grow
     // the build's memory with the dataset.
     let clips = HeldClips::new(clips, |c| index.get(&key(c)).cloned())?;

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 pub use read::{ClipFrames, OpenShard, ShardReader, read_clip, read_clip_in, read_frames};
-pub use skeletons::{SkeletonEntry, Skeletons, read_skeletons};
+pub use skeletons::{SkeletonEntry, Skeletons, SkeletonsError, read_skeletons};
 
 /// Why a dataset folder, or a clip in it, cannot be read.
 #[derive(Debug, thiserror::Error)]
@@ -36,14 +36,9 @@ pub enum DatasetError {
         /// What was found and what was expected.
         message: String,
     },
-    /// `skeletons.json` does not describe the skeletons.
-    #[error("{}: {message}", path.display())]
-    Skeletons {
-        /// The file.
-        path: PathBuf,
-        /// What was expected.
-        message: String,
-    },
+    /// `skeletons.json` cannot be read or does not describe the skeletons.
+    #[error(transparent)]
+    Skeletons(#[from] SkeletonsError),
     /// The folder holds no clip table.
     #[error("{}: no clip table (data/*.parquet); build the dataset first", path.display())]
     NotADataset {
