@@ -177,8 +177,13 @@ fn export_bvh_command_writes_the_clip_from_the_dataset_folder() {
     let bvh = read_bvh(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(bvh.motion.num_frames(), 300);
     assert_eq!(bvh.skeleton.joints[0].name, "Hips");
-    // Skeletons with fields this reader does not know still read.
+    // The file is the typed value the readers get, written back: nothing in it goes unread.
     let path = ds.join("skeletons.json");
+    let written = std::fs::read_to_string(&path).unwrap();
+    let typed = dataset::read_skeletons(&ds).unwrap();
+    assert_eq!(motionforge::io::skeletons::skeletons_json(&typed), written);
+    assert!(typed.values().any(|s| s.mirror_of.is_some()));
+    // Skeletons with fields this reader does not know still read.
     let mut json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     for (_, s) in json.as_object_mut().unwrap() {

@@ -19,12 +19,7 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use arrow_array::RecordBatch;
-use arrow_array::cast::AsArray;
-use arrow_array::types::{Float64Type, Int32Type};
 use glam::DVec3;
-use parquet::arrow::ProjectionMask;
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -32,7 +27,9 @@ use motionforge_core::base::guard::{Kept, check_replaceable, is_plain_name};
 use motionforge_core::humanml3d::{self as hml3d, DIM, NUM_JOINTS};
 use motionforge_core::motion::profile::SmplPlacement;
 use motionforge_core::motion::{Motion, ProfileSpec};
+use motionforge_format::dataset::{self, DatasetError, OpenShard, ShardBatch};
 use motionforge_format::io::schema::Column;
+use motionforge_format::io::skeletons::{SkeletonsError, read_skeletons};
 use motionforge_sources::clip::Split;
 
 /// Rows the HumanML3D loaders keep: `Text2MotionDatasetV2` drops motions shorter than 40 rows or
@@ -122,6 +119,12 @@ pub enum ExportError {
         /// The folder.
         path: PathBuf,
     },
+    /// `skeletons.json` cannot be read.
+    #[error(transparent)]
+    Skeletons(#[from] SkeletonsError),
+    /// A shard cannot be read.
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
     /// The output folder is, holds or lies inside a folder the export must keep.
     #[error(transparent)]
     Refused(#[from] motionforge_core::base::guard::Refused),
@@ -230,20 +233,15 @@ fn check_out(dataset: &Path, out: &Path, options: &ExportOptions) -> Result<(), 
     Ok(())
 }
 
-/// The dataset's clip tables; at least one.
-fn clip_tables(dataset: &Path) -> Result<Vec<PathBuf>, ExportError> {
-    let shards =
-        motionforge_report::find_clip_tables(dataset).map_err(|e| ExportError::NotADataset {
-            path: dataset.to_path_buf(),
-            message: e.to_string(),
-        })?;
-    if shards.is_empty() {
-        return Err(ExportError::NotADataset {
+/// The dataset's shards, opened; at least one.
+fn clip_tables(dataset: &Path) -> Result<Vec<OpenShard>, ExportError> {
+    dataset::open_shards(dataset).map_err(|e| match e {
+        DatasetError::NotADataset { .. } => ExportError::NotADataset {
             path: dataset.to_path_buf(),
             message: "no clip table (data/*.parquet); build the dataset first".into(),
-        });
-    }
-    Ok(shards)
+        },
+        e => ExportError::Dataset(e),
+    })
 }
 
 /// What every clip's export reads: where it writes, the skeletons' SMPL placements and the
@@ -260,7 +258,7 @@ impl ClipExport<'_> {
     /// not depend on scheduling).
     fn shard<'e>(
         &self,
-        shard: &Path,
+        shard: &OpenShard,
         rows: &[&'e Entry],
         tally: &mut Tally<'e>,
     ) -> Result<(), ExportError> {
@@ -268,7 +266,10 @@ impl ClipExport<'_> {
         for frames in read_frames(shard)? {
             let frames = frames?;
             let group = rows.get(next..next + frames.len()).ok_or_else(|| {
-                table_err(shard, "more rows on the second read than on the first")
+                table_err(
+                    shard.path(),
+                    "more rows on the second read than on the first",
+                )
             })?;
             next += frames.len();
             let done: Vec<Result<Result<Done, Skipped>, ExportError>> = group
@@ -424,37 +425,21 @@ fn placements(
     dataset: &Path,
     options: &ExportOptions,
 ) -> Result<BTreeMap<String, Result<SmplPlacement, String>>, ExportError> {
-    let path = dataset.join(motionforge_core::base::layout::SKELETONS_FILE);
-    let text = fs::read_to_string(&path).map_err(io_err(&path))?;
-    let json: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| ExportError::NotADataset {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
+    let skeletons = read_skeletons(dataset)?;
     let mut out = BTreeMap::new();
-    let Some(skeletons) = json.as_object() else {
-        return Err(ExportError::NotADataset {
-            path,
-            message: "expected an object of skeletons".into(),
-        });
-    };
     for (id, skeleton) in skeletons {
-        let profile = id.split(':').next().unwrap_or_default();
-        let names: Vec<&str> = skeleton["joints"]
-            .as_array()
-            .map(|joints| joints.iter().filter_map(|j| j["name"].as_str()).collect())
-            .unwrap_or_default();
+        let names: Vec<&str> = skeleton.joints.iter().map(|j| j.name.as_str()).collect();
         let spec = options
             .profiles
             .iter()
-            .find(|p| p.name == profile)
+            .find(|p| p.name == skeleton.profile)
             .cloned()
             .map(Ok)
-            .unwrap_or_else(|| ProfileSpec::bundled(profile));
+            .unwrap_or_else(|| ProfileSpec::bundled(&skeleton.profile));
         let placement = spec
             .and_then(|spec| spec.smpl_placement(&hml3d::JOINTS, &names))
             .map_err(|e| e.to_string());
-        out.insert(id.clone(), placement);
+        out.insert(id, placement);
     }
     Ok(out)
 }
@@ -466,31 +451,20 @@ fn table_err(path: &Path, e: impl std::fmt::Display) -> ExportError {
     }
 }
 
-/// The shard's rows with only `columns` decoded, [`BATCH_ROWS`] at a time.
-fn batches<'p>(
-    path: &'p Path,
+/// The shard's rows with only `columns` (each required) decoded, [`BATCH_ROWS`] at a time.
+fn batches(
+    shard: &OpenShard,
     columns: &[Column],
-) -> Result<impl Iterator<Item = Result<RecordBatch, ExportError>> + use<'p>, ExportError> {
-    let file = fs::File::open(path).map_err(io_err(path))?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| table_err(path, e))?;
-    let schema = builder.schema().clone();
-    let mut indices = Vec::new();
-    for c in columns {
-        let i = schema
-            .index_of(c.name())
-            .map_err(|_| table_err(path, format!("no `{}` column", c.name())))?;
-        indices.push(i);
-    }
-    let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
-    let reader = builder
-        .with_projection(mask)
-        .with_batch_size(BATCH_ROWS)
-        .build()
-        .map_err(|e| table_err(path, e))?;
-    Ok(reader.map(move |b| b.map_err(|e| table_err(path, e))))
+) -> Result<impl Iterator<Item = Result<ShardBatch, ExportError>> + use<>, ExportError> {
+    let batches = shard
+        .read(columns)
+        .require(columns)
+        .batch_rows(BATCH_ROWS)
+        .batches()?;
+    Ok(batches.map(|b| b.map_err(ExportError::from)))
 }
 
-fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), ExportError> {
+fn read_entries(shard: &OpenShard, index: usize, out: &mut Vec<Entry>) -> Result<(), ExportError> {
     let columns = [
         Column::ClipId,
         Column::Split,
@@ -500,52 +474,33 @@ fn read_entries(path: &Path, shard: usize, out: &mut Vec<Entry>) -> Result<(), E
         Column::Texts,
         Column::Paraphrases,
     ];
-    for batch in batches(path, &columns)? {
+    for batch in batches(shard, &columns)? {
         let batch = batch?;
-        let lists = |column: Column| {
-            let name = column.name();
-            batch
-                .column_by_name(name)
-                .and_then(|c| c.as_list_opt::<i32>())
-                .ok_or_else(|| table_err(path, format!("`{name}` is not a list column")))
-        };
-        let (texts, paraphrases) = (lists(Column::Texts)?, lists(Column::Paraphrases)?);
-        let strings = |column: Column| {
-            let name = column.name();
-            batch
-                .column_by_name(name)
-                .and_then(|c| c.as_string_opt::<i32>())
-                .ok_or_else(|| table_err(path, format!("`{name}` is not a string column")))
-        };
-        let (ids, splits, kinds) = (
-            strings(Column::ClipId)?,
-            strings(Column::Split)?,
-            strings(Column::SourceKind)?,
+        let (texts, paraphrases) = (
+            batch.string_lists(Column::Texts)?,
+            batch.string_lists(Column::Paraphrases)?,
         );
-        let text = strings(Column::Text)?;
-        let mirrored = batch
-            .column_by_name(Column::Mirrored.name())
-            .and_then(|c| c.as_boolean_opt())
-            .ok_or_else(|| table_err(path, "`mirrored` is not a boolean column"))?;
+        let (ids, splits, kinds) = (
+            batch.strings(Column::ClipId)?,
+            batch.strings(Column::Split)?,
+            batch.strings(Column::SourceKind)?,
+        );
+        let text = batch.strings(Column::Text)?;
+        let mirrored = batch.bools(Column::Mirrored)?;
         for i in 0..batch.num_rows() {
-            let mut captions = vec![text.value(i).to_string()];
-            for list in [&texts, &paraphrases] {
-                let values = list.value(i);
-                if let Some(values) = values.as_string_opt::<i32>() {
-                    for v in values.iter().flatten() {
-                        if !captions.iter().any(|c| c == v) {
-                            captions.push(v.to_string());
-                        }
-                    }
+            let mut captions = vec![text[i].clone().unwrap_or_default()];
+            for v in texts[i].iter().chain(&paraphrases[i]) {
+                if !captions.iter().any(|c| c == v) {
+                    captions.push(v.clone());
                 }
             }
             out.push(Entry {
                 captions,
-                clip_id: ids.value(i).to_string(),
-                split: Split::new(splits.value(i)),
-                mirrored: mirrored.value(i),
-                source_kind: kinds.value(i).to_string(),
-                shard,
+                clip_id: ids[i].clone().unwrap_or_default(),
+                split: Split::new(splits[i].as_deref().unwrap_or_default()),
+                mirrored: mirrored[i].unwrap_or(false),
+                source_kind: kinds[i].clone().unwrap_or_default(),
+                shard: index,
             });
         }
     }
@@ -571,8 +526,8 @@ struct Frames {
 
 /// The frames of every row of a shard, a batch of rows at a time.
 fn read_frames(
-    path: &Path,
-) -> Result<impl Iterator<Item = Result<Vec<Frames>, ExportError>> + '_, ExportError> {
+    shard: &OpenShard,
+) -> Result<impl Iterator<Item = Result<Vec<Frames>, ExportError>> + use<>, ExportError> {
     let columns = [
         Column::Skeleton,
         Column::Fps,
@@ -580,36 +535,24 @@ fn read_frames(
         Column::NumJoints,
         Column::JointPositions,
     ];
-    Ok(batches(path, &columns)?.map(move |batch| frames_of(path, &batch?)))
+    Ok(batches(shard, &columns)?.map(|batch| frames_of(&batch?)))
 }
 
-fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportError> {
-    let missing =
-        |column: Column| table_err(path, format!("`{}` has an unexpected type", column.name()));
-    let skeleton = batch
-        .column_by_name(Column::Skeleton.name())
-        .and_then(|c| c.as_string_opt::<i32>())
-        .ok_or_else(|| missing(Column::Skeleton))?;
-    let fps = batch
-        .column_by_name(Column::Fps.name())
-        .and_then(|c| c.as_primitive_opt::<Float64Type>())
-        .ok_or_else(|| missing(Column::Fps))?;
-    let ints = |column: Column| {
-        batch
-            .column_by_name(column.name())
-            .and_then(|c| c.as_primitive_opt::<Int32Type>())
-            .ok_or_else(|| missing(column))
+fn frames_of(batch: &ShardBatch) -> Result<Vec<Frames>, ExportError> {
+    let skeleton = batch.strings(Column::Skeleton)?;
+    let fps = batch.floats(Column::Fps)?;
+    let count = |column: Column| -> Result<Vec<usize>, ExportError> {
+        Ok(batch
+            .ints(column)?
+            .into_iter()
+            .map(|v| v.and_then(|v| usize::try_from(v).ok()).unwrap_or(0))
+            .collect())
     };
-    let (frames, joints) = (ints(Column::NumFrames)?, ints(Column::NumJoints)?);
-    let positions = batch
-        .column_by_name(Column::JointPositions.name())
-        .ok_or_else(|| missing(Column::JointPositions))?;
+    let (frames, joints) = (count(Column::NumFrames)?, count(Column::NumJoints)?);
+    let positions = batch.column(Column::JointPositions)?;
     let mut out = Vec::with_capacity(batch.num_rows());
     for i in 0..batch.num_rows() {
-        let (n, j) = (
-            usize::try_from(frames.value(i)).unwrap_or(0),
-            usize::try_from(joints.value(i)).unwrap_or(0),
-        );
+        let (n, j) = (frames[i], joints[i]);
         // A row whose frames do not match its counts is skipped with the reason (the export goes
         // on); a column of another layout fails the shard.
         let values = match motionforge_format::io::parquet::frame_values(
@@ -624,11 +567,11 @@ fn frames_of(path: &Path, batch: &RecordBatch) -> Result<Vec<Frames>, ExportErro
             Err(e @ motionforge_format::io::parquet::FrameColumnError::Shape { .. }) => {
                 Err(e.to_string())
             }
-            Err(e) => return Err(table_err(path, e)),
+            Err(e) => return Err(table_err(batch.path(), e)),
         };
         out.push(Frames {
-            skeleton: skeleton.value(i).to_string(),
-            fps: fps.value(i),
+            skeleton: skeleton[i].clone().unwrap_or_default(),
+            fps: fps[i].unwrap_or(f64::NAN),
             frames: n,
             joints: j,
             positions: values,

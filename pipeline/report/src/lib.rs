@@ -106,42 +106,9 @@ pub enum ReportError {
         /// The error.
         source: std::io::Error,
     },
-    /// A Parquet file could not be opened or decoded.
-    #[error("{path}: {source}")]
-    Parquet {
-        /// The table.
-        path: PathBuf,
-        /// The error.
-        source: parquet::errors::ParquetError,
-    },
-    /// A record batch could not be decoded.
-    #[error("{path}: {source}")]
-    Arrow {
-        /// The table.
-        path: PathBuf,
-        /// The error.
-        source: arrow_schema::ArrowError,
-    },
-    /// A required column is missing.
-    #[error("{path}: no column `{column}` (is this a motionforge clip table?)")]
-    MissingColumn {
-        /// The table.
-        path: PathBuf,
-        /// The column.
-        column: String,
-    },
-    /// A column has a type the reader does not accept.
-    #[error("{path}: column `{column}` has type {found}, expected {expected}")]
-    ColumnType {
-        /// The table.
-        path: PathBuf,
-        /// The column.
-        column: String,
-        /// Its Arrow type.
-        found: String,
-        /// What the reader accepts.
-        expected: String,
-    },
+    /// A clip table cannot be found, opened or decoded, or lacks a column the report needs.
+    #[error(transparent)]
+    Dataset(#[from] motionforge_format::dataset::DatasetError),
     /// A value that the statistics cannot use (a null in a required column, a negative frame
     /// count, a non-positive frame rate, a goal that is not `[x, y]`).
     #[error("{path}: row {row} ({clip_id}): {message}")]

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 
 use motionforge_core::base::layout::DATA_DIR;
 use motionforge_core::motion::{MirrorPlan, OffsetPolicy, Profile};
+use motionforge_format::io::skeletons::{CaptureAxes, SkeletonEntry, SkeletonJoint, Skeletons};
 use motionforge_sources::clip::{Clip, Split};
 
 /// The table's skeletons as `skeletons.json` lists them (by id), and each profile bound to the
@@ -13,12 +14,9 @@ use motionforge_sources::clip::{Clip, Split};
 pub(super) fn skeletons_of(
     shared: &super::capture::Shared<'_>,
     clips: &[Clip],
-) -> (
-    BTreeMap<String, Profile>,
-    BTreeMap<String, serde_json::Value>,
-) {
+) -> (BTreeMap<String, Profile>, Skeletons) {
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
-    let mut skeletons: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    let mut skeletons = Skeletons::new();
     // Clips share their skeleton (`SkeletonPool`): its id, a digest of the whole skeleton, is
     // taken once per shared copy and profile, not once per clip.
     let mut named: std::collections::HashSet<(*const motionforge_core::motion::Skeleton, &str)> =
@@ -64,39 +62,39 @@ pub(super) fn skeleton_json(
     skeleton: &motionforge_core::motion::Skeleton,
     profile: &Profile,
     mirror_of: Option<String>,
-) -> serde_json::Value {
-    let joints: Vec<serde_json::Value> = skeleton
+) -> SkeletonEntry {
+    let joints = skeleton
         .joints
         .iter()
         .enumerate()
         .map(|(j, joint)| {
             let o = joint.offset * profile.unit_scale;
-            serde_json::json!({
-                "name": joint.name,
-                "parent": joint.parent,
-                "offset_m": [o.x, o.y, o.z],
+            SkeletonJoint {
+                name: joint.name.clone(),
+                parent: joint.parent,
+                offset_m: [o.x, o.y, o.z],
                 // In file units as read, with the channel layout and end site: what a BVH of
                 // the clip needs beyond the rows (`export-bvh` from the shards).
-                "offset": [joint.offset.x, joint.offset.y, joint.offset.z],
-                "channels": joint.channels.iter().map(|c| c.name()).collect::<Vec<_>>(),
-                "end_site": joint.end_site.map(|e| [e.x, e.y, e.z]),
-                "mirror": skeleton.joints[profile.swap[j]].name,
-                "part": profile.part_of[j],
-                "role": profile.roles[j],
-            })
+                offset: Some(joint.offset.to_array()),
+                channels: Some(joint.channels.clone()),
+                end_site: joint.end_site.map(|e| e.to_array()),
+                mirror: Some(skeleton.joints[profile.swap[j]].name.clone()),
+                part: profile.part_of[j],
+                role: Some(profile.roles[j]),
+            }
         })
         .collect();
-    let mut entry = serde_json::json!({
-        "profile": profile.name,
-        "root": skeleton.joints[profile.root].name,
-        "capture_axes": { "up": profile.up.to_string(), "forward": profile.forward.to_string() },
-        "unit_scale": profile.unit_scale,
-        "joints": joints,
-    });
-    if let (Some(of), Some(map)) = (mirror_of, entry.as_object_mut()) {
-        map.insert("mirror_of".into(), serde_json::Value::String(of));
+    SkeletonEntry {
+        profile: profile.name.clone(),
+        root: skeleton.joints[profile.root].name.clone(),
+        capture_axes: CaptureAxes {
+            up: profile.up,
+            forward: profile.forward,
+        },
+        unit_scale: profile.unit_scale,
+        joints,
+        mirror_of,
     }
-    entry
 }
 
 /// Everything written beside the shards that the build computes: manifest fields and card text.

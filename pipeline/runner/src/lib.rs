@@ -197,6 +197,9 @@ pub enum BuildError {
     /// The dataset folder is one the build must not write into.
     #[error(transparent)]
     Refused(#[from] motionforge_core::base::guard::Refused),
+    /// A written shard cannot be read back.
+    #[error(transparent)]
+    ReadBack(#[from] motionforge_format::dataset::DatasetError),
     /// The table cannot be written.
     #[error("{path}: {source}")]
     Table {

@@ -93,7 +93,7 @@ impl Recorded {
 pub(super) struct Table<'a> {
     pub(super) plans: &'a BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
     pub(super) profiles: &'a BTreeMap<String, Profile>,
-    pub(super) skeletons: &'a BTreeMap<String, serde_json::Value>,
+    pub(super) skeletons: &'a motionforge_format::io::skeletons::Skeletons,
     pub(super) rejects: &'a [Reject],
     /// Reads them back.
     pub(super) motions: &'a MotionSource,
@@ -163,40 +163,21 @@ fn check_splits(
     plans: &[ShardPlan],
     path_of: impl Fn(&ShardPlan) -> std::path::PathBuf,
 ) -> Result<(), BuildError> {
-    use arrow_array::{Array, StringArray};
-    use parquet::arrow::ProjectionMask;
-    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    use motionforge_format::dataset::OpenShard;
+    use motionforge_format::io::schema::Column;
     let mut seen: BTreeMap<String, std::collections::BTreeSet<String>> = BTreeMap::new();
     for plan in plans {
-        let path = path_of(plan);
-        let table_err = |e: parquet::errors::ParquetError| BuildError::Table {
-            path: path.clone(),
-            source: e.into(),
-        };
-        let file = std::fs::File::open(&path).map_err(workspace::io_err(&path))?;
-        let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(table_err)?;
-        let mask = ProjectionMask::columns(builder.parquet_schema(), ["split", "source_path"]);
-        let reader = builder.with_projection(mask).build().map_err(table_err)?;
-        for batch in reader {
-            let batch = batch.map_err(|e| BuildError::Table {
-                path: path.clone(),
-                source: e.into(),
-            })?;
-            let column = |name: &str| {
-                batch
-                    .column_by_name(name)
-                    .and_then(|c| c.as_any().downcast_ref::<StringArray>().cloned())
-            };
-            let (Some(splits), Some(paths)) = (column("split"), column("source_path")) else {
-                continue;
-            };
-            for r in 0..batch.num_rows() {
-                if splits.is_null(r) || paths.is_null(r) {
-                    continue;
+        let shard = OpenShard::open(&path_of(plan))?;
+        for batch in shard.read(&[Column::Split, Column::SourcePath]).batches()? {
+            let batch = batch?;
+            let (splits, paths) = (
+                batch.strings(Column::Split)?,
+                batch.strings(Column::SourcePath)?,
+            );
+            for (split, path) in splits.into_iter().zip(paths) {
+                if let (Some(split), Some(path)) = (split, path) {
+                    seen.entry(path).or_default().insert(split);
                 }
-                seen.entry(paths.value(r).to_string())
-                    .or_default()
-                    .insert(splits.value(r).to_string());
             }
         }
     }
@@ -530,7 +511,7 @@ pub(super) fn write_outputs(
     {
         return Ok(false);
     }
-    let skeletons_json = serde_json::to_string_pretty(table.skeletons).unwrap_or_default();
+    let skeletons_json = motionforge_format::io::skeletons::skeletons_json(table.skeletons);
     // From here on the clips are read a shard at a time: held compressed, they no longer grow
     // the build's memory with the dataset.
     let clips = HeldClips::new(clips, |c| index.get(&key(c)).cloned())?;

@@ -307,7 +307,7 @@ struct MotionAnswer<'a> {
     joints: usize,
     names: Vec<&'a str>,
     parents: Vec<Option<usize>>,
-    parts: Vec<Option<&'a str>>,
+    parts: Vec<Option<motionforge_core::motion::BodyPart>>,
     #[serde(serialize_with = "widened")]
     positions: Vec<f32>,
     root: &'a str,
@@ -348,7 +348,7 @@ fn motion_answer(
         joints: frames.info.joints,
         names: skeleton.joints.iter().map(|j| j.name.as_str()).collect(),
         parents: skeleton.parents(),
-        parts: skeleton.joints.iter().map(|j| j.part.as_deref()).collect(),
+        parts: skeleton.joints.iter().map(|j| j.part).collect(),
         positions: dataset::preview::canonical_positions(frames, skeleton),
         root: &skeleton.root,
     };

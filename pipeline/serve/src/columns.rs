@@ -18,9 +18,7 @@ use arrow_array::types::{
     UInt32Type, UInt64Type,
 };
 use arrow_array::{Array, RecordBatch};
-use arrow_schema::{DataType, Schema};
-use parquet::arrow::ProjectionMask;
-use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
+use arrow_schema::{DataType, SchemaRef};
 use serde_json::{Map, Value, json};
 
 use motionforge_format::dataset::{ClipInfo, OpenShard};
@@ -43,38 +41,31 @@ pub(crate) const MAX_ROWS: usize = 100;
 pub(crate) type ReadError = String;
 
 /// The columns of the table: the first shard's schema (the builds write one schema).
-fn table_schema(shards: &[OpenShard]) -> Result<Option<Schema>, ReadError> {
+fn table_schema(shards: &[OpenShard]) -> Result<Option<SchemaRef>, ReadError> {
     let Some(first) = shards.first() else {
         return Ok(None);
     };
-    let builder = ParquetRecordBatchReaderBuilder::try_new(first.clone())
-        .map_err(|e| format!("{}: {e}", first.path().display()))?;
-    Ok(Some(builder.schema().as_ref().clone()))
+    first.schema().map(Some).map_err(|e| e.to_string())
 }
 
-/// Reads the columns of `shard` named in `names` that are not per-frame arrays, `selection` of
-/// its rows (all without one), a batch at a time.
+/// Reads the columns of `shard` named in `names` that are not per-frame arrays, the rows
+/// `first..first + count` of it (all without them), a batch at a time.
 fn batches(
     shard: &OpenShard,
     names: &[String],
-    selection: Option<RowSelection>,
-) -> Result<impl Iterator<Item = Result<RecordBatch, ReadError>>, ReadError> {
-    let path = shard.path().to_path_buf();
-    let at = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
-    let builder = ParquetRecordBatchReaderBuilder::try_new(shard.clone()).map_err(|e| at(&e))?;
-    let schema = builder.schema().clone();
-    let indices: Vec<usize> = names
-        .iter()
-        .filter(|n| frame_shape(n).is_none())
-        .filter_map(|n| schema.index_of(n).ok())
-        .collect();
-    let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
-    let mut builder = builder.with_projection(mask).with_batch_size(BATCH_ROWS);
-    if let Some(s) = selection {
-        builder = builder.with_row_selection(s);
+    rows: Option<(usize, usize)>,
+) -> Result<impl Iterator<Item = Result<RecordBatch, ReadError>> + use<>, ReadError> {
+    let mut read = shard
+        .read_named(names.iter().filter(|n| frame_shape(n).is_none()))
+        .batch_rows(BATCH_ROWS);
+    if let Some((first, count)) = rows {
+        read = read.rows(first, count);
     }
-    let reader = builder.build().map_err(|e| at(&e))?;
-    Ok(reader.map(move |b| b.map_err(|e| format!("{}: {e}", path.display()))))
+    let batches = read.batches().map_err(|e| e.to_string())?;
+    Ok(batches.map(|b| {
+        b.map(|b| b.record_batch().clone())
+            .map_err(|e| e.to_string())
+    }))
 }
 
 /// What is counted of one column.
@@ -462,9 +453,8 @@ pub(crate) fn page(
         let Some(open) = shards.get(shard) else {
             return Err(format!("row {r}: no shard {shard}"));
         };
-        let selection = RowSelection::from(vec![RowSelector::skip(first), RowSelector::select(n)]);
         let mut k = r;
-        for batch in batches(open, &names, Some(selection))? {
+        for batch in batches(open, &names, Some((first, n)))? {
             let batch = batch?;
             for i in 0..batch.num_rows() {
                 let info = clips.get(k);

@@ -117,12 +117,7 @@ impl Snapshot {
                 waited += POLL;
                 continue;
             }
-            let opened = dataset::shards(dataset).and_then(|paths| {
-                paths
-                    .iter()
-                    .map(|p| OpenShard::open(p))
-                    .collect::<Result<Vec<_>, _>>()
-            });
+            let opened = dataset::open_shards(dataset);
             let skeletons = dataset::read_skeletons(dataset).map_err(|e| e.to_string());
             let settled = Version::of(dataset) == before && !before.switching();
             let retry = waited < SWITCH_WAIT && (!settled || opened.as_ref().is_err_and(vanished));

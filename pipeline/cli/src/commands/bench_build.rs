@@ -614,40 +614,30 @@ struct EncodeReference {
 /// shard is in memory at a time.
 fn encode_reference(data: &Path, zstd_level: i32, repeat: usize) -> Result<EncodeReference> {
     use parquet::arrow::ArrowWriter;
-    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-    let mut files: Vec<PathBuf> = std::fs::read_dir(data)
-        .with_context(|| format!("cannot list {}", data.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "parquet"))
-        .collect();
-    files.sort();
+    let shards = motionforge::dataset::open_clip_tables(data)
+        .with_context(|| format!("cannot list {}", data.display()))?;
     let mut reference = EncodeReference {
         seconds: vec![0.0; repeat],
         cpu_seconds: vec![0.0; repeat],
-        shards: files.len(),
+        shards: shards.len(),
         rows: 0,
         bytes: 0,
         identical: true,
     };
-    for file in &files {
-        let shard = bytes::Bytes::from(
-            std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?,
-        );
-        let reader = ParquetRecordBatchReaderBuilder::try_new(shard.clone())
-            .with_context(|| format!("cannot read {}", file.display()))?;
-        let skeletons = reader
-            .metadata()
-            .file_metadata()
-            .key_value_metadata()
-            .and_then(|kv| kv.iter().find(|kv| kv.key == "motionforge.skeletons"))
-            .and_then(|kv| kv.value.clone())
-            .unwrap_or_default();
+    for open in &shards {
+        let file = open.path();
+        let shard =
+            std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?;
+        let skeletons = open.key_value("motionforge.skeletons")?.unwrap_or_default();
         // The reader copies the file's key-value metadata into the Arrow schema; the writer
         // adds it back from the properties, so the schema the build wrote has none.
-        let schema = Arc::new(arrow_schema::Schema::new(reader.schema().fields().clone()));
-        let batches = reader
-            .with_batch_size(motionforge::io::parquet::ROWS_PER_GROUP)
-            .build()?
+        let fields = open.schema()?.fields().clone();
+        let schema = Arc::new(arrow_schema::Schema::new(fields.clone()));
+        let batches = open
+            .read_named(fields.iter().map(|f| f.name()))
+            .batch_rows(motionforge::io::parquet::ROWS_PER_GROUP)
+            .batches()?
+            .map(|b| b.map(|b| b.record_batch().clone()))
             .collect::<Result<Vec<_>, _>>()
             .with_context(|| format!("cannot read {}", file.display()))?;
         reference.rows += batches.iter().map(|b| b.num_rows()).sum::<usize>();

@@ -1,7 +1,10 @@
-//! A built dataset read back from its folder alone (shards and `skeletons.json`): the clip
-//! listing with its filters, one clip's metadata and frames, its motion on its own skeleton (for
-//! `export-bvh`) and stick-figure previews. Used by the `clips`, `export-bvh` and `preview`
-//! commands, the report's gallery and the service's browser; it reads, never writes a dataset.
+//! A built dataset read back from its folder alone (shards and `skeletons.json`): the one reader
+//! of clip tables (finding the shards, reading the columns a caller names, typed decoding:
+//! [`OpenShard::read`], [`ShardBatch`]), the clip listing with its filters, one clip's metadata
+//! and frames, its motion on its own skeleton (for `export-bvh`) and stick-figure previews. Used
+//! by `clips`, `export-bvh`, `preview`, the report and its gallery, the planner, the exports, the
+//! service, the build's check of its own shards and `bench-build`; it reads, never writes a
+//! dataset.
 //!
 //! Columns are found by name in each shard's schema, never by position, so a table with added
 //! columns still reads.
@@ -9,13 +12,15 @@
 pub mod preview;
 mod read;
 pub mod skeletons;
+mod table;
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
 pub use read::{ClipFrames, OpenShard, ShardReader, read_clip, read_clip_in, read_frames};
-pub use skeletons::{SkeletonEntry, Skeletons, read_skeletons};
+pub use skeletons::{SkeletonEntry, Skeletons, SkeletonsError, read_skeletons};
+pub use table::{ShardBatch, ShardRead, find_clip_tables, open_clip_tables};
 
 /// Why a dataset folder, or a clip in it, cannot be read.
 #[derive(Debug, thiserror::Error)]
@@ -28,22 +33,55 @@ pub enum DatasetError {
         /// The error.
         source: std::io::Error,
     },
-    /// A shard cannot be decoded, or a column is missing or of another type.
-    #[error("{}: {message}", path.display())]
-    Table {
+    /// A shard cannot be opened or decoded as Parquet.
+    #[error("{}: {source}", path.display())]
+    Parquet {
         /// The shard.
         path: PathBuf,
-        /// What was found and what was expected.
-        message: String,
+        /// The error.
+        source: parquet::errors::ParquetError,
     },
-    /// `skeletons.json` does not describe the skeletons.
-    #[error("{}: {message}", path.display())]
-    Skeletons {
-        /// The file.
+    /// A batch of a shard's rows cannot be decoded.
+    #[error("{}: {source}", path.display())]
+    Arrow {
+        /// The shard.
         path: PathBuf,
-        /// What was expected.
-        message: String,
+        /// The error.
+        source: arrow_schema::ArrowError,
     },
+    /// A column the read needs is not in the shard.
+    #[error("{}: no column `{column}` (is this a motionforge clip table?)", path.display())]
+    MissingColumn {
+        /// The shard.
+        path: PathBuf,
+        /// The column.
+        column: &'static str,
+    },
+    /// A column has a type the reader does not accept.
+    #[error("{}: column `{column}` has type {found}, expected {expected}", path.display())]
+    ColumnType {
+        /// The shard.
+        path: PathBuf,
+        /// The column.
+        column: &'static str,
+        /// Its Arrow type.
+        found: String,
+        /// What the reader accepts.
+        expected: &'static str,
+    },
+    /// A column that must have a value is null.
+    #[error("{}: `{column}` is null in row {row}", path.display())]
+    NullValue {
+        /// The shard.
+        path: PathBuf,
+        /// The column.
+        column: &'static str,
+        /// The row, from 0 in the shard.
+        row: usize,
+    },
+    /// `skeletons.json` cannot be read or does not describe the skeletons.
+    #[error(transparent)]
+    Skeletons(#[from] SkeletonsError),
     /// The folder holds no clip table.
     #[error("{}: no clip table (data/*.parquet); build the dataset first", path.display())]
     NotADataset {
@@ -199,37 +237,36 @@ impl ClipFilter {
     }
 }
 
-/// The clip tables of a dataset folder: `data/*.parquet`, sorted by name.
+/// The clip tables of a dataset folder: its shards, `data/*.parquet` ([`find_clip_tables`] of
+/// `data/`), sorted by name; at least one.
 pub fn shards(dataset: &Path) -> Result<Vec<PathBuf>, DatasetError> {
+    Ok(open_shards(dataset)?
+        .into_iter()
+        .map(|shard| shard.path().to_path_buf())
+        .collect())
+}
+
+/// [`shards`], opened: what they hold stays the build that was listed, whatever replaces them.
+pub fn open_shards(dataset: &Path) -> Result<Vec<OpenShard>, DatasetError> {
     let dir = dataset.join(motionforge_core::base::layout::DATA_DIR);
-    let entries = std::fs::read_dir(&dir).map_err(|_| DatasetError::NotADataset {
+    let not_a_dataset = || DatasetError::NotADataset {
         path: dataset.to_path_buf(),
-    })?;
-    let mut found = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(|source| DatasetError::Io {
-            path: dir.clone(),
-            source,
-        })?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if name.ends_with(".parquet") && !name.starts_with('.') {
-            found.push(entry.path());
-        }
+    };
+    if !dir.is_dir() {
+        return Err(not_a_dataset());
     }
+    let found = open_clip_tables(&dir)?;
     if found.is_empty() {
-        return Err(DatasetError::NotADataset {
-            path: dataset.to_path_buf(),
-        });
+        return Err(not_a_dataset());
     }
-    found.sort();
     Ok(found)
 }
 
 /// Every row's metadata, in shard order and then row order.
 pub fn list_clips(dataset: &Path) -> Result<Vec<ClipInfo>, DatasetError> {
     let mut out = Vec::new();
-    for shard in shards(dataset)? {
-        read::read_infos(dataset, &shard, &mut out)?;
+    for shard in open_shards(dataset)? {
+        shard.read_infos(dataset, &mut out)?;
     }
     Ok(out)
 }

@@ -17,7 +17,7 @@ use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
 use super::{ClipFrames, DatasetError, SkeletonEntry};
-use motionforge_core::motion::Motion;
+use motionforge_core::motion::{BodyPart, Motion, Role};
 
 /// The camera's height above the character, as an angle below the horizontal.
 pub const ELEVATION_DEGREES: f64 = 20.0;
@@ -102,15 +102,19 @@ fn canonical(frames: &ClipFrames, entry: &SkeletonEntry) -> (DVec3, DQuat) {
         .position(|j| j.name == entry.root)
         .unwrap_or(0);
     let origin = p(root) * DVec3::new(1.0, 1.0, 0.0);
-    let side = |role: &str, part: &str| {
+    let side = |role: Role, left: bool| {
         entry.joints.iter().position(|j| {
-            j.role.as_deref() == Some(role)
-                && j.part.as_deref().is_some_and(|p| p.starts_with(part))
+            j.role == Some(role)
+                && j.part.is_some_and(|p| match p {
+                    BodyPart::LeftArm | BodyPart::LeftLeg => left,
+                    BodyPart::RightArm | BodyPart::RightLeg => !left,
+                    BodyPart::Global | BodyPart::Torso => false,
+                })
         })
     };
     let mut rotation = DQuat::IDENTITY;
-    for (role, l, r) in [("hip", "left", "right"), ("shoulder", "left", "right")] {
-        if let (Some(a), Some(b)) = (side(role, l), side(role, r)) {
+    for role in [Role::Hip, Role::Shoulder] {
+        if let (Some(a), Some(b)) = (side(role, true), side(role, false)) {
             let right = (p(b) - p(a)) * DVec3::new(1.0, 1.0, 0.0);
             if right.length() > 1e-6 {
                 let forward = DVec3::Z.cross(right.normalize());
@@ -169,14 +173,14 @@ fn projected(frames: &ClipFrames, entry: &SkeletonEntry) -> Vec<([f64; 2], f64)>
 }
 
 /// RGB of a body part; left side cool, right side warm.
-fn part_colour(part: Option<&str>) -> RGBColor {
+fn part_colour(part: Option<BodyPart>) -> RGBColor {
     match part {
-        Some("left_arm") => RGBColor(31, 90, 220),
-        Some("left_leg") => RGBColor(0, 160, 170),
-        Some("right_arm") => RGBColor(220, 40, 40),
-        Some("right_leg") => RGBColor(240, 140, 0),
-        Some("torso") => RGBColor(60, 60, 60),
-        _ => RGBColor(120, 120, 120),
+        Some(BodyPart::LeftArm) => RGBColor(31, 90, 220),
+        Some(BodyPart::LeftLeg) => RGBColor(0, 160, 170),
+        Some(BodyPart::RightArm) => RGBColor(220, 40, 40),
+        Some(BodyPart::RightLeg) => RGBColor(240, 140, 0),
+        Some(BodyPart::Torso) => RGBColor(60, 60, 60),
+        Some(BodyPart::Global) | None => RGBColor(120, 120, 120),
     }
 }
 
@@ -492,7 +496,7 @@ fn draw_pose(
     bones.sort_by(|a, b| b.0.total_cmp(&a.0));
     let width = (f64::from(size) / 90.0).round().max(2.0) as u32;
     for (_, j, p) in bones {
-        let colour = part_colour(joints[j].part.as_deref());
+        let colour = part_colour(joints[j].part);
         root.draw(&PathElement::new(
             vec![px(pose[p].0), px(pose[j].0)],
             colour.stroke_width(width),
@@ -737,11 +741,11 @@ fn palette() -> &'static (Vec<u8>, Vec<u8>) {
     PALETTE.get_or_init(|| {
         let mut colours: Vec<[u8; 3]> = vec![[255, 255, 255], [0, 0, 0]];
         for c in [
-            part_colour(Some("left_arm")),
-            part_colour(Some("left_leg")),
-            part_colour(Some("right_arm")),
-            part_colour(Some("right_leg")),
-            part_colour(Some("torso")),
+            part_colour(Some(BodyPart::LeftArm)),
+            part_colour(Some(BodyPart::LeftLeg)),
+            part_colour(Some(BodyPart::RightArm)),
+            part_colour(Some(BodyPart::RightLeg)),
+            part_colour(Some(BodyPart::Torso)),
             part_colour(None),
             GRID,
             GOAL,

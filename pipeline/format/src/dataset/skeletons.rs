@@ -1,142 +1,34 @@
-//! `skeletons.json` read back, and a row's frames turned into a [`Motion`] on its own skeleton.
-//!
-//! Fields this reader does not know are ignored, so a writer may add some (a mirrored skeleton of
-//! an asymmetric capture, for one) without breaking it.
+//! A row's frames turned into a [`Motion`] on its own skeleton, from its `skeletons.json` entry
+//! (the file's type is [`crate::io::skeletons`], re-exported here).
 
-use std::collections::BTreeMap;
-use std::path::Path;
 use std::sync::Arc;
 
 use glam::{DQuat, DVec3};
-use serde::Deserialize;
 
-use super::{ClipFrames, DatasetError};
+use super::ClipFrames;
+pub use crate::io::skeletons::{
+    CaptureAxes, NoBvhLayout, SkeletonEntry, SkeletonJoint, Skeletons, SkeletonsError,
+    read_skeletons,
+};
 use motionforge_core::motion::profile::dataset_axes;
-use motionforge_core::motion::{Channel, Joint, Motion, SignedAxis, Skeleton};
+use motionforge_core::motion::{Motion, Skeleton};
 
-/// Every skeleton of a dataset, by skeleton id (the `skeleton` column).
-pub type Skeletons = BTreeMap<String, SkeletonEntry>;
-
-/// One entry of `skeletons.json`.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct SkeletonEntry {
-    /// The profile name.
-    pub profile: String,
-    /// The root-motion joint's name.
-    pub root: String,
-    /// The capture axes the profile declares.
-    pub capture_axes: CaptureAxes,
-    /// File units to metres.
-    pub unit_scale: f64,
-    /// Joints in table order.
-    pub joints: Vec<SkeletonJoint>,
-}
-
-/// `capture_axes`: which file axes are up and forward.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-pub struct CaptureAxes {
-    /// Up, e.g. `+y`.
-    pub up: SignedAxis,
-    /// Forward, e.g. `+z`.
-    pub forward: SignedAxis,
-}
-
-/// One joint of a [`SkeletonEntry`].
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct SkeletonJoint {
-    /// The joint's name.
-    pub name: String,
-    /// The parent's index; `None` for joint 0.
-    pub parent: Option<usize>,
-    /// Rest offset in metres, in the parent's frame.
-    pub offset_m: [f64; 3],
-    /// The left/right partner's name (itself for centre joints).
-    #[serde(default)]
-    pub mirror: Option<String>,
-    /// SINC body part, if any.
-    #[serde(default)]
-    pub part: Option<String>,
-    /// Role (`pelvis`, `hip`, `hand`, ...).
-    #[serde(default)]
-    pub role: Option<String>,
-    /// Rest offset in file units as read (datasets written before schema 7's skeletons lack it).
-    #[serde(default)]
-    pub offset: Option<[f64; 3]>,
-    /// BVH channels in file order.
-    #[serde(default)]
-    pub channels: Option<Vec<String>>,
-    /// The end site's offset in file units.
-    #[serde(default)]
-    pub end_site: Option<[f64; 3]>,
-}
-
-/// Reads `<dataset>/skeletons.json`.
-pub fn read_skeletons(dataset: &Path) -> Result<Skeletons, DatasetError> {
-    let path = dataset.join(motionforge_core::base::layout::SKELETONS_FILE);
-    let text = std::fs::read_to_string(&path).map_err(|source| DatasetError::Io {
-        path: path.clone(),
-        source,
-    })?;
-    let skeletons: Skeletons =
-        serde_json::from_str(&text).map_err(|e| DatasetError::Skeletons {
-            path: path.clone(),
-            message: format!("line {}: {e}", e.line()),
-        })?;
-    for (id, s) in &skeletons {
-        let bad = s
-            .joints
-            .iter()
-            .enumerate()
-            .find(|(j, joint)| match joint.parent {
-                None => *j != 0,
-                Some(p) => p >= *j,
-            });
-        if s.joints.is_empty() || bad.is_some() || !(s.unit_scale.is_finite() && s.unit_scale > 0.0)
-        {
-            return Err(DatasetError::Skeletons {
-                path,
-                message: format!(
-                    "skeleton `{id}`: expected joints with parents before children, joint 0 the \
-                     only root, and a positive unit_scale"
-                ),
-            });
-        }
-    }
-    Ok(skeletons)
-}
-
-impl SkeletonEntry {
-    /// Parent index per joint.
-    pub fn parents(&self) -> Vec<Option<usize>> {
-        self.joints.iter().map(|j| j.parent).collect()
-    }
-
-    /// The hierarchy as the capture file had it (offsets in file units, channels, end sites), or
-    /// why the entry lacks what that needs.
-    pub fn skeleton(&self) -> Result<Skeleton, String> {
-        let mut joints = Vec::with_capacity(self.joints.len());
-        for j in &self.joints {
-            let (Some(offset), Some(channels)) = (j.offset, &j.channels) else {
-                return Err(format!(
-                    "joint `{}` has no `offset` or `channels`: the dataset was written before \
-                     skeletons.json recorded them; rebuild it, or use export-bvh --config",
-                    j.name
-                ));
-            };
-            let channels = channels
-                .iter()
-                .map(|c| Channel::parse(c).ok_or_else(|| format!("`{c}` is not a BVH channel")))
-                .collect::<Result<Vec<_>, _>>()?;
-            joints.push(Joint {
-                name: j.name.clone(),
-                parent: j.parent,
-                offset: DVec3::from_array(offset),
-                channels,
-                end_site: j.end_site.map(DVec3::from_array),
-            });
-        }
-        Ok(Skeleton { joints })
-    }
+/// Why a row cannot be put on its skeleton.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ClipMotionError {
+    /// The entry lacks the file-unit offsets or channels.
+    #[error(transparent)]
+    NoBvhLayout(#[from] NoBvhLayout),
+    /// The skeleton and the row count different joints.
+    #[error("skeleton `{skeleton}` has {skeleton_joints} joints, the row {row_joints}")]
+    JointCount {
+        /// The skeleton id.
+        skeleton: String,
+        /// Joints of the skeleton.
+        skeleton_joints: usize,
+        /// Joints of the row (`num_joints`).
+        row_joints: usize,
+    },
 }
 
 /// The motion of a row on its own skeleton, in capture units and axes: the inverse of the
@@ -144,14 +36,15 @@ impl SkeletonEntry {
 /// capture axes); a joint with position channels gets its translation from the stored world
 /// positions (`W_parent⁻¹ (P_j − P_parent)` over the unit scale), every other joint its rest
 /// offset.
-pub fn clip_motion(frames: &ClipFrames, entry: &SkeletonEntry) -> Result<Motion, String> {
+pub fn clip_motion(frames: &ClipFrames, entry: &SkeletonEntry) -> Result<Motion, ClipMotionError> {
     let skeleton = entry.skeleton()?;
     let n = skeleton.len();
     if n != frames.info.joints {
-        return Err(format!(
-            "skeleton `{}` has {n} joints, the row {}",
-            frames.info.skeleton, frames.info.joints
-        ));
+        return Err(ClipMotionError::JointCount {
+            skeleton: frames.info.skeleton.clone(),
+            skeleton_joints: n,
+            row_joints: frames.info.joints,
+        });
     }
     let to_capture = dataset_axes(entry.capture_axes.up, entry.capture_axes.forward).inverse();
     Ok(motion_from_rows(
