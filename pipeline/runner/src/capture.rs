@@ -215,23 +215,22 @@ fn ingest_capture(
     parsed: &mut Option<ingest::IngestOutput>,
     item: &mut Item,
 ) -> Result<Ingested, BuildError> {
-    let ingest_fp = ingest::fingerprint(&read.input(&[]));
-    let Some((ingested, ran)) =
-        shared
-            .workspace
-            .try_item(ingest::NAME, &item.key, &ingest_fp, || {
-                let out = read.parse()?;
-                let record = out.record();
-                *parsed = Some(out);
-                Ok::<_, BuildError>(record)
-            })?
-    else {
-        item.pending = Some(Stage::Ingest);
+    let stamp = ingest::fingerprint(&read.input(&[]));
+    let ingest_fp = stamp.fingerprint.clone();
+    let ingested = item.run_stage::<ingest::Ingest, BuildError>(
+        &shared.workspace,
+        stamp,
+        |_| true,
+        || {
+            let out = read.parse()?;
+            let record = out.record();
+            *parsed = Some(out);
+            Ok(record)
+        },
+    )?;
+    let Some(ingested) = ingested else {
         return Ok(Ingested::Pending);
     };
-    let ingest_fp = ingest_fp.fingerprint;
-    item.done.push((Stage::Ingest, ingest_fp.clone(), ran));
-    item.rejects.extend(ingested.rejects);
     Ok(match ingested.capture {
         Some(header) => Ingested::Read(header, ingest_fp),
         None => Ingested::Refused,
@@ -270,9 +269,11 @@ fn segment_ingested(
             .flat_map(MotionRef::chunks)
             .all(|(stage, fingerprint)| shared.workspace.has(stage, fingerprint))
     };
-    let Some(((segmented, refs), ran)): Option<((SegmentOutput, Vec<MotionRef>), bool)> = shared
-        .workspace
-        .try_item_where(segment::NAME, &item.key, &seg_fp, chunks_present, || {
+    let segmented = item.run_stage::<segment::Segment, BuildError>(
+        &shared.workspace,
+        seg_fp,
+        chunks_present,
+        || {
             let capture = match parsed.take() {
                 Some(out) => out.capture,
                 None => read.parse()?.capture,
@@ -294,20 +295,17 @@ fn segment_ingested(
             };
             let mut spill = MotionSpill::new(&shared.workspace);
             let out = segment::run_with(&seg_input, |_, motion| spill.push(motion))?;
-            Ok::<_, BuildError>((out, spill.finish()?))
-        })?
-    else {
-        item.pending = Some(Stage::Segment);
+            Ok((out, spill.finish()?))
+        },
+    )?;
+    let Some((mut segmented, refs)) = segmented else {
         return Ok(());
     };
-
-    let mut segmented = segmented;
     item.clips = std::mem::take(&mut segmented.clips);
     for clip in &mut item.clips {
         shared.skeletons.share(&mut clip.skeleton);
     }
     item.refs = refs;
-    item.done.push((Stage::Segment, seg_fp.fingerprint, ran));
     item.segment = segmented;
     Ok(())
 }
@@ -374,11 +372,19 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
     let fp = mirror::fingerprint(&encoded, spec, &shared.types_digest, offsets);
     // The copies' texts and labels are made here; their frames are made from the originals'
     // when read (`MotionRef::Mirrored`), so the stage reads and stores no frames.
-    let Some(((mirrored, refs), ran)): Option<((mirror::MirrorOutput, Vec<MotionRef>), bool)> =
-        shared.workspace.item(mirror::NAME, &item.key, &fp, || {
+    // Taken for the stage's run, which records itself on the item, and put back after.
+    let (clips, clip_refs) = (
+        std::mem::take(&mut item.clips),
+        std::mem::take(&mut item.refs),
+    );
+    let mirrored = item.run_stage::<mirror::Mirror, BuildError>(
+        &shared.workspace,
+        fp,
+        |_| true,
+        || {
             let mut out = mirror::MirrorOutput::default();
             let mut refs = Vec::new();
-            for (clip, at) in item.clips.iter().zip(&item.refs) {
+            for (clip, at) in clips.iter().zip(&clip_refs) {
                 let one = mirror::run_with(
                     std::slice::from_ref(clip),
                     spec,
@@ -392,19 +398,18 @@ pub(super) fn mirror_capture(shared: &Shared<'_>, item: &mut Item) -> Result<(),
                 }
                 out.rejects.extend(one.rejects);
             }
-            (out, refs)
-        })?
-    else {
-        item.pending = Some(Stage::Mirror);
+            Ok((out, refs))
+        },
+    );
+    item.clips = clips;
+    item.refs = clip_refs;
+    let Some((mirrored, refs)) = mirrored? else {
         return Ok(());
     };
-
     item.mirrored = mirrored.clips;
     for clip in &mut item.mirrored {
         shared.skeletons.share(&mut clip.skeleton);
     }
     item.mirrored_refs = refs;
-    item.done.push((Stage::Mirror, fp.fingerprint, ran));
-    item.rejects.extend(mirrored.rejects);
     Ok(())
 }

@@ -7,13 +7,20 @@ use rayon::prelude::*;
 
 use super::capture::Shared;
 use super::motions::{self, MotionIndex, MotionSource};
-use super::{BuildError, Fingerprint, sha256_hex};
+use super::{BuildError, sha256_hex};
+use crate::stage::CachedStage;
 use motionforge_sources::clip::Clip;
 
-/// Stage-cache folder of the label check's findings, one entry per capture with claiming clips.
-const LABEL_CHECK: &str = "label-check";
-/// Version of the label check's cached findings (bump when `quality::contradictions` changes).
-const LABEL_CHECK_VERSION: u32 = 1;
+/// The label check as the runner caches it: the findings of one capture's claiming clips (key:
+/// the capture path; stage-cache folder `label-check`).
+struct LabelCheck;
+
+impl CachedStage for LabelCheck {
+    const NAME: &'static str = "label-check";
+    /// Bump when `quality::contradictions` changes.
+    const VERSION: u32 = 1;
+    type Output = Vec<motionforge_core::quality::Contradiction>;
+}
 
 /// The real single clips (mirrors included) whose motion contradicts what their text says
 /// (`quality::contradictions`), in `clip_id` order. Only clips whose text makes a claim the
@@ -49,38 +56,43 @@ pub(super) fn contradicting_labels(
                     held.iter().map(|c| index.get(&motions::key(c))).collect();
                 let encoded =
                     motionforge_core::base::encoded_sha256(&(held, &refs), "clips to check")?;
-                let stamp = Fingerprint::new(LABEL_CHECK, LABEL_CHECK_VERSION)
+                let stamp = LabelCheck::fingerprint()
                     .text("clips", &encoded)
                     .json("config mirror.offsets", &shared.config.mirror.offsets)
                     .text("skeleton profiles", &profiles)
                     .stamp();
-                let found = shared.workspace.try_item(LABEL_CHECK, path, &stamp, || {
-                    let mut out = Vec::new();
-                    for clip in held {
-                        let Some(profile) = shared.profile_of(clip) else {
-                            continue;
-                        };
-                        let motion = motions.motion_of(clip, index)?;
-                        let positions = motionforge_core::motion::canonical::dataset_positions(
-                            &motion, &profile,
-                        );
-                        out.extend(motionforge_core::quality::contradictions(
-                            &clip.clip_id,
-                            &clip.text,
-                            &positions,
-                            motion.num_joints(),
-                            motion.fps,
-                            &profile,
-                        ));
-                    }
-                    Ok::<_, BuildError>(out)
-                })?;
+                let found = shared.workspace.run_stage::<LabelCheck, BuildError>(
+                    path,
+                    &stamp,
+                    |_| true,
+                    || {
+                        let mut out = Vec::new();
+                        for clip in held {
+                            let Some(profile) = shared.profile_of(clip) else {
+                                continue;
+                            };
+                            let motion = motions.motion_of(clip, index)?;
+                            let positions = motionforge_core::motion::canonical::dataset_positions(
+                                &motion, &profile,
+                            );
+                            out.extend(motionforge_core::quality::contradictions(
+                                &clip.clip_id,
+                                &clip.text,
+                                &positions,
+                                motion.num_joints(),
+                                motion.fps,
+                                &profile,
+                            ));
+                        }
+                        Ok(out)
+                    },
+                )?;
                 Ok::<_, BuildError>((stamp.fingerprint, found.map(|(f, _)| f).unwrap_or_default()))
             },
         )
         .collect::<Result<Vec<_>, BuildError>>()?;
     let live: BTreeSet<String> = checked.iter().map(|(f, _)| f.clone()).collect();
-    shared.workspace.prune(LABEL_CHECK, &live);
+    shared.workspace.prune(LabelCheck::NAME, &live);
     let mut out: Vec<motionforge_core::quality::Contradiction> =
         checked.into_iter().flat_map(|(_, found)| found).collect();
     out.sort_by(|a, b| {

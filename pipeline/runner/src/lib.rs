@@ -26,16 +26,17 @@ mod motions;
 mod output;
 mod pack;
 mod plan;
+mod stage;
+mod steps;
 mod synthetic;
 mod text;
 pub mod workspace;
 
 pub use motionforge_core::base::lock;
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use lookup::{ProfiledClip, collect_clips, find_clip, stored_motion};
@@ -318,50 +319,18 @@ pub struct BuildOptions {
     pub lock_wait: Option<std::time::Duration>,
 }
 
+/// The stages up to the write stage, as a loop over the build's steps ([`steps::STEPS`]); what
+/// they produced, before anything is written.
 fn run_stages<'a>(
     config: &'a Config,
     options: &BuildOptions,
     probe: bool,
 ) -> Result<Staged<'a>, BuildError> {
     let mut build = BuildState::open(config, options, probe)?;
-    build.ingest_and_segment()?;
-    let text = build.text_stages()?;
-    let run_mirror = build.mirror(&text)?;
-    let mirror_pending = build.items.iter().any(|i| i.pending == Some(Stage::Mirror));
-    let first_pending = items_pending_stage(&build.items);
-    build.prune_stage_caches();
-    if run_mirror {
-        let run = capture_run(&build.items, Stage::Mirror, &options.progress);
-        build.stages.push(run);
+    for step in steps::STEPS {
+        step.run(&mut build)?;
     }
-    let mut gathered = build.gather(&text);
-    let mut blocked = if build.upstream_pending {
-        first_pending
-    } else if text.pending {
-        Some(Stage::Label)
-    } else if mirror_pending {
-        Some(Stage::Mirror)
-    } else {
-        None
-    };
-    let (compose, pair_check) = build.compose(&mut gathered, &mut blocked)?;
-    Ok(Staged {
-        output: build.output,
-        files: build.files.len(),
-        stages: build.stages,
-        clips: gathered.clips,
-        rejects: gathered.rejects,
-        notes: gathered.notes,
-        drops_by_reason: gathered.drops_by_reason,
-        drops: gathered.drops,
-        unmapped_labels: gathered.unmapped_labels,
-        text,
-        compose,
-        pair_check,
-        blocked,
-        index: gathered.index,
-        shared: build.shared,
-    })
+    Ok(build.staged())
 }
 
 /// What a build carries from stage to stage: what every stage shares, each capture's item, and
@@ -385,10 +354,21 @@ struct BuildState<'a, 'o> {
     /// depends on outputs that do not exist yet.
     upstream_pending: bool,
     stages: Vec<StageRun>,
+    /// What the text stages did.
+    text: text::TextOutcome,
+    /// Every capture's clips, once gathered (the items are then empty).
+    gathered: Gathered,
+    /// In probe mode: the first stage whose output is not cached.
+    blocked: Option<Stage>,
+    /// What the compose stage did.
+    compose: crate::stages::compose::ComposeReport,
+    /// What the LLM pair check did.
+    pair_check: crate::stages::augment::AugmentReport,
 }
 
 /// Every clip of the captures, originals and mirrors, with where their frames are, and what
 /// the stages dropped, noted and rejected, in their report order.
+#[derive(Default)]
 struct Gathered {
     clips: Vec<Clip>,
     index: MotionIndex,
@@ -397,250 +377,6 @@ struct Gathered {
     drops: Vec<Dropped>,
     unmapped_labels: BTreeMap<String, usize>,
     notes: Vec<Note>,
-}
-
-impl<'a, 'o> BuildState<'a, 'o> {
-    /// The workspace (its stage cache cleared by `--force`), the checked word lists, the capture
-    /// files, and what every stage shares: profiles, annotations, frame-rate tables, motion types
-    /// and remembered file digests.
-    fn open(
-        config: &'a Config,
-        options: &'o BuildOptions,
-        probe: bool,
-    ) -> Result<BuildState<'a, 'o>, BuildError> {
-        let output = config.dataset_dir();
-        let workspace = if probe {
-            Workspace::probing(&output)
-        } else {
-            Workspace::new(&output)
-        };
-        if options.force && !probe {
-            let _ = std::fs::remove_dir_all(workspace.root().join("cache"));
-        }
-        motionforge_language::parts::lexicon::check_lexicon()?;
-        motionforge_language::compose_text::check_words()?;
-        motionforge_llm::paraphrase::check_words()?;
-        let files = source::discover(config)?;
-        // `--force` trusts nothing remembered: every capture is read and hashed again.
-        let shared = load_shared(config, workspace, options.force && !probe)?;
-        let motions = shared.motions();
-        Ok(BuildState {
-            config,
-            options,
-            probe,
-            through: options.through.unwrap_or(Stage::Report),
-            output,
-            files,
-            shared,
-            motions,
-            items: Vec::new(),
-            upstream_pending: false,
-            stages: Vec::new(),
-        })
-    }
-
-    /// Ingest and segment, capture by capture on all cores; then each clip's split, by capture,
-    /// set before labelling so every later copy (mirror, pair) inherits it.
-    fn ingest_and_segment(&mut self) -> Result<(), BuildError> {
-        let progress = &self.options.progress;
-        progress.stage_started(ingest::NAME, self.files.len() as u64);
-        let shared = &self.shared;
-        let mut items: Vec<Item> = self
-            .files
-            .par_iter()
-            .map(|file| {
-                let item = capture::segment_capture(shared, file);
-                progress.advanced(ingest::NAME, 1);
-                item
-            })
-            .collect::<Result<_, _>>()?;
-        std::mem::take(&mut self.shared.digests).save(&self.shared.workspace)?;
-        self.upstream_pending = items.iter().any(|i| i.pending.is_some());
-        let splits = crate::stages::split::Splits::from_config(self.config)?;
-        for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
-            splits.assign(clip);
-        }
-        self.stages
-            .push(capture_run(&items, Stage::Ingest, progress));
-        if self.through >= Stage::Segment {
-            self.stages
-                .push(capture_run(&items, Stage::Segment, progress));
-        }
-        self.items = items;
-        Ok(())
-    }
-
-    /// The text stages (labels, paraphrases, plans), unless a capture's upstream output is
-    /// pending.
-    fn text_stages(&mut self) -> Result<text::TextOutcome, BuildError> {
-        let progress = &self.options.progress;
-        let text = if self.through >= Stage::Label && !self.upstream_pending {
-            text::run(
-                &self.shared,
-                &self.motions,
-                &mut self.items,
-                self.options.offline || self.probe,
-                self.through,
-                progress,
-            )?
-        } else {
-            text::TextOutcome {
-                pending: self.upstream_pending,
-                ..Default::default()
-            }
-        };
-        for run in &text.runs {
-            progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-        }
-        self.stages.extend(text.runs.iter().cloned());
-        Ok(text)
-    }
-
-    /// Mirrored copies of every capture's labelled clips, on all cores; true when the stage ran
-    /// (mirroring on, reached, and the labels known).
-    fn mirror(&mut self, text: &text::TextOutcome) -> Result<bool, BuildError> {
-        let run_mirror =
-            self.config.mirror.enabled && self.through >= Stage::Mirror && !text.pending;
-        if run_mirror {
-            let progress = &self.options.progress;
-            let shared = &self.shared;
-            progress.stage_started(mirror::NAME, self.items.len() as u64);
-            self.items
-                .par_iter_mut()
-                .map(|item| {
-                    let done = capture::mirror_capture(shared, item);
-                    progress.advanced(mirror::NAME, 1);
-                    done
-                })
-                .collect::<Result<Vec<()>, _>>()?;
-        }
-        Ok(run_mirror)
-    }
-
-    /// Removes from the stage cache the per-capture outputs and frame chunks no capture of this
-    /// build uses.
-    fn prune_stage_caches(&self) {
-        let workspace = &self.shared.workspace;
-        for stage in [Stage::Ingest, Stage::Segment, Stage::Mirror] {
-            let live: BTreeSet<String> = self
-                .items
-                .iter()
-                .filter_map(|i| i.fingerprint(stage))
-                .map(str::to_string)
-                .collect();
-            workspace.prune(stage.name(), &live);
-        }
-
-        // Frame chunks that no held clip points to belong to outputs that are gone.
-        let live: BTreeSet<String> = self
-            .items
-            .iter()
-            .flat_map(|i| i.refs.iter().chain(&i.mirrored_refs))
-            .flat_map(|r| r.chunks())
-            .map(|(_, fingerprint)| fingerprint.to_string())
-            .collect();
-        workspace.prune(motions::SEGMENT_CHUNKS, &live);
-        for retired in motions::RETIRED_CHUNKS {
-            workspace.prune(retired, &BTreeSet::new());
-        }
-    }
-
-    /// Takes every capture's clips, drops, notes and rejects (with the text stages' rejects),
-    /// each sorted so the outputs do not depend on scheduling or glob order.
-    fn gather(&mut self, text: &text::TextOutcome) -> Gathered {
-        let items = std::mem::take(&mut self.items);
-        // Exactly: grown by doubling, the list kept up to a third of its capacity (a `Clip` is a few
-        // hundred bytes before its strings) unused until the synthetic pairs are added.
-        let mut clips: Vec<Clip> =
-            Vec::with_capacity(items.iter().map(|i| i.clips.len() + i.mirrored.len()).sum());
-        let mut index = MotionIndex::new();
-        let mut rejects: Vec<Reject> = Vec::new();
-        let mut drops_by_reason = BTreeMap::new();
-        let mut drops: Vec<Dropped> = Vec::new();
-        let mut unmapped_labels = BTreeMap::new();
-        let mut notes: Vec<Note> = Vec::new();
-        for item in items {
-            for (clip, at) in item
-                .clips
-                .iter()
-                .zip(item.refs)
-                .chain(item.mirrored.iter().zip(item.mirrored_refs))
-            {
-                index.insert(motions::key(clip), at);
-            }
-            clips.extend(item.clips);
-            clips.extend(item.mirrored);
-            rejects.extend(item.rejects);
-            add_counts(&mut drops_by_reason, item.segment.drops);
-            drops.extend(item.segment.dropped);
-            add_counts(&mut unmapped_labels, item.segment.unmapped);
-            notes.extend(item.segment.notes);
-        }
-        notes.extend(source::annotation_notes(
-            self.config,
-            &self.shared.annotations,
-            &self.files,
-        ));
-
-        rejects.extend(text.rejects.iter().cloned());
-        let mut rejects: Vec<Reject> = rejects.into_iter().map(Reject::bounded).collect();
-        // Row order: by clip id, so the table does not depend on scheduling or glob order.
-        clips.sort_by(|a, b| {
-            a.clip_id
-                .cmp(&b.clip_id)
-                .then(a.capture.path.cmp(&b.capture.path))
-        });
-        rejects.sort_by(|a, b| (&a.file, a.line, &a.stage).cmp(&(&b.file, b.line, &b.stage)));
-        notes.sort();
-        drops.sort();
-        Gathered {
-            clips,
-            index,
-            rejects,
-            drops_by_reason,
-            drops,
-            unmapped_labels,
-            notes,
-        }
-    }
-
-    /// Synthetic pairs from the labelled originals and mirrors, unless an earlier stage is
-    /// `blocked` (probe mode), which it becomes when the pairs themselves are not cached.
-    fn compose(
-        &mut self,
-        gathered: &mut Gathered,
-        blocked: &mut Option<Stage>,
-    ) -> Result<
-        (
-            crate::stages::compose::ComposeReport,
-            crate::stages::augment::AugmentReport,
-        ),
-        BuildError,
-    > {
-        let mut compose_report = crate::stages::compose::ComposeReport::default();
-        let mut pair_check = crate::stages::augment::AugmentReport::default();
-        if self.through >= Stage::Compose && blocked.is_none() {
-            let progress = &self.options.progress;
-            progress.stage_started(crate::stages::compose::NAME, gathered.clips.len() as u64);
-            match synthetic::compose(
-                &self.shared,
-                &self.motions,
-                &mut gathered.clips,
-                &mut gathered.index,
-                self.options.offline || self.probe,
-                progress,
-            )? {
-                Some((report, check, run)) => {
-                    progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-                    compose_report = report;
-                    pair_check = check;
-                    self.stages.push(run);
-                }
-                None => *blocked = Some(Stage::Compose),
-            }
-        }
-        Ok((compose_report, pair_check))
-    }
 }
 
 /// What every stage shares: each source's profile, annotations and frame-rate table, the motion

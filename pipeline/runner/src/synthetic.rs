@@ -5,7 +5,8 @@ use std::collections::BTreeSet;
 
 use super::capture::Shared;
 use super::motions::{self, MotionIndex, MotionSource};
-use super::{BuildError, Fingerprint, StageRun, label, text};
+use super::{BuildError, StageRun, label, text};
+use crate::stage::CachedStage;
 use motionforge_sources::clip::Clip;
 
 /// The compose stage's cache entry: the synthetic clips (their skeletons in the table), where
@@ -15,6 +16,16 @@ type ComposeEntry = (
     Vec<motions::MotionRef>,
     motionforge_sources::clip::SkeletonTable,
 );
+
+/// The compose stage as the runner caches it: the whole build's synthetic pairs at once (one
+/// entry, key `*`).
+pub(crate) struct Compose;
+
+impl CachedStage for Compose {
+    const NAME: &'static str = crate::stages::compose::NAME;
+    const VERSION: u32 = crate::stages::compose::VERSION;
+    type Output = ComposeEntry;
+}
 
 /// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
 /// `None` in probe mode when its output is not cached.
@@ -38,18 +49,17 @@ pub(super) fn compose(
     // The clips without frames, and where their frames are: together, the stage's input.
     let encoded = motionforge_core::base::encoded_sha256(&(&all, &*index), "clips to compose")?;
     let vetoed = llm_vetoes(shared, &all, offline, progress)?;
-    let stamp = Fingerprint::new(
-        crate::stages::compose::NAME,
-        crate::stages::compose::VERSION,
-    )
-    .text("clips", &encoded)
-    .json("config synthetic", &config.synthetic)
-    .json("config dataset.seed", &config.dataset.seed)
-    .json("llm pair check", &vetoed.0)
-    .stamp();
-    let composed = shared
-        .workspace
-        .try_item(crate::stages::compose::NAME, "*", &stamp, || {
+    let stamp = Compose::fingerprint()
+        .text("clips", &encoded)
+        .json("config synthetic", &config.synthetic)
+        .json("config dataset.seed", &config.dataset.seed)
+        .json("llm pair check", &vetoed.0)
+        .stamp();
+    let composed = shared.workspace.run_stage::<Compose, BuildError>(
+        "*",
+        &stamp,
+        |_| true,
+        || {
             let mut refs: Vec<motions::MotionRef> = Vec::new();
             let out = crate::stages::compose::run(
                 &all,
@@ -95,7 +105,8 @@ pub(super) fn compose(
             // Stored with each distinct skeleton once, not once per synthetic clip.
             let skeletons = motionforge_sources::clip::SkeletonTable::take_all(&mut out.clips);
             Ok::<_, BuildError>((out, refs, skeletons))
-        })?;
+        },
+    )?;
     let Some(((mut composed, refs, skeletons), ran)): Option<(ComposeEntry, bool)> = composed
     else {
         return Ok(None);

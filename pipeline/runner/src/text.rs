@@ -9,8 +9,9 @@ use serde::{Deserialize, Serialize};
 
 use super::capture::{Item, Shared};
 use super::motions::MotionSource;
-use super::{BuildError, Fingerprint, Reject, StageRun};
+use super::{BuildError, Reject, StageRun};
 use crate::config::{Config, Labeller};
+use crate::stage::CachedStage;
 use crate::stages::augment::{self, Asking, AugmentError, AugmentReport};
 use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
 use motionforge_language::parts::PartSet;
@@ -21,6 +22,16 @@ use motionforge_sources::clip::{Clip, LoadedClip, SourceKind};
 /// Bump when label assignment changes for the same inputs. 2: flagged LLM answers follow
 /// `part_labels.on_invalid` (the embedded labeller by default) instead of being used.
 const LABEL_VERSION: u32 = 2;
+
+/// The label stage as the runner caches it: every clip's body parts and their labeller, for
+/// the whole build at once (one entry, key `*`).
+pub(crate) struct Labels;
+
+impl CachedStage for Labels {
+    const NAME: &'static str = label::NAME;
+    const VERSION: u32 = LABEL_VERSION;
+    type Output = ClipLabels;
+}
 
 /// What the text stages produced.
 #[derive(Debug, Default)]
@@ -54,7 +65,7 @@ fn text_reject(stage: &str, text: &str, reason: RejectReason, message: String) -
 
 /// Per-clip labels as cached.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-struct ClipLabels {
+pub(crate) struct ClipLabels {
     by_clip: BTreeMap<
         String,
         (
@@ -149,14 +160,17 @@ fn label_stage(
         .iter()
         .filter_map(|i| i.fingerprint(super::Stage::Segment))
         .collect();
-    let stamp = Fingerprint::new(label::NAME, LABEL_VERSION)
+    let stamp = Labels::fingerprint()
         .json("part labels", &labels)
         .json("segments", &segment_fps)
         .stamp();
     let n_clips = clips.len();
-    let assigned = shared.workspace.try_item(label::NAME, "*", &stamp, || {
-        assign_labels(shared, motions, items, &labels, &report)
-    })?;
+    let assigned = shared.workspace.run_stage::<Labels, BuildError>(
+        "*",
+        &stamp,
+        |_| true,
+        || assign_labels(shared, motions, items, &labels, &report),
+    )?;
     let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
         return Ok(false);
     };

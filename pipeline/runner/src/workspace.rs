@@ -246,7 +246,7 @@ impl Workspace {
         }
     }
 
-    /// The same workspace in probe mode: [`Workspace::item`] computes nothing on a miss.
+    /// The same workspace in probe mode: a stage computes nothing on a miss.
     pub fn probing(output: &Path) -> Workspace {
         Workspace {
             probe: true,
@@ -269,33 +269,12 @@ impl Workspace {
             .unwrap_or_default()
     }
 
-    /// The cached output of `stage` for item `key`, or computes and stores it; the flag says
-    /// whether it ran. In probe mode a miss returns `None` and computes nothing.
-    pub fn item<T: Serialize + DeserializeOwned>(
-        &self,
-        stage: &str,
-        key: &str,
-        stamp: &Stamp,
-        compute: impl FnOnce() -> T,
-    ) -> Result<Option<(T, bool)>, WorkspaceError> {
-        self.try_item(stage, key, stamp, || Ok::<T, WorkspaceError>(compute()))
-    }
-
-    /// Like [`Workspace::item`], for a computation that can fail.
-    pub fn try_item<T: Serialize + DeserializeOwned, E: From<WorkspaceError>>(
-        &self,
-        stage: &str,
-        key: &str,
-        stamp: &Stamp,
-        compute: impl FnOnce() -> Result<T, E>,
-    ) -> Result<Option<(T, bool)>, E> {
-        self.try_item_where(stage, key, stamp, |_| true, compute)
-    }
-
-    /// Like [`Workspace::try_item`], using a cached output only when `usable` accepts it: an
-    /// output that names entries of another stage (a segment's frame chunks) is recomputed
-    /// when one of them is gone, instead of failing the build when it is read.
-    pub fn try_item_where<T: Serialize + DeserializeOwned, E: From<WorkspaceError>>(
+    /// The cached output of `stage` for item `key`, used only when `usable` accepts it (an
+    /// output that names entries of another stage, a segment's frame chunks, is recomputed when
+    /// one of them is gone, instead of failing the build when it is read), or `compute`'s,
+    /// stored; the flag says whether it ran. In probe mode a miss returns `None` and computes
+    /// nothing. Stages reach it through [`crate::stage::CachedStage`].
+    pub(crate) fn try_item_where<T: Serialize + DeserializeOwned, E: From<WorkspaceError>>(
         &self,
         stage: &str,
         key: &str,

@@ -4,7 +4,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{AmassConfig, PositionsConfig};
 use crate::source::CaptureFile;
-use motionforge_core::base::{Fingerprint, Reject, RejectReason, Stamp};
+use crate::stage::{CachedStage, CaptureStage};
+use motionforge_core::base::{Reject, RejectReason, Stamp};
 use motionforge_core::motion::bvh::FPS_RANGE;
 use motionforge_core::motion::ik::{IkError, PositionLayout, motion_from_positions};
 use motionforge_core::motion::npy::{NpyError, read_joint_positions};
@@ -17,6 +18,23 @@ pub const NAME: &str = "ingest";
 /// Bump when the stage's output for the same input changes (5: a capture records its effective
 /// frame rate).
 pub const VERSION: u32 = 5;
+
+/// The stage as the runner caches it: one record per capture file.
+pub(crate) struct Ingest;
+
+impl CachedStage for Ingest {
+    const NAME: &'static str = NAME;
+    const VERSION: u32 = VERSION;
+    type Output = IngestRecord;
+
+    fn take_rejects(output: &mut IngestRecord) -> Vec<Reject> {
+        std::mem::take(&mut output.rejects)
+    }
+}
+
+impl CaptureStage for Ingest {
+    const STAGE: crate::Stage = crate::Stage::Ingest;
+}
 
 /// Kind of the note that an AMASS file's frames, taken at HumanML3D's stride, are at another
 /// rate than the 20 fps they are labelled with (counted in the build report's `notes_by_kind`).
@@ -102,7 +120,7 @@ impl IngestOutput {
 /// The fingerprint of one capture's ingest: everything the output depends on. The bytes are not
 /// read: `input.sha256` stands for them, so the fingerprint is known without reading the file.
 pub fn fingerprint(input: &CaptureInput<'_>) -> Stamp {
-    let print = Fingerprint::new(NAME, VERSION)
+    let print = Ingest::fingerprint()
         .text("source name", input.source)
         .text("file path", &input.file.display)
         .text("file content", input.sha256)

@@ -3,7 +3,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use motionforge_core::base::{Fingerprint, Reject, RejectReason, Stamp};
+use crate::motions::MotionRef;
+use crate::stage::{CachedStage, CaptureStage};
+use motionforge_core::base::{Reject, RejectReason, Stamp};
 use motionforge_core::motion::{BoundProfiles, MirrorPlan, OffsetPolicy, ProfileSpec};
 use motionforge_language::parts::PartSet;
 use motionforge_language::text::mirror_text;
@@ -17,6 +19,24 @@ pub const NAME: &str = "mirror";
 /// Bump when the stage's output for the same input changes.
 pub const VERSION: u32 = 6;
 
+/// The stage as the runner caches it: a capture's mirrored clips without their frames (made
+/// from the originals' when read), and where those are.
+pub(crate) struct Mirror;
+
+impl CachedStage for Mirror {
+    const NAME: &'static str = NAME;
+    const VERSION: u32 = VERSION;
+    type Output = (MirrorOutput, Vec<MotionRef>);
+
+    fn take_rejects(output: &mut Self::Output) -> Vec<Reject> {
+        std::mem::take(&mut output.0.rejects)
+    }
+}
+
+impl CaptureStage for Mirror {
+    const STAGE: crate::Stage = crate::Stage::Mirror;
+}
+
 /// Fingerprint of mirroring one segmented capture.
 pub fn fingerprint(
     segment_fingerprint: &str,
@@ -24,7 +44,7 @@ pub fn fingerprint(
     types: &impl Serialize,
     offsets: OffsetPolicy,
 ) -> Stamp {
-    Fingerprint::new(NAME, VERSION)
+    Mirror::fingerprint()
         .text("labelled clips", segment_fingerprint)
         .json("skeleton profile", profile)
         .json("motion types", types)

@@ -10,7 +10,9 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::config::SegmentConfig;
-use motionforge_core::base::{DropReason, Dropped, Fingerprint, Stamp};
+use crate::motions::MotionRef;
+use crate::stage::{CachedStage, CaptureStage};
+use motionforge_core::base::{DropReason, Dropped, Stamp};
 use motionforge_core::motion::bvh::excerpt;
 use motionforge_core::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
 use motionforge_core::motion::{BodyPart, Motion, Profile};
@@ -62,6 +64,20 @@ pub struct SegmentOutput {
     pub dropped: Vec<Dropped>,
 }
 
+/// The stage as the runner caches it: a capture's clips without their frames, and where the
+/// frames went (frame chunks stored as the clips are made).
+pub(crate) struct Segment;
+
+impl CachedStage for Segment {
+    const NAME: &'static str = NAME;
+    const VERSION: u32 = VERSION;
+    type Output = (SegmentOutput, Vec<MotionRef>);
+}
+
+impl CaptureStage for Segment {
+    const STAGE: crate::Stage = crate::Stage::Segment;
+}
+
 /// Fingerprint of segmenting one capture.
 pub fn fingerprint(
     ingest: &str,
@@ -71,7 +87,7 @@ pub fn fingerprint(
     fps: f64,
     types_config: &impl Serialize,
 ) -> Stamp {
-    Fingerprint::new(NAME, VERSION)
+    Segment::fingerprint()
         .text("ingest output", ingest)
         .text("annotation format", kind)
         .json("annotations", annotation)
