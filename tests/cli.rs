@@ -1301,3 +1301,49 @@ fn the_old_spellings_still_work_and_warn_naming_the_new_one() {
     );
     assert_eq!(both.status.code(), Some(2), "{}", text(&both.stderr));
 }
+
+// ---- an LLM server that is not there -----------------------------------------------------------
+
+#[test]
+fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt() {
+    let dir = tempfile::tempdir().unwrap();
+    // A port that was free a moment ago: nothing listens on it.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let fixtures = repo().join("fixtures");
+    let demo = std::fs::read_to_string(fixtures.join("demo.toml")).unwrap();
+    // The demo's relative paths made absolute, so the config can live in the temporary folder.
+    let config = demo
+        .replace("output = \"../out\"", "output = \"out\"")
+        .replace(
+            "[\"bandai-namco-1/",
+            &format!("[\"{}/bandai-namco-1/", fixtures.display()),
+        )
+        .replace("[\"cmu/", &format!("[\"{}/cmu/", fixtures.display()))
+        .replace(
+            "\"humanml3d/",
+            &format!("\"{}/humanml3d/", fixtures.display()),
+        )
+        + &format!(
+            "\n[llm]\nbase_url = \"http://127.0.0.1:{port}/v1\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
+        );
+    std::fs::write(dir.path().join("llm.toml"), config).unwrap();
+    let out = run(&["build", "--config", "llm.toml"], dir.path());
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "label: no LLM server answers at http://127.0.0.1:{port}/v1"
+        )),
+        "{err}"
+    );
+    // Nothing is sent, so no line announces or counts requests ("label: sending 9 LLM requests",
+    // "label: 1 of 9 requests, ... 1 error").
+    assert!(
+        !err.lines().any(|l| l.starts_with("label:")),
+        "no progress line of requests never sent:\n{err}"
+    );
+}
