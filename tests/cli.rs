@@ -1347,3 +1347,86 @@ fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt(
         "no progress line of requests never sent:\n{err}"
     );
 }
+
+#[test]
+fn every_commands_help_runs_and_status_and_clean_take_the_dataset_folder_first() {
+    for command in leaf_commands(&[]) {
+        let mut args: Vec<&str> = command.iter().map(String::as_str).collect();
+        args.push("--help");
+        let out = run(&args, &repo());
+        assert!(
+            out.status.success(),
+            "`{}`: {}",
+            args.join(" "),
+            text(&out.stderr)
+        );
+    }
+    for command in ["status", "clean"] {
+        let help = text(&run(&[command, "--help"], &repo()).stdout);
+        let (_, arguments) = help.split_once("Arguments:\n").unwrap_or_default();
+        let first = arguments.split_whitespace().next().unwrap_or_default();
+        assert_eq!(
+            first.trim_matches(['<', '>', '[', ']']),
+            "DATASET",
+            "`{command}`: the first positional argument is the dataset folder:\n{help}"
+        );
+    }
+
+    let (out, dataset) = built_demo();
+    let d = dataset.display().to_string();
+    let o = out.path().display().to_string();
+    // The folder alone finds the config its build was given: the same status as with --config.
+    let by_folder = run(&["status", &d, "--json"], &repo());
+    assert!(by_folder.status.success(), "{}", text(&by_folder.stderr));
+    let by_config = run(
+        &["status", "--config", &demo(), "--output", &o, "--json"],
+        &repo(),
+    );
+    assert!(by_config.status.success(), "{}", text(&by_config.stderr));
+    let by_folder: serde_json::Value = serde_json::from_slice(&by_folder.stdout).unwrap();
+    let by_config: serde_json::Value = serde_json::from_slice(&by_config.stdout).unwrap();
+    assert_eq!(by_folder, by_config);
+    assert_eq!(by_folder["stages"][0]["fresh"], true, "{by_folder}");
+    // A config naming another dataset is a usage error, as is a folder that is no dataset.
+    let other = repo().join("fixtures/humanml3d-joints/build.toml");
+    let wrong = run(
+        &["status", &d, "--config", other.to_str().unwrap()],
+        &repo(),
+    );
+    assert_eq!(wrong.status.code(), Some(2), "{}", text(&wrong.stderr));
+    assert!(
+        text(&wrong.stderr).contains("hml3d-joints"),
+        "{}",
+        text(&wrong.stderr)
+    );
+    let not_a_dataset = run(&["status", &o], &repo());
+    assert_eq!(not_a_dataset.status.code(), Some(2));
+    // A folder whose build recorded no config (built by an older release) asks for --config.
+    std::fs::remove_file(dataset.join(".motionforge/config.json")).unwrap();
+    let unrecorded = run(&["status", &d], &repo());
+    assert_eq!(
+        unrecorded.status.code(),
+        Some(2),
+        "{}",
+        text(&unrecorded.stderr)
+    );
+    assert!(
+        text(&unrecorded.stderr).contains("pass --config"),
+        "{}",
+        text(&unrecorded.stderr)
+    );
+    let given = run(&["status", &d, "--config", &demo()], &repo());
+    assert!(given.status.success(), "{}", text(&given.stderr));
+
+    // clean: the folder alone, as with --config.
+    let cleaned = run(&["clean", &d, "--cache-only"], &repo());
+    assert!(cleaned.status.success(), "{}", text(&cleaned.stderr));
+    assert!(!dataset.join(".motionforge/cache").exists());
+    assert!(dataset.join("data").is_dir());
+    let cleaned = run(&["clean", &d], &repo());
+    assert!(cleaned.status.success(), "{}", text(&cleaned.stderr));
+    assert!(!dataset.join("data").exists() && !dataset.join("manifest.json").exists());
+    // The folder and a config at once is a usage error.
+    let both = run(&["clean", &d, "--config", &demo()], &repo());
+    assert_eq!(both.status.code(), Some(2), "{}", text(&both.stderr));
+}

@@ -44,7 +44,7 @@ pub use motionforge_core::base::{
     write_atomic_with,
 };
 pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
-pub use workspace::{Ledger, Miss, SeenStamps, StageLedger, Workspace};
+pub use workspace::{ConfigRecord, Ledger, Miss, SeenStamps, StageLedger, Workspace};
 
 use capture::{Item, Shared};
 use motions::MotionIndex;
@@ -308,6 +308,9 @@ pub struct BuildOptions {
     /// How long to wait for another build of the same dataset folder to finish (`None`: refuse
     /// at once).
     pub lock_wait: Option<std::time::Duration>,
+    /// The config file the build was given, recorded in the dataset's workspace so commands
+    /// given only the dataset folder (`status <dataset>`) find it; `None` records nothing.
+    pub config_file: Option<PathBuf>,
 }
 
 fn run_stages<'a>(
@@ -786,6 +789,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         write_atomic(&output.join(REPORT_FILE), &json)?;
     }
     save_ledger(&shared.workspace, &report.stages, written.stamps)?;
+    if let Some(file) = &options.config_file {
+        workspace::ConfigRecord::save(&shared.workspace, file)?;
+    }
     match report.report_error {
         Some(e) => Err(BuildError::Report(e)),
         None => Ok(report),
