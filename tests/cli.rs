@@ -1430,3 +1430,55 @@ fn every_commands_help_runs_and_status_and_clean_take_the_dataset_folder_first()
     let both = run(&["clean", &d, "--config", &demo()], &repo());
     assert_eq!(both.status.code(), Some(2), "{}", text(&both.stderr));
 }
+
+/// `motionforge <args>` on a terminal (a pseudo-terminal made by util-linux `script`) `columns`
+/// wide; what it printed, without the terminal's carriage returns.
+fn on_terminal(args: &[&str], columns: usize) -> String {
+    let command = std::iter::once(BIN)
+        .chain(args.iter().copied())
+        .map(|a| format!("'{a}'"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let out = Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .env("COLUMNS", columns.to_string())
+        .output()
+        .expect("util-linux `script` runs the command on a pseudo-terminal");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    text(&out.stdout).replace('\r', "")
+}
+
+#[test]
+fn clips_fits_the_terminal_and_prints_whole_ids_when_piped_or_wide() {
+    let (_out, dataset) = built_demo();
+    let d = dataset.display().to_string();
+    let longest = "synthetic/bandai-namco-1/dataset-1_walk-left_normal_001:0-135:m+bandai-namco-1/dataset-1_bye_normal_001:0-111:m";
+    let table = on_terminal(&["clips", &d], 120);
+    let rows = lines(&table);
+    assert_eq!(rows.len(), 25, "{table}");
+    for row in &rows {
+        assert!(
+            row.chars().count() <= 120,
+            "{} wide: {row}",
+            row.chars().count()
+        );
+    }
+    assert!(!table.contains(longest), "{table}");
+    // Cut in the middle: the start and the end of the id stay, so a mirror's `:m` shows.
+    assert!(
+        rows.iter()
+            .any(|r| r.starts_with("synthetic/") && r.contains('…') && r.contains(":0-111:m ")),
+        "{table}"
+    );
+    // Whole with --wide on a terminal, and whenever the output is not a terminal.
+    let wide = on_terminal(&["clips", &d, "--wide"], 120);
+    assert!(wide.contains(longest) && !wide.contains('…'), "{wide}");
+    let piped = run(&["clips", &d], &repo());
+    assert!(
+        text(&piped.stdout).contains(longest),
+        "{}",
+        text(&piped.stdout)
+    );
+    let json = on_terminal(&["clips", &d, "--json"], 120);
+    assert!(json.contains(longest), "{json}");
+}
