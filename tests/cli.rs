@@ -1075,7 +1075,12 @@ fn a_run_that_stops_early_says_nothing_was_written_and_an_empty_stage_says_it_ha
         printed.contains("segment  all to run: ingest re-runs first\n"),
         "{printed}"
     );
-    assert!(!printed.contains("1 of 1 to run: ingest"), "{printed}");
+    for stage in ["segment", "label", "compose"] {
+        assert!(
+            !printed.contains(&format!("{stage}  1 of 1 to run")),
+            "{printed}"
+        );
+    }
     // The HumanML3D fixture has no compatible pair: its first build has nothing to compose.
     let config = repo().join("fixtures/humanml3d-joints/build.toml");
     let out = run(
@@ -1304,20 +1309,12 @@ fn the_old_spellings_still_work_and_warn_naming_the_new_one() {
 
 // ---- an LLM server that is not there -----------------------------------------------------------
 
-#[test]
-fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt() {
-    let dir = tempfile::tempdir().unwrap();
-    // A port that was free a moment ago: nothing listens on it.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+/// The demo config with its paths made absolute (so it can live in a temporary folder), its
+/// output `out` beside it, and `extra` appended.
+fn demo_copy(extra: &str) -> String {
     let fixtures = repo().join("fixtures");
     let demo = std::fs::read_to_string(fixtures.join("demo.toml")).unwrap();
-    // The demo's relative paths made absolute, so the config can live in the temporary folder.
-    let config = demo
-        .replace("output = \"../out\"", "output = \"out\"")
+    demo.replace("output = \"../out\"", "output = \"out\"")
         .replace(
             "[\"bandai-namco-1/",
             &format!("[\"{}/bandai-namco-1/", fixtures.display()),
@@ -1327,9 +1324,21 @@ fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt(
             "\"humanml3d/",
             &format!("\"{}/humanml3d/", fixtures.display()),
         )
-        + &format!(
-            "\n[llm]\nbase_url = \"http://127.0.0.1:{port}/v1\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
-        );
+        + extra
+}
+
+#[test]
+fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt() {
+    let dir = tempfile::tempdir().unwrap();
+    // A port that was free a moment ago: nothing listens on it.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let config = demo_copy(&format!(
+        "\n[llm]\nbase_url = \"http://127.0.0.1:{port}/v1\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
+    ));
     std::fs::write(dir.path().join("llm.toml"), config).unwrap();
     let out = run(&["build", "--config", "llm.toml"], dir.path());
     let err = text(&out.stderr);
@@ -1481,4 +1490,75 @@ fn clips_fits_the_terminal_and_prints_whole_ids_when_piped_or_wide() {
     );
     let json = on_terminal(&["clips", &d, "--json"], 120);
     assert!(json.contains(longest), "{json}");
+}
+
+// ---- plan counts as build does ---------------------------------------------------------------
+
+/// `plan --json` then `build --json` with the config `config` in `dir`: every stage the plan
+/// gives a count for has the build's count, and would run what the build then ran. The plan.
+fn plan_then_build(dir: &Path, config: &str) -> serde_json::Value {
+    let planned = run(&["--json", "plan", "--config", config], dir);
+    assert!(planned.status.success(), "{}", text(&planned.stderr));
+    let plan: serde_json::Value = serde_json::from_slice(&planned.stdout).unwrap();
+    let built = run(&["--json", "build", "--config", config], dir);
+    assert!(built.status.success(), "{}", text(&built.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&built.stdout).unwrap();
+    for planned in plan["stages"].as_array().unwrap() {
+        // 0: not known before an earlier stage runs ("all to run").
+        if planned["items"] == 0 {
+            continue;
+        }
+        let name = planned["stage"].as_str().unwrap();
+        let built = report["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["stage"] == name)
+            .unwrap_or_else(|| panic!("{name} planned, not in the build's report: {report}"));
+        assert_eq!(
+            planned["items"], built["items"],
+            "{name}: plan {plan}\nbuild {report}"
+        );
+        assert_eq!(
+            planned["to_run"], built["ran"],
+            "{name}: plan {plan}\nbuild {report}"
+        );
+    }
+    plan
+}
+
+#[test]
+fn plan_counts_every_stage_as_the_next_build_does_also_after_a_seed_change() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("demo.toml"), demo_copy("")).unwrap();
+    let first = plan_then_build(dir.path(), "demo.toml");
+    assert_eq!(first["stages"][0]["to_run"], 9, "{first}");
+    let again = plan_then_build(dir.path(), "demo.toml");
+    let label = &again["stages"][2];
+    assert_eq!(label["stage"], "label");
+    assert_eq!(
+        label["items"], 10,
+        "ten clips labelled, not one cache entry: {again}"
+    );
+
+    let seeded = demo_copy("").replace("seed = 42", "seed = 7");
+    std::fs::write(dir.path().join("seeded.toml"), seeded).unwrap();
+    let through = run(
+        &["plan", "--config", "seeded.toml", "--through", "label"],
+        dir.path(),
+    );
+    let printed = text(&through.stdout);
+    assert!(
+        printed.contains("nothing to run through label")
+            && !printed.contains("a build would reuse everything"),
+        "{printed}"
+    );
+    let after_seed = plan_then_build(dir.path(), "seeded.toml");
+    // Every stage is known after a seed change, and compose re-runs its newly sampled pairs.
+    for stage in after_seed["stages"].as_array().unwrap() {
+        assert_ne!(stage["items"], 0, "{after_seed}");
+    }
+    let compose = &after_seed["stages"][6];
+    assert_eq!(compose["stage"], "compose");
+    assert!(compose["to_run"].as_u64().unwrap() > 1, "{after_seed}");
 }

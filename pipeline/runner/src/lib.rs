@@ -379,6 +379,8 @@ struct BuildState<'a, 'o> {
     /// In probe mode: some capture's ingest or segment output is not cached, so what follows
     /// depends on outputs that do not exist yet.
     upstream_pending: bool,
+    /// What each stage did; in probe mode, a whole-set stage (label, compose) whose output is not
+    /// cached counts what it would run.
     stages: Vec<StageRun>,
 }
 
@@ -631,7 +633,24 @@ impl<'a, 'o> BuildState<'a, 'o> {
                     pair_check = check;
                     self.stages.push(run);
                 }
-                None => *blocked = Some(Stage::Compose),
+                None => {
+                    // Probe mode, not cached: the pairs a build would compose (sampling is cheap,
+                    // composing is not), so `plan` counts them as `build` does.
+                    let clips: Vec<&Clip> = gathered.clips.iter().collect();
+                    let (_, sampled) = crate::stages::compose::sample(
+                        &clips,
+                        &self.config.synthetic,
+                        self.config.dataset.seed,
+                        |c| c.split.clone(),
+                    );
+                    self.stages.push(StageRun {
+                        stage: crate::stages::compose::NAME.into(),
+                        items: sampled.sampled,
+                        ran: sampled.sampled,
+                        reused: 0,
+                    });
+                    *blocked = Some(Stage::Compose);
+                }
             }
         }
         Ok((compose_report, pair_check))

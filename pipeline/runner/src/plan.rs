@@ -107,6 +107,29 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
             );
         }
     }
+    // Stages over the whole set have one cache entry, but a build counts their items (clips
+    // labelled, pairs composed): the plan counts them the same way, also when they would run.
+    for run in &staged.stages {
+        let Some(stage) = [Stage::Label, Stage::Compose]
+            .into_iter()
+            .find(|s| s.name() == run.stage)
+        else {
+            continue;
+        };
+        if let Some(plan) = plans.get_mut(&stage) {
+            plan.items = run.items;
+            if !plan.fresh() {
+                plan.to_run = run.items;
+                plan.reasons.values_mut().for_each(|n| *n = run.items);
+            }
+        }
+    }
+    // Write and report make one dataset and one report, whatever comes before them.
+    for stage in [Stage::Write, Stage::Report] {
+        if let Some(plan) = plans.get_mut(&stage) {
+            plan.items = 1;
+        }
+    }
     // Whatever comes after the first stale stage re-runs because of it.
     let blocked = staged.blocked;
     if let Some(first) = blocked {
@@ -160,7 +183,6 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         let stamp = table_stamp(config, &staged.clips, &staged.index, &text.plans)?;
         let write_fresh = output::written(&staged.output, workspace, &stamp.fingerprint);
         if let Some(plan) = plans.get_mut(&Stage::Write) {
-            plan.items = 1;
             if let Err(why) = write_fresh.clone() {
                 let reason = match why.as_str() {
                     "rows changed" => ledger.why(Stage::Write.name(), "*", &stamp),
@@ -170,7 +192,6 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
             }
         }
         if let Some(plan) = plans.get_mut(&Stage::Report) {
-            plan.items = 1;
             if write_fresh.is_err() {
                 plan.stale("*", "write re-runs first".to_string());
             } else if !report_is_current(&staged.output, workspace, &stamp.fingerprint) {
