@@ -1075,7 +1075,12 @@ fn a_run_that_stops_early_says_nothing_was_written_and_an_empty_stage_says_it_ha
         printed.contains("segment  all to run: ingest re-runs first\n"),
         "{printed}"
     );
-    assert!(!printed.contains("1 of 1 to run: ingest"), "{printed}");
+    for stage in ["segment", "label", "compose"] {
+        assert!(
+            !printed.contains(&format!("{stage}  1 of 1 to run")),
+            "{printed}"
+        );
+    }
     // The HumanML3D fixture has no compatible pair: its first build has nothing to compose.
     let config = repo().join("fixtures/humanml3d-joints/build.toml");
     let out = run(
@@ -1300,4 +1305,260 @@ fn the_old_spellings_still_work_and_warn_naming_the_new_one() {
         &repo(),
     );
     assert_eq!(both.status.code(), Some(2), "{}", text(&both.stderr));
+}
+
+// ---- an LLM server that is not there -----------------------------------------------------------
+
+/// The demo config with its paths made absolute (so it can live in a temporary folder), its
+/// output `out` beside it, and `extra` appended.
+fn demo_copy(extra: &str) -> String {
+    let fixtures = repo().join("fixtures");
+    let demo = std::fs::read_to_string(fixtures.join("demo.toml")).unwrap();
+    demo.replace("output = \"../out\"", "output = \"out\"")
+        .replace(
+            "[\"bandai-namco-1/",
+            &format!("[\"{}/bandai-namco-1/", fixtures.display()),
+        )
+        .replace("[\"cmu/", &format!("[\"{}/cmu/", fixtures.display()))
+        .replace(
+            "\"humanml3d/",
+            &format!("\"{}/humanml3d/", fixtures.display()),
+        )
+        + extra
+}
+
+#[test]
+fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt() {
+    let dir = tempfile::tempdir().unwrap();
+    // A port that was free a moment ago: nothing listens on it.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let config = demo_copy(&format!(
+        "\n[llm]\nbase_url = \"http://127.0.0.1:{port}/v1\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
+    ));
+    std::fs::write(dir.path().join("llm.toml"), config).unwrap();
+    let out = run(&["build", "--config", "llm.toml"], dir.path());
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "label: no LLM server answers at http://127.0.0.1:{port}/v1"
+        )),
+        "{err}"
+    );
+    // Nothing is sent, so no line announces or counts requests ("label: sending 9 LLM requests",
+    // "label: 1 of 9 requests, ... 1 error").
+    assert!(
+        !err.lines().any(|l| l.starts_with("label:")),
+        "no progress line of requests never sent:\n{err}"
+    );
+}
+
+#[test]
+fn every_commands_help_runs_and_status_and_clean_take_the_dataset_folder_first() {
+    for command in leaf_commands(&[]) {
+        let mut args: Vec<&str> = command.iter().map(String::as_str).collect();
+        args.push("--help");
+        let out = run(&args, &repo());
+        assert!(
+            out.status.success(),
+            "`{}`: {}",
+            args.join(" "),
+            text(&out.stderr)
+        );
+    }
+    for command in ["status", "clean"] {
+        let help = text(&run(&[command, "--help"], &repo()).stdout);
+        let (_, arguments) = help.split_once("Arguments:\n").unwrap_or_default();
+        let first = arguments.split_whitespace().next().unwrap_or_default();
+        assert_eq!(
+            first.trim_matches(['<', '>', '[', ']']),
+            "DATASET",
+            "`{command}`: the first positional argument is the dataset folder:\n{help}"
+        );
+    }
+
+    let (out, dataset) = built_demo();
+    let d = dataset.display().to_string();
+    let o = out.path().display().to_string();
+    // The folder alone finds the config its build was given: the same status as with --config.
+    let by_folder = run(&["status", &d, "--json"], &repo());
+    assert!(by_folder.status.success(), "{}", text(&by_folder.stderr));
+    let by_config = run(
+        &["status", "--config", &demo(), "--output", &o, "--json"],
+        &repo(),
+    );
+    assert!(by_config.status.success(), "{}", text(&by_config.stderr));
+    let by_folder: serde_json::Value = serde_json::from_slice(&by_folder.stdout).unwrap();
+    let by_config: serde_json::Value = serde_json::from_slice(&by_config.stdout).unwrap();
+    assert_eq!(by_folder, by_config);
+    assert_eq!(by_folder["stages"][0]["fresh"], true, "{by_folder}");
+    // A config naming another dataset is a usage error, as is a folder that is no dataset.
+    let other = repo().join("fixtures/humanml3d-joints/build.toml");
+    let wrong = run(
+        &["status", &d, "--config", other.to_str().unwrap()],
+        &repo(),
+    );
+    assert_eq!(wrong.status.code(), Some(2), "{}", text(&wrong.stderr));
+    assert!(
+        text(&wrong.stderr).contains("hml3d-joints"),
+        "{}",
+        text(&wrong.stderr)
+    );
+    let not_a_dataset = run(&["status", &o], &repo());
+    assert_eq!(not_a_dataset.status.code(), Some(2));
+    // A folder whose build recorded no config (built by an older release) asks for --config.
+    std::fs::remove_file(dataset.join(".motionforge/config.json")).unwrap();
+    let unrecorded = run(&["status", &d], &repo());
+    assert_eq!(
+        unrecorded.status.code(),
+        Some(2),
+        "{}",
+        text(&unrecorded.stderr)
+    );
+    assert!(
+        text(&unrecorded.stderr).contains("pass --config"),
+        "{}",
+        text(&unrecorded.stderr)
+    );
+    let given = run(&["status", &d, "--config", &demo()], &repo());
+    assert!(given.status.success(), "{}", text(&given.stderr));
+
+    // clean: the folder alone, as with --config.
+    let cleaned = run(&["clean", &d, "--cache-only"], &repo());
+    assert!(cleaned.status.success(), "{}", text(&cleaned.stderr));
+    assert!(!dataset.join(".motionforge/cache").exists());
+    assert!(dataset.join("data").is_dir());
+    let cleaned = run(&["clean", &d], &repo());
+    assert!(cleaned.status.success(), "{}", text(&cleaned.stderr));
+    assert!(!dataset.join("data").exists() && !dataset.join("manifest.json").exists());
+    // The folder and a config at once is a usage error.
+    let both = run(&["clean", &d, "--config", &demo()], &repo());
+    assert_eq!(both.status.code(), Some(2), "{}", text(&both.stderr));
+}
+
+/// `motionforge <args>` on a terminal (a pseudo-terminal made by util-linux `script`) `columns`
+/// wide; what it printed, without the terminal's carriage returns.
+fn on_terminal(args: &[&str], columns: usize) -> String {
+    let command = std::iter::once(BIN)
+        .chain(args.iter().copied())
+        .map(|a| format!("'{a}'"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let out = Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .env("COLUMNS", columns.to_string())
+        .output()
+        .expect("util-linux `script` runs the command on a pseudo-terminal");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    text(&out.stdout).replace('\r', "")
+}
+
+#[test]
+fn clips_fits_the_terminal_and_prints_whole_ids_when_piped_or_wide() {
+    let (_out, dataset) = built_demo();
+    let d = dataset.display().to_string();
+    let longest = "synthetic/bandai-namco-1/dataset-1_walk-left_normal_001:0-135:m+bandai-namco-1/dataset-1_bye_normal_001:0-111:m";
+    let table = on_terminal(&["clips", &d], 120);
+    let rows = lines(&table);
+    assert_eq!(rows.len(), 25, "{table}");
+    for row in &rows {
+        assert!(
+            row.chars().count() <= 120,
+            "{} wide: {row}",
+            row.chars().count()
+        );
+    }
+    assert!(!table.contains(longest), "{table}");
+    // Cut in the middle: the start and the end of the id stay, so a mirror's `:m` shows.
+    assert!(
+        rows.iter()
+            .any(|r| r.starts_with("synthetic/") && r.contains('…') && r.contains(":0-111:m ")),
+        "{table}"
+    );
+    // Whole with --wide on a terminal, and whenever the output is not a terminal.
+    let wide = on_terminal(&["clips", &d, "--wide"], 120);
+    assert!(wide.contains(longest) && !wide.contains('…'), "{wide}");
+    let piped = run(&["clips", &d], &repo());
+    assert!(
+        text(&piped.stdout).contains(longest),
+        "{}",
+        text(&piped.stdout)
+    );
+    let json = on_terminal(&["clips", &d, "--json"], 120);
+    assert!(json.contains(longest), "{json}");
+}
+
+// ---- plan counts as build does ---------------------------------------------------------------
+
+/// `plan --json` then `build --json` with the config `config` in `dir`: every stage the plan
+/// gives a count for has the build's count, and would run what the build then ran. The plan.
+fn plan_then_build(dir: &Path, config: &str) -> serde_json::Value {
+    let planned = run(&["--json", "plan", "--config", config], dir);
+    assert!(planned.status.success(), "{}", text(&planned.stderr));
+    let plan: serde_json::Value = serde_json::from_slice(&planned.stdout).unwrap();
+    let built = run(&["--json", "build", "--config", config], dir);
+    assert!(built.status.success(), "{}", text(&built.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&built.stdout).unwrap();
+    for planned in plan["stages"].as_array().unwrap() {
+        // 0: not known before an earlier stage runs ("all to run").
+        if planned["items"] == 0 {
+            continue;
+        }
+        let name = planned["stage"].as_str().unwrap();
+        let built = report["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["stage"] == name)
+            .unwrap_or_else(|| panic!("{name} planned, not in the build's report: {report}"));
+        assert_eq!(
+            planned["items"], built["items"],
+            "{name}: plan {plan}\nbuild {report}"
+        );
+        assert_eq!(
+            planned["to_run"], built["ran"],
+            "{name}: plan {plan}\nbuild {report}"
+        );
+    }
+    plan
+}
+
+#[test]
+fn plan_counts_every_stage_as_the_next_build_does_also_after_a_seed_change() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("demo.toml"), demo_copy("")).unwrap();
+    let first = plan_then_build(dir.path(), "demo.toml");
+    assert_eq!(first["stages"][0]["to_run"], 9, "{first}");
+    let again = plan_then_build(dir.path(), "demo.toml");
+    let label = &again["stages"][2];
+    assert_eq!(label["stage"], "label");
+    assert_eq!(
+        label["items"], 10,
+        "ten clips labelled, not one cache entry: {again}"
+    );
+
+    let seeded = demo_copy("").replace("seed = 42", "seed = 7");
+    std::fs::write(dir.path().join("seeded.toml"), seeded).unwrap();
+    let through = run(
+        &["plan", "--config", "seeded.toml", "--through", "label"],
+        dir.path(),
+    );
+    let printed = text(&through.stdout);
+    assert!(
+        printed.contains("nothing to run through label")
+            && !printed.contains("a build would reuse everything"),
+        "{printed}"
+    );
+    let after_seed = plan_then_build(dir.path(), "seeded.toml");
+    // Every stage is known after a seed change, and compose re-runs its newly sampled pairs.
+    for stage in after_seed["stages"].as_array().unwrap() {
+        assert_ne!(stage["items"], 0, "{after_seed}");
+    }
+    let compose = &after_seed["stages"][6];
+    assert_eq!(compose["stage"], "compose");
+    assert!(compose["to_run"].as_u64().unwrap() > 1, "{after_seed}");
 }

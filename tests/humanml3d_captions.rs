@@ -516,6 +516,73 @@ fn nouns_and_verbs_are_lemmatised_but_left_is_not() {
 }
 
 #[test]
+fn lemmas_and_units_come_out_as_spacy_gives_them() {
+    let words = |c: &str| -> Vec<(String, Upos)> {
+        tokens(c)
+            .unwrap()
+            .into_iter()
+            .map(|t| (t.word, t.tag))
+            .collect()
+    };
+    let word = |w: &str, t: Upos| (w.to_string(), t);
+    // Of the suffix rules whose result is a verb, spaCy takes the last it tries: `swing`, not
+    // the verb `swinge` (`ing` -> `e`, tried first).
+    assert_eq!(
+        words("a person is swinging their arms")[3],
+        word("swing", Upos::Verb)
+    );
+    assert_eq!(words("swinging")[0], word("swing", Upos::Verb));
+    // A singular noun (NN) is a base form: no suffix rule touches it.
+    assert_eq!(
+        words("a person is swinging a radius taes 50cm")[5..7],
+        [word("radius", Upos::Noun), word("taes", Upos::Noun)]
+    );
+    assert_eq!(
+        words("walk in a circle with a small radius")[7],
+        word("radius", Upos::Noun)
+    );
+    // A unit glued to a number is a token of its own; the number drops out, the unit stays.
+    assert_eq!(
+        words("step forward 50cm"),
+        [
+            word("step", Upos::Verb),
+            word("forward", Upos::Adv),
+            word("cm", Upos::Noun)
+        ]
+    );
+    assert_eq!(words("walk in a 50cm radius")[3], word("cm", Upos::Noun));
+    // spaCy's network tags `masculine` in `walk, masculine style` NN (spaCy 3.8 en_core_web_sm,
+    // whose weights the tagger runs), and ADJ after `kick,`: the caption decides, as in spaCy.
+    assert_eq!(
+        words("walk, masculine style")[1],
+        word("masculine", Upos::Noun)
+    );
+    assert_eq!(
+        words("kick, masculine style")[1],
+        word("masculine", Upos::Adj)
+    );
+    // The same captions through spaCy itself.
+    let captions: Vec<String> = [
+        "a person is swinging their arms",
+        "a person is swinging a radius taes 50cm",
+        "step forward 50cm",
+        "walk in a 50cm radius",
+        "walk, masculine style",
+        "kick, masculine style",
+    ]
+    .map(str::to_string)
+    .to_vec();
+    let theirs = reference(&captions);
+    for caption in &captions {
+        let ours: Vec<(String, String)> = words(caption)
+            .into_iter()
+            .map(|(w, t)| (w, t.to_string()))
+            .collect();
+        assert_eq!(&ours, &theirs[caption], "{caption}");
+    }
+}
+
+#[test]
 fn hyphens_go_and_only_alphabetic_tokens_stay() {
     let words: Vec<String> = tokens("do a push-up, 90 degrees; he doesn't stop")
         .unwrap()

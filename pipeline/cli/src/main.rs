@@ -42,8 +42,9 @@ struct Cli {
     /// Print only warnings and errors (no progress, no build summary).
     #[arg(long, short, global = true, conflicts_with = "verbose")]
     quiet: bool,
-    /// Log more: -v adds debug lines (stage starts, timings, fields), -vv trace lines, -vvv
-    /// dependencies' lines too.
+    /// Log more: -v adds debug lines (each stage's start, a line per item done, or per tenth of
+    /// the items past ten, its time, and each line's fields), -vv trace lines, -vvv dependencies'
+    /// lines too.
     #[arg(long, short, global = true, action = clap::ArgAction::Count)]
     verbose: u8,
     /// Machine-readable output: log lines as JSON objects on standard error, and results (the

@@ -59,7 +59,9 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
         plan.output.display()
     )?;
     for stage in &plan.stages {
-        if stage.fresh() {
+        if stage.fresh() && stage.items == 0 {
+            writeln!(out, "{:>10}  nothing to do", stage.stage.name())?;
+        } else if stage.fresh() {
             writeln!(
                 out,
                 "{:>10}  up to date ({} items)",
@@ -95,7 +97,14 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
         }
     }
     if plan.nothing_to_run() {
-        writeln!(out, "nothing to run: a build would reuse everything")?;
+        match plan.stages.last().map(|s| s.stage) {
+            // `--through`: the stages after it are not planned, and may well have work to do.
+            Some(last) if last != motionforge::build::Stage::Report => writeln!(
+                out,
+                "nothing to run through {last}: `run {last}` would reuse everything (the stages after it are not planned)"
+            )?,
+            _ => writeln!(out, "nothing to run: a build would reuse everything")?,
+        }
     }
     Ok(())
 }

@@ -631,11 +631,8 @@ impl LlmClient {
                 },
             }
         }
-        observe(RequestEvent::Sending {
-            cached,
-            to_send: pending.len(),
-        });
-
+        // Probed before anything is announced: a server that is not there fails every prompt at
+        // once, with no progress line per prompt that was never sent.
         if !pending.is_empty()
             && !self.shared.probed.load(Ordering::SeqCst)
             && let Err(e) = self.shared.probe().await
@@ -644,10 +641,13 @@ impl LlmClient {
                 for &i in positions {
                     results[i] = Some(Err(e.clone()));
                 }
-                observe(RequestEvent::Finished { ok: false });
             }
             return finish(results);
         }
+        observe(RequestEvent::Sending {
+            cached,
+            to_send: pending.len(),
+        });
 
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
         for (slot, (_, positions)) in pending.iter().enumerate() {

@@ -27,7 +27,7 @@ const REPORT_DIR: &str = "report";
 pub enum CleanError {
     /// The folder has no `.motionforge/` workspace, so it may not be a build's output.
     #[error(
-        "{dir} does not look like a motionforge dataset folder (no .motionforge/ inside); nothing removed. Check --config and --output"
+        "{dir} does not look like a motionforge dataset folder (no .motionforge/ inside); nothing removed. Check the folder given, or --config and --output"
     )]
     NotADataset {
         /// The folder.

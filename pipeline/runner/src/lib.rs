@@ -45,7 +45,7 @@ pub use motionforge_core::base::{
     write_atomic_with,
 };
 pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
-pub use workspace::{Ledger, Miss, SeenStamps, StageLedger, Workspace};
+pub use workspace::{ConfigRecord, Ledger, Miss, SeenStamps, StageLedger, Workspace};
 
 use capture::{Item, Shared};
 use motions::MotionIndex;
@@ -317,6 +317,9 @@ pub struct BuildOptions {
     /// How long to wait for another build of the same dataset folder to finish (`None`: refuse
     /// at once).
     pub lock_wait: Option<std::time::Duration>,
+    /// The config file the build was given, recorded in the dataset's workspace so commands
+    /// given only the dataset folder (`status <dataset>`) find it; `None` records nothing.
+    pub config_file: Option<PathBuf>,
 }
 
 /// The stages up to the write stage, as a loop over the build's steps ([`steps::STEPS`]); what
@@ -353,6 +356,8 @@ struct BuildState<'a, 'o> {
     /// In probe mode: some capture's ingest or segment output is not cached, so what follows
     /// depends on outputs that do not exist yet.
     upstream_pending: bool,
+    /// What each stage did; in probe mode, a whole-set stage (label, compose) whose output is not
+    /// cached counts what it would run.
     stages: Vec<StageRun>,
     /// What the text stages did.
     text: text::TextOutcome,
@@ -531,6 +536,9 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         write_atomic(&output.join(REPORT_FILE), &json)?;
     }
     save_ledger(&shared.workspace, &report.stages, written.stamps)?;
+    if let Some(file) = &options.config_file {
+        workspace::ConfigRecord::save(&shared.workspace, file)?;
+    }
     match report.report_error {
         Some(e) => Err(BuildError::Report(e)),
         None => Ok(report),

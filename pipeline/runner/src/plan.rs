@@ -107,6 +107,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
             );
         }
     }
+    count_as_a_build_does(&mut plans, &staged.stages);
     // Whatever comes after the first stale stage re-runs because of it.
     let blocked = staged.blocked;
     if let Some(first) = blocked {
@@ -159,18 +160,16 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
     if blocked.is_none() && through >= Stage::Write {
         let stamp = table_stamp(config, &staged.clips, &staged.index, &text.plans)?;
         let write_fresh = output::written(&staged.output, workspace, &stamp.fingerprint);
-        if let Some(plan) = plans.get_mut(&Stage::Write) {
-            plan.items = 1;
-            if let Err(why) = write_fresh.clone() {
-                let reason = match why.as_str() {
-                    "rows changed" => ledger.why(Stage::Write.name(), "*", &stamp),
-                    _ => why,
-                };
-                plan.stale("*", reason);
-            }
+        if let Some(plan) = plans.get_mut(&Stage::Write)
+            && let Err(why) = write_fresh.clone()
+        {
+            let reason = match why.as_str() {
+                "rows changed" => ledger.why(Stage::Write.name(), "*", &stamp),
+                _ => why,
+            };
+            plan.stale("*", reason);
         }
         if let Some(plan) = plans.get_mut(&Stage::Report) {
-            plan.items = 1;
             if write_fresh.is_err() {
                 plan.stale("*", "write re-runs first".to_string());
             } else if !report_is_current(&staged.output, workspace, &stamp.fingerprint) {
@@ -183,6 +182,32 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         output: staged.output.clone(),
         stages: plans.into_values().collect(),
     })
+}
+
+/// Stages over the whole set have one cache entry, but a build counts their items (clips
+/// labelled, pairs composed, as the probe's `runs` say, also when they would run): the plan counts
+/// them the same way. Write and report make one dataset and one report, whatever comes before.
+fn count_as_a_build_does(plans: &mut BTreeMap<Stage, StagePlan>, runs: &[super::StageRun]) {
+    for run in runs {
+        let Some(stage) = [Stage::Label, Stage::Compose]
+            .into_iter()
+            .find(|s| s.name() == run.stage)
+        else {
+            continue;
+        };
+        if let Some(plan) = plans.get_mut(&stage) {
+            plan.items = run.items;
+            if !plan.fresh() {
+                plan.to_run = run.items;
+                plan.reasons.values_mut().for_each(|n| *n = run.items);
+            }
+        }
+    }
+    for stage in [Stage::Write, Stage::Report] {
+        if let Some(plan) = plans.get_mut(&stage) {
+            plan.items = 1;
+        }
+    }
 }
 
 /// One stage's state: fresh or stale now, and what its last run did.

@@ -327,7 +327,24 @@ impl<'a, 'o> BuildState<'a, 'o> {
                 self.pair_check = check;
                 self.stages.push(run);
             }
-            None => self.blocked = Some(Stage::Compose),
+            None => {
+                // Probe mode, not cached: the pairs a build would compose (sampling is cheap,
+                // composing is not), so `plan` counts them as `build` does.
+                let clips: Vec<&Clip> = gathered.clips.iter().collect();
+                let (_, sampled) = crate::stages::compose::sample(
+                    &clips,
+                    &self.config.synthetic,
+                    self.config.dataset.seed,
+                    |c| c.split.clone(),
+                );
+                self.stages.push(super::StageRun {
+                    stage: crate::stages::compose::NAME.into(),
+                    items: sampled.sampled,
+                    ran: sampled.sampled,
+                    reused: 0,
+                });
+                self.blocked = Some(Stage::Compose);
+            }
         }
         Ok(())
     }

@@ -172,6 +172,13 @@ fn label_stage(
         || assign_labels(shared, motions, items, &labels, &report),
     )?;
     let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
+        // Probe mode, not cached: what a build would run, so `plan` counts clips as `build` does.
+        outcome.runs.push(StageRun {
+            stage: label::NAME.into(),
+            items: n_clips,
+            ran: n_clips,
+            reused: 0,
+        });
         return Ok(false);
     };
     shared

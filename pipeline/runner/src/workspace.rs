@@ -14,6 +14,37 @@ use motionforge_core::base::{Stamp, WorkspaceError};
 /// The file recording, per stage and item, the fingerprint of the last run.
 pub const LEDGER_FILE: &str = "ledger.json";
 
+/// The file recording which config file the dataset folder was last built from, so commands
+/// given only the folder (`status <dataset>`) can find it.
+pub const CONFIG_RECORD_FILE: &str = "config.json";
+
+/// Which config file a dataset folder was last built from (`.motionforge/config.json`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ConfigRecord {
+    /// The config file, absolute when the build could make it so.
+    pub config: PathBuf,
+}
+
+impl ConfigRecord {
+    /// The config the dataset in `dataset_dir` was last built from; `None` when no build
+    /// recorded one (a folder built before builds recorded it, or not a dataset folder).
+    pub fn load(dataset_dir: &Path) -> Option<PathBuf> {
+        let bytes = fs::read(dataset_dir.join(".motionforge").join(CONFIG_RECORD_FILE)).ok()?;
+        serde_json::from_slice::<ConfigRecord>(&bytes)
+            .ok()
+            .map(|r| r.config)
+    }
+
+    /// Records `config` as the file the dataset of `workspace` was built from (atomically).
+    pub(crate) fn save(workspace: &Workspace, config: &Path) -> Result<(), WorkspaceError> {
+        let record = ConfigRecord {
+            config: std::path::absolute(config).unwrap_or_else(|_| config.to_path_buf()),
+        };
+        let json = serde_json::to_vec_pretty(&record).unwrap_or_default();
+        motionforge_core::base::write_atomic(&workspace.root().join(CONFIG_RECORD_FILE), &json)
+    }
+}
+
 /// What the last runs of each stage saw: per item, its [`Stamp`]; per stage, when and how much.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Ledger {

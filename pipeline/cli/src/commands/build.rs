@@ -104,6 +104,7 @@ fn build_through(args: BuildArgs, through: Option<Stage>, ui: &Ui) -> Result<Exi
             progress: ui.progress(),
             lock_wait: args.wait,
             through,
+            config_file: Some(args.config.clone()),
         },
     )?;
     ui.clear_bars();

@@ -18,15 +18,18 @@ use crate::ui::Ui;
 /// cache and files you put there are kept. Takes the dataset folder's lock, like a build.
 #[derive(clap::Args)]
 #[command(after_help = examples_then_exit_codes!(
-    "  motionforge clean --config fixtures/demo.toml
-  motionforge clean --config fixtures/demo.toml --cache-only"
+    "  motionforge clean out/demo
+  motionforge clean out/demo --cache-only
+  motionforge clean --config fixtures/demo.toml"
 ))]
 pub(crate) struct CleanArgs {
+    /// The dataset folder (`<output>/<name>`), instead of the one a config names.
+    dataset: Option<PathBuf>,
     /// Build configuration naming the dataset folder.
-    #[arg(long, short, default_value = DEFAULT_CONFIG)]
+    #[arg(long, short, default_value = DEFAULT_CONFIG, conflicts_with = "dataset")]
     config: PathBuf,
     /// The output folder the dataset was built into with `build --output`.
-    #[arg(long, short)]
+    #[arg(long, short, conflicts_with = "dataset")]
     output: Option<PathBuf>,
     /// Remove only the stage cache (`.motionforge/cache`); the next build recomputes every
     /// stage but rewrites no output that would be identical.
@@ -39,11 +42,16 @@ pub(crate) struct CleanArgs {
 
 /// `motionforge clean`.
 pub(crate) fn run(args: CleanArgs, ui: &Ui) -> Result<ExitCode> {
-    let mut config = Config::load(&args.config)?;
-    if let Some(output) = args.output {
-        config.dataset.output = std::path::absolute(&output).unwrap_or(output);
-    }
-    let dir = config.dataset_dir();
+    let dir = match args.dataset {
+        Some(dataset) => dataset,
+        None => {
+            let mut config = Config::load(&args.config)?;
+            if let Some(output) = args.output {
+                config.dataset.output = std::path::absolute(&output).unwrap_or(output);
+            }
+            config.dataset_dir()
+        }
+    };
     let report = motionforge::build::clean::clean(&dir, args.cache_only, args.wait)?;
     let mut out = std::io::stdout().lock();
     if ui.json() {

@@ -1,6 +1,6 @@
 //! `clips`: a built dataset's clips from its shards alone, with filters (shared with `preview`).
 
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -30,12 +30,63 @@ pub(crate) struct ClipsArgs {
     /// Print a JSON array of the clips' metadata instead of a table.
     #[arg(long)]
     json: bool,
+    /// Print whole ids and captions however wide the table gets. Without it, on a terminal, long
+    /// ids are cut in the middle (`…`) and captions at the end so each line fits the terminal's
+    /// width (COLUMNS, else the terminal's own, else 100); piped output is never cut.
+    #[arg(long)]
+    wide: bool,
 }
 
 /// `motionforge clips`.
 pub(crate) fn run(args: ClipsArgs) -> Result<ExitCode> {
-    clips(&args.dataset, &args.filter, args.json)?;
+    let width = (!args.wide && !args.json && std::io::stdout().is_terminal()).then(terminal_width);
+    clips(&args.dataset, &args.filter, args.json, width)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Columns of the terminal on standard output: `COLUMNS` when set to a number, else the
+/// terminal's own width, else 100.
+fn terminal_width() -> usize {
+    if let Some(columns) = std::env::var("COLUMNS")
+        .ok()
+        .and_then(|c| c.trim().parse::<usize>().ok())
+        .filter(|c| *c > 0)
+    {
+        return columns;
+    }
+    // SAFETY: TIOCGWINSZ fills the `winsize` it is given and reads nothing else; a failure leaves
+    // it zeroed.
+    let mut size: libc::winsize = unsafe { std::mem::zeroed() };
+    let ok = unsafe { libc::ioctl(libc::STDOUT_FILENO, libc::TIOCGWINSZ, &mut size) } == 0;
+    if ok && size.ws_col > 0 {
+        usize::from(size.ws_col)
+    } else {
+        100
+    }
+}
+
+/// `text` in at most `width` characters: cut in the middle with `…`, keeping its start and end
+/// (where clip ids differ: the capture, the frames, a mirror's `:m`).
+fn cut_middle(text: &str, width: usize) -> String {
+    let n = text.chars().count();
+    if n <= width {
+        return text.to_string();
+    }
+    let keep = width.saturating_sub(1);
+    let head = keep.div_ceil(2);
+    let tail = keep - head;
+    let start: String = text.chars().take(head).collect();
+    let end: String = text.chars().skip(n - tail).collect();
+    format!("{start}…{end}")
+}
+
+/// `text` in at most `width` characters: cut at the end with `…`.
+fn cut_end(text: &str, width: usize) -> String {
+    if text.chars().count() <= width {
+        return text.to_string();
+    }
+    let start: String = text.chars().take(width.saturating_sub(1)).collect();
+    format!("{start}…")
 }
 
 /// The clip filters shared by `clips` and `preview`.
@@ -106,8 +157,8 @@ pub(crate) fn check_filter_values(dir: &Path, all: &[ClipInfo], args: &FilterArg
     )
 }
 
-/// `motionforge clips`.
-fn clips(dir: &Path, args: &FilterArgs, json: bool) -> Result<()> {
+/// `motionforge clips`: the table cut to `width` columns when given.
+fn clips(dir: &Path, args: &FilterArgs, json: bool, width: Option<usize>) -> Result<()> {
     // Read once: the whole list answers both what the filters may name and what they keep.
     let mut clips = dataset::list_clips(dir)?;
     check_filter_values(dir, &clips, args)?;
@@ -130,33 +181,47 @@ fn clips(dir: &Path, args: &FilterArgs, json: bool) -> Result<()> {
             c.source_kind.clone()
         }
     };
-    let width = |f: &dyn Fn(&ClipInfo) -> usize, header: &str| {
+    let widest = |f: &dyn Fn(&ClipInfo) -> usize, header: &str| {
         clips.iter().map(f).max().unwrap_or(0).max(header.len())
     };
-    let wi = width(&|c| c.clip_id.chars().count(), "clip_id");
-    let ws = width(&|c| c.split.chars().count(), "split");
-    let wk = width(&|c| kind(c).len(), "kind");
-    let wt = width(
+    let mut wi = widest(&|c| c.clip_id.chars().count(), "clip_id");
+    let ws = widest(&|c| c.split.chars().count(), "split");
+    let wk = widest(&|c| kind(c).len(), "kind");
+    let wt = widest(
         &|c| c.motion_type.as_deref().unwrap_or("-").chars().count(),
         "type",
     );
+    // Split, kind, type and frames with their separators, and the separator before the text.
+    let fixed = 2 + ws + 2 + wk + 2 + wt + 2 + 6 + 2;
+    let text_width = width.map(|columns| {
+        // The id gives way first, down to a readable start and end; the caption takes the rest.
+        wi = wi.min(columns.saturating_sub(fixed + MIN_TEXT).max(MIN_ID));
+        columns.saturating_sub(wi + fixed).max(1)
+    });
     writeln!(
         out,
         "{:wi$}  {:ws$}  {:wk$}  {:wt$}  {:>6}  text",
         "clip_id", "split", "kind", "type", "frames"
     )?;
     for c in &clips {
+        let (id, text) = match text_width {
+            Some(tw) => (cut_middle(&c.clip_id, wi), cut_end(&c.text, tw)),
+            None => (c.clip_id.clone(), c.text.clone()),
+        };
         writeln!(
             out,
-            "{:wi$}  {:ws$}  {:wk$}  {:wt$}  {:>6}  {}",
-            c.clip_id,
+            "{id:wi$}  {:ws$}  {:wk$}  {:wt$}  {:>6}  {text}",
             c.split,
             kind(c),
             c.motion_type.as_deref().unwrap_or("-"),
             c.frames,
-            c.text
         )?;
     }
     out.flush()?;
     Ok(())
 }
+
+/// Columns a cut id keeps at least (its start and end), however narrow the terminal.
+const MIN_ID: usize = 24;
+/// Columns the caption keeps before ids are cut further.
+const MIN_TEXT: usize = 24;

@@ -273,13 +273,22 @@ fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let pieces = split_words(&caption.replace('-', ""));
     let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
     let input = spacy_input(&pieces, net);
-    let tags = net
-        .tag(&input)
-        .into_iter()
+    let penn = net.tag(&input);
+    let tags = penn
+        .iter()
         .zip(&pieces)
         .map(|(penn, p)| pos234(penn, &p.text))
         .collect();
-    finish(caption, &analysed, tags, tagger)
+    let base: Vec<bool> = penn.iter().map(|t| is_base_form(t)).collect();
+    finish(caption, &analysed, tags, &base, tagger)
+}
+
+/// True for the Penn tags whose words spaCy's English lemmatiser leaves as they are (lower-cased):
+/// a singular noun (NN: `Number=Sing`), a bare verb (VB: `VerbForm=Inf`) and a present verb
+/// that is not third person (VBP), its `is_base_form`. Its suffix rules would otherwise turn
+/// `taes` into `tae` and `series` into `serie`.
+fn is_base_form(penn: &str) -> bool {
+    matches!(penn, "NN" | "VB" | "VBP")
 }
 
 /// The pieces as the network reads them, with the norms of the tokenizer exceptions they come from.
@@ -412,22 +421,31 @@ pub fn rule_tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
     let pieces = split_words(&caption.replace('-', ""));
     let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
     let tags = tagger.tag(&analysed);
-    finish(caption, &analysed, tags, tagger)
+    // No Penn tags: a word is a base form where its reading for its tag is the lemma itself.
+    let base: Vec<bool> = analysed
+        .iter()
+        .zip(&tags)
+        .map(|(w, tag)| w.form(*tag) == Some(Form::Base))
+        .collect();
+    finish(caption, &analysed, tags, &base, tagger)
 }
 
-/// The alphabetic tokens with their tags, nouns and verbs lemmatised.
+/// The alphabetic tokens with their tags, nouns and verbs lemmatised (but those whose Penn tag
+/// is a base form, `base`).
 fn finish(
     caption: &str,
     analysed: &[Word],
     tags: Vec<Upos>,
+    base: &[bool],
     tagger: &Tagger,
 ) -> Result<Vec<Token>, CaptionError> {
     let out: Vec<Token> = analysed
         .iter()
         .zip(tags)
-        .filter(|(w, _)| w.alpha)
-        .map(|(w, tag)| Token {
-            word: w.output(tag, tagger),
+        .zip(base)
+        .filter(|((w, _), _)| w.alpha)
+        .map(|((w, tag), &base)| Token {
+            word: w.output(tag, base, tagger),
             tag,
         })
         .collect();
@@ -608,6 +626,11 @@ fn split_words(sentence: &str) -> Vec<Piece> {
                 continue;
             }
             last_was_word = true;
+            if let Some(cut) = unit_after_number(piece) {
+                out.push(Piece::whole(&piece[..cut]));
+                out.push(Piece::whole(&piece[cut..]));
+                continue;
+            }
             let (base, clitic) = split_clitic(piece);
             let base = if keeps_period {
                 format!("{base}.")
@@ -649,6 +672,28 @@ fn split_words(sentence: &str) -> Vec<Piece> {
     out
 }
 
+/// The units spaCy's tokenizer splits off a number they follow (`50cm` -> `50` `cm`), those of
+/// its list (`spacy/lang/char_classes.py`) written in Latin letters; `m/s` and `km/h` are split at
+/// their `/` first.
+const UNITS: [&str; 45] = [
+    "km", "km²", "km³", "m", "m²", "m³", "dm", "dm²", "dm³", "cm", "cm²", "cm³", "mm", "mm²",
+    "mm³", "ha", "µm", "nm", "yd", "in", "ft", "kg", "g", "mg", "µg", "t", "lb", "oz", "kmh",
+    "mph", "hPa", "Pa", "mbar", "mb", "MB", "kb", "KB", "gb", "GB", "tb", "TB", "T", "G", "M", "K",
+];
+
+/// Where a unit glued to a number starts in `word` (`50cm`: 2), as spaCy's suffix rule
+/// `(?<=[0-9])(?:km|...)` splits it: the unit ends the word and a digit comes right before it.
+fn unit_after_number(word: &str) -> Option<usize> {
+    UNITS
+        .iter()
+        .filter_map(|unit| {
+            let cut = word.len().checked_sub(unit.len())?;
+            (word.ends_with(unit) && word[..cut].ends_with(|c: char| c.is_ascii_digit()))
+                .then_some(cut)
+        })
+        .min()
+}
+
 /// Splits a trailing clitic off: "doesn't" -> ("does", "n't"), "person's" -> ("person", "'s").
 fn split_clitic(word: &str) -> (&str, Option<&str>) {
     let lower = word.to_lowercase();
@@ -686,7 +731,6 @@ enum Form {
 /// One way to read a word as an open-class part of speech.
 #[derive(Debug, Clone)]
 struct Reading {
-    lemma: String,
     form: Form,
     /// SemCor count of the lemma for this part of speech, plus one so a known lemma weighs more
     /// than none.
@@ -745,18 +789,19 @@ impl Word {
         self.closed.is_empty() && self.can(Upos::Noun)
     }
 
-    /// The word as HumanML3D writes it for this tag: nouns and verbs by their lemma, but `left`.
-    fn output(&self, tag: Upos, tagger: &Tagger) -> String {
+    /// The word as HumanML3D writes it for this tag: nouns and verbs by their lemma, but `left`,
+    /// and lower-cased as it is when its Penn tag is a base form (`base`).
+    fn output(&self, tag: Upos, base: bool, tagger: &Tagger) -> String {
         if !matches!(tag, Upos::Noun | Upos::Verb) || self.text == "left" {
             return self.text.clone();
+        }
+        if base {
+            return self.lower.clone();
         }
         if let Some(lemma) = tagger.lemma_exceptions.get(&self.lower) {
             return lemma.clone();
         }
-        match self.reading(tag) {
-            Some(r) => r.lemma.clone(),
-            None => tagger.oov_lemma(&self.lower, tag),
-        }
+        tagger.rule_lemma(&self.lower, tag)
     }
 }
 
@@ -879,15 +924,8 @@ impl Tagger {
                 .find(|(ending, _)| lower.len() > ending.len() && lower.ends_with(ending.as_str()))
                 .map_or(Upos::Noun, |(_, t)| *t);
             if let Some(i) = open_index(tag) {
-                let form = inflection(&lower, tag);
-                let lemma = if form == Form::Base {
-                    lower.clone()
-                } else {
-                    self.oov_lemma(&lower, tag)
-                };
                 open[i] = Some(Reading {
-                    lemma,
-                    form,
+                    form: inflection(&lower, tag),
                     weight: 0.5,
                 });
             }
@@ -924,12 +962,10 @@ impl Tagger {
                 let weight = f64::from(self.count(&lemma, i).unwrap_or(0)) + 1.0;
                 Some(Reading {
                     form: inflection(word, tag),
-                    lemma,
                     weight,
                 })
             }
             (None, Some(n)) => Some(Reading {
-                lemma: word.to_string(),
                 form: Form::Base,
                 weight: f64::from(n) + 1.0,
             }),
@@ -937,16 +973,34 @@ impl Tagger {
         }
     }
 
-    /// spaCy's lemma for a word its tables do not know: the first suffix rule that applies.
-    fn oov_lemma(&self, word: &str, tag: Upos) -> String {
-        open_index(tag)
-            .and_then(|i| {
-                self.suffixes[i]
-                    .iter()
-                    .filter(|(end, _)| word.ends_with(end.as_str()))
-                    .map(|(end, new)| format!("{}{new}", &word[..word.len() - end.len()]))
-                    .find(|f| !f.is_empty())
-            })
+    /// spaCy's lemma of an inflected noun or verb (`rule_lemmatize`): its irregular form's lemma,
+    /// else of the suffix rules' results that are lemmas the one of the last rule (spaCy puts each
+    /// before those found earlier: `swinging` is `swing`, not the verb `swinge` of the rule tried
+    /// first), else the first rule's result (`binoculars` is `binocular`, though WordNet lists
+    /// the plural as a noun too), else the word.
+    fn rule_lemma(&self, word: &str, tag: Upos) -> String {
+        let Some(i) = open_index(tag) else {
+            return word.to_string();
+        };
+        if let Some((_, lemma)) = self
+            .irregular
+            .get(word)
+            .and_then(|v| v.iter().find(|(t, _)| *t == tag))
+        {
+            return lemma.clone();
+        }
+        let forms: Vec<String> = self.suffixes[i]
+            .iter()
+            .filter(|(end, _)| word.ends_with(end.as_str()))
+            .map(|(end, new)| format!("{}{new}", &word[..word.len() - end.len()]))
+            .filter(|form| !form.is_empty())
+            .collect();
+        forms
+            .iter()
+            .rev()
+            .find(|form| self.count(form, i).is_some())
+            .or(forms.first())
+            .cloned()
             .unwrap_or_else(|| word.to_string())
     }
 
