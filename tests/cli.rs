@@ -1099,7 +1099,7 @@ fn a_run_that_stops_early_says_nothing_was_written_and_an_empty_stage_says_it_ha
 }
 
 #[test]
-fn report_and_export_bvh_answer_json_with_json() {
+fn report_export_bvh_preview_and_export_answer_json_with_json() {
     let dir = tempfile::tempdir().unwrap();
     common::build_demo(dir.path());
     let ds = dir.path().join("demo");
@@ -1123,6 +1123,48 @@ fn report_and_export_bvh_answer_json_with_json() {
     assert_eq!(value["path"], "cmu_01_01_115-1315.bvh", "{value}");
     assert!(value["frames"].as_u64().unwrap() > 0, "{value}");
     assert!(dir.path().join("cmu_01_01_115-1315.bvh").is_file());
+
+    // preview and export humanml3d answer one JSON object too, naming every file they wrote.
+    let out = run(
+        &[
+            "preview",
+            ds,
+            "--clip",
+            "cmu/01_01:115-1315",
+            "--with",
+            "mirror",
+            "--json",
+            "-o",
+            "pv",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let previews = value["previews"].as_array().unwrap();
+    assert_eq!(previews.len(), 1, "{value}");
+    assert_eq!(
+        previews[0]["panels"],
+        serde_json::json!(["cmu/01_01:115-1315", "cmu/01_01:115-1315:m"]),
+        "{value}"
+    );
+    for key in ["gif", "png"] {
+        let path = dir.path().join(previews[0][key].as_str().unwrap());
+        assert!(path.is_file(), "{key}: {value}");
+    }
+    let out = run(
+        &["export", "humanml3d", ds, "--json", "-o", "hml"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let exported = value["exported"].as_u64().unwrap();
+    assert!(exported > 0, "{value}");
+    let joints = std::fs::read_dir(dir.path().join("hml/new_joints"))
+        .unwrap()
+        .count();
+    assert_eq!(joints as u64, exported, "{value}");
+    assert_eq!(value["output"], "hml", "{value}");
 }
 
 // ---- one command grammar ---------------------------------------------------------------------

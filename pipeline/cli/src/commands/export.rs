@@ -80,7 +80,18 @@ pub(crate) fn run(args: ExportArgs, ui: &Ui) -> Result<ExitCode> {
         profiles,
     };
     let summary = motionforge::export::export_humanml3d(&dataset, &out, &options)?;
-    if ui.status() {
+    if ui.json() {
+        // The summary export.json records, with where it went.
+        let mut value = serde_json::to_value(&summary)?;
+        if let Some(object) = value.as_object_mut() {
+            object.insert("output".into(), serde_json::json!(out));
+        }
+        writeln!(
+            std::io::stdout(),
+            "{}",
+            serde_json::to_string_pretty(&value)?
+        )?;
+    } else if ui.status() {
         let mut stdout = std::io::stdout();
         writeln!(
             stdout,

@@ -130,6 +130,7 @@ fn preview(
     check_replaceable(output, &kept, "pass another --output")?;
     let skeletons = dataset::read_skeletons(dir)?;
     let mut out = std::io::stdout().lock();
+    let mut written = Vec::new();
     for clip in chosen {
         let mut rows = vec![dataset::read_clip_in(dir, &clips, &clip.clip_id)?];
         for id in dataset::companion_ids(clip, with, &clips) {
@@ -160,7 +161,16 @@ fn preview(
         let rendered = preview::render_scaled(&panels, options, scaling)?;
         let [gif, png] =
             preview::write_preview(&rendered, output, &preview::file_stem(&clip.clip_id))?;
-        if ui.status() {
+        if ui.json() {
+            written.push(serde_json::json!({
+                "clip_id": clip.clip_id,
+                "panels": rows.iter().map(|r| &r.info.clip_id).collect::<Vec<_>>(),
+                "gif": gif,
+                "png": png,
+                "frames": rendered.frames.len(),
+                "fps": rendered.fps,
+            }));
+        } else if ui.status() {
             writeln!(
                 out,
                 "wrote {} ({} frames at {} fps) and {}",
@@ -170,6 +180,10 @@ fn preview(
                 png.display()
             )?;
         }
+    }
+    if ui.json() {
+        let value = serde_json::json!({ "output": output, "previews": written });
+        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
     }
     Ok(())
 }
