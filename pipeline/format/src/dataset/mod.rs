@@ -296,20 +296,45 @@ pub(crate) fn no_clip(dataset: &Path, clip_id: &str, ids: &[String]) -> DatasetE
 }
 
 /// `; did you mean a, b` with up to five of `ids` that contain `clip_id` (or that it contains),
-/// or empty when none does: the hint after a clip id that is not in a dataset.
+/// or that differ from it by a character or two, or empty when none does: the hint after a clip
+/// id that is not in a dataset.
 pub fn near_clip_ids(clip_id: &str, ids: &[String]) -> String {
-    let near: Vec<&str> = ids
+    // Ids that contain what was typed (or are contained in it) first, in table order; then the
+    // ids closest to it letter by letter (a mistyped frame range, a missing `:m`), closest first.
+    let mut near: Vec<&str> = ids
         .iter()
         .map(String::as_str)
         .filter(|id| id.contains(clip_id) || clip_id.contains(*id))
-        .take(5)
+        .take(NEAR_IDS)
         .collect();
+    if near.len() < NEAR_IDS {
+        let mut scored: Vec<(f64, &str)> = ids
+            .iter()
+            .map(String::as_str)
+            .filter(|id| !near.contains(id))
+            .map(|id| (strsim::normalized_levenshtein(clip_id, id), id))
+            .filter(|(score, _)| *score >= NEAR_SIMILARITY)
+            .collect();
+        scored.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(b.1)));
+        near.extend(
+            scored
+                .into_iter()
+                .map(|(_, id)| id)
+                .take(NEAR_IDS - near.len()),
+        );
+    }
     if near.is_empty() {
         String::new()
     } else {
         format!("; did you mean {}", near.join(", "))
     }
 }
+
+/// Ids suggested for one that is not in the dataset, at most.
+const NEAR_IDS: usize = 5;
+/// Letter-by-letter similarity (normalised Levenshtein, 1 for equal ids) from which an id is
+/// suggested: one or two characters off in a typical id of 20 to 40.
+const NEAR_SIMILARITY: f64 = 0.85;
 
 /// Which clips a preview draws beside a clip.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -337,4 +362,39 @@ pub fn companion_ids(clip: &ClipInfo, with: Companions, clips: &[ClipInfo]) -> V
         .into_iter()
         .filter(|id| clips.iter().any(|c| &c.clip_id == id))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::near_clip_ids;
+
+    fn ids() -> Vec<String> {
+        [
+            "cmu/01_01:115-1315",
+            "cmu/01_01:115-1315:m",
+            "cmu/01_01:1207-2407",
+            "bandai-namco-1/dataset-1_walk-left_normal_001:0-135",
+        ]
+        .map(String::from)
+        .to_vec()
+    }
+
+    #[test]
+    fn a_typo_in_the_frames_suggests_the_ids_a_character_or_two_away() {
+        let hint = near_clip_ids("cmu/01_01:115-1351", &ids());
+        assert_eq!(
+            hint,
+            "; did you mean cmu/01_01:115-1315, cmu/01_01:115-1315:m"
+        );
+    }
+
+    #[test]
+    fn a_part_of_an_id_suggests_the_ids_containing_it_first() {
+        let hint = near_clip_ids("walk-left", &ids());
+        assert_eq!(
+            hint,
+            "; did you mean bandai-namco-1/dataset-1_walk-left_normal_001:0-135"
+        );
+        assert_eq!(near_clip_ids("nothing/like/it:1-2", &ids()), "");
+    }
 }
