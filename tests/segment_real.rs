@@ -556,9 +556,10 @@ fn leading_trim_and_pair_exclusions_drop_what_they_should_and_count_it() {
 }
 
 #[test]
-fn babel_extra_files_read_the_first_of_several_annotations() {
+fn babel_extra_files_cut_the_first_annotation_and_keep_every_annotators_texts() {
     // The real record 7692, rewritten in the shape of BABEL's extra files: lists of annotations
-    // (`frame_anns`, `seq_anns`) instead of one `frame_ann` and `seq_ann`.
+    // (`frame_anns`, `seq_anns`) instead of one `frame_ann` and `seq_ann`. The second annotator
+    // segments the same motion a little differently, as BABEL's do.
     let path = common::shared_data().join("babel/babel_records_from_notebook_outputs.json");
     let text = std::fs::read_to_string(path).unwrap();
     let main = read_babel(&text, "babel.json").unwrap();
@@ -570,25 +571,67 @@ fn babel_extra_files_read_the_first_of_several_annotations() {
     let frame_ann = object.remove("frame_ann").unwrap();
     let seq_ann = object.remove("seq_ann").unwrap();
     let mut second = frame_ann.clone();
-    second["labels"] = serde_json::json!([]);
+    let label = |text: &str, start: f64, end: f64| serde_json::json!({"raw_label": text, "proc_label": text, "start_t": start, "end_t": end});
+    second["labels"] = serde_json::json!([
+        label("hop to the left", 1.1, 2.05),
+        label("hopping right", 2.0, 3.0),
+        label("stand still", 0.0, 0.8),
+        label("wave", 0.2, 3.6),
+    ]);
     object.insert("frame_anns".into(), serde_json::json!([frame_ann, second]));
     object.insert("seq_anns".into(), serde_json::json!([seq_ann]));
     let extra_text = serde_json::json!({ "7692": extra }).to_string();
     let read = read_babel(&extra_text, "extra.json").unwrap();
     let original = main.iter().find(|r| r.sid == "7692").unwrap();
     assert_eq!(read[0].feat_p, original.feat_p);
-    assert_eq!(read[0].annotation.spans, original.annotation.spans);
-    assert!(!read[0].annotation.spans.is_empty());
-    let several: Vec<&str> = read[0]
-        .annotation
-        .notes
+    // The first annotation's spans are the clips, each with the texts of the spans that cover it
+    // by at least half (intersection over union); a text already there is not repeated.
+    let spans = &read[0].annotation.spans;
+    assert_eq!(spans.len(), original.annotation.spans.len());
+    for (span, first) in spans.iter().zip(&original.annotation.spans) {
+        assert_eq!(
+            (&span.raw_text, span.start, span.end),
+            (&first.raw_text, first.start, first.end)
+        );
+    }
+    let captions: Vec<(&str, Vec<&str>)> = spans
         .iter()
-        .filter(|n| n.kind == "several_annotations")
-        .map(|n| n.message.as_str())
+        .map(|s| {
+            (
+                s.raw_text.as_str(),
+                s.alternatives.iter().map(String::as_str).collect(),
+            )
+        })
         .collect();
     assert_eq!(
-        several,
-        ["sid 7692: 2 annotations in `frame_anns`; the first is read"]
+        captions,
+        [
+            ("standing", vec!["stand still"]),
+            ("hopping left", vec!["hop to the left"]),
+            ("hopping right", vec![]),
+            ("standing", vec![]),
+        ]
+    );
+    let notes = |kind: &str| -> Vec<String> {
+        read[0]
+            .annotation
+            .notes
+            .iter()
+            .filter(|n| n.kind == kind)
+            .map(|n| n.message.clone())
+            .collect()
+    };
+    assert_eq!(
+        notes("several_annotations"),
+        [
+            "sid 7692: 2 annotations in `frame_anns`; the first's spans are cut, the others' texts added to the spans they cover"
+        ]
+    );
+    assert_eq!(
+        notes("unmatched_annotation"),
+        [
+            "sid 7692: annotation 2's `wave` (0.2 to 3.6 s) covers no span of the first annotation; not cut"
+        ]
     );
     // Only sequence labels: the first of `seq_anns` covers the capture.
     let object = extra.as_object_mut().unwrap();

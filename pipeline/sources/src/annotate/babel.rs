@@ -1,5 +1,7 @@
 //! BABEL JSON (`frame_ann.labels[]` with `start_t`/`end_t` in seconds, `seq_ann` for the whole
-//! sequence; the extra files' `frame_anns` and `seq_anns` lists, of which the first is read). Accepts the real quirks: integer times, unsorted labels, `end_t` past the duration,
+//! sequence; the extra files' `frame_anns` and `seq_anns` lists of several annotators' work: the
+//! first annotation's spans are cut, and the other annotators' texts become further captions of the
+//! spans they cover). Accepts the real quirks: integer times, unsorted labels, `end_t` past the duration,
 //! `null` labels, overlapping segments, and the wrapped record shapes of saved notebook outputs.
 
 use std::collections::BTreeMap;
@@ -65,24 +67,36 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
     let feat_p = string(record.get("feat_p"));
     let duration = record.get("dur").and_then(number);
     // BABEL's extra files hold several annotators' work per sequence, as lists `frame_anns` and
-    // `seq_anns`: the first is read, like the main files' single `frame_ann` and `seq_ann`.
-    let frame_ann = one_annotation(record, "frame_ann", "frame_anns", sid, &mut read.notes);
-    let seq_ann = one_annotation(record, "seq_ann", "seq_anns", sid, &mut read.notes);
-    let labels = frame_ann
-        .and_then(|f| f.get("labels"))
-        .and_then(Value::as_array);
-    if let Some(labels) = labels {
+    // `seq_anns`; the main files hold one `frame_ann` and `seq_ann`. The first annotation's spans
+    // are the clips; the others' texts are further captions of the spans they cover (as
+    // HumanML3D keeps about three captions per clip), so no annotator's text is lost and no
+    // span is cut twice.
+    let frame_anns = annotations(record, "frame_ann", "frame_anns");
+    let seq_anns = annotations(record, "seq_ann", "seq_anns");
+    fn labels_of<'v>(a: &&'v Value) -> Option<&'v Vec<Value>> {
+        a.get("labels").and_then(Value::as_array)
+    }
+    if let Some(labels) = frame_anns.first().and_then(labels_of) {
         read.frame_labels(labels);
+        read.several(
+            &frame_anns,
+            "frame_anns",
+            duration,
+            RecordReader::frame_labels,
+        );
     } else if let Some(rows) = record
         .get("frame_labels_raw_start_end")
         .and_then(Value::as_array)
     {
         read.notebook_rows(rows);
-    } else if let Some(seq) = seq_ann
-        .and_then(|s| s.get("labels"))
-        .and_then(Value::as_array)
-    {
+    } else if let Some(seq) = seq_anns.first().and_then(labels_of) {
         read.sequence_labels(seq);
+        read.several(
+            &seq_anns,
+            "seq_anns",
+            duration,
+            RecordReader::sequence_labels,
+        );
     } else {
         read.notes.push(Note::new(
             "no_labels",
@@ -284,34 +298,103 @@ impl RecordReader<'_> {
     }
 }
 
-/// The record's `single` annotation, else the first of its `several` (BABEL's extra files), with
-/// a note when others are left unread.
-fn one_annotation<'r>(
-    record: &'r Value,
-    single: &str,
-    several: &str,
-    sid: &str,
-    notes: &mut Vec<Note>,
-) -> Option<&'r Value> {
+/// The record's `single` annotation, else every one of its `several` (BABEL's extra files), in
+/// the file's order.
+fn annotations<'r>(record: &'r Value, single: &str, several: &str) -> Vec<&'r Value> {
     if let Some(one) = record.get(single).filter(|v| !v.is_null()) {
-        return Some(one);
+        return vec![one];
     }
-    let list: Vec<&Value> = record
+    record
         .get(several)
-        .and_then(Value::as_array)?
-        .iter()
-        .filter(|v| !v.is_null())
-        .collect();
-    if list.len() > 1 {
-        notes.push(Note::new(
-            "several_annotations",
-            format!(
-                "sid {sid}: {} annotations in `{several}`; the first is read",
-                list.len()
-            ),
-        ));
+        .and_then(Value::as_array)
+        .map(|list| list.iter().filter(|v| !v.is_null()).collect())
+        .unwrap_or_default()
+}
+
+/// Temporal overlap from which another annotator's span is the same action as a span of the first
+/// annotation: intersection over union of their times.
+const SAME_SPAN_IOU: f64 = 0.5;
+
+impl RecordReader<'_> {
+    /// The annotations after the first (`list`, read by `read`): each span's text is added to the
+    /// first annotation's span it overlaps most, when they overlap by [`SAME_SPAN_IOU`]; a span
+    /// overlapping none is noted, not cut.
+    fn several(
+        &mut self,
+        list: &[&Value],
+        name: &str,
+        duration: Option<f64>,
+        read: fn(&mut Self, &[Value]),
+    ) {
+        let sid = self.sid;
+        if list.len() > 1 {
+            self.notes.push(Note::new(
+                "several_annotations",
+                format!(
+                    "sid {sid}: {} annotations in `{name}`; the first's spans are cut, the others' texts added to the spans they cover",
+                    list.len()
+                ),
+            ));
+        }
+        for (k, annotation) in list.iter().enumerate().skip(1) {
+            let Some(labels) = annotation.get("labels").and_then(Value::as_array) else {
+                continue;
+            };
+            let mut other = RecordReader {
+                sid,
+                spans: Vec::new(),
+                notes: Vec::new(),
+                nulls: 0,
+            };
+            read(&mut other, labels);
+            self.nulls += other.nulls;
+            self.notes.append(&mut other.notes);
+            for span in other.spans {
+                self.add_caption(span, k + 1, duration);
+            }
+        }
     }
-    list.first().copied()
+
+    /// Another annotator's `span` (of annotation `number`) as a further caption of the first
+    /// annotation's span it overlaps most.
+    fn add_caption(&mut self, span: Span, number: usize, duration: Option<f64>) {
+        let interval = |s: &Span| {
+            let end = match s.end {
+                Time::Seconds(e) => e,
+                _ => duration.unwrap_or(f64::MAX),
+            };
+            (start_secs(s), end)
+        };
+        let (start, end) = interval(&span);
+        let best = self
+            .spans
+            .iter_mut()
+            .map(|s| {
+                let (a, b) = interval(s);
+                let inter = (end.min(b) - start.max(a)).max(0.0);
+                let union = end.max(b) - start.min(a);
+                let iou = if union > 0.0 { inter / union } else { 0.0 };
+                (iou, s)
+            })
+            .filter(|(iou, _)| *iou >= SAME_SPAN_IOU)
+            .max_by(|x, y| x.0.total_cmp(&y.0));
+        match best {
+            Some((_, same)) => {
+                if same.raw_text != span.raw_text && !same.alternatives.contains(&span.raw_text) {
+                    same.alternatives.push(span.raw_text);
+                }
+            }
+            None => self.notes.push(Note::new(
+                "unmatched_annotation",
+                format!(
+                    "sid {}: annotation {number}'s `{}` ({start} to {} s) covers no span of the first annotation; not cut",
+                    self.sid,
+                    span.raw_text,
+                    if end == f64::MAX { "the end".to_string() } else { end.to_string() },
+                ),
+            )),
+        }
+    }
 }
 
 fn start_secs(s: &Span) -> f64 {
