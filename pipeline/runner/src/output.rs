@@ -415,56 +415,71 @@ impl ShardJob<'_> {
 
     /// Calls `each` with the shard's rows, one row group at a time, in row order. A group's
     /// frames are read in storage order (neighbours on disk together) and its rows prepared on
-    /// all cores.
+    /// all cores; while `each` takes a group (the writer encodes it), the next group is read and
+    /// prepared beside it, so a shard's reading and encoding overlap instead of taking turns.
     fn each_row_group(
         &self,
         clips: &[(Clip, MotionRef)],
-        mut each: impl FnMut(Vec<Row<'_>>) -> Result<(), TableOrBuild>,
+        mut each: impl FnMut(Vec<Row<'_>>) -> Result<(), TableOrBuild> + Send,
     ) -> Result<(), TableOrBuild> {
-        let Table {
-            profiles, motions, ..
-        } = *self.table;
         // Each shard reads with its own recent-entry memory, so parallel shards do not evict
         // each other's chunks.
-        let motions = motions.sibling();
+        let motions = self.table.motions.sibling();
+        let mut ready: Option<Vec<Row<'_>>> = None;
         for group in clips.chunks(ROWS_PER_GROUP) {
-            let held: Vec<&Clip> = group.iter().map(|(c, _)| c).collect();
-            let mut order: Vec<usize> = (0..group.len()).collect();
-            // By the chunk a motion is made from first: a mirror (or a composite) is read right
-            // after its original, while the original's chunk is still decoded in the source's
-            // memory of recent entries, instead of decoding the chunk a second time.
-            order.sort_by_cached_key(|&i| (group[i].1.chunks().first().copied(), &group[i].1));
-            let mut frames: Vec<Option<motionforge_core::motion::Motion>> = vec![None; group.len()];
-            for i in order {
-                let (clip, at) = &group[i];
-                frames[i] = Some(
-                    motions
-                        .motion(at, &clip.profile)
-                        .map_err(TableOrBuild::Build)?,
-                );
-            }
-            let rows =
-                held.par_iter()
-                    .zip(frames.par_iter())
-                    .map(|(clip, motion)| {
-                        let profile = profiles.get(&clip.profile).ok_or_else(|| {
-                            TableError::MissingProfile {
-                                clip: clip.clip_id.clone(),
-                                profile: clip.profile.clone(),
-                            }
-                        })?;
-                        let motion = motion.as_ref().ok_or_else(|| {
-                            BuildError::Motion(format!("no frames read for `{}`", clip.clip_id))
-                        });
-                        let motion = motion.map_err(TableOrBuild::Build)?;
-                        Ok(Row::new(clip, motion, profile, &self.companions.features))
-                    })
-                    .collect::<Result<Vec<Row<'_>>, TableOrBuild>>()?;
-            // The rows hold what they need of the frames.
-            drop(frames);
-            each(rows)?;
+            let (done, rows) = match ready.take() {
+                Some(rows) => rayon::join(|| each(rows), || self.group_rows(&motions, group)),
+                None => (Ok(()), self.group_rows(&motions, group)),
+            };
+            done?;
+            ready = Some(rows?);
         }
-        Ok(())
+        match ready {
+            Some(rows) => each(rows),
+            None => Ok(()),
+        }
+    }
+
+    /// One row group's rows: its frames read in storage order, its rows made on all cores.
+    fn group_rows<'c>(
+        &self,
+        motions: &crate::motions::MotionSource,
+        group: &'c [(Clip, MotionRef)],
+    ) -> Result<Vec<Row<'c>>, TableOrBuild> {
+        let profiles = self.table.profiles;
+        let held: Vec<&Clip> = group.iter().map(|(c, _)| c).collect();
+        let mut order: Vec<usize> = (0..group.len()).collect();
+        // By the chunk a motion is made from first: a mirror (or a composite) is read right
+        // after its original, while the original's chunk is still decoded in the source's
+        // memory of recent entries, instead of decoding the chunk a second time.
+        order.sort_by_cached_key(|&i| (group[i].1.chunks().first().copied(), &group[i].1));
+        let mut frames: Vec<Option<motionforge_core::motion::Motion>> = vec![None; group.len()];
+        for i in order {
+            let (clip, at) = &group[i];
+            frames[i] = Some(
+                motions
+                    .motion(at, &clip.profile)
+                    .map_err(TableOrBuild::Build)?,
+            );
+        }
+        // The rows hold what they need of the frames, which go when this returns.
+        held.par_iter()
+            .zip(frames.par_iter())
+            .map(|(clip, motion)| {
+                let profile =
+                    profiles
+                        .get(&clip.profile)
+                        .ok_or_else(|| TableError::MissingProfile {
+                            clip: clip.clip_id.clone(),
+                            profile: clip.profile.clone(),
+                        })?;
+                let motion = motion.as_ref().ok_or_else(|| {
+                    BuildError::Motion(format!("no frames read for `{}`", clip.clip_id))
+                });
+                let motion = motion.map_err(TableOrBuild::Build)?;
+                Ok(Row::new(clip, motion, profile, &self.companions.features))
+            })
+            .collect::<Result<Vec<Row<'c>>, TableOrBuild>>()
     }
 }
 
