@@ -55,11 +55,12 @@ use crate::config::Config;
 use crate::source::{SourceAnnotations, SourceError};
 use crate::stages::{ingest, mirror};
 use crate::stages::{label, segment};
+use motionforge_core::base::{DropReason, RejectReason, Tally};
 use motionforge_core::motion::ProfileSpec;
 use motionforge_format::io::parquet::TableError;
 use motionforge_sources::annotate::span::Note;
 use motionforge_sources::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
-use motionforge_sources::clip::Clip;
+use motionforge_sources::clip::{Clip, SourceKind};
 
 pub use motionforge_core::base::layout::{
     CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE, REPORT_FILE,
@@ -246,7 +247,7 @@ pub struct BuildReport {
     /// Rows that are mirrored copies.
     pub mirrored: usize,
     /// Rows by source kind (`real_single`, `real_pair`, ...), mirrors included.
-    pub kinds: BTreeMap<String, usize>,
+    pub kinds: Tally<SourceKind>,
     /// Clips per action label (originals only).
     pub actions: BTreeMap<String, usize>,
     /// Single clips per motion type (originals only); `(unmapped)` for labels with no type.
@@ -254,7 +255,7 @@ pub struct BuildReport {
     /// Labels that map to no motion type, with counts: listed, never merged.
     pub unmapped_labels: BTreeMap<String, usize>,
     /// Segments dropped during segmentation, by reason.
-    pub drops_by_reason: BTreeMap<String, usize>,
+    pub drops_by_reason: Tally<DropReason>,
     /// Every dropped segment: file, reason, text and frames.
     pub drops: Vec<Dropped>,
     /// Rows whose frames are really at another rate than the dataset's, by that rate (fps, two
@@ -267,7 +268,7 @@ pub struct BuildReport {
     /// Every annotation quirk, for people.
     pub notes: Vec<Note>,
     /// Rejected inputs by reason.
-    pub rejects_by_reason: BTreeMap<String, usize>,
+    pub rejects_by_reason: Tally<RejectReason>,
     /// Every rejected input.
     pub rejects: Vec<Reject>,
     /// Body-part labelling: sources, requests, cache hits, flagged answers.
@@ -378,7 +379,7 @@ struct Gathered {
     clips: Vec<Clip>,
     index: MotionIndex,
     rejects: Vec<Reject>,
-    drops_by_reason: BTreeMap<String, usize>,
+    drops_by_reason: Tally<DropReason>,
     drops: Vec<Dropped>,
     unmapped_labels: BTreeMap<String, usize>,
     notes: Vec<Note>,
@@ -457,7 +458,7 @@ struct Staged<'a> {
     clips: Vec<Clip>,
     rejects: Vec<Reject>,
     notes: Vec<Note>,
-    drops_by_reason: BTreeMap<String, usize>,
+    drops_by_reason: Tally<DropReason>,
     drops: Vec<Dropped>,
     unmapped_labels: BTreeMap<String, usize>,
     text: text::TextOutcome,
