@@ -184,7 +184,7 @@ pub enum BuildError {
     /// The statistics report cannot be made (the dataset was written; `build-report.json` says
     /// why in `report_error`).
     #[error("report: {0}")]
-    Report(#[source] motionforge_report::ReportError),
+    Report(#[source] Box<motionforge_report::ReportError>),
     /// A prompt template does not load or render.
     #[error(transparent)]
     Prompt(#[from] motionforge_llm::prompt::PromptError),
@@ -199,10 +199,10 @@ pub enum BuildError {
     /// Part labelling cannot run (missing answers with `on_miss = "fail"`, no client, the
     /// server gone).
     #[error(transparent)]
-    Labels(crate::stages::label::LabelError),
+    Labels(Box<crate::stages::label::LabelError>),
     /// A text-augmentation stage cannot run (missing answers, the server gone).
     #[error(transparent)]
-    Augment(crate::stages::augment::AugmentError),
+    Augment(Box<crate::stages::augment::AugmentError>),
     /// The motion-type taxonomy or mapping is invalid.
     #[error(transparent)]
     Taxonomy(#[from] TaxonomyError),
@@ -248,7 +248,7 @@ pub enum BuildError {
         /// The profile's name.
         profile: String,
         /// Why it does not bind.
-        error: motionforge_core::motion::profile::ProfileError,
+        error: Box<motionforge_core::motion::profile::ProfileError>,
     },
     /// A looked-up clip names a skeleton profile the config does not define.
     #[error("clip `{clip}`: no profile `{profile}`")]
@@ -267,7 +267,7 @@ pub enum BuildError {
         /// The profile's name.
         profile: String,
         /// Why it does not bind.
-        error: motionforge_core::motion::profile::ProfileError,
+        error: Box<motionforge_core::motion::profile::ProfileError>,
     },
     /// A capture's bytes differ from the digest taken when the build found it.
     #[error("{file}: the file changed during the build; run the build again")]
@@ -632,7 +632,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         workspace::ConfigRecord::save(&shared.workspace, file)?;
     }
     match written.report_error {
-        Some(e) => Err(BuildError::Report(e)),
+        Some(e) => Err(BuildError::Report(Box::new(e))),
         None => Ok(report),
     }
 }

@@ -51,7 +51,7 @@ pub fn find_clip(
                 BuildError::ClipProfileFit {
                     clip: clip_id.to_string(),
                     profile: c.profile.clone(),
-                    error: e,
+                    error: Box::new(e),
                 }
             })?;
             Some((motions.load(c, &staged.index)?, profile))

@@ -213,7 +213,7 @@ impl MotionSource {
             .bind(spec, &motion.skeleton)
             .map_err(|error| BuildError::Rebind {
                 profile: profile.to_string(),
-                error,
+                error: Box::new(error),
             })
     }
 

@@ -154,7 +154,7 @@ fn label_stage(
     };
     let labels = label::label_texts(&clips, &input, cache, &mut report).map_err(|e| match e {
         label::LabelError::Prompt(p) => BuildError::Prompt(p),
-        other => BuildError::Labels(other),
+        other => BuildError::Labels(Box::new(other)),
     })?;
     let segment_fps: Vec<&str> = items
         .iter()
@@ -398,7 +398,7 @@ fn plan_stage(
 pub(super) fn augment_error(e: AugmentError) -> BuildError {
     match e {
         AugmentError::Prompt(p) => BuildError::Prompt(p),
-        other => BuildError::Augment(other),
+        other => BuildError::Augment(Box::new(other)),
     }
 }
 
