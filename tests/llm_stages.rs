@@ -673,7 +673,7 @@ fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
     let checks = &first.paraphrases.checks;
     assert_eq!(checks.accepted, 4, "{checks:?}");
     assert_eq!(
-        checks.rejected_by_reason,
+        checks.rejected_by_reason.to_names(),
         [
             ("action", 2),
             ("beyond_count", 10),

@@ -3,19 +3,30 @@
 use motionforge::build::BuildReport;
 use std::io::Write;
 
-pub(crate) fn counts(map: &std::collections::BTreeMap<String, usize>) -> String {
-    if map.is_empty() {
+/// `name n, name n`, or `none`: counts by name (a `BTreeMap` by string or a `Tally` by kind).
+pub(crate) fn counts<N, C>(map: impl IntoIterator<Item = (N, C)>) -> String
+where
+    N: std::fmt::Display,
+    C: std::borrow::Borrow<usize>,
+{
+    let listed: Vec<String> = map
+        .into_iter()
+        .map(|(k, n)| format!("{k} {}", n.borrow()))
+        .collect();
+    if listed.is_empty() {
         return "none".to_string();
     }
-    map.iter()
-        .map(|(k, n)| format!("{k} {n}"))
-        .collect::<Vec<_>>()
-        .join(", ")
+    listed.join(", ")
 }
 
-pub(crate) fn reasons(map: &std::collections::BTreeMap<String, usize>) -> String {
-    map.iter()
-        .map(|(why, n)| format!("{why} ({n})"))
+/// `why (n); why (n)`.
+pub(crate) fn reasons<N, C>(map: impl IntoIterator<Item = (N, C)>) -> String
+where
+    N: std::fmt::Display,
+    C: std::borrow::Borrow<usize>,
+{
+    map.into_iter()
+        .map(|(why, n)| format!("{why} ({})", n.borrow()))
         .collect::<Vec<_>>()
         .join("; ")
 }

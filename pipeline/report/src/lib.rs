@@ -231,8 +231,8 @@ pub fn report_dataset(dataset: &Path, out_dir: Option<&Path>) -> Result<Vec<Path
     });
     let input = ReportInput {
         tables,
-        drops: counts.drop_reason,
-        rejects: counts.reject_reason,
+        drops: counts.drop_reason.to_names(),
+        rejects: counts.reject_reason.to_names(),
         title,
         contradictions,
     };

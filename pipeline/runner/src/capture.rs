@@ -184,10 +184,9 @@ impl<'s> CaptureRead<'s> {
             let file = self.file;
             let read = std::fs::read(&file.path).map_err(super::workspace::io_err(&file.path))?;
             if sha256_hex(&read) != self.sha256 {
-                return Err(BuildError::Motion(format!(
-                    "{}: the file changed during the build; run the build again",
-                    file.display
-                )));
+                return Err(BuildError::CaptureChanged {
+                    file: file.display.to_string(),
+                });
             }
             self.bytes = Some(read);
         }
@@ -279,10 +278,9 @@ fn segment_ingested(
                 None => read.parse()?.capture,
             };
             let Some(capture) = capture else {
-                return Err(BuildError::Motion(format!(
-                    "{}: the capture read before no longer reads; run the build again with --force",
-                    file.display
-                )));
+                return Err(BuildError::CaptureUnreadable {
+                    file: file.display.to_string(),
+                });
             };
             let seg_input = segment::SegmentInput {
                 capture: &capture,

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use motionforge_core::base::layout::DATA_DIR;
 use motionforge_core::motion::{MirrorPlan, OffsetPolicy, Profile};
 use motionforge_format::io::skeletons::{CaptureAxes, SkeletonEntry, SkeletonJoint, Skeletons};
-use motionforge_sources::clip::{Clip, Split};
+use motionforge_sources::clip::{Clip, SourceKind, Split};
 
 /// The table's skeletons as `skeletons.json` lists them (by id), and each profile bound to the
 /// first skeleton of its clips (what the writer turns frames into rows with).
@@ -120,7 +120,7 @@ impl Companions {
         config: &crate::config::Config,
         clips: &[Clip],
         rejects: &[super::Reject],
-        drops_by_reason: BTreeMap<String, usize>,
+        drops_by_reason: motionforge_core::base::Tally<motionforge_core::base::DropReason>,
         label_contradictions: &[motionforge_core::quality::Contradiction],
         table_fingerprint: &str,
     ) -> Companions {
@@ -156,7 +156,7 @@ pub(super) fn card_body(
     config: &crate::config::Config,
     clips: &[Clip],
     licences: &[String],
-    kinds: &BTreeMap<String, usize>,
+    kinds: &motionforge_core::base::Tally<SourceKind>,
 ) -> String {
     use std::fmt::Write as _;
     let mut b = String::new();

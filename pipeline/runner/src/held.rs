@@ -62,8 +62,8 @@ impl HeldClips {
         };
         let mut pending: Vec<Entry> = Vec::with_capacity(BLOCK);
         for mut clip in clips {
-            let motion = at(&clip).ok_or_else(|| {
-                BuildError::Motion(format!("no motion recorded for clip `{}`", clip.clip_id))
+            let motion = at(&clip).ok_or_else(|| BuildError::NoMotion {
+                clip: clip.clip_id.clone(),
             })?;
             let split = match held.splits.iter().position(|s| *s == clip.split) {
                 Some(i) => i,
@@ -154,9 +154,10 @@ impl HeldClips {
 }
 
 fn undecodable(block: usize, why: &str) -> BuildError {
-    BuildError::Motion(format!(
-        "held clips, block {block}: {why} (an internal error; please report it)"
-    ))
+    BuildError::HeldClips {
+        block,
+        why: why.to_string(),
+    }
 }
 
 #[cfg(test)]

@@ -55,11 +55,12 @@ use crate::config::Config;
 use crate::source::{SourceAnnotations, SourceError};
 use crate::stages::{ingest, mirror};
 use crate::stages::{label, segment};
+use motionforge_core::base::{DropReason, RejectReason, Tally};
 use motionforge_core::motion::ProfileSpec;
 use motionforge_format::io::parquet::TableError;
 use motionforge_sources::annotate::span::Note;
 use motionforge_sources::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
-use motionforge_sources::clip::Clip;
+use motionforge_sources::clip::{Clip, SourceKind};
 
 pub use motionforge_core::base::layout::{
     CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE, REPORT_FILE,
@@ -180,21 +181,112 @@ pub enum BuildError {
     /// A dataset's `manifest.json` cannot be read.
     #[error(transparent)]
     Manifest(#[from] motionforge_format::io::manifest::ManifestError),
-    /// The statistics report cannot be made.
+    /// The statistics report cannot be made (the dataset was written; `build-report.json` says
+    /// why in `report_error`).
     #[error("report: {0}")]
-    Report(String),
+    Report(#[source] Box<motionforge_report::ReportError>),
     /// A prompt template does not load or render.
     #[error(transparent)]
     Prompt(#[from] motionforge_llm::prompt::PromptError),
-    /// An LLM stage cannot run (cache file, missing answers with `on_miss = "fail"`).
-    #[error("{0}")]
-    Llm(String),
+    /// The LLM response cache cannot be opened.
+    #[error("{path}: {source}")]
+    LlmCache {
+        /// The cache file.
+        path: PathBuf,
+        /// Why.
+        source: motionforge_llm::cache::CacheError,
+    },
+    /// Part labelling cannot run (missing answers with `on_miss = "fail"`, no client, the
+    /// server gone).
+    #[error(transparent)]
+    Labels(Box<crate::stages::label::LabelError>),
+    /// A text-augmentation stage cannot run (missing answers, the server gone).
+    #[error(transparent)]
+    Augment(Box<crate::stages::augment::AugmentError>),
     /// The motion-type taxonomy or mapping is invalid.
     #[error(transparent)]
     Taxonomy(#[from] TaxonomyError),
     /// A held clip's motion cannot be found (internal bookkeeping; `--force` rebuilds it).
-    #[error("{0}")]
-    Motion(String),
+    #[error("no motion recorded for clip `{clip}`")]
+    NoMotion {
+        /// The clip id.
+        clip: String,
+    },
+    /// A row's frames were not read before its row was made (internal bookkeeping).
+    #[error("no frames read for `{clip}`")]
+    NoFrames {
+        /// The clip id.
+        clip: String,
+    },
+    /// A shard's writer finished without writing it (internal bookkeeping).
+    #[error("{file}: nothing written")]
+    NothingWritten {
+        /// The shard, relative to the dataset folder.
+        file: String,
+    },
+    /// A block of held clips does not decode (an internal error).
+    #[error("held clips, block {block}: {why} (an internal error; please report it)")]
+    HeldClips {
+        /// The block's index.
+        block: usize,
+        /// The decoder's or the check's message.
+        why: String,
+    },
+    /// A held motion cannot be mirrored again.
+    #[error("cannot mirror a held motion: {0}")]
+    Remirror(#[source] motionforge_core::motion::mirror::MirrorError),
+    /// A held clip names a skeleton profile the config does not define.
+    #[error("no skeleton profile `{profile}`")]
+    NoProfile {
+        /// The profile's name.
+        profile: String,
+    },
+    /// A held motion's skeleton no longer binds to its profile. (Not a `#[source]`: a
+    /// `ProfileError` among the causes would make the whole a usage mistake, and this is not.)
+    #[error("profile `{profile}`: {error}")]
+    Rebind {
+        /// The profile's name.
+        profile: String,
+        /// Why it does not bind.
+        error: Box<motionforge_core::motion::profile::ProfileError>,
+    },
+    /// A looked-up clip names a skeleton profile the config does not define.
+    #[error("clip `{clip}`: no profile `{profile}`")]
+    ClipProfile {
+        /// The clip id.
+        clip: String,
+        /// The profile's name.
+        profile: String,
+    },
+    /// A looked-up clip's skeleton does not bind to its profile (not a `#[source]`, as
+    /// [`BuildError::Rebind`]).
+    #[error("clip `{clip}`: profile `{profile}` does not fit its skeleton: {error}")]
+    ClipProfileFit {
+        /// The clip id.
+        clip: String,
+        /// The profile's name.
+        profile: String,
+        /// Why it does not bind.
+        error: Box<motionforge_core::motion::profile::ProfileError>,
+    },
+    /// A capture's bytes differ from the digest taken when the build found it.
+    #[error("{file}: the file changed during the build; run the build again")]
+    CaptureChanged {
+        /// The capture, as the build names it.
+        file: String,
+    },
+    /// A capture whose ingest record is cached no longer parses.
+    #[error("{file}: the capture read before no longer reads; run the build again with --force")]
+    CaptureUnreadable {
+        /// The capture, as the build names it.
+        file: String,
+    },
+    /// A stage's cache entry disagrees with itself.
+    #[error("the {stage} cache entry is inconsistent; run the build again with --force")]
+    InconsistentCache {
+        /// The stage's name.
+        stage: &'static str,
+    },
     /// The dataset folder is one the build must not write into.
     #[error(transparent)]
     Refused(#[from] motionforge_core::base::guard::Refused),
@@ -246,7 +338,7 @@ pub struct BuildReport {
     /// Rows that are mirrored copies.
     pub mirrored: usize,
     /// Rows by source kind (`real_single`, `real_pair`, ...), mirrors included.
-    pub kinds: BTreeMap<String, usize>,
+    pub kinds: Tally<SourceKind>,
     /// Clips per action label (originals only).
     pub actions: BTreeMap<String, usize>,
     /// Single clips per motion type (originals only); `(unmapped)` for labels with no type.
@@ -254,7 +346,7 @@ pub struct BuildReport {
     /// Labels that map to no motion type, with counts: listed, never merged.
     pub unmapped_labels: BTreeMap<String, usize>,
     /// Segments dropped during segmentation, by reason.
-    pub drops_by_reason: BTreeMap<String, usize>,
+    pub drops_by_reason: Tally<DropReason>,
     /// Every dropped segment: file, reason, text and frames.
     pub drops: Vec<Dropped>,
     /// Rows whose frames are really at another rate than the dataset's, by that rate (fps, two
@@ -267,7 +359,7 @@ pub struct BuildReport {
     /// Every annotation quirk, for people.
     pub notes: Vec<Note>,
     /// Rejected inputs by reason.
-    pub rejects_by_reason: BTreeMap<String, usize>,
+    pub rejects_by_reason: Tally<RejectReason>,
     /// Every rejected input.
     pub rejects: Vec<Reject>,
     /// Body-part labelling: sources, requests, cache hits, flagged answers.
@@ -378,7 +470,7 @@ struct Gathered {
     clips: Vec<Clip>,
     index: MotionIndex,
     rejects: Vec<Reject>,
-    drops_by_reason: BTreeMap<String, usize>,
+    drops_by_reason: Tally<DropReason>,
     drops: Vec<Dropped>,
     unmapped_labels: BTreeMap<String, usize>,
     notes: Vec<Note>,
@@ -457,7 +549,7 @@ struct Staged<'a> {
     clips: Vec<Clip>,
     rejects: Vec<Reject>,
     notes: Vec<Note>,
-    drops_by_reason: BTreeMap<String, usize>,
+    drops_by_reason: Tally<DropReason>,
     drops: Vec<Dropped>,
     unmapped_labels: BTreeMap<String, usize>,
     text: text::TextOutcome,
@@ -528,7 +620,7 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
         synthetic: compose,
         pair_check,
         table_fingerprint: written.table_fingerprint,
-        report_error: written.report_error,
+        report_error: written.report_error.as_ref().map(ToString::to_string),
     };
     // A partial run (`run <stage>`) leaves the last full build's report in place.
     if options.through.unwrap_or(Stage::Report) == Stage::Report {
@@ -539,8 +631,8 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     if let Some(file) = &options.config_file {
         workspace::ConfigRecord::save(&shared.workspace, file)?;
     }
-    match report.report_error {
-        Some(e) => Err(BuildError::Report(e)),
+    match written.report_error {
+        Some(e) => Err(BuildError::Report(Box::new(e))),
         None => Ok(report),
     }
 }
@@ -556,7 +648,8 @@ struct Written {
     mirrored: usize,
     clips_by_effective_rate: BTreeMap<String, usize>,
     actions: BTreeMap<String, usize>,
-    report_error: Option<String>,
+    /// Why the statistics report could not be made, when it could not.
+    report_error: Option<motionforge_report::ReportError>,
     /// Every stamp this build saw, the table's among them when it was written.
     stamps: SeenStamps,
 }
@@ -682,7 +775,7 @@ fn report_stage(
     workspace: &Workspace,
     table_fingerprint: &str,
     n_clips: usize,
-) -> Result<(StageRun, Option<String>), BuildError> {
+) -> Result<(StageRun, Option<motionforge_report::ReportError>), BuildError> {
     if n_clips == 0 {
         // Nothing to describe: a report of an earlier build would describe rows that are gone.
         let stale = output.join("report");
@@ -711,7 +804,7 @@ fn report_stage(
         // build-report.json and fails the build after it, rather than losing both.
         match motionforge_report::report_dataset(output, None) {
             Ok(_) => write_atomic(&marker, table_fingerprint.as_bytes())?,
-            Err(e) => report_error = Some(e.to_string()),
+            Err(e) => report_error = Some(e),
         }
     }
     Ok((single_run(options, Stage::Report, report_ran), report_error))

@@ -43,14 +43,16 @@ pub fn find_clip(
                 .specs
                 .iter()
                 .find(|s| s.name == c.profile)
-                .ok_or_else(|| {
-                    BuildError::Motion(format!("clip `{clip_id}`: no profile `{}`", c.profile))
+                .ok_or_else(|| BuildError::ClipProfile {
+                    clip: clip_id.to_string(),
+                    profile: c.profile.clone(),
                 })?;
             let profile = staged.shared.bound.bind(spec, &c.skeleton).map_err(|e| {
-                BuildError::Motion(format!(
-                    "clip `{clip_id}`: profile `{}` does not fit its skeleton: {e}",
-                    c.profile
-                ))
+                BuildError::ClipProfileFit {
+                    clip: clip_id.to_string(),
+                    profile: c.profile.clone(),
+                    error: Box::new(e),
+                }
             })?;
             Some((motions.load(c, &staged.index)?, profile))
         }

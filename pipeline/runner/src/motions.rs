@@ -177,7 +177,7 @@ impl MotionSource {
                 let original = self.motion(of, profile)?;
                 let bound = self.bind(&original, profile)?;
                 let plan = MirrorPlan::from_profile(&original.skeleton, &bound)
-                    .map_err(|e| BuildError::Motion(format!("cannot mirror a held motion: {e}")))?;
+                    .map_err(BuildError::Remirror)?;
                 Ok(plan.mirror(&original, self.offsets))
             }
             MotionRef::Composed {
@@ -206,10 +206,15 @@ impl MotionSource {
             .specs
             .iter()
             .find(|s| s.name == profile)
-            .ok_or_else(|| BuildError::Motion(format!("no skeleton profile `{profile}`")))?;
+            .ok_or_else(|| BuildError::NoProfile {
+                profile: profile.to_string(),
+            })?;
         self.bound
             .bind(spec, &motion.skeleton)
-            .map_err(|e| BuildError::Motion(format!("profile `{profile}`: {e}")))
+            .map_err(|error| BuildError::Rebind {
+                profile: profile.to_string(),
+                error: Box::new(error),
+            })
     }
 
     fn stored(&self, at: &MotionRef) -> Result<Motion, BuildError> {
@@ -249,8 +254,8 @@ impl MotionSource {
 
     /// The frames of a held `clip`.
     pub(super) fn motion_of(&self, clip: &Clip, index: &MotionIndex) -> Result<Motion, BuildError> {
-        let at = index.get(&key(clip)).ok_or_else(|| {
-            BuildError::Motion(format!("no motion recorded for clip `{}`", clip.clip_id))
+        let at = index.get(&key(clip)).ok_or_else(|| BuildError::NoMotion {
+            clip: clip.clip_id.clone(),
         })?;
         self.motion(at, &clip.profile)
     }

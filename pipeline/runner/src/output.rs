@@ -410,7 +410,9 @@ impl ShardJob<'_> {
             Some(failure) => failure.into_build(self.output.join(&plan.file)),
             None => BuildError::Workspace(e),
         })?;
-        written.ok_or_else(|| BuildError::Motion(format!("{}: nothing written", plan.file)))
+        written.ok_or_else(|| BuildError::NothingWritten {
+            file: plan.file.clone(),
+        })
     }
 
     /// Calls `each` with the shard's rows, one row group at a time, in row order. A group's
@@ -473,8 +475,8 @@ impl ShardJob<'_> {
                             clip: clip.clip_id.clone(),
                             profile: clip.profile.clone(),
                         })?;
-                let motion = motion.as_ref().ok_or_else(|| {
-                    BuildError::Motion(format!("no frames read for `{}`", clip.clip_id))
+                let motion = motion.as_ref().ok_or_else(|| BuildError::NoFrames {
+                    clip: clip.clip_id.clone(),
                 });
                 let motion = motion.map_err(TableOrBuild::Build)?;
                 Ok(Row::new(clip, motion, profile, &self.companions.features))

@@ -15,7 +15,7 @@ use super::{
 };
 use crate::config::Config;
 use crate::stages::{ingest, mirror};
-use motionforge_core::base::{Dropped, Reject};
+use motionforge_core::base::{Dropped, Reject, Tally};
 use motionforge_sources::annotate::span::Note;
 use motionforge_sources::clip::Clip;
 
@@ -255,7 +255,7 @@ impl<'a, 'o> BuildState<'a, 'o> {
             Vec::with_capacity(items.iter().map(|i| i.clips.len() + i.mirrored.len()).sum());
         let mut index = MotionIndex::new();
         let mut rejects: Vec<Reject> = Vec::new();
-        let mut drops_by_reason = BTreeMap::new();
+        let mut drops_by_reason = Tally::new();
         let mut drops: Vec<Dropped> = Vec::new();
         let mut unmapped_labels = BTreeMap::new();
         let mut notes: Vec<Note> = Vec::new();
@@ -271,7 +271,7 @@ impl<'a, 'o> BuildState<'a, 'o> {
             clips.extend(item.clips);
             clips.extend(item.mirrored);
             rejects.extend(item.rejects);
-            add_counts(&mut drops_by_reason, item.segment.drops);
+            drops_by_reason.merge(&item.segment.drops);
             drops.extend(item.segment.dropped);
             add_counts(&mut unmapped_labels, item.segment.unmapped);
             notes.extend(item.segment.notes);

@@ -80,12 +80,12 @@ pub(super) fn compose(
                     // mirror's); held clips share one copy of each.
                     shared.skeletons.share(&mut clip.skeleton);
                     let source = |c: &Clip| {
-                        index.get(&motions::key(c)).cloned().ok_or_else(|| {
-                            BuildError::Motion(format!(
-                                "no motion recorded for clip `{}`",
-                                c.clip_id
-                            ))
-                        })
+                        index
+                            .get(&motions::key(c))
+                            .cloned()
+                            .ok_or_else(|| BuildError::NoMotion {
+                                clip: c.clip_id.clone(),
+                            })
                     };
                     refs.push(motions::MotionRef::Composed {
                         first: Box::new(source(recipe.first)?),
@@ -112,10 +112,9 @@ pub(super) fn compose(
         return Ok(None);
     };
     if !skeletons.give_all(&mut composed.clips) || refs.len() != composed.clips.len() {
-        return Err(BuildError::Motion(format!(
-            "the {} cache entry is inconsistent; run the build again with --force",
-            crate::stages::compose::NAME
-        )));
+        return Err(BuildError::InconsistentCache {
+            stage: crate::stages::compose::NAME,
+        });
     }
     shared.workspace.prune(
         crate::stages::compose::NAME,

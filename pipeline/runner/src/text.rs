@@ -86,7 +86,7 @@ pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, B
     let path = config.llm_cache_path();
     ResponseCache::open(&path)
         .map(Some)
-        .map_err(|e| BuildError::Llm(format!("{}: {e}", path.display())))
+        .map_err(|source| BuildError::LlmCache { path, source })
 }
 
 /// What the text stages ask with: the config, the prompt templates, whether requests may be sent,
@@ -154,7 +154,7 @@ fn label_stage(
     };
     let labels = label::label_texts(&clips, &input, cache, &mut report).map_err(|e| match e {
         label::LabelError::Prompt(p) => BuildError::Prompt(p),
-        other => BuildError::Llm(other.to_string()),
+        other => BuildError::Labels(Box::new(other)),
     })?;
     let segment_fps: Vec<&str> = items
         .iter()
@@ -398,7 +398,7 @@ fn plan_stage(
 pub(super) fn augment_error(e: AugmentError) -> BuildError {
     match e {
         AugmentError::Prompt(p) => BuildError::Prompt(p),
-        other => BuildError::Llm(other.to_string()),
+        other => BuildError::Augment(Box::new(other)),
     }
 }
 

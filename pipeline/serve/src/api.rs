@@ -535,7 +535,7 @@ fn view(shared: &Shared, record: BuildRecord, with_log: bool) -> BuildView {
             mirrored: r.mirrored,
             rejects: r.rejects.len(),
             nothing_ran: r.nothing_ran(),
-            kinds: r.kinds,
+            kinds: r.kinds.to_names(),
         });
     BuildView {
         id: record.id,

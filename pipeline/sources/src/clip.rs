@@ -49,6 +49,20 @@ impl SourceKind {
     }
 }
 
+impl motionforge_core::base::Named for SourceKind {
+    const ALL: &'static [SourceKind] = &SourceKind::ALL;
+
+    fn name(self) -> &'static str {
+        self.as_str()
+    }
+}
+
+impl std::fmt::Display for SourceKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// The split a clip belongs to: `train`, `validation`, `test` (Hugging Face's names, the
 /// defaults) or any other name `[splits]` configures.
 /// Names are the user's, so this is a name with the rules that read it in one place: the order

@@ -7,10 +7,12 @@ pub mod guard;
 pub mod layout;
 pub mod lock;
 mod reject;
+pub mod tally;
 pub mod toml_path;
 mod write;
 
 pub use reject::{DropReason, Dropped, MAX_MESSAGE_CHARS, Reject, RejectReason};
+pub use tally::{Named, Tally};
 pub use write::{
     Fingerprint, HashingWriter, Stamp, WorkspaceError, encoded_sha256, hex, io_err, io_hint,
     replace_dir, restore_replaced, sha256_hex, sibling, temp_path, write_atomic, write_atomic_with,

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use motionforge_core::base::Reject;
+use motionforge_core::base::{DropReason, Reject, RejectReason, Tally};
 use motionforge_sources::clip::{Clip, SourceKind};
 
 // Fields are declared in alphabetical order: the file's keys have always been sorted, and a
@@ -50,15 +50,15 @@ pub struct Manifest {
 #[serde(deny_unknown_fields)]
 pub struct Counts {
     /// Segments dropped, by reason.
-    pub drop_reason: BTreeMap<String, usize>,
+    pub drop_reason: Tally<DropReason>,
     /// Rows by label source.
     pub label_source: BTreeMap<String, usize>,
     /// Original single clips by motion type.
     pub motion_type: BTreeMap<String, usize>,
     /// Rejected inputs by reason.
-    pub reject_reason: BTreeMap<String, usize>,
+    pub reject_reason: Tally<RejectReason>,
     /// Rows by source kind.
-    pub source_kind: BTreeMap<String, usize>,
+    pub source_kind: Tally<SourceKind>,
 }
 
 /// The companion files.
@@ -167,16 +167,14 @@ impl Counts {
     /// rows by source kind and by label source, original single clips by motion type (mirrors
     /// are the same actions again), rejected inputs by reason, and the segments dropped by reason
     /// as the segment stage counted them.
-    pub fn of(clips: &[Clip], rejects: &[Reject], drop_reason: BTreeMap<String, usize>) -> Counts {
+    pub fn of(clips: &[Clip], rejects: &[Reject], drop_reason: Tally<DropReason>) -> Counts {
         let mut counts = Counts {
             drop_reason,
+            reject_reason: rejects.iter().map(|r| r.reason).collect(),
             ..Counts::default()
         };
         for clip in clips {
-            *counts
-                .source_kind
-                .entry(clip.kind.as_str().to_string())
-                .or_insert(0) += 1;
+            counts.source_kind.add(clip.kind);
             let label = clip
                 .label_source
                 .as_ref()
@@ -186,12 +184,6 @@ impl Counts {
                 let t = clip.motion_type.as_deref().unwrap_or(UNMAPPED);
                 *counts.motion_type.entry(t.to_string()).or_insert(0) += 1;
             }
-        }
-        for r in rejects {
-            *counts
-                .reject_reason
-                .entry(r.reason.to_string())
-                .or_insert(0) += 1;
         }
         counts
     }

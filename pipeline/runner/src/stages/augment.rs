@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::{Deserialize, Serialize};
 
 use crate::config::OnInvalid;
+use motionforge_core::base::Tally;
 use motionforge_core::progress::ProgressSink;
 use motionforge_llm::Unanswered;
 use motionforge_llm::cache::ResponseCache;
@@ -15,6 +16,62 @@ use motionforge_llm::paraphrase::{ParaphraseFault, check_paraphrases};
 use motionforge_llm::plans::{PlanStep, parse_task_plan, repair_message};
 use motionforge_llm::prompt::{PromptError, Prompts};
 
+/// Why an LLM answer (a paraphrase line, a task plan, a part list, a pair verdict) failed its
+/// check: the reason codes of [`AnswerChecks::rejected_by_reason`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AnswerFault {
+    /// A paraphrase line refused by `llm::paraphrase`'s checks.
+    Paraphrase(ParaphraseFault),
+    /// An answer holding no line.
+    Empty,
+    /// A pair verdict other than yes or no.
+    NotYesOrNo,
+    /// A task plan still invalid after one repair.
+    InvalidPlan,
+    /// A part list naming no part.
+    NoPart,
+    /// A part list naming a part not on the list.
+    OffList,
+}
+
+impl motionforge_core::base::Named for AnswerFault {
+    const ALL: &'static [AnswerFault] = &[
+        AnswerFault::Paraphrase(ParaphraseFault::Markup),
+        AnswerFault::Paraphrase(ParaphraseFault::Url),
+        AnswerFault::Paraphrase(ParaphraseFault::Code),
+        AnswerFault::Paraphrase(ParaphraseFault::NotEnglish),
+        AnswerFault::Paraphrase(ParaphraseFault::TooShort),
+        AnswerFault::Paraphrase(ParaphraseFault::TooLong),
+        AnswerFault::Paraphrase(ParaphraseFault::BeyondCount),
+        AnswerFault::Paraphrase(ParaphraseFault::Duplicate),
+        AnswerFault::Paraphrase(ParaphraseFault::Sides),
+        AnswerFault::Paraphrase(ParaphraseFault::Turning),
+        AnswerFault::Paraphrase(ParaphraseFault::Action),
+        AnswerFault::Empty,
+        AnswerFault::NotYesOrNo,
+        AnswerFault::InvalidPlan,
+        AnswerFault::NoPart,
+        AnswerFault::OffList,
+    ];
+
+    fn name(self) -> &'static str {
+        match self {
+            AnswerFault::Paraphrase(fault) => fault.code(),
+            AnswerFault::Empty => "empty",
+            AnswerFault::NotYesOrNo => "not_yes_or_no",
+            AnswerFault::InvalidPlan => "invalid_plan",
+            AnswerFault::NoPart => "no_part",
+            AnswerFault::OffList => "off_list",
+        }
+    }
+}
+
+impl std::fmt::Display for AnswerFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(motionforge_core::base::Named::name(*self))
+    }
+}
+
 /// How a stage's LLM answers fared against its checks, for the build report: what passed, what
 /// failed by reason, and what the stage's `on_invalid` policy made of the failures.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -22,7 +79,7 @@ pub struct AnswerChecks {
     /// Answers that passed (for paraphrases: lines).
     pub accepted: usize,
     /// Answers (lines) that failed, by reason code (`markup`, `off_list`, `invalid_plan`, ...).
-    pub rejected_by_reason: BTreeMap<String, usize>,
+    pub rejected_by_reason: Tally<AnswerFault>,
     /// Failed answers replaced by the embedded labeller's.
     pub fell_back: usize,
     /// Failed answers not used.
@@ -36,16 +93,13 @@ pub struct AnswerChecks {
 
 impl AnswerChecks {
     /// Counts one failed answer under `reason`.
-    pub fn reject(&mut self, reason: &str) {
-        *self
-            .rejected_by_reason
-            .entry(reason.to_string())
-            .or_insert(0) += 1;
+    pub fn reject(&mut self, reason: AnswerFault) {
+        self.rejected_by_reason.add(reason);
     }
 
     /// Answers that failed their checks.
     pub fn rejected(&self) -> usize {
-        self.rejected_by_reason.values().sum()
+        self.rejected_by_reason.total()
     }
 }
 
@@ -217,7 +271,7 @@ pub fn paraphrase(
         let checked = check_paraphrases(t, &answer, n);
         if checked.lines.is_empty() {
             // Small models answer nothing at all; that is a failed answer too, not a quiet one.
-            report.checks.reject("empty");
+            report.checks.reject(AnswerFault::Empty);
             report.checks.dropped += 1;
             report
                 .rejected
@@ -230,7 +284,7 @@ pub fn paraphrase(
                 kept.push(line);
                 continue;
             };
-            report.checks.reject(fault.code());
+            report.checks.reject(AnswerFault::Paraphrase(fault));
             report
                 .rejected
                 .push((format!("{t} -> {line}"), fault.to_string()));
@@ -281,7 +335,7 @@ pub fn incompatible_pairs(
         } else if word == "yes" {
             report.checks.accepted += 1;
         } else {
-            report.checks.reject("not_yes_or_no");
+            report.checks.reject(AnswerFault::NotYesOrNo);
             report.checks.dropped += 1;
             report.rejected.push((
                 format!("{} + {}", pair.0, pair.1),
@@ -351,7 +405,7 @@ pub fn plan(
                     out.insert(texts[*i].clone(), steps);
                 }
                 Err(reason) => {
-                    report.checks.reject("invalid_plan");
+                    report.checks.reject(AnswerFault::InvalidPlan);
                     report.checks.dropped += 1;
                     report.rejected.push((
                         texts[*i].clone(),

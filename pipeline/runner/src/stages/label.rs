@@ -8,7 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Labeller, OnInvalid, OnMiss, PartLabelConfig};
-use crate::stages::augment::{AnswerChecks, Asking};
+use crate::stages::augment::{AnswerChecks, AnswerFault, Asking};
 use motionforge_core::motion::Profile;
 use motionforge_language::parts::answer::parse_part_answer;
 use motionforge_language::parts::lexicon::label_text;
@@ -298,9 +298,11 @@ fn checked_answer(
         report.checks.accepted += 1;
         return llm;
     };
-    report
-        .checks
-        .reject(if parsed.empty { "no_part" } else { "off_list" });
+    report.checks.reject(if parsed.empty {
+        AnswerFault::NoPart
+    } else {
+        AnswerFault::OffList
+    });
     report.flagged.push((t.to_string(), f.clone()));
     match on_invalid {
         OnInvalid::Embedded => {

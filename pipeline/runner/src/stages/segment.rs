@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::SegmentConfig;
 use crate::motions::MotionRef;
 use crate::stage::{CachedStage, CaptureStage};
-use motionforge_core::base::{DropReason, Dropped, Stamp};
+use motionforge_core::base::{DropReason, Dropped, Stamp, Tally};
 use motionforge_core::motion::bvh::excerpt;
 use motionforge_core::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
 use motionforge_core::motion::{BodyPart, Motion, Profile};
@@ -55,7 +55,7 @@ pub struct SegmentOutput {
     /// Clips, in range order.
     pub clips: Vec<Clip>,
     /// Dropped segments by reason.
-    pub drops: BTreeMap<String, usize>,
+    pub drops: Tally<DropReason>,
     /// Labels of single clips that map to no motion type, with counts.
     pub unmapped: BTreeMap<String, usize>,
     /// Annotation quirks met (from the reader and from segmentation).
@@ -185,9 +185,7 @@ pub fn run_with<E>(
             clip.clip_id = format!("{}~{n}", clip.clip_id);
         }
     }
-    for d in &drops.dropped {
-        *out.drops.entry(d.reason.to_string()).or_insert(0) += 1;
-    }
+    out.drops = drops.dropped.iter().map(|d| d.reason).collect();
     out.dropped = drops.dropped;
     out.clips = clips;
     Ok(out)
