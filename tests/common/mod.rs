@@ -1,6 +1,8 @@
 //! Shared helpers for integration tests: where the real data lives, and reading it.
 #![allow(dead_code)]
 
+pub(crate) mod llm;
+pub(crate) mod project;
 pub(crate) mod service;
 
 use std::path::{Path, PathBuf};
