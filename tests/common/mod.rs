@@ -140,19 +140,6 @@ pub(crate) fn build_demo(output: &Path) -> std::process::Output {
     )
 }
 
-/// A fresh folder with the named Bandai Namco dataset-1 captures (stems) copied into `captures/`.
-pub(crate) fn bandai1_scratch(names: &[&str]) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir_all(dir.path().join("captures")).unwrap();
-    for name in names {
-        let src = shared_data()
-            .join("bandai-namco-1/data")
-            .join(format!("{name}.bvh"));
-        std::fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
-    }
-    dir
-}
-
 /// The walk, kick and bye takes most LLM-stage tests label.
 pub(crate) const WALK_KICK_BYE: [&str; 3] = [
     "dataset-1_walk_normal_001",
