@@ -4,70 +4,54 @@ use crate::common;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use common::project::{ConfigSpec, Project, Source};
 use common::*;
 use motionforge::build::{BuildOptions, BuildReport, build};
 use motionforge::config::Config;
 
-/// Copies real captures (and their sidecars) into a fresh folder and writes a config for them.
+/// Real captures (and their sidecars) copied into a fresh project with a config for them.
 struct Scratch {
-    dir: tempfile::TempDir,
+    project: Project,
+}
+
+/// The captures in `captures/` as the source `name`, labelled from their file names and sidecars.
+fn bandai_source(name: &str) -> Source {
+    Source::new(name, "bandai-namco", &["captures/*.bvh"])
+        .filename_labels(
+            "dataset-1_{content}_{style}_{take}",
+            "{content}",
+            "{content}, {style} style",
+        )
+        .set("labels.sidecar", true)
+}
+
+/// The scratch config: one source, 30 fps.
+fn scratch_spec() -> ConfigSpec {
+    ConfigSpec::new("scratch")
+        .fps(30)
+        .source(bandai_source("bandai-namco-1"))
 }
 
 impl Scratch {
     fn new(captures: &[&str]) -> Scratch {
-        let dir = tempfile::tempdir().unwrap();
-        fs::create_dir_all(dir.path().join("captures")).unwrap();
-        let scratch = Scratch { dir };
-        for name in captures {
-            scratch.add(name);
-        }
-        fs::write(
-            scratch.config_path(),
-            r#"
-[dataset]
-name = "scratch"
-output = "out"
-fps = 30
-
-[[sources]]
-name = "bandai-namco-1"
-captures = ["captures/*.bvh"]
-profile = "bandai-namco"
-
-[sources.labels]
-kind = "filename"
-pattern = "dataset-1_{content}_{style}_{take}"
-action = "{content}"
-text = "{content}, {style} style"
-sidecar = true
-"#,
-        )
-        .unwrap();
-        scratch
-    }
-
-    fn add(&self, name: &str) {
-        let src = shared_data().join("bandai-namco-1/data");
-        for ext in ["bvh", "json"] {
-            fs::copy(
-                src.join(format!("{name}.{ext}")),
-                self.captures().join(format!("{name}.{ext}")),
-            )
-            .unwrap();
-        }
+        let project = Project::new()
+            .captures_with("bandai-namco-1", captures, &["bvh", "json"])
+            .config(scratch_spec())
+            .build();
+        Scratch { project }
     }
 
     fn captures(&self) -> PathBuf {
-        self.dir.path().join("captures")
+        self.project.join("captures")
     }
 
     fn config_path(&self) -> PathBuf {
-        self.dir.path().join("build.toml")
+        self.project.config_path()
     }
 
     /// The dataset folder, `<output>/<name>`.
     fn out(&self) -> PathBuf {
-        self.dir.path().join("out/scratch")
+        self.project.join("out/scratch")
     }
 
     fn build(&self) -> BuildReport {
@@ -375,13 +359,8 @@ fn the_same_captures_under_two_source_names_build() {
     // Identical captures give identical, content-named frame chunks, which two threads then write
     // at the same moment; each write has a temporary file of its own (`temp_path`).
     let s = Scratch::new(&THREE);
-    let text = fs::read_to_string(s.config_path()).unwrap();
-    let (_, source) = text.split_once("[[sources]]").unwrap();
-    let copy = format!(
-        "[[sources]]{}",
-        source.replace("bandai-namco-1\"", "copy\"")
-    );
-    fs::write(s.config_path(), format!("{text}\n{copy}")).unwrap();
+    let two = scratch_spec().source(bandai_source("copy"));
+    fs::write(s.config_path(), two.render()).unwrap();
     for _ in 0..3 {
         let _ = fs::remove_dir_all(s.out());
         let report = s.build();

@@ -1372,23 +1372,16 @@ fn demo_copy(extra: &str) -> String {
 #[test]
 fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt() {
     let dir = tempfile::tempdir().unwrap();
-    // A port that was free a moment ago: nothing listens on it.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let url = crate::common::llm::dead_url();
     let config = demo_copy(&format!(
-        "\n[llm]\nbase_url = \"http://127.0.0.1:{port}/v1\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
+        "\n[llm]\nbase_url = \"{url}\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
     ));
     std::fs::write(dir.path().join("llm.toml"), config).unwrap();
     let out = run(&["build", "--config", "llm.toml"], dir.path());
     let err = text(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
-        err.contains(&format!(
-            "label: no LLM server answers at http://127.0.0.1:{port}/v1"
-        )),
+        err.contains(&format!("label: no LLM server answers at {url}")),
         "{err}"
     );
     // Nothing is sent, so no line announces or counts requests ("label: sending 9 LLM requests",

@@ -4,6 +4,7 @@ use crate::common;
 use std::fs;
 use std::process::Command;
 
+use common::project::{ConfigSpec, Project, Source};
 use common::*;
 
 /// Builds the demo into a temp folder and returns (temp dir, dataset folder).
@@ -114,31 +115,17 @@ print(total)
     run_python(script, &[&dataset]);
 }
 
-fn scratch(captures: &[&str], split_file: Option<&str>) -> (tempfile::TempDir, std::path::PathBuf) {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir_all(dir.path().join("captures")).unwrap();
-    for name in captures {
-        fs::copy(
-            shared_data()
-                .join("bandai-namco-1/data")
-                .join(format!("{name}.bvh")),
-            dir.path().join("captures").join(format!("{name}.bvh")),
-        )
-        .unwrap();
+/// A project with these Bandai Namco captures, split by `split_file` when given; its config path.
+fn scratch(captures: &[&str], split_file: Option<&str>) -> (Project, std::path::PathBuf) {
+    let mut spec = ConfigSpec::new("ds").source(Source::bandai1("b"));
+    let mut project = Project::new().captures("bandai-namco-1", captures);
+    if let Some(text) = split_file {
+        spec = spec.set("splits.file", "splits.csv");
+        project = project.file("splits.csv", text);
     }
-    let split = match split_file {
-        Some(text) => {
-            fs::write(dir.path().join("splits.csv"), text).unwrap();
-            "[splits]\nfile = \"splits.csv\"\n"
-        }
-        None => "",
-    };
-    let config = format!(
-        "[dataset]\nname = \"ds\"\noutput = \"out\"\n\n{split}\n[[sources]]\nname = \"b\"\ncaptures = [\"captures/*.bvh\"]\nprofile = \"bandai-namco\"\n[sources.labels]\nkind = \"filename\"\npattern = \"dataset-1_{{content}}_{{style}}_{{take}}\"\naction = \"{{content}}\"\ntext = \"{{content}}\"\n"
-    );
-    fs::write(dir.path().join("build.toml"), config).unwrap();
-    let path = dir.path().join("build.toml");
-    (dir, path)
+    let project = project.config(spec).build();
+    let path = project.config_path();
+    (project, path)
 }
 
 fn build(config: &std::path::Path) -> std::process::Output {

@@ -629,32 +629,27 @@ fn run_console(run: &mut PageRun, block: &Block, at: &str, words: &[&str]) {
     run.tally.add("transcripts run");
 }
 
-/// An LLM server that answers every request with a model list, or a free port nothing listens on.
+/// The fake LLM server serving the page's model, or a free port nothing listens on.
 struct LlmStub {
     address: String,
+    _server: Option<common::llm::LlmServer>,
 }
 
 impl LlmStub {
     fn start(answers: bool) -> LlmStub {
-        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let address = listener.local_addr().unwrap().to_string();
         if !answers {
-            return LlmStub { address };
+            return LlmStub {
+                address: common::llm::dead_address(),
+                _server: None,
+            };
         }
-        std::thread::spawn(move || {
-            for stream in listener.incoming() {
-                let Ok(mut stream) = stream else { continue };
-                let mut request = [0u8; 4096];
-                let _ = stream.read(&mut request);
-                let body = r#"{"object":"list","data":[{"id":"gemma-3-270m","object":"model"}]}"#;
-                let _ = write!(
-                    stream,
-                    "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
-                    body.len()
-                );
-            }
-        });
-        LlmStub { address }
+        let server = common::llm::LlmServer::builder()
+            .models(&["gemma-3-270m"])
+            .start();
+        LlmStub {
+            address: server.address().to_string(),
+            _server: Some(server),
+        }
     }
 }
 

@@ -2,239 +2,36 @@
 //! OpenAI-compatible endpoint (success, 429 with Retry-After, 5xx, hangs, malformed bodies, 400s)
 //! and counts what it receives.
 
-use std::collections::VecDeque;
 use std::io::Write;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use axum::extract::State;
-use axum::http::{HeaderMap, StatusCode, Uri, header};
-use axum::response::{IntoResponse, Response};
-use axum::routing::post;
-use axum::{Json, Router};
-use serde_json::{Value, json};
+use serde_json::json;
 
+use crate::common::llm::{LlmServer, Reply, Request, dead_url};
 use motionforge::llm::cache::{CacheEntry, CacheKey, ResponseCache};
 use motionforge::llm::client::{
     Answer, LlmClient, LlmConfig, LlmError, RequestKind, SamplingParams,
 };
 
-/// What the server does with one request.
-#[derive(Clone, Debug)]
-enum Step {
-    /// 200 with `echo: <prompt>`.
-    Echo,
-    /// An error status with a body and optional `Retry-After`.
-    Status(u16, &'static str, Option<&'static str>),
-    /// Sleep (longer than the client's timeout), then echo.
-    Hang(Duration),
-    /// 200 with this body as JSON content type.
-    Raw(&'static str),
-    /// Below this `max_tokens`, a cut-off answer (`finish_reason: "length"`); else echo.
-    CutBelow(u64),
-}
-
-#[derive(Debug, Clone)]
-struct Seen {
-    path: String,
-    auth: Option<String>,
-    body: Value,
-    at: Instant,
-}
-
-struct ServerState {
-    /// Steps taken in order; `default` once empty.
-    script: Mutex<VecDeque<Step>>,
-    default: Step,
-    /// Every request sleeps this long before answering (to make concurrency observable).
-    delay: Duration,
-    /// When set, requests without exactly this `Authorization` header get a 401.
-    expected_auth: Option<String>,
-    requests: AtomicUsize,
-    in_flight: AtomicUsize,
-    max_in_flight: AtomicUsize,
-    seen: Mutex<Vec<Seen>>,
-}
-
-struct InFlight(Arc<ServerState>);
-
-impl Drop for InFlight {
-    fn drop(&mut self) {
-        self.0.in_flight.fetch_sub(1, Ordering::SeqCst);
+/// A config for `server` that retries fast and is not rate limited in practice.
+fn fast_config(server: &LlmServer) -> LlmConfig {
+    LlmConfig {
+        requests_per_minute: 600_000,
+        backoff_seconds: 0.01,
+        timeout_seconds: 10.0,
+        max_retries: 3,
+        ..LlmConfig::new(&server.base_url(), "test-model")
     }
 }
 
-fn prompt_of(body: &Value) -> String {
-    body.pointer("/messages/0/content")
-        .or_else(|| body.get("prompt"))
-        .and_then(Value::as_str)
-        .unwrap_or_default()
-        .to_string()
-}
-
-fn echo(chat: bool, prompt: &str) -> Response {
-    answer_with(chat, &format!("echo: {prompt}"), "stop")
-}
-
-fn answer_with(chat: bool, text: &str, finish_reason: &str) -> Response {
-    let body = if chat {
-        json!({"object": "chat.completion", "choices": [
-            {"index": 0, "message": {"role": "assistant", "content": text}, "finish_reason": finish_reason}
-        ]})
-    } else {
-        json!({"object": "text_completion", "choices": [
-            {"index": 0, "text": text, "finish_reason": finish_reason}
-        ]})
-    };
-    Json(body).into_response()
-}
-
-async fn handle(
-    State(s): State<Arc<ServerState>>,
-    uri: Uri,
-    headers: HeaderMap,
-    Json(body): Json<Value>,
-) -> Response {
-    s.requests.fetch_add(1, Ordering::SeqCst);
-    let now = s.in_flight.fetch_add(1, Ordering::SeqCst) + 1;
-    s.max_in_flight.fetch_max(now, Ordering::SeqCst);
-    let _guard = InFlight(Arc::clone(&s));
-    let auth = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .map(str::to_string);
-    let chat = uri.path().ends_with("/chat/completions");
-    let prompt = prompt_of(&body);
-    let max_tokens = body["max_tokens"].as_u64().unwrap_or(0);
-    s.seen.lock().unwrap().push(Seen {
-        path: uri.path().to_string(),
-        auth: auth.clone(),
-        body,
-        at: Instant::now(),
-    });
-    if let Some(expected) = &s.expected_auth
-        && auth.as_deref() != Some(expected.as_str())
-    {
-        return (StatusCode::UNAUTHORIZED, "bad or missing API key").into_response();
-    }
-    if !s.delay.is_zero() {
-        tokio::time::sleep(s.delay).await;
-    }
-    let step = s
-        .script
-        .lock()
-        .unwrap()
-        .pop_front()
-        .unwrap_or_else(|| s.default.clone());
-    match step {
-        Step::Echo => echo(chat, &prompt),
-        Step::Status(code, text, retry_after) => {
-            let mut r = (StatusCode::from_u16(code).unwrap(), text).into_response();
-            if let Some(v) = retry_after {
-                r.headers_mut()
-                    .insert(header::RETRY_AFTER, v.parse().unwrap());
-            }
-            r
-        }
-        Step::Hang(d) => {
-            tokio::time::sleep(d).await;
-            echo(chat, &prompt)
-        }
-        Step::Raw(text) => ([(header::CONTENT_TYPE, "application/json")], text).into_response(),
-        Step::CutBelow(limit) if max_tokens < limit => {
-            answer_with(chat, "someone performs guide, chil", "length")
-        }
-        Step::CutBelow(_) => echo(chat, &prompt),
-    }
-}
-
-/// A scripted OpenAI-compatible server on 127.0.0.1, running on its own runtime.
-struct TestServer {
-    state: Arc<ServerState>,
-    base_url: String,
-    _runtime: tokio::runtime::Runtime,
-}
-
-struct ServerSpec {
-    script: Vec<Step>,
-    default: Step,
-    delay: Duration,
-    expected_auth: Option<String>,
-}
-
-impl Default for ServerSpec {
-    fn default() -> Self {
-        ServerSpec {
-            script: Vec::new(),
-            default: Step::Echo,
-            delay: Duration::ZERO,
-            expected_auth: None,
-        }
-    }
-}
-
-impl TestServer {
-    fn start(spec: ServerSpec) -> TestServer {
-        let state = Arc::new(ServerState {
-            script: Mutex::new(spec.script.into()),
-            default: spec.default,
-            delay: spec.delay,
-            expected_auth: spec.expected_auth,
-            requests: AtomicUsize::new(0),
-            in_flight: AtomicUsize::new(0),
-            max_in_flight: AtomicUsize::new(0),
-            seen: Mutex::new(Vec::new()),
-        });
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .unwrap();
-        let listener = runtime
-            .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
-            .unwrap();
-        let addr = listener.local_addr().unwrap();
-        let app = Router::new()
-            .route("/v1/chat/completions", post(handle))
-            .route("/v1/completions", post(handle))
-            .with_state(Arc::clone(&state));
-        runtime.spawn(async move { axum::serve(listener, app).await });
-        TestServer {
-            state,
-            base_url: format!("http://{addr}/v1"),
-            _runtime: runtime,
-        }
-    }
-
-    fn echo() -> TestServer {
-        TestServer::start(ServerSpec::default())
-    }
-
-    fn scripted(script: Vec<Step>) -> TestServer {
-        TestServer::start(ServerSpec {
-            script,
-            ..ServerSpec::default()
-        })
-    }
-
-    fn requests(&self) -> usize {
-        self.state.requests.load(Ordering::SeqCst)
-    }
-
-    fn seen(&self) -> Vec<Seen> {
-        self.state.seen.lock().unwrap().clone()
-    }
-
-    /// A config for this server that retries fast and is not rate limited in practice.
-    fn config(&self) -> LlmConfig {
-        LlmConfig {
-            requests_per_minute: 600_000,
-            backoff_seconds: 0.01,
-            timeout_seconds: 10.0,
-            max_retries: 3,
-            ..LlmConfig::new(&self.base_url, "test-model")
+/// Below `limit` max tokens, a cut-off answer (`finish_reason: "length"`); else an echo.
+fn cut_below(limit: u64) -> impl Fn(&Request) -> Reply + Send + Sync + 'static {
+    move |request| {
+        if request.max_tokens() < limit {
+            Reply::cut("someone performs guide, chil")
+        } else {
+            Reply::Echo
         }
     }
 }
@@ -254,14 +51,14 @@ fn answer(r: &Result<Answer, LlmError>) -> &Answer {
 
 #[test]
 fn chat_success_sends_the_documented_request() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         seed: Some(7),
         temperature: 0.5,
         max_tokens: 32,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["hello"]), &mut cache);
@@ -294,12 +91,12 @@ fn chat_success_sends_the_documented_request() {
 
 #[test]
 fn completion_success_uses_the_completions_endpoint() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         kind: RequestKind::Completion,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["once upon"]), &mut cache);
@@ -313,16 +110,18 @@ fn completion_success_uses_the_completions_endpoint() {
         "seed is only sent when set"
     );
     // Chat and completion answers are cached apart.
-    let chat_key = LlmConfig::new(&server.base_url, "test-model").cache_key("once upon");
+    let chat_key = LlmConfig::new(&server.base_url(), "test-model").cache_key("once upon");
     assert_ne!(client.key("once upon"), chat_key);
 }
 
 #[test]
 fn retry_after_on_429_is_respected() {
-    let server = TestServer::scripted(vec![Step::Status(429, "slow down", Some("1"))]);
+    let server = LlmServer::builder()
+        .script(vec![Reply::Status(429, "slow down", Some("1"))])
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let t = Instant::now();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
     let elapsed = t.elapsed();
@@ -337,12 +136,14 @@ fn retry_after_on_429_is_respected() {
 
 #[test]
 fn retry_after_is_capped_by_config() {
-    let server = TestServer::scripted(vec![Step::Status(503, "loading model", Some("30"))]);
+    let server = LlmServer::builder()
+        .script(vec![Reply::Status(503, "loading model", Some("30"))])
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         max_retry_after_seconds: 0.2,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let t = Instant::now();
@@ -356,13 +157,15 @@ fn retry_after_is_capped_by_config() {
 
 #[test]
 fn server_errors_are_retried_then_succeed() {
-    let server = TestServer::scripted(vec![
-        Step::Status(500, "boom", None),
-        Step::Status(500, "boom", None),
-    ]);
+    let server = LlmServer::builder()
+        .script(vec![
+            Reply::Status(500, "boom", None),
+            Reply::Status(500, "boom", None),
+        ])
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
     assert_eq!(answer(&results[0]).text, "echo: p");
     assert_eq!(server.requests(), 3);
@@ -371,15 +174,14 @@ fn server_errors_are_retried_then_succeed() {
 
 #[test]
 fn server_errors_exhaust_retries() {
-    let server = TestServer::start(ServerSpec {
-        default: Step::Status(502, "bad gateway", None),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder()
+        .default(Reply::Status(502, "bad gateway", None))
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         max_retries: 2,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -397,12 +199,14 @@ fn server_errors_exhaust_retries() {
 
 #[test]
 fn hanging_response_times_out_then_retry_succeeds() {
-    let server = TestServer::scripted(vec![Step::Hang(Duration::from_secs(5))]);
+    let server = LlmServer::builder()
+        .script(vec![Reply::Hang(Duration::from_secs(5))])
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         timeout_seconds: 0.3,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let t = Instant::now();
@@ -416,16 +220,15 @@ fn hanging_response_times_out_then_retry_succeeds() {
 
 #[test]
 fn hanging_every_time_gives_timeout() {
-    let server = TestServer::start(ServerSpec {
-        default: Step::Hang(Duration::from_secs(5)),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder()
+        .default(Reply::Hang(Duration::from_secs(5)))
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         timeout_seconds: 0.2,
         max_retries: 1,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -435,10 +238,12 @@ fn hanging_every_time_gives_timeout() {
 
 #[test]
 fn malformed_json_is_retried() {
-    let server = TestServer::scripted(vec![Step::Raw("{\"choices\": [ {\"mess")]);
+    let server = LlmServer::builder()
+        .script(vec![Reply::Raw("{\"choices\": [ {\"mess")])
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
     assert_eq!(answer(&results[0]).text, "echo: p");
     assert_eq!(server.requests(), 2);
@@ -446,15 +251,14 @@ fn malformed_json_is_retried() {
 
 #[test]
 fn malformed_json_every_time_is_a_bad_response() {
-    let server = TestServer::start(ServerSpec {
-        default: Step::Raw("<html>not json</html>"),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder()
+        .default(Reply::Raw("<html>not json</html>"))
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         max_retries: 1,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -471,15 +275,16 @@ fn malformed_json_every_time_is_a_bad_response() {
 
 #[test]
 fn no_choices_is_a_bad_response_after_retries() {
-    let server = TestServer::start(ServerSpec {
-        default: Step::Raw(r#"{"object": "chat.completion", "choices": []}"#),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder()
+        .default(Reply::Raw(
+            r#"{"object": "chat.completion", "choices": []}"#,
+        ))
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         max_retries: 2,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -497,13 +302,12 @@ fn no_choices_is_a_bad_response_after_retries() {
 #[test]
 fn client_error_is_not_retried() {
     let body = "{\"error\": {\"message\": \"model 'test-model' not found\"}}";
-    let server = TestServer::start(ServerSpec {
-        default: Step::Status(400, body, None),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder()
+        .default(Reply::Status(400, body, None))
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
     match &results[0] {
         Err(
@@ -521,16 +325,6 @@ fn client_error_is_not_retried() {
         other => panic!("expected Http, got {other:?}"),
     }
     assert_eq!(server.requests(), 1);
-}
-
-/// A port that was free a moment ago: nothing listens on it.
-fn dead_url() -> String {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    format!("http://127.0.0.1:{port}/v1")
 }
 
 #[test]
@@ -573,16 +367,16 @@ fn nothing_listening_fails_the_probe_at_once_and_sends_nothing() {
 fn the_circuit_breaker_stops_sending_when_the_server_goes_away() {
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let config = LlmConfig {
         max_retries: 5,
         backoff_seconds: 0.05,
         concurrency: 1,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let probe = client.probe().unwrap();
-    assert_eq!(probe.url, format!("{}/models", server.base_url));
+    assert_eq!(probe.url, format!("{}/models", server.base_url()));
     assert!(client.complete_all(&strings(&["first"]), &mut cache)[0].is_ok());
     drop(server);
     let prompts: Vec<String> = (0..20).map(|i| format!("p{i}")).collect();
@@ -604,16 +398,13 @@ fn the_circuit_breaker_stops_sending_when_the_server_goes_away() {
 #[test]
 fn a_cut_off_answer_fails_and_is_not_cached() {
     for kind in [RequestKind::Chat, RequestKind::Completion] {
-        let server = TestServer::start(ServerSpec {
-            default: Step::CutBelow(100),
-            ..ServerSpec::default()
-        });
+        let server = LlmServer::answering(cut_below(100));
         let dir = tempfile::tempdir().unwrap();
         let mut cache = open_cache(dir.path());
         let config = LlmConfig {
             kind,
             max_tokens: 64,
-            ..server.config()
+            ..fast_config(&server)
         };
         let client = LlmClient::new(config).unwrap();
         let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -640,16 +431,13 @@ fn a_cut_off_answer_fails_and_is_not_cached() {
 
 #[test]
 fn a_cut_off_answer_is_asked_once_more_with_retry_max_tokens() {
-    let server = TestServer::start(ServerSpec {
-        default: Step::CutBelow(100),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::answering(cut_below(100));
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         max_tokens: 64,
         retry_max_tokens: Some(200),
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config.clone()).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -670,14 +458,11 @@ fn a_cut_off_answer_is_asked_once_more_with_retry_max_tokens() {
     assert!(answer(&again[0]).from_cache);
     assert_eq!(server.requests(), 2, "settled: no request on the rebuild");
     // Still cut off at the larger limit: one retry only, then the error.
-    let server = TestServer::start(ServerSpec {
-        default: Step::CutBelow(1000),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::answering(cut_below(1000));
     let client = LlmClient::new(LlmConfig {
         max_tokens: 64,
         retry_max_tokens: Some(200),
-        ..server.config()
+        ..fast_config(&server)
     })
     .unwrap();
     let results = client.complete_all(&strings(&["q"]), &mut open_cache(dir.path()));
@@ -697,9 +482,9 @@ fn a_cut_off_answer_is_asked_once_more_with_retry_max_tokens() {
 
 #[test]
 fn entries_cached_without_a_finish_reason_are_asked_again_once() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
-    let config = server.config();
+    let config = fast_config(&server);
     // A line as an earlier version wrote it: no finish_reason, a cut-off answer cached as good;
     // and an imported answer, which has none either and must be kept.
     let old = format!(
@@ -733,10 +518,10 @@ fn entries_cached_without_a_finish_reason_are_asked_again_once() {
 
 #[test]
 fn identical_prompts_in_a_batch_are_sent_once() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let prompts = strings(&["a", "b", "a", "a", "b"]);
     let results = client.complete_all(&prompts, &mut cache);
     assert_eq!(server.requests(), 2);
@@ -748,34 +533,33 @@ fn identical_prompts_in_a_batch_are_sent_once() {
 
 #[test]
 fn concurrency_limit_is_respected() {
-    let server = TestServer::start(ServerSpec {
-        delay: Duration::from_millis(150),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder()
+        .delay(Duration::from_millis(150))
+        .start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         concurrency: 3,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let prompts: Vec<String> = (0..12).map(|i| format!("prompt {i}")).collect();
     let results = client.complete_all(&prompts, &mut cache);
     assert!(results.iter().all(Result::is_ok));
     assert_eq!(server.requests(), 12);
-    assert_eq!(server.state.max_in_flight.load(Ordering::SeqCst), 3);
+    assert_eq!(server.max_in_flight(), 3);
 }
 
 #[test]
 fn request_starts_are_spaced_by_the_rate_limit() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     // 600 per minute: one start every 100 ms.
     let config = LlmConfig {
         concurrency: 5,
         requests_per_minute: 600,
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let prompts: Vec<String> = (0..5).map(|i| format!("prompt {i}")).collect();
@@ -794,10 +578,10 @@ fn request_starts_are_spaced_by_the_rate_limit() {
 
 #[test]
 fn second_run_is_served_from_the_cache() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let prompts = strings(&["x", "y", "z"]);
     let first = client.complete_all(&prompts, &mut cache);
     assert!(first.iter().all(|r| !answer(r).from_cache));
@@ -816,8 +600,8 @@ fn cache_survives_a_restart() {
     let prompts = strings(&["walk forward", "wave the left hand"]);
     let config;
     {
-        let server = TestServer::echo();
-        config = server.config();
+        let server = LlmServer::echo();
+        config = fast_config(&server);
         let mut cache = open_cache(dir.path());
         let client = LlmClient::new(config.clone()).unwrap();
         let results = client.complete_all(&prompts, &mut cache);
@@ -825,15 +609,14 @@ fn cache_survives_a_restart() {
     }
     // Everything from the first "process" is gone; a server that would fail every request stands
     // where the old one was configured.
-    let failing = TestServer::start(ServerSpec {
-        default: Step::Status(500, "must not be called", None),
-        ..ServerSpec::default()
-    });
+    let failing = LlmServer::builder()
+        .default(Reply::Status(500, "must not be called", None))
+        .start();
     let mut cache = open_cache(dir.path());
     assert_eq!(cache.len(), 2);
     assert_eq!(cache.recovered_partial_lines(), 0);
     let client = LlmClient::new(LlmConfig {
-        base_url: failing.base_url.clone(),
+        base_url: failing.base_url(),
         ..config
     })
     .unwrap();
@@ -1013,15 +796,12 @@ fn api_key_is_sent_as_bearer() {
     // SAFETY: the variable is used by this test only, and Rust's own environment accesses
     // (std::env::var, also used by reqwest) are serialised by std's lock.
     unsafe { std::env::set_var(VAR, "sk-test-123") };
-    let server = TestServer::start(ServerSpec {
-        expected_auth: Some("Bearer sk-test-123".into()),
-        ..ServerSpec::default()
-    });
+    let server = LlmServer::builder().api_key("sk-test-123").start();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
     let config = LlmConfig {
         api_key_env: Some(VAR.into()),
-        ..server.config()
+        ..fast_config(&server)
     };
     let client = LlmClient::new(config).unwrap();
     let results = client.complete_all(&strings(&["p"]), &mut cache);
@@ -1110,10 +890,10 @@ fn config_defaults_and_validation() {
 
 #[test]
 fn works_when_called_from_inside_a_runtime() {
-    let server = TestServer::echo();
+    let server = LlmServer::echo();
     let dir = tempfile::tempdir().unwrap();
     let mut cache = open_cache(dir.path());
-    let client = LlmClient::new(server.config()).unwrap();
+    let client = LlmClient::new(fast_config(&server)).unwrap();
     let outer = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

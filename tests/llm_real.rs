@@ -5,9 +5,9 @@ use crate::common;
 
 use std::fs;
 
+use common::project::{ConfigSpec, Project, Source};
 use common::*;
 use motionforge::build::{BuildOptions, build};
-use motionforge::config::Config;
 
 #[test]
 #[ignore = "needs a local OpenAI-compatible server; see docs/llm-real-run.md"]
@@ -15,44 +15,24 @@ fn a_real_server_labels_paraphrases_and_plans_and_a_rebuild_asks_nothing() {
     let url = std::env::var("MOTIONFORGE_LLM_URL")
         .expect("set MOTIONFORGE_LLM_URL, e.g. http://127.0.0.1:8081/v1");
     let model = std::env::var("MOTIONFORGE_LLM_MODEL").unwrap_or_else(|_| "gemma-3-270m".into());
-    let dir = bandai1_scratch(&WALK_KICK_BYE);
-    let config_text = format!(
-        r#"
-[dataset]
-name = "real-llm"
-output = "out"
-
-[part_labels]
-labeller = "llm"
-
-[paraphrases]
-n = 3
-
-[llm]
-base_url = "{url}"
-model = "{model}"
-temperature = 0
-max_tokens = 200
-retry_max_tokens = 400
-seed = 7
-concurrency = 1
-requests_per_minute = 600
-timeout_seconds = 120
-
-[[sources]]
-name = "bandai"
-captures = ["captures/*.bvh"]
-profile = "bandai-namco"
-[sources.labels]
-kind = "filename"
-pattern = "dataset-1_{{content}}_{{style}}_{{take}}"
-action = "{{content}}"
-text = "a person does a {{content}}"
-"#
-    );
-    let path = dir.path().join("build.toml");
-    fs::write(&path, config_text).unwrap();
-    let config = Config::load(&path).unwrap();
+    let spec = ConfigSpec::new("real-llm")
+        .set("part_labels.labeller", "llm")
+        .set("paraphrases.n", 3)
+        .set("llm.base_url", url)
+        .set("llm.model", model)
+        .set("llm.temperature", 0)
+        .set("llm.max_tokens", 200)
+        .set("llm.retry_max_tokens", 400)
+        .set("llm.seed", 7)
+        .set("llm.concurrency", 1)
+        .set("llm.requests_per_minute", 600)
+        .set("llm.timeout_seconds", 120)
+        .source(Source::bandai1("bandai").set("labels.text", "a person does a {content}"));
+    let dir = Project::new()
+        .captures("bandai-namco-1", &WALK_KICK_BYE)
+        .config(spec)
+        .build();
+    let config = dir.load();
     let first = build(&config, &BuildOptions::default()).unwrap();
     println!(
         "labels: {:#?}\nparaphrases: {:#?}\nplans: {:#?}",

@@ -4,31 +4,14 @@ use crate::common;
 
 use std::fs;
 use std::process::Command;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-use axum::extract::State;
-use axum::routing::post;
-use axum::{Json, Router};
+use common::llm::{LlmServer, Reply, dead_url};
+use common::project::{ConfigSpec, Project, Source};
 use common::*;
 use motionforge::build::{BuildOptions, BuildReport, build};
 use motionforge::config::Config;
 use serde_json::{Value, json};
-
-/// A chat server that answers like a (well-behaved) model, by prompt kind, and counts requests.
-struct Server {
-    base_url: String,
-    requests: Arc<AtomicUsize>,
-    prompts: Arc<Mutex<Vec<String>>>,
-    _runtime: tokio::runtime::Runtime,
-}
-
-#[derive(Clone)]
-struct ServerState {
-    requests: Arc<AtomicUsize>,
-    prompts: Arc<Mutex<Vec<String>>>,
-    mode: Mode,
-}
 
 /// How the server misbehaves.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -124,61 +107,16 @@ fn answer_for(prompt: &str) -> String {
     "I do not understand.".into()
 }
 
-async fn chat(
-    State(state): State<ServerState>,
-    Json(body): Json<Value>,
-) -> axum::response::Response {
-    use axum::response::IntoResponse;
-    state.requests.fetch_add(1, Ordering::SeqCst);
-    let prompt = body["messages"][0]["content"]
-        .as_str()
-        .unwrap_or_default()
-        .to_string();
-    state.prompts.lock().unwrap().push(prompt.clone());
-    if state.mode == Mode::FailLabels && prompt.contains("body parts involved") {
-        return (axum::http::StatusCode::INTERNAL_SERVER_ERROR, "overloaded").into_response();
-    }
-    let max_tokens = body["max_tokens"].as_u64().unwrap_or(0);
-    let (content, finish_reason) = reply_for(&prompt, state.mode, max_tokens);
-    Json(json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": content}, "finish_reason": finish_reason}]}))
-        .into_response()
-}
-
-impl Server {
-    fn start() -> Server {
-        Server::start_with(Mode::Good)
-    }
-
-    fn start_with(mode: Mode) -> Server {
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(1)
-            .enable_all()
-            .build()
-            .unwrap();
-        let listener = runtime
-            .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
-            .unwrap();
-        let addr = listener.local_addr().unwrap();
-        let state = ServerState {
-            requests: Arc::default(),
-            prompts: Arc::default(),
-            mode,
-        };
-        let app = Router::new()
-            .route("/v1/chat/completions", post(chat))
-            .with_state(state.clone());
-        runtime.spawn(async move { axum::serve(listener, app).await });
-        Server {
-            base_url: format!("http://{addr}/v1"),
-            requests: state.requests,
-            prompts: state.prompts,
-            _runtime: runtime,
+/// A chat server that answers like a (well-behaved) model, by prompt kind, unless `mode` says.
+fn start(mode: Mode) -> LlmServer {
+    LlmServer::answering(move |request| {
+        let prompt = request.prompt();
+        if mode == Mode::FailLabels && prompt.contains("body parts involved") {
+            return Reply::Status(500, "overloaded", None);
         }
-    }
-
-    fn requests(&self) -> usize {
-        self.requests.load(Ordering::SeqCst)
-    }
+        let (content, finish_reason) = reply_for(prompt, mode, request.max_tokens());
+        Reply::Answer(content, finish_reason)
+    })
 }
 
 /// Progress events of a build, as words.
@@ -200,38 +138,26 @@ impl motionforge::progress::Progress for Recorder {
     }
 }
 
-/// A scratch build of three real Bandai captures with the given extra config.
-fn scratch(extra: &str) -> (tempfile::TempDir, Config) {
-    let dir = bandai1_scratch(&WALK_KICK_BYE);
-    let text = format!(
-        r#"
-[dataset]
-name = "llm"
-output = "out"
-{extra}
-
-[[sources]]
-name = "bandai"
-captures = ["captures/*.bvh"]
-profile = "bandai-namco"
-[sources.labels]
-kind = "filename"
-pattern = "dataset-1_{{content}}_{{style}}_{{take}}"
-action = "{{content}}"
-text = "{{content}}"
-"#
-    );
-    let path = dir.path().join("build.toml");
-    fs::write(&path, text).unwrap();
-    let config = Config::load(&path).unwrap();
-    (dir, config)
+/// A scratch build of three real Bandai captures with the given config.
+fn scratch(spec: ConfigSpec) -> (Project, Config) {
+    let project = Project::new()
+        .captures("bandai-namco-1", &WALK_KICK_BYE)
+        .config(spec)
+        .build();
+    let config = project.load();
+    (project, config)
 }
 
-fn llm_section(server: &Server) -> String {
-    format!(
-        "[part_labels]\nlabeller = \"llm\"\n\n[llm]\nbase_url = \"{}\"\nmodel = \"test-model\"\nrequests_per_minute = 6000\nbackoff_seconds = 0.01\n",
-        server.base_url
-    )
+/// The three captures labelled from their file names, no LLM.
+fn spec() -> ConfigSpec {
+    ConfigSpec::new("llm").source(Source::bandai1("bandai"))
+}
+
+/// [`spec`] with `[llm]` at `server` and its part labeller.
+fn llm_spec(server: &LlmServer) -> ConfigSpec {
+    spec()
+        .set("part_labels.labeller", "llm")
+        .llm(&server.base_url())
 }
 
 fn stage<'a>(report: &'a BuildReport, name: &str) -> &'a motionforge::build::StageRun {
@@ -244,16 +170,11 @@ fn stage<'a>(report: &'a BuildReport, name: &str) -> &'a motionforge::build::Sta
 
 #[test]
 fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
-    let server = Server::start();
-    let (dir, config) = scratch(&llm_section(&server));
+    let server = start(Mode::Good);
+    let (dir, config) = scratch(llm_spec(&server));
     let first = build(&config, &BuildOptions::default()).unwrap();
     // 3 texts x (labels + paraphrases + plans) + 3 plan repairs.
-    assert_eq!(
-        server.requests(),
-        12,
-        "{:?}",
-        server.prompts.lock().unwrap()
-    );
+    assert_eq!(server.requests(), 12, "{:?}", server.prompts());
     assert_eq!(first.labels.requests, 3);
     assert_eq!(
         first.labels.flagged.len(),
@@ -333,8 +254,8 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
 
 #[test]
 fn offline_sends_nothing_and_falls_back_as_configured() {
-    let server = Server::start();
-    let (_dir, config) = scratch(&llm_section(&server));
+    let server = start(Mode::Good);
+    let (_dir, config) = scratch(llm_spec(&server));
     let report = build(
         &config,
         &BuildOptions {
@@ -362,13 +283,7 @@ fn offline_sends_nothing_and_falls_back_as_configured() {
         Some(&3)
     );
     // With on_miss = "fail", the build stops and lists the texts.
-    let (_dir, config) = scratch(&format!(
-        "{}\n",
-        llm_section(&server).replace(
-            "labeller = \"llm\"",
-            "labeller = \"llm\"\non_miss = \"fail\""
-        )
-    ));
+    let (_dir, config) = scratch(llm_spec(&server).set("part_labels.on_miss", "fail"));
     let err = build(
         &config,
         &BuildOptions {
@@ -387,7 +302,7 @@ fn offline_sends_nothing_and_falls_back_as_configured() {
 
 #[test]
 fn without_an_llm_the_embedded_labeller_labels_and_skips_are_reported() {
-    let (dir, config) = scratch("");
+    let (dir, config) = scratch(spec());
     let report = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(
         report.paraphrases.skipped.get("no LLM configured"),
@@ -420,48 +335,31 @@ fn without_an_llm_the_embedded_labeller_labels_and_skips_are_reported() {
 
 #[test]
 fn imported_sinc_answers_label_a_build_without_a_request() {
-    let dir = tempfile::tempdir().unwrap();
-    fs::create_dir_all(dir.path().join("captures")).unwrap();
-    fs::copy(
-        shared_data().join("cmu/01_01.bvh"),
-        dir.path().join("captures/01_01.bvh"),
-    )
-    .unwrap();
-    fs::copy(
-        repo().join("fixtures/humanml3d/index-cmu-01_01.csv"),
-        dir.path().join("index.csv"),
-    )
-    .unwrap();
     // No server listens here: any request would fail the labels and show up as `missing`.
-    let config_text = r#"
-[dataset]
-name = "imported"
-output = "out"
-
-[part_labels]
-labeller = "llm"
-offline = true
-
-[llm]
-base_url = "http://127.0.0.1:9/v1"
-model = "text-davinci-003"
-kind = "completion"
-max_tokens = 256
-
-[[sources]]
-name = "cmu"
-captures = ["captures/*.bvh"]
-profile = "cmu"
-[sources.labels]
-kind = "frame_index"
-path = "index.csv"
-fps = 20
-default_text = "jump forward"
-[sources.segment]
-timeline_offset_frames = 1
-"#;
-    let config_path = dir.path().join("build.toml");
-    fs::write(&config_path, config_text).unwrap();
+    let spec = ConfigSpec::new("imported")
+        .set("part_labels.labeller", "llm")
+        .set("part_labels.offline", true)
+        .set("llm.base_url", dead_url())
+        .set("llm.model", "text-davinci-003")
+        .set("llm.kind", "completion")
+        .set("llm.max_tokens", 256)
+        .source(
+            Source::new("cmu", "cmu", &["captures/*.bvh"])
+                .set("labels.kind", "frame_index")
+                .set("labels.path", "index.csv")
+                .set("labels.fps", 20)
+                .set("labels.default_text", "jump forward")
+                .set("segment.timeline_offset_frames", 1),
+        );
+    let project = Project::new()
+        .copy(shared_data().join("cmu/01_01.bvh"), "captures/01_01.bvh")
+        .copy(
+            repo().join("fixtures/humanml3d/index-cmu-01_01.csv"),
+            "index.csv",
+        )
+        .config(spec)
+        .build();
+    let config_path = project.config_path();
     let import = Command::new(env!("CARGO_BIN_EXE_motionforge"))
         .args(["labels", "import"])
         .arg(shared_data().join("sinc/gpt3-labels-list.json"))
@@ -569,12 +467,8 @@ fn prompt_render_prints_the_exact_prompt_and_names_unknown_templates() {
 
 #[test]
 fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
-    let server = Server::start_with(Mode::FailLabels);
-    let extra = llm_section(&server).replace(
-        "backoff_seconds = 0.01",
-        "backoff_seconds = 0.01\nmax_retries = 2",
-    );
-    let (_dir, config) = scratch(&extra);
+    let server = start(Mode::FailLabels);
+    let (_dir, config) = scratch(llm_spec(&server).set("llm.max_retries", 2));
     let recorder = Arc::new(Recorder::default());
     let report = build(
         &config,
@@ -630,12 +524,15 @@ fn a_request_that_fails_after_its_retries_is_rejected_and_the_build_goes_on() {
 
 #[test]
 fn the_optional_llm_pair_check_drops_pairs_it_says_no_to() {
-    let server = Server::start();
-    let extra = format!(
-        "[splits]\nratios = {{ train = 1.0 }}\n\n[synthetic]\nexhaustive = true\nllm_check = true\n\n[task_plans]\nenabled = false\n\n[paraphrases]\nenabled = false\n\n{}",
-        llm_section(&server).replace("labeller = \"llm\"", "labeller = \"embedded\"")
-    );
-    let (_dir, config) = scratch(&extra);
+    let server = start(Mode::Good);
+    let spec = llm_spec(&server)
+        .set("part_labels.labeller", "embedded")
+        .set("splits.ratios.train", 1.0)
+        .set("synthetic.exhaustive", true)
+        .set("synthetic.llm_check", true)
+        .set("task_plans.enabled", false)
+        .set("paraphrases.enabled", false);
+    let (_dir, config) = scratch(spec);
     let first = build(&config, &BuildOptions::default()).unwrap();
     let asked = server.requests();
     assert!(asked > 0, "pairs were asked about");
@@ -657,16 +554,16 @@ fn the_optional_llm_pair_check_drops_pairs_it_says_no_to() {
 }
 
 /// `build-report.json` of a built scratch dataset.
-fn report_json(dir: &tempfile::TempDir) -> Value {
+fn report_json(dir: &Project) -> Value {
     let text = fs::read_to_string(dir.path().join("out/llm/build-report.json")).unwrap();
     serde_json::from_str(&text).unwrap()
 }
 
 #[test]
 fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
-    let server = Server::start_with(Mode::JunkParaphrases);
-    let extra = format!("[task_plans]\nenabled = false\n\n{}", llm_section(&server));
-    let (dir, config) = scratch(&extra);
+    let server = start(Mode::JunkParaphrases);
+    let spec = llm_spec(&server).set("task_plans.enabled", false);
+    let (dir, config) = scratch(spec.clone());
     let first = build(&config, &BuildOptions::default()).unwrap();
     // Walk and bye: two template lines, two good lines, a line about sitting (the third asked),
     // and five lines beyond the three asked. Kick: an empty answer.
@@ -720,7 +617,7 @@ fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
     assert_eq!(second.paraphrases.checks, first.paraphrases.checks);
 
     // `keep` keeps the refused lines (duplicates aside) and counts them.
-    let (_dir, config) = scratch(&format!("[paraphrases]\non_invalid = \"keep\"\n\n{extra}"));
+    let (_dir, config) = scratch(spec.set("paraphrases.on_invalid", "keep"));
     let kept = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(
         (
@@ -734,21 +631,12 @@ fn junk_paraphrases_are_refused_by_reason_counted_and_settled() {
 
 #[test]
 fn cut_off_answers_are_retried_with_more_tokens_never_cached_and_asked_again() {
-    let server = Server::start_with(Mode::Truncated);
-    let extra = llm_section(&server).replace(
-        "backoff_seconds = 0.01",
-        "backoff_seconds = 0.01\nretry_max_tokens = 400",
-    );
-    let (dir, config) = scratch(&extra);
+    let server = start(Mode::Truncated);
+    let (dir, config) = scratch(llm_spec(&server).set("llm.retry_max_tokens", 400));
     let first = build(&config, &BuildOptions::default()).unwrap();
     // Labels: cut off at 256 and at 400 (2 each); paraphrases: cut off at 256, whole at 400 (2
     // each); plans: 3 and 3 repairs.
-    assert_eq!(
-        server.requests(),
-        18,
-        "{:?}",
-        server.prompts.lock().unwrap()
-    );
+    assert_eq!(server.requests(), 18, "{:?}", server.prompts());
     assert_eq!(first.labels.checks.truncated, 3);
     assert_eq!(first.paraphrases.checks.truncated, 0);
     assert_eq!(first.paraphrases.answered, 3);
@@ -797,12 +685,11 @@ fn cut_off_answers_are_retried_with_more_tokens_never_cached_and_asked_again() {
 
 #[test]
 fn flagged_labels_fall_back_drop_or_stay_as_configured() {
-    let server = Server::start_with(Mode::FlaggedLabels);
-    let base = format!(
-        "[task_plans]\nenabled = false\n\n[paraphrases]\nenabled = false\n\n{}",
-        llm_section(&server)
-    );
-    let originals = |dir: &tempfile::TempDir| -> Vec<String> {
+    let server = start(Mode::FlaggedLabels);
+    let base = llm_spec(&server)
+        .set("task_plans.enabled", false)
+        .set("paraphrases.enabled", false);
+    let originals = |dir: &Project| -> Vec<String> {
         let mut rows: Vec<String> = pyarrow_rows(
             &dir.path().join("out/llm/data"),
             "clip_id,parts,label_source",
@@ -815,7 +702,7 @@ fn flagged_labels_fall_back_drop_or_stay_as_configured() {
     };
 
     // Default: the embedded labeller, and the label source says so.
-    let (dir, config) = scratch(&base);
+    let (dir, config) = scratch(base.clone());
     let report = build(&config, &BuildOptions::default()).unwrap();
     let c = &report.labels.checks;
     assert_eq!(c.accepted, 0);
@@ -831,20 +718,14 @@ fn flagged_labels_fall_back_drop_or_stay_as_configured() {
     assert_eq!(server.requests(), asked, "flagged answers are settled too");
 
     // drop: no parts at all.
-    let (dir, config) = scratch(&base.replace(
-        "labeller = \"llm\"",
-        "labeller = \"llm\"\non_invalid = \"drop\"",
-    ));
+    let (dir, config) = scratch(base.clone().set("part_labels.on_invalid", "drop"));
     let report = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(report.labels.checks.dropped, 3);
     let rows = originals(&dir);
     assert!(rows.iter().all(|r| r.ends_with("|None|None")), "{rows:?}");
 
     // keep: the answer's parts, marked as the LLM's; the answer with no part gets the motion's.
-    let (dir, config) = scratch(&base.replace(
-        "labeller = \"llm\"",
-        "labeller = \"llm\"\non_invalid = \"keep\"",
-    ));
+    let (dir, config) = scratch(base.set("part_labels.on_invalid", "keep"));
     let report = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(report.labels.checks.kept, 3);
     let rows = originals(&dir);
@@ -877,16 +758,14 @@ fn flagged_labels_fall_back_drop_or_stay_as_configured() {
 
 #[test]
 fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let url = format!("http://127.0.0.1:{port}/v1");
+    let url = dead_url();
     // Retries and backoff at their defaults: 6 attempts per prompt, up to a minute apart.
-    let (dir, config) = scratch(&format!(
-        "[part_labels]\nlabeller = \"llm\"\n\n[llm]\nbase_url = \"{url}\"\nmodel = \"m\"\n"
-    ));
+    let (dir, config) = scratch(
+        spec()
+            .set("part_labels.labeller", "llm")
+            .set("llm.base_url", url.as_str())
+            .set("llm.model", "m"),
+    );
     let t = std::time::Instant::now();
     let err = build(&config, &BuildOptions::default())
         .unwrap_err()
@@ -934,9 +813,9 @@ fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
     assert_eq!(probed.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&probed.stderr).contains("no LLM server answers"));
 
-    // With a server there, the probe says what answered.
-    let server = Server::start();
-    let (dir, _config) = scratch(&llm_section(&server));
+    // With a server there, the probe says what answered (one without a model list).
+    let server = LlmServer::builder().without_models().start();
+    let (dir, _config) = scratch(llm_spec(&server));
     let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
         .args(["config", "check", "--probe", "--config"])
         .arg(dir.path().join("build.toml"))
@@ -951,7 +830,7 @@ fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
     assert!(
         stdout.contains(&format!(
             "answered GET {}/models with HTTP 404",
-            server.base_url
+            server.base_url()
         )),
         "{stdout}"
     );

@@ -3,6 +3,7 @@ use crate::common;
 
 use std::path::{Path, PathBuf};
 
+use common::project::{ConfigSpec, Project, Source};
 use common::*;
 use glam::{DQuat, DVec3};
 use motionforge::motion::canonical::dataset_positions;
@@ -454,39 +455,35 @@ fn every_metric_of_a_real_capture_equals_the_metric_of_the_builds_mirror() {
 }
 
 /// A build of the fixture capture whose label contradicts its motion, beside the Bandai Namco 2
-/// subset's walk-turns and hand takes (real captures, read in place); mirrors on.
-fn label_check_build(label_check: &str) -> (tempfile::TempDir, motionforge::config::Config) {
-    let dir = tempfile::tempdir().unwrap();
+/// subset's walk-turns and hand takes (real captures, read in place); mirrors on; `label_check`
+/// adds to the config.
+fn label_check_build(
+    label_check: impl FnOnce(ConfigSpec) -> ConfigSpec,
+) -> (Project, motionforge::config::Config) {
     let subset = shared_data().join("bandai-namco-2-subset/data");
+    let subset = subset.display();
     let fixture = repo().join("fixtures/bandai-namco-2/data");
-    let text = format!(
-        r#"
-[dataset]
-name = "labels"
-output = "out"
-
-[synthetic]
-probability = 1.0
-
-[label_check]
-{label_check}
-
-[[sources]]
-name = "bandai-2"
-captures = ["{fixture}/*.bvh", "{subset}/dataset-2_walk-turn-*.bvh", "{subset}/dataset-2_*-hand_*.bvh"]
-profile = "bandai-namco"
-[sources.labels]
-kind = "filename"
-pattern = "dataset-2_{{content}}_{{style}}_{{take}}"
-action = "{{content}}"
-text = "{{content}}, {{style}} style"
-"#,
-        fixture = fixture.display(),
-        subset = subset.display()
+    let source = Source::new(
+        "bandai-2",
+        "bandai-namco",
+        &[
+            &format!("{}/*.bvh", fixture.display()),
+            &format!("{subset}/dataset-2_walk-turn-*.bvh"),
+            &format!("{subset}/dataset-2_*-hand_*.bvh"),
+        ],
+    )
+    .filename_labels(
+        "dataset-2_{content}_{style}_{take}",
+        "{content}",
+        "{content}, {style} style",
     );
-    std::fs::write(dir.path().join("build.toml"), text).unwrap();
-    let config = motionforge::config::Config::load(&dir.path().join("build.toml")).unwrap();
-    (dir, config)
+    let spec = ConfigSpec::new("labels")
+        .set("synthetic.probability", 1.0)
+        .set("label_check", toml::Table::new())
+        .source(source);
+    let project = Project::new().config(label_check(spec)).build();
+    let config = project.load();
+    (project, config)
 }
 
 #[test]
@@ -495,7 +492,7 @@ fn labels_that_contradict_the_motion_are_listed_and_dropped_on_request() {
     // its mirror's passed through unnoticed. The 48 consistent takes beside it (walk-turns left
     // and right, left- and right-hand waves and raises, and their mirrors) must not be listed.
     use motionforge::build::{BuildOptions, build};
-    let (dir, config) = label_check_build("");
+    let (dir, config) = label_check_build(|s| s);
     let report = build(&config, &BuildOptions::default()).unwrap();
     let listed: Vec<_> = report
         .label_contradictions
@@ -544,7 +541,7 @@ fn labels_that_contradict_the_motion_are_listed_and_dropped_on_request() {
     let kept = report.clips;
 
     // `label_check.drop = true` leaves them out, and every pair made from them.
-    let (_dir, dropping) = label_check_build("drop = true");
+    let (_dir, dropping) = label_check_build(|s| s.set("label_check.drop", true));
     let report = build(&dropping, &BuildOptions::default()).unwrap();
     assert_eq!(report.label_contradictions.len(), 2);
     assert!(report.label_contradictions_dropped >= 2);

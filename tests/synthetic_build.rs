@@ -4,6 +4,7 @@ use crate::common;
 use std::fs;
 use std::process::Command;
 
+use common::project::{ConfigSpec, Project, Source};
 use common::*;
 use motionforge::build::{BuildOptions, build, collect_clips};
 use motionforge::clip::SourceKind;
@@ -18,32 +19,18 @@ const CAPTURES: [&str; 5] = [
     "dataset-1_walk-left_normal_001",
 ];
 
-fn scratch(synthetic: &str, seed: u64) -> (tempfile::TempDir, Config) {
-    let dir = bandai1_scratch(&CAPTURES);
-    let text = format!(
-        r#"
-[dataset]
-name = "synthetic"
-output = "out"
-seed = {seed}
-
-[synthetic]
-{synthetic}
-
-[[sources]]
-name = "bandai"
-captures = ["captures/*.bvh"]
-profile = "bandai-namco"
-[sources.labels]
-kind = "filename"
-pattern = "dataset-1_{{content}}_{{style}}_{{take}}"
-action = "{{content}}"
-text = "{{content}}"
-"#
-    );
-    fs::write(dir.path().join("build.toml"), text).unwrap();
-    let config = Config::load(&dir.path().join("build.toml")).unwrap();
-    (dir, config)
+/// The five captures labelled from their file names, `synthetic.<key> = value`, this seed.
+fn scratch(key: &str, value: impl Into<toml::Value>, seed: i64) -> (Project, Config) {
+    let spec = ConfigSpec::new("synthetic")
+        .seed(seed)
+        .set(&format!("synthetic.{key}"), value)
+        .source(Source::bandai1("bandai"));
+    let project = Project::new()
+        .captures("bandai-namco-1", &CAPTURES)
+        .config(spec)
+        .build();
+    let config = project.load();
+    (project, config)
 }
 
 fn synthetic_ids(config: &Config) -> Vec<String> {
@@ -58,11 +45,11 @@ fn synthetic_ids(config: &Config) -> Vec<String> {
 
 #[test]
 fn same_seed_same_pairs_different_seed_different_sample() {
-    let (dir_a, a) = scratch("probability = 0.5", 7);
-    let (dir_b, b) = scratch("probability = 0.5", 7);
+    let (dir_a, a) = scratch("probability", 0.5, 7);
+    let (dir_b, b) = scratch("probability", 0.5, 7);
     build(&a, &BuildOptions::default()).unwrap();
     build(&b, &BuildOptions::default()).unwrap();
-    let bytes = |d: &tempfile::TempDir| table_bytes(&d.path().join("out/synthetic"));
+    let bytes = |d: &Project| table_bytes(&d.path().join("out/synthetic"));
     assert!(
         bytes(&dir_a) == bytes(&dir_b),
         "same seed, byte-identical tables"
@@ -70,7 +57,7 @@ fn same_seed_same_pairs_different_seed_different_sample() {
     let first = synthetic_ids(&a);
     assert!(!first.is_empty());
     let others: Vec<Vec<String>> = (1..6)
-        .map(|seed| synthetic_ids(&scratch("probability = 0.5", seed).1))
+        .map(|seed| synthetic_ids(&scratch("probability", 0.5, seed).1))
         .collect();
     assert!(
         others.iter().any(|o| *o != first),
@@ -80,7 +67,7 @@ fn same_seed_same_pairs_different_seed_different_sample() {
 
 #[test]
 fn incompatible_pairs_are_never_composed_and_counts_add_up() {
-    let (_dir, config) = scratch("exhaustive = true", 1);
+    let (_dir, config) = scratch("exhaustive", true, 1);
     let report = build(&config, &BuildOptions::default()).unwrap();
     let s = &report.synthetic;
     println!("{s:?}");
@@ -140,7 +127,7 @@ fn incompatible_pairs_are_never_composed_and_counts_add_up() {
 
 #[test]
 fn export_bvh_writes_a_synthetic_clip_that_reads_back_on_the_source_skeleton() {
-    let (dir, config) = scratch("exhaustive = true", 1);
+    let (dir, config) = scratch("exhaustive", true, 1);
     build(&config, &BuildOptions::default()).unwrap();
     let ids = synthetic_ids(&config);
     let id = ids.first().expect("a synthetic pair");
@@ -184,40 +171,31 @@ fn export_bvh_writes_a_synthetic_clip_that_reads_back_on_the_source_skeleton() {
 }
 
 /// A build of the Bandai Namco 2 subset's walk-turns and raise-up-hand takes (real captures,
-/// read in place), every compatible pair composed, mirrors off; `synthetic` adds to
-/// `[synthetic]`.
-fn turns_and_raises(synthetic: &str) -> (tempfile::TempDir, Config) {
-    let dir = tempfile::tempdir().unwrap();
+/// read in place), every compatible pair composed, mirrors off; `synthetic` adds to the config.
+fn turns_and_raises(synthetic: impl FnOnce(ConfigSpec) -> ConfigSpec) -> (Project, Config) {
     let data = shared_data().join("bandai-namco-2-subset/data");
-    let text = format!(
-        r#"
-[dataset]
-name = "turns"
-output = "out"
-seed = 3
-
-[mirror]
-enabled = false
-
-[synthetic]
-exhaustive = true
-{synthetic}
-
-[[sources]]
-name = "bandai-2"
-captures = ["{data}/dataset-2_walk-turn-*.bvh", "{data}/dataset-2_raise-up-*-hand_*.bvh"]
-profile = "bandai-namco"
-[sources.labels]
-kind = "filename"
-pattern = "dataset-2_{{content}}_{{style}}_{{take}}"
-action = "{{content}}"
-text = "{{content}}"
-"#,
-        data = data.display()
+    let data = data.display();
+    let source = Source::new(
+        "bandai-2",
+        "bandai-namco",
+        &[
+            &format!("{data}/dataset-2_walk-turn-*.bvh"),
+            &format!("{data}/dataset-2_raise-up-*-hand_*.bvh"),
+        ],
+    )
+    .filename_labels(
+        "dataset-2_{content}_{style}_{take}",
+        "{content}",
+        "{content}",
     );
-    fs::write(dir.path().join("build.toml"), text).unwrap();
-    let config = Config::load(&dir.path().join("build.toml")).unwrap();
-    (dir, config)
+    let spec = ConfigSpec::new("turns")
+        .seed(3)
+        .mirror(false)
+        .set("synthetic.exhaustive", true)
+        .source(source);
+    let project = Project::new().config(synthetic(spec)).build();
+    let config = project.load();
+    (project, config)
 }
 
 /// Net heading change (degrees, left positive) of a motion, from the hips' facing averaged over
@@ -275,7 +253,7 @@ fn pairs_keep_the_turn_of_their_walk_turns_and_drop_what_cannot_keep_it() {
     // Issue 16, finding 4: SINC's crop from the start kept less than half the turn of 405 of
     // 1,143 Bandai Namco 2 pairs whose legs came from a walk-turn. Here a raise-up take (51 to 60
     // frames) crops a walk-turn (100 to 215 frames) to its length.
-    let (_dir, config) = turns_and_raises("");
+    let (_dir, config) = turns_and_raises(|s| s);
     let report = build(&config, &BuildOptions::default()).unwrap();
     let s = &report.synthetic;
     assert_eq!(s.composed + s.dropped.values().sum::<usize>(), s.sampled);
@@ -294,7 +272,10 @@ fn pairs_keep_the_turn_of_their_walk_turns_and_drop_what_cannot_keep_it() {
     }
 
     // SINC's protocol is still there (`keep_action = false`): it cuts the turn away.
-    let (_sinc_dir, sinc) = turns_and_raises("keep_action = false\nmin_action_kept = 0.0");
+    let (_sinc_dir, sinc) = turns_and_raises(|s| {
+        s.set("synthetic.keep_action", false)
+            .set("synthetic.min_action_kept", 0.0)
+    });
     let cut = turn_kept(&sinc);
     let below_half = cut.iter().filter(|k| k.1 < 0.5).count();
     println!(
@@ -311,7 +292,7 @@ fn pairs_keep_the_turn_of_their_walk_turns_and_drop_what_cannot_keep_it() {
     }
 
     // Pairs that keep too little are dropped and counted under `action_cut`.
-    let (_strict_dir, strict) = turns_and_raises("min_action_kept = 1.0");
+    let (_strict_dir, strict) = turns_and_raises(|s| s.set("synthetic.min_action_kept", 1.0));
     let report = build(&strict, &BuildOptions::default()).unwrap();
     let dropped = report
         .synthetic

@@ -1,6 +1,8 @@
 //! Shared helpers for integration tests: where the real data lives, and reading it.
 #![allow(dead_code)]
 
+pub(crate) mod llm;
+pub(crate) mod project;
 pub(crate) mod service;
 
 use std::path::{Path, PathBuf};
@@ -136,19 +138,6 @@ pub(crate) fn build_demo(output: &Path) -> std::process::Output {
             .arg("--output")
             .arg(output),
     )
-}
-
-/// A fresh folder with the named Bandai Namco dataset-1 captures (stems) copied into `captures/`.
-pub(crate) fn bandai1_scratch(names: &[&str]) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir_all(dir.path().join("captures")).unwrap();
-    for name in names {
-        let src = shared_data()
-            .join("bandai-namco-1/data")
-            .join(format!("{name}.bvh"));
-        std::fs::copy(src, dir.path().join("captures").join(format!("{name}.bvh"))).unwrap();
-    }
-    dir
 }
 
 /// The walk, kick and bye takes most LLM-stage tests label.
