@@ -66,7 +66,7 @@ impl Ui {
         !self.log.quiet
     }
 
-    /// Whether results are printed as JSON (`--json`).
+    /// Whether results are printed as JSON (`--json`): with [`print_json`].
     pub(crate) fn json(&self) -> bool {
         self.log.json
     }
@@ -76,4 +76,15 @@ impl Ui {
             bars.clear();
         }
     }
+}
+
+/// A command's result as JSON on standard output (`--json`): pretty-printed, one value, a newline.
+pub(crate) fn print_json(value: &impl serde::Serialize) -> anyhow::Result<()> {
+    use std::io::Write;
+    writeln!(
+        std::io::stdout(),
+        "{}",
+        serde_json::to_string_pretty(value)?
+    )?;
+    Ok(())
 }

@@ -129,11 +129,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         kept: args.keep.as_ref().map(|_| dataset.clone()),
     };
     if ui.log.json {
-        writeln!(
-            std::io::stdout(),
-            "{}",
-            serde_json::to_string_pretty(&result.json())?
-        )?;
+        crate::ui::print_json(&result.json())?;
     } else {
         result.print()?;
     }

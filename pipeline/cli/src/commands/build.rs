@@ -1,6 +1,5 @@
 //! `build` and `run`: the build with logs, progress and the summary.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -129,11 +128,7 @@ fn build_through(args: BuildArgs, through: Option<Stage>, ui: &Ui) -> Result<Exi
         );
     }
     if ui.json() {
-        writeln!(
-            std::io::stdout(),
-            "{}",
-            serde_json::to_string_pretty(&report)?
-        )?;
+        crate::ui::print_json(&report)?;
     } else if ui.status() {
         print_report(&report, seconds)?;
     }

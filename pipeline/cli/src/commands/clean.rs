@@ -61,7 +61,7 @@ pub(crate) fn run(args: CleanArgs, ui: &Ui) -> Result<ExitCode> {
             "bytes": report.bytes,
             "kept": report.kept,
         });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+        crate::ui::print_json(&value)?;
     } else if ui.status() {
         if report.removed.is_empty() {
             writeln!(out, "nothing to clean in {}", dir.display())?;

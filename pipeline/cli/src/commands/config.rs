@@ -98,11 +98,7 @@ fn config_check(path: &Path, output: Option<PathBuf>, probe: bool, ui: &Ui) -> R
                 };
                 let value =
                     serde_json::json!({ "ok": false, "config": path, "problems": problems });
-                writeln!(
-                    std::io::stdout(),
-                    "{}",
-                    serde_json::to_string_pretty(&value)?
-                )?;
+                crate::ui::print_json(&value)?;
             }
             return Err(err.into());
         }
@@ -134,7 +130,7 @@ fn config_check(path: &Path, output: Option<PathBuf>, probe: bool, ui: &Ui) -> R
                 "models": p.models,
             })),
         });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+        crate::ui::print_json(&value)?;
     } else if ui.status() {
         let splits: Vec<String> = config
             .splits

@@ -86,11 +86,7 @@ pub(crate) fn run(args: ExportArgs, ui: &Ui) -> Result<ExitCode> {
         if let Some(object) = value.as_object_mut() {
             object.insert("output".into(), serde_json::json!(out));
         }
-        writeln!(
-            std::io::stdout(),
-            "{}",
-            serde_json::to_string_pretty(&value)?
-        )?;
+        crate::ui::print_json(&value)?;
     } else if ui.status() {
         let mut stdout = std::io::stdout();
         writeln!(

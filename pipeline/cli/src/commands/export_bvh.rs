@@ -110,7 +110,7 @@ pub(crate) fn say_bvh_written(
             "fps": motion.fps,
             "skeleton": skeleton,
         });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+        crate::ui::print_json(&value)?;
     } else if ui.status() {
         writeln!(
             out,

@@ -168,7 +168,7 @@ fn eval(gold: &Path, sources: &[String], config: &Path, json: bool) -> Result<()
             .map(|(s, e)| (s.clone(), serde_json::to_value(e).unwrap_or_default()))
             .collect::<serde_json::Map<_, _>>()
             .into();
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+        crate::ui::print_json(&value)?;
     } else {
         let table: Vec<(&str, &Evaluation)> = rows.iter().map(|(s, e)| (s.as_str(), e)).collect();
         write!(out, "{}", motionforge::parts::eval::format_table(&table))?;

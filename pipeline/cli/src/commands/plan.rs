@@ -1,6 +1,5 @@
 //! `plan` and `status`: what a build would run and why, and what is built.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -65,11 +64,7 @@ pub(crate) fn plan(args: PlanArgs, ui: &Ui) -> Result<ExitCode> {
         },
     )?;
     if ui.json() {
-        writeln!(
-            std::io::stdout(),
-            "{}",
-            serde_json::to_string_pretty(&plan)?
-        )?;
+        crate::ui::print_json(&plan)?;
     } else {
         print_plan(&plan)?;
     }
@@ -87,11 +82,7 @@ pub(crate) fn status(args: StatusArgs, ui: &Ui) -> Result<ExitCode> {
     };
     let status = motionforge::build::status(&config)?;
     if ui.json() {
-        writeln!(
-            std::io::stdout(),
-            "{}",
-            serde_json::to_string_pretty(&status)?
-        )?;
+        crate::ui::print_json(&status)?;
     } else {
         print_status(&status)?;
     }

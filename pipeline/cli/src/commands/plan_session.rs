@@ -110,7 +110,7 @@ pub(crate) fn run(args: PlanSessionArgs, ui: &Ui) -> Result<ExitCode> {
             "kl_after": after,
             "never_possible": session.unreachable,
         });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+        crate::ui::print_json(&value)?;
     } else if status {
         writeln!(
             out,

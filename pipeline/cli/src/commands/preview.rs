@@ -183,7 +183,7 @@ fn preview(
     }
     if ui.json() {
         let value = serde_json::json!({ "output": output, "previews": written });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+        crate::ui::print_json(&value)?;
     }
     Ok(())
 }

@@ -33,11 +33,7 @@ pub(crate) fn run(args: ReportArgs, ui: &Ui) -> Result<ExitCode> {
             "output": output,
             "files": files,
         });
-        writeln!(
-            std::io::stdout(),
-            "{}",
-            serde_json::to_string_pretty(&value)?
-        )?;
+        crate::ui::print_json(&value)?;
     } else if ui.status() {
         writeln!(
             std::io::stdout(),

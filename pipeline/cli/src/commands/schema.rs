@@ -1,6 +1,5 @@
 //! `schema`: the clip table's schema as JSON.
 
-use std::io::Write;
 use std::process::ExitCode;
 
 use anyhow::Result;
@@ -15,10 +14,6 @@ pub(crate) struct SchemaArgs {}
 /// `motionforge schema`.
 pub(crate) fn run(_: SchemaArgs) -> Result<ExitCode> {
     let schema = motionforge::io::schema::clip_schema_json();
-    writeln!(
-        std::io::stdout(),
-        "{}",
-        serde_json::to_string_pretty(&schema)?
-    )?;
+    crate::ui::print_json(&schema)?;
     Ok(ExitCode::SUCCESS)
 }
