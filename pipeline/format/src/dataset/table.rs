@@ -326,45 +326,42 @@ impl ShardBatch {
 
     /// A small vector per row (a goal), as a list or a fixed-size list of floats.
     pub fn f32_lists(&self, column: Column) -> Result<Vec<Option<Vec<f32>>>, DatasetError> {
-        let expected = "a list of Float32";
-        let Some(c) = self.batch.column_by_name(column.name()) else {
-            return Ok(vec![None; self.batch.num_rows()]);
-        };
-        let rows =
-            crate::io::parquet::list_rows(c).ok_or_else(|| self.wrong(column, c, expected))?;
-        rows.into_iter()
-            .map(|row| {
-                row.map(|v| {
-                    let values = if let Some(f) = v.as_primitive_opt::<Float32Type>() {
-                        Some(f.iter().map(|x| x.unwrap_or(f32::NAN)).collect())
-                    } else {
-                        float_values(&v)
-                            .map(|f| f.into_iter().map(|x| x.map_or(f32::NAN, |x| x as f32)))
-                            .map(Iterator::collect)
-                    };
-                    values.ok_or_else(|| self.wrong(column, c, expected))
-                })
-                .transpose()
-            })
-            .collect()
+        self.lists(column, "a list of Float32", |v| {
+            if let Some(f) = v.as_primitive_opt::<Float32Type>() {
+                Some(f.iter().map(|x| x.unwrap_or(f32::NAN)).collect())
+            } else {
+                float_values(v)
+                    .map(|f| f.into_iter().map(|x| x.map_or(f32::NAN, |x| x as f32)))
+                    .map(Iterator::collect)
+            }
+        })
     }
 
     /// A list of flags per row (`parts`).
     pub fn bool_lists(&self, column: Column) -> Result<Vec<Option<Vec<bool>>>, DatasetError> {
-        let expected = "a list of Boolean";
+        self.lists(column, "a list of Boolean", |v| {
+            v.as_boolean_opt()
+                .map(|b| b.iter().map(|x| x.unwrap_or(false)).collect())
+        })
+    }
+
+    /// A list column's rows, each decoded by `decode` (`None`: not the `expected` type); every
+    /// row null when the shard has no such column.
+    fn lists<T>(
+        &self,
+        column: Column,
+        expected: &'static str,
+        decode: impl Fn(&ArrayRef) -> Option<Vec<T>>,
+    ) -> Result<Vec<Option<Vec<T>>>, DatasetError> {
         let Some(c) = self.batch.column_by_name(column.name()) else {
-            return Ok(vec![None; self.batch.num_rows()]);
+            return Ok((0..self.batch.num_rows()).map(|_| None).collect());
         };
         let rows =
             crate::io::parquet::list_rows(c).ok_or_else(|| self.wrong(column, c, expected))?;
         rows.into_iter()
             .map(|row| {
-                row.map(|v| {
-                    v.as_boolean_opt()
-                        .map(|b| b.iter().map(|x| x.unwrap_or(false)).collect())
-                        .ok_or_else(|| self.wrong(column, c, expected))
-                })
-                .transpose()
+                row.map(|v| decode(&v).ok_or_else(|| self.wrong(column, c, expected)))
+                    .transpose()
             })
             .collect()
     }
