@@ -566,7 +566,7 @@ fn an_index_of_bad_rows_gives_a_bounded_report_under_a_1_gb_address_space() {
     assert_eq!(bad_rows, motionforge::annotate::span::NOTES_PER_KIND);
     let rest = notes
         .iter()
-        .find(|n| n["kind"] == motionforge::annotate::span::NOT_LISTED)
+        .find(|n| n["kind"] == motionforge::annotate::span::NOT_LISTED.as_str())
         .unwrap_or_else(|| panic!("no count of the notes left out: {notes:?}"));
     let expected = format!(
         "{} more `bad_row` notes",

@@ -190,7 +190,7 @@ fn real_babel_records_parse_with_every_quirk_reported() {
             .annotation
             .notes
             .iter()
-            .map(|n| n.kind.clone())
+            .map(|n| n.kind)
             .collect::<Vec<_>>()
     };
     // 7692: integer times, unsorted labels, `end_t` 3.834 past the 3.83 s duration.

@@ -355,7 +355,7 @@ pub struct BuildReport {
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub clips_by_effective_rate: BTreeMap<String, usize>,
     /// Annotation quirks handled (clamped ends, null labels, ...), by kind.
-    pub notes_by_kind: BTreeMap<String, usize>,
+    pub notes_by_kind: motionforge_core::base::Tally<motionforge_sources::annotate::span::NoteKind>,
     /// Every annotation quirk, for people.
     pub notes: Vec<Note>,
     /// Rejected inputs by reason.
@@ -812,11 +812,13 @@ fn report_stage(
 
 /// Annotation notes counted by kind, and listed up to a bound per kind: the report stays
 /// readable and its size bounded.
-fn counted_notes(notes: Vec<Note>) -> (BTreeMap<String, usize>, Vec<Note>) {
-    let mut notes_by_kind = BTreeMap::new();
-    for n in &notes {
-        *notes_by_kind.entry(n.kind.clone()).or_insert(0) += 1;
-    }
+fn counted_notes(
+    notes: Vec<Note>,
+) -> (
+    motionforge_core::base::Tally<motionforge_sources::annotate::span::NoteKind>,
+    Vec<Note>,
+) {
+    let notes_by_kind = notes.iter().map(|n| n.kind).collect();
     let notes = motionforge_sources::annotate::span::cap_per_kind(
         notes,
         motionforge_sources::annotate::span::NOTES_PER_KIND,

@@ -10,7 +10,9 @@ use motionforge_sources::annotate::event_log::{self, EventLogFormat};
 use motionforge_sources::annotate::filename::{
     FilenamePattern, LabelRefusal, PatternError, compiled_filename_annotation,
 };
-use motionforge_sources::annotate::span::{AnnotationError, CaptureAnnotation, Note, stem_of};
+use motionforge_sources::annotate::span::{
+    AnnotationError, CaptureAnnotation, Note, NoteKind, stem_of,
+};
 use motionforge_sources::annotate::{babel, frame_index};
 
 /// A capture file found by a source's globs.
@@ -220,7 +222,7 @@ pub fn annotation_notes(
                 .filter(|k| !matched.contains(&(index, (*k).clone())))
             {
                 notes.push(Note::new(
-                    "annotation_without_capture",
+                    NoteKind::AnnotationWithoutCapture,
                     format!(
                         "source `{}`: annotations for `{key}` match no capture file",
                         source.name
@@ -238,7 +240,7 @@ pub fn annotation_notes(
             && motionforge_sources::amass::is_not_a_motion(&file.file_name())
         {
             notes.push(Note::new(
-                "amass_not_a_motion",
+                NoteKind::AmassNotAMotion,
                 format!(
                     "`{}`: a body shape or MoSh stage-i file, not a motion: skipped",
                     file.display
@@ -456,9 +458,10 @@ pub fn load_annotations(
                     }
                     Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
                     Err(e) => {
-                        caption_notes
-                            .borrow_mut()
-                            .push(Note::new("caption_unreadable", format!("{shown}: {e}")));
+                        caption_notes.borrow_mut().push(Note::new(
+                            NoteKind::CaptionUnreadable,
+                            format!("{shown}: {e}"),
+                        ));
                         Some(Vec::new())
                     }
                 }
@@ -505,7 +508,10 @@ mod tests {
             notes,
         };
         let annotations = [
-            indexed(&["walk", "jump"], vec![Note::new("null_label", "record 3")]),
+            indexed(
+                &["walk", "jump"],
+                vec![Note::new(NoteKind::NullLabel, "record 3")],
+            ),
             // `walk` is captured under the first source only: the second's key has no capture.
             indexed(&["walk"], Vec::new()),
         ];

@@ -10,7 +10,7 @@ use motionforge_core::motion::bvh::FPS_RANGE;
 use motionforge_core::motion::ik::{IkError, PositionLayout, motion_from_positions};
 use motionforge_core::motion::npy::{NpyError, read_joint_positions};
 use motionforge_core::motion::{Motion, ProfileSpec, read_bvh};
-use motionforge_sources::annotate::span::Note;
+use motionforge_sources::annotate::span::{Note, NoteKind};
 use motionforge_sources::clip::{Capture, CaptureRef};
 
 /// Stage name.
@@ -38,7 +38,7 @@ impl CaptureStage for Ingest {
 
 /// Kind of the note that an AMASS file's frames, taken at HumanML3D's stride, are at another
 /// rate than the 20 fps they are labelled with (counted in the build report's `notes_by_kind`).
-pub const EFFECTIVE_RATE_NOTE: &str = "amass_effective_rate";
+pub const EFFECTIVE_RATE_NOTE: NoteKind = NoteKind::AmassEffectiveRate;
 
 /// Bone-length change (relative to the bone's mean) from which a capture's IK fit is reported:
 /// below it the bones are constant to the arrays' float precision.
@@ -350,7 +350,7 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
     if fit.max_length_change > REPORTED_LENGTH_CHANGE {
         let (frame, joint) = fit.worst;
         notes.push(Note::new(
-            "ik_residual",
+            NoteKind::IkResidual,
             format!(
                 "`{}`: bone lengths vary up to {:.3}% from their means, so forward kinematics \
                  reproduces the positions to {:.2e} m (worst: frame {frame}, joint `{}`)",

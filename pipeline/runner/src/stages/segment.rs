@@ -17,7 +17,7 @@ use motionforge_core::motion::bvh::excerpt;
 use motionforge_core::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
 use motionforge_core::motion::{BodyPart, Motion, Profile};
 use motionforge_sources::annotate::overlap::overlaps;
-use motionforge_sources::annotate::span::{CaptureAnnotation, Hand, Note, Span, Time};
+use motionforge_sources::annotate::span::{CaptureAnnotation, Hand, Note, NoteKind, Span, Time};
 use motionforge_sources::annotate::taxonomy::TypeMap;
 use motionforge_sources::clip::{Capture, Clip, LoadedClip, SourceKind, Split};
 
@@ -220,7 +220,7 @@ impl Timeline {
         let actual = len.saturating_sub(offset.max(0) as u64) as f64 / fps;
         ((stated - actual).abs() > DURATION_TOLERANCE).then(|| {
             Note::new(
-                "duration_mismatch",
+                NoteKind::DurationMismatch,
                 format!(
                     "`{}`: {actual:.3} s long ({len} frames at {fps} fps), but {} says {stated} s; \
                      check the frame rate (fps_override, fps_table) or the file",
@@ -242,7 +242,7 @@ impl Timeline {
         let mut end = span.end.to_frame(self.fps, len) + shift(span.end);
         if end > len as i64 {
             notes.push(Note::new(
-                "end_clamped",
+                NoteKind::EndClamped,
                 format!(
                     "`{}` ends at frame {end}, past the capture's {len} frames (clamped)",
                     span.raw_text
@@ -308,7 +308,7 @@ fn keep_spans<'a>(
         if span.raw_text.trim().is_empty() || span.label.trim().is_empty() {
             drops.drop(DropReason::EmptyText, &span.id, None);
             notes.push(Note::new(
-                "empty_text",
+                NoteKind::EmptyText,
                 format!(
                     "`{}`: annotation `{}` has an empty caption; skipped",
                     capture.capture.path,
@@ -386,7 +386,7 @@ fn note_duplicates(
         if *count > 1 {
             let shown: Vec<String> = ids.iter().map(|i| excerpt(i)).collect();
             notes.push(Note::new(
-                "duplicate_annotation",
+                NoteKind::DuplicateAnnotation,
                 format!(
                     "`{}`: `{}` on frames {}-{} appears {count} times (rows {}{}); kept once",
                     path,

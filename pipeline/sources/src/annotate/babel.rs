@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use serde_json::Value;
 
-use super::span::{AnnotationError, CaptureAnnotation, Note, Span, Time};
+use super::span::{AnnotationError, CaptureAnnotation, Note, NoteKind, Span, Time};
 
 /// One BABEL sequence record, keyed by its AMASS feature path.
 #[derive(Debug, Clone, PartialEq)]
@@ -99,7 +99,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
         );
     } else {
         read.notes.push(Note::new(
-            "no_labels",
+            NoteKind::NoLabels,
             format!("sid {sid}: record has neither frame_ann nor seq_ann labels"),
         ));
     }
@@ -109,7 +109,7 @@ fn read_record(sid: &str, record: &Value, file: &str) -> BabelRecord {
     } = read;
     if feat_p.is_none() {
         notes.push(Note::new(
-            "no_feat_p",
+            NoteKind::NoFeatP,
             format!("sid {sid}: record has no feat_p; it cannot be matched to a capture"),
         ));
     }
@@ -172,7 +172,7 @@ impl RecordReader<'_> {
                 label.get("end_t").and_then(number),
             ) else {
                 self.notes.push(Note::new(
-                    "bad_times",
+                    NoteKind::BadTimes,
                     format!("sid {sid}: label {i} has no numeric start_t/end_t"),
                 ));
                 continue;
@@ -185,7 +185,7 @@ impl RecordReader<'_> {
                 || label.get("end_t").is_some_and(Value::is_u64)
             {
                 self.notes.push(Note::new(
-                    "integer_times",
+                    NoteKind::IntegerTimes,
                     format!("sid {sid}: label `{text}` has integer times"),
                 ));
             }
@@ -228,7 +228,7 @@ impl RecordReader<'_> {
                 )),
                 (None, Some(_), Some(_)) => self.nulls += 1,
                 _ => self.notes.push(Note::new(
-                    "bad_times",
+                    NoteKind::BadTimes,
                     format!("sid {sid}: row {i} is not [label, start, end]"),
                 )),
             }
@@ -260,7 +260,7 @@ impl RecordReader<'_> {
         let nulls = self.nulls;
         if nulls > 0 {
             self.notes.push(Note::new(
-                "null_label",
+                NoteKind::NullLabel,
                 format!("sid {sid}: skipped {nulls} labels with null text"),
             ));
         }
@@ -270,7 +270,7 @@ impl RecordReader<'_> {
             .all(|w| start_secs(&w[0]) <= start_secs(&w[1]));
         if !sorted {
             self.notes.push(Note::new(
-                "unsorted",
+                NoteKind::Unsorted,
                 format!("sid {sid}: labels are not in time order (sorted on read)"),
             ));
             self.spans.sort_by(|a, b| {
@@ -285,7 +285,7 @@ impl RecordReader<'_> {
                     && e > dur
                 {
                     self.notes.push(Note::new(
-                        "end_past_duration",
+                        NoteKind::EndPastDuration,
                         format!(
                             "sid {sid}: `{}` ends at {e} s, past the {dur} s duration (clamped)",
                             s.raw_text
@@ -329,7 +329,7 @@ impl RecordReader<'_> {
         let sid = self.sid;
         if list.len() > 1 {
             self.notes.push(Note::new(
-                "several_annotations",
+                NoteKind::SeveralAnnotations,
                 format!(
                     "sid {sid}: {} annotations in `{name}`; the first's spans are cut, the others' texts added to the spans they cover",
                     list.len()
@@ -385,7 +385,7 @@ impl RecordReader<'_> {
                 }
             }
             None => self.notes.push(Note::new(
-                "unmatched_annotation",
+                NoteKind::UnmatchedAnnotation,
                 format!(
                     "sid {}: annotation {number}'s `{}` ({start} to {} s) covers no span of the first annotation; not cut",
                     self.sid,

@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use serde_json::Value;
 
 use super::frame_index::{csv_lines, split_csv_line};
-use super::span::{AnnotationError, CaptureAnnotation, Hand, Note, Span, Time, stem_of};
+use super::span::{AnnotationError, CaptureAnnotation, Hand, Note, NoteKind, Span, Time, stem_of};
 
 /// How an event log is written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -104,7 +104,7 @@ pub fn read_event_log(
         let mut annotation = build(&capture, events, file);
         for name in &unknown {
             annotation.notes.push(Note::new(
-                "unknown_column",
+                NoteKind::UnknownColumn,
                 format!(
                     "{file}: column `{name}` is not one of {} (ignored)",
                     EVENT_COLUMNS.join(", ")
@@ -474,7 +474,7 @@ fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation
     let mut notes = Vec::new();
     if !events.windows(2).all(|w| w[0].secs <= w[1].secs) {
         notes.push(Note::new(
-            "unsorted",
+            NoteKind::Unsorted,
             format!("{file}: events of `{capture}` are not in time order (sorted on read)"),
         ));
     }
@@ -518,7 +518,7 @@ fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation
             .next_back()
         else {
             notes.push(Note::new(
-                "event_before_instruction",
+                NoteKind::EventBeforeInstruction,
                 format!(
                     "{file}: row {} ({} at {:?}) comes before the first instruction of \
                      `{capture}`",
@@ -548,7 +548,7 @@ fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation
         };
         if span.grasp.is_some() {
             notes.push(Note::new(
-                "second_grasp",
+                NoteKind::SecondGrasp,
                 format!(
                     "{file}: row {} grasps again during `{}` ({}); the first grasp is kept",
                     e.n, span.raw_text, span.id

@@ -10,7 +10,7 @@
 use std::collections::BTreeMap;
 
 use super::span::{
-    AnnotationError, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note, Span, Time,
+    AnnotationError, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note, NoteKind, Span, Time,
 };
 use motionforge_language::caption::{MAX_CAPTION_CHARS, over_length};
 
@@ -162,7 +162,7 @@ pub fn read_frame_index(
             Err(why) => {
                 bad += 1;
                 if bad <= NOTES_PER_KIND {
-                    notes.push(Note::new("bad_row", format!("{file}:{line}: {why}")));
+                    notes.push(Note::new(NoteKind::BadRow, format!("{file}:{line}: {why}")));
                 }
             }
         }
@@ -410,7 +410,7 @@ pub fn index_annotations_with(
             && let Some(other) = group.iter().find(|r| r.source_path != first.source_path)
         {
             notes.push(Note::new(
-                "key_collision",
+                NoteKind::KeyCollision,
                 format!(
                     "{file}:{}: `{}` maps to capture `{capture}` like `{}` (line {}); their rows \
                      are merged",
@@ -426,7 +426,7 @@ pub fn index_annotations_with(
                 Some(lines) if !lines.is_empty() => lines,
                 _ => {
                     notes.push(Note::new(
-                        "no_caption",
+                        NoteKind::NoCaption,
                         format!(
                             "{file}:{}: no caption for `{}`; using `{default_text}`",
                             row.line, row.new_name
@@ -562,7 +562,7 @@ pub fn read_caption_file(
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(e) => {
                 notes.push(Note::new(
-                    "caption_unreadable",
+                    NoteKind::CaptionUnreadable,
                     format!(
                         "{file}:{}: {e}; the file's later lines are not read",
                         line.number + 1
@@ -633,7 +633,7 @@ impl RawLine {
                 )
             };
             notes.push(Note::new(
-                "long_caption",
+                NoteKind::LongCaption,
                 format!("{file}:{number}: {what}; caption skipped"),
             ));
         } else {
@@ -683,7 +683,7 @@ fn caption_line_of(
                 let offset = fields[..i].iter().map(|f| f.len() as u64 + 1).sum::<u64>()
                     + e.valid_up_to() as u64;
                 notes.push(Note::new(
-                    "caption_encoding",
+                    NoteKind::CaptionEncoding,
                     format!(
                         "{file}:{number}: byte {} (0x{:02x}) is not UTF-8; caption skipped",
                         at + offset,
@@ -700,7 +700,7 @@ fn caption_line_of(
     }
     if let Some(chars) = over_length(caption) {
         notes.push(Note::new(
-            "long_caption",
+            NoteKind::LongCaption,
             format!(
                 "{file}:{number}: caption of {chars} characters is longer than the \
                  {MAX_CAPTION_CHARS} a caption may have; caption skipped"
@@ -716,7 +716,7 @@ fn caption_line_of(
             }
             _ => {
                 notes.push(Note::new(
-                    "bad_caption",
+                    NoteKind::BadCaption,
                     format!(
                         "{file}:{number}: start#end `{start}#{end}`: expected seconds with end \
                          after start, or 0#0 for the whole clip; caption skipped"

@@ -134,19 +134,200 @@ pub struct CaptureAnnotation {
 /// Something odd in an annotation that was handled, not fatal.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct Note {
-    /// Short kind (`null_label`, `end_past_duration`, `unsorted`, ...).
-    pub kind: String,
+    /// What it is about.
+    pub kind: NoteKind,
     /// Details for people.
     pub message: String,
 }
 
 impl Note {
     /// A note of `kind` with a message.
-    pub fn new(kind: &str, message: impl Into<String>) -> Note {
+    pub fn new(kind: NoteKind, message: impl Into<String>) -> Note {
         Note {
-            kind: kind.to_string(),
+            kind,
             message: message.into(),
         }
+    }
+}
+
+/// What an annotation note is about: a closed set, written by its name (`null_label`, ...) in
+/// build reports and in the stage cache alike, and ordered by that name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum NoteKind {
+    /// A BABEL label or notebook row without numeric times (skipped).
+    BadTimes,
+    /// A BABEL label with integer times.
+    IntegerTimes,
+    /// Labels without text, skipped.
+    NullLabel,
+    /// Labels or events out of time order (sorted on read).
+    Unsorted,
+    /// A span ending past the record's duration (clamped).
+    EndPastDuration,
+    /// A BABEL record without `feat_p`: it cannot be matched to a capture.
+    NoFeatP,
+    /// A BABEL record with neither frame nor sequence labels.
+    NoLabels,
+    /// A BABEL record of several annotators' work.
+    SeveralAnnotations,
+    /// Another annotator's span that covers no span of the first annotation.
+    UnmatchedAnnotation,
+    /// An event-log column the reader does not know (ignored).
+    UnknownColumn,
+    /// An event-log event before any instruction.
+    EventBeforeInstruction,
+    /// A second grasp in one event-log instruction.
+    SecondGrasp,
+    /// A frame-index row that cannot be read.
+    BadRow,
+    /// A frame-index row without a caption.
+    NoCaption,
+    /// Two frame-index rows with the same key.
+    KeyCollision,
+    /// A caption line whose `start#end` are not seconds with the end after the start.
+    BadCaption,
+    /// A caption over 4,000 characters or a line over 64 KiB.
+    LongCaption,
+    /// A caption file byte that is not UTF-8.
+    CaptionEncoding,
+    /// A caption file that cannot be read.
+    CaptionUnreadable,
+    /// A joint-position capture whose bone lengths are not constant.
+    IkResidual,
+    /// An AMASS file taken at HumanML3D's stride whose rate is not 20 fps.
+    AmassEffectiveRate,
+    /// A segment ending past its capture (clamped).
+    EndClamped,
+    /// A segment without text.
+    EmptyText,
+    /// The same span annotated twice.
+    DuplicateAnnotation,
+    /// A capture whose length differs from its annotation's duration.
+    DurationMismatch,
+    /// An annotation naming no capture the globs found.
+    AnnotationWithoutCapture,
+    /// An AMASS `shape.npz` or `*_stagei.npz` the globs matched (skipped).
+    AmassNotAMotion,
+    /// How many notes of another kind a list leaves out.
+    NotesNotListed,
+}
+
+impl NoteKind {
+    /// The kind as written in `build-report.json` (`docs/formats.md`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            NoteKind::BadTimes => "bad_times",
+            NoteKind::IntegerTimes => "integer_times",
+            NoteKind::NullLabel => "null_label",
+            NoteKind::Unsorted => "unsorted",
+            NoteKind::EndPastDuration => "end_past_duration",
+            NoteKind::NoFeatP => "no_feat_p",
+            NoteKind::NoLabels => "no_labels",
+            NoteKind::SeveralAnnotations => "several_annotations",
+            NoteKind::UnmatchedAnnotation => "unmatched_annotation",
+            NoteKind::UnknownColumn => "unknown_column",
+            NoteKind::EventBeforeInstruction => "event_before_instruction",
+            NoteKind::SecondGrasp => "second_grasp",
+            NoteKind::BadRow => "bad_row",
+            NoteKind::NoCaption => "no_caption",
+            NoteKind::KeyCollision => "key_collision",
+            NoteKind::BadCaption => "bad_caption",
+            NoteKind::LongCaption => "long_caption",
+            NoteKind::CaptionEncoding => "caption_encoding",
+            NoteKind::CaptionUnreadable => "caption_unreadable",
+            NoteKind::IkResidual => "ik_residual",
+            NoteKind::AmassEffectiveRate => "amass_effective_rate",
+            NoteKind::EndClamped => "end_clamped",
+            NoteKind::EmptyText => "empty_text",
+            NoteKind::DuplicateAnnotation => "duplicate_annotation",
+            NoteKind::DurationMismatch => "duration_mismatch",
+            NoteKind::AnnotationWithoutCapture => "annotation_without_capture",
+            NoteKind::AmassNotAMotion => "amass_not_a_motion",
+            NoteKind::NotesNotListed => "notes_not_listed",
+        }
+    }
+}
+
+impl motionforge_core::base::Named for NoteKind {
+    const ALL: &'static [NoteKind] = &[
+        NoteKind::BadTimes,
+        NoteKind::IntegerTimes,
+        NoteKind::NullLabel,
+        NoteKind::Unsorted,
+        NoteKind::EndPastDuration,
+        NoteKind::NoFeatP,
+        NoteKind::NoLabels,
+        NoteKind::SeveralAnnotations,
+        NoteKind::UnmatchedAnnotation,
+        NoteKind::UnknownColumn,
+        NoteKind::EventBeforeInstruction,
+        NoteKind::SecondGrasp,
+        NoteKind::BadRow,
+        NoteKind::NoCaption,
+        NoteKind::KeyCollision,
+        NoteKind::BadCaption,
+        NoteKind::LongCaption,
+        NoteKind::CaptionEncoding,
+        NoteKind::CaptionUnreadable,
+        NoteKind::IkResidual,
+        NoteKind::AmassEffectiveRate,
+        NoteKind::EndClamped,
+        NoteKind::EmptyText,
+        NoteKind::DuplicateAnnotation,
+        NoteKind::DurationMismatch,
+        NoteKind::AnnotationWithoutCapture,
+        NoteKind::AmassNotAMotion,
+        NoteKind::NotesNotListed,
+    ];
+
+    fn name(self) -> &'static str {
+        self.as_str()
+    }
+}
+
+impl std::fmt::Display for NoteKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl PartialEq<str> for NoteKind {
+    fn eq(&self, other: &str) -> bool {
+        self.as_str() == other
+    }
+}
+
+impl PartialEq<&str> for NoteKind {
+    fn eq(&self, other: &&str) -> bool {
+        self.as_str() == *other
+    }
+}
+
+/// By name, so notes sort as they did when their kinds were strings.
+impl Ord for NoteKind {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.as_str().cmp(other.as_str())
+    }
+}
+
+impl PartialOrd for NoteKind {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// As its name: the JSON and the stage cache's bytes are those of the string it replaces.
+impl Serialize for NoteKind {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> Deserialize<'de> for NoteKind {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = std::borrow::Cow::<'de, str>::deserialize(deserializer)?;
+        <NoteKind as motionforge_core::base::Named>::from_name(&name)
+            .ok_or_else(|| serde::de::Error::custom(format!("unknown note kind `{name}`")))
     }
 }
 
@@ -155,15 +336,15 @@ impl Note {
 pub const NOTES_PER_KIND: usize = 200;
 
 /// Kind of the note that counts the notes of another kind left out of a list.
-pub const NOT_LISTED: &str = "notes_not_listed";
+pub const NOT_LISTED: NoteKind = NoteKind::NotesNotListed;
 
 /// `notes` with at most `limit` of each kind, in their order; for each kind with more, one
 /// [`NOT_LISTED`] note at the end says how many more there were.
 pub fn cap_per_kind(notes: Vec<Note>, limit: usize) -> Vec<Note> {
-    let mut seen: std::collections::BTreeMap<String, usize> = std::collections::BTreeMap::new();
+    let mut seen: std::collections::BTreeMap<NoteKind, usize> = std::collections::BTreeMap::new();
     let mut kept = Vec::with_capacity(notes.len().min(limit.saturating_mul(8)));
     for note in notes {
-        let n = seen.entry(note.kind.clone()).or_insert(0);
+        let n = seen.entry(note.kind).or_insert(0);
         *n += 1;
         if *n <= limit || note.kind == NOT_LISTED {
             kept.push(note);
