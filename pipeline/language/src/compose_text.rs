@@ -345,6 +345,7 @@ struct WordFile {
 }
 
 /// The composer's vocabulary (`schemas/compose_text.toml`).
+#[derive(Default)]
 struct Words {
     not_gerunds: Vec<&'static str>,
     stressed_final: Vec<&'static str>,
@@ -415,25 +416,7 @@ static WORDS: LazyLock<Result<Words, WordsError>> = LazyLock::new(|| load_words(
 
 /// The composer's vocabulary, loaded and validated once ([`check_words`] reports a bad file).
 fn words() -> &'static Words {
-    static EMPTY: LazyLock<Words> = LazyLock::new(|| Words {
-        not_gerunds: Vec::new(),
-        stressed_final: Vec::new(),
-        verbs: HashSet::new(),
-        light_verbs: Vec::new(),
-        compound_heads: Vec::new(),
-        gait_nouns: Vec::new(),
-        move_nouns: Vec::new(),
-        nominal_phrases: Vec::new(),
-        subjects: Vec::new(),
-        auxiliaries: Vec::new(),
-        side_words: Vec::new(),
-        body_parts: HashSet::new(),
-        positions: HashSet::new(),
-        coordinators: Vec::new(),
-        plain_adverbs: Vec::new(),
-        not_adverbs: Vec::new(),
-        particle_verbs: Vec::new(),
-    });
+    static EMPTY: LazyLock<Words> = LazyLock::new(Words::default);
     match &*WORDS {
         Ok(w) => w,
         Err(_) => &EMPTY,

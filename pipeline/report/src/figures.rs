@@ -462,10 +462,11 @@ where
     })
 }
 
-/// Draws category labels below the axis points `anchors` (backend units) on the whole figure.
-fn draw_categories<DB: DrawingBackend>(
+/// Draws category labels on the whole figure, below `chart`'s category points at height `base`.
+fn draw_categories<'a, DB: DrawingBackend + 'a>(
     root: &DrawingArea<DB, Shift>,
-    anchors: &[(i32, i32)],
+    chart: &AxisChart<'a, DB>,
+    base: f64,
     cats: &Categories,
 ) -> DrawResult
 where
@@ -476,7 +477,8 @@ where
         root.get_pixel_range().0.start,
         root.get_pixel_range().1.start,
     );
-    for (lines, &(x, y)) in cats.lines.iter().zip(anchors) {
+    for (i, lines) in cats.lines.iter().enumerate() {
+        let (x, y) = chart.backend_coord(&(i as f64, base));
         let (x, y) = (x - x0, y - y0);
         if cats.rotated {
             let s = style
@@ -603,6 +605,32 @@ where
     Ok(widest + udots(TICK_MARK + 4.0) + title)
 }
 
+/// The y label area for `labels` (as [`y_label_area`]) and the width of each of `n` category
+/// slots across what is left of `area` between its margins.
+fn category_slots<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    labels: &[String],
+    titled: bool,
+    margin: u32,
+    n: usize,
+) -> DrawResult<(u32, f64)>
+where
+    DB::ErrorType: 'static,
+{
+    let y_area = y_label_area(area, labels, titled)?;
+    let width = area
+        .dim_in_pixel()
+        .0
+        .saturating_sub(2 * margin + y_area)
+        .max(1);
+    Ok((y_area, f64::from(width) / n as f64))
+}
+
+/// The printed labels of `ticks`, `step` apart.
+fn tick_labels(ticks: &[f64], step: f64) -> Vec<String> {
+    ticks.iter().map(|v| tick_label(*v, step)).collect()
+}
+
 /// Line widths, as printed: axes, grid lines, data outlines.
 const AXIS_LINE: f64 = 0.6;
 const GRID_LINE: f64 = 0.4;
@@ -668,17 +696,8 @@ where
         }
     };
     let margin = udots(4.0);
-    let y_area = y_label_area(
-        &area,
-        &bold.iter().map(|v| tick_text(*v)).collect::<Vec<_>>(),
-        true,
-    )?;
-    let slot = f64::from(
-        area.dim_in_pixel()
-            .0
-            .saturating_sub(2 * margin + y_area)
-            .max(1),
-    ) / n as f64;
+    let tick_texts: Vec<String> = bold.iter().map(|v| tick_text(*v)).collect();
+    let (y_area, slot) = category_slots(&area, &tick_texts, true, margin, n)?;
     let labels: Vec<(String, Option<String>)> = types
         .iter()
         .map(|t| (t.motion_type.clone(), None))
@@ -723,10 +742,7 @@ where
                 + Text::new(t.clips.to_string(), (0, lift), style.clone())
         }))?;
     }
-    let anchors: Vec<(i32, i32)> = (0..types.len())
-        .map(|i| chart.backend_coord(&(i as f64, base)))
-        .collect();
-    draw_categories(root, &anchors, &cats)?;
+    draw_categories(root, &chart, base, &cats)?;
     Ok(())
 }
 
@@ -766,20 +782,7 @@ where
     let n = data.len().max(1);
     let (ticks, step) = nice_ticks(0.0, top, 6);
     let margin = udots(4.0);
-    let y_area = y_label_area(
-        &area,
-        &ticks
-            .iter()
-            .map(|v| tick_label(*v, step))
-            .collect::<Vec<_>>(),
-        true,
-    )?;
-    let slot = f64::from(
-        area.dim_in_pixel()
-            .0
-            .saturating_sub(2 * margin + y_area)
-            .max(1),
-    ) / n as f64;
+    let (y_area, slot) = category_slots(&area, &tick_labels(&ticks, step), true, margin, n)?;
     let labels: Vec<(String, Option<String>)> = data
         .iter()
         .map(|(name, v)| (name.to_string(), Some(format!("(n = {})", v.len()))))
@@ -827,10 +830,7 @@ where
             }))?;
         }
     }
-    let anchors: Vec<(i32, i32)> = (0..data.len())
-        .map(|i| chart.backend_coord(&(i as f64, 0.0)))
-        .collect();
-    draw_categories(root, &anchors, &cats)?;
+    draw_categories(root, &chart, 0.0, &cats)?;
     Ok(())
 }
 
@@ -1301,20 +1301,7 @@ where
     let headroom = ((legend + dots(NOTE + 3.0)) / plot_height).clamp(0.15, 0.7);
     let top = max / (1.0 - headroom);
     let (ticks, step) = count_ticks(top);
-    let y_area = y_label_area(
-        &area,
-        &ticks
-            .iter()
-            .map(|v| tick_label(*v, step))
-            .collect::<Vec<_>>(),
-        true,
-    )?;
-    let slot = f64::from(
-        area.dim_in_pixel()
-            .0
-            .saturating_sub(2 * margin + y_area)
-            .max(1),
-    ) / n as f64;
+    let (y_area, slot) = category_slots(&area, &tick_labels(&ticks, step), true, margin, n)?;
     let cats = layout_categories(&area, &labels, slot)?;
     let mut chart = category_chart(
         &area,
@@ -1329,10 +1316,7 @@ where
         draw_kind_bars(&mut chart, &area, splits, &kinds, slot)?;
         draw_kind_legend(&mut chart, &kinds, any_mirrored)?;
     }
-    let anchors: Vec<(i32, i32)> = (0..splits.len())
-        .map(|i| chart.backend_coord(&(i as f64, 0.0)))
-        .collect();
-    draw_categories(root, &anchors, &cats)?;
+    draw_categories(root, &chart, 0.0, &cats)?;
     Ok(())
 }
 
@@ -1495,21 +1479,7 @@ where
     let top = if reach > 0.0 { reach * 1.15 } else { 0.01 };
     let (ticks, step) = nice_ticks(0.0, top, 5);
     let margin = udots(3.0);
-    let y_area = y_label_area(
-        panel,
-        &ticks
-            .iter()
-            .map(|v| tick_label(*v, step))
-            .collect::<Vec<_>>(),
-        false,
-    )?;
-    let slot = f64::from(
-        panel
-            .dim_in_pixel()
-            .0
-            .saturating_sub(2 * margin + y_area)
-            .max(1),
-    ) / 2.0;
+    let (y_area, slot) = category_slots(panel, &tick_labels(&ticks, step), false, margin, 2)?;
     let labels: Vec<(String, Option<String>)> = groups
         .iter()
         .map(|(name, v, _)| (name.to_string(), Some(format!("(n = {})", v.len()))))
@@ -1548,10 +1518,7 @@ where
     for (g, (_, values, color)) in groups.iter().enumerate() {
         draw_metric_group(&mut chart, values, g as f64, *color, top)?;
     }
-    let anchors: Vec<(i32, i32)> = (0..2)
-        .map(|i| chart.backend_coord(&(f64::from(i), 0.0)))
-        .collect();
-    draw_categories(root, &anchors, &cats)
+    draw_categories(root, &chart, 0.0, &cats)
 }
 
 /// The build's default threshold `t` of a metric, dashed across the panel and labelled.

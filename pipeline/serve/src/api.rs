@@ -73,53 +73,34 @@ where
     }
 }
 
+/// A GET route: most of the table.
+fn get<H, T>(path: &'static str, handler: H) -> Route
+where
+    H: axum::handler::Handler<T, AppState>,
+    T: 'static,
+{
+    route(Verb::Get, path, handler)
+}
+
 /// The one list the router is made from, so [`routes`] is exactly what it serves.
 fn table() -> Vec<Route> {
     vec![
-        route(Verb::Get, "/health", health),
+        get("/health", health),
         route(Verb::Post, "/builds", create_build),
-        route(Verb::Get, "/builds", list_builds),
-        route(Verb::Get, "/builds/{id}", get_build),
-        route(Verb::Get, "/datasets", list_datasets),
-        route(Verb::Get, "/datasets/{name}/stats", dataset_stats),
-        route(Verb::Get, "/", super::browse::page),
-        route(Verb::Get, "/favicon.svg", super::browse::favicon),
-        route(
-            Verb::Get,
-            "/datasets/{name}/clips",
-            super::browse::list_clips,
-        ),
-        route(Verb::Get, "/datasets/{name}/clip", super::browse::clip_meta),
-        route(
-            Verb::Get,
-            "/datasets/{name}/motion",
-            super::browse::clip_motion,
-        ),
-        route(
-            Verb::Get,
-            "/datasets/{name}/columns",
-            super::browse::column_stats,
-        ),
-        route(
-            Verb::Get,
-            "/datasets/{name}/rows",
-            super::browse::table_rows,
-        ),
-        route(
-            Verb::Get,
-            "/datasets/{name}/report",
-            super::browse::report_files,
-        ),
-        route(
-            Verb::Get,
-            "/datasets/{name}/report/html",
-            super::browse::report_html,
-        ),
-        route(
-            Verb::Get,
-            "/datasets/{name}/report/file",
-            super::browse::report_file,
-        ),
+        get("/builds", list_builds),
+        get("/builds/{id}", get_build),
+        get("/datasets", list_datasets),
+        get("/datasets/{name}/stats", dataset_stats),
+        get("/", super::browse::page),
+        get("/favicon.svg", super::browse::favicon),
+        get("/datasets/{name}/clips", super::browse::list_clips),
+        get("/datasets/{name}/clip", super::browse::clip_meta),
+        get("/datasets/{name}/motion", super::browse::clip_motion),
+        get("/datasets/{name}/columns", super::browse::column_stats),
+        get("/datasets/{name}/rows", super::browse::table_rows),
+        get("/datasets/{name}/report", super::browse::report_files),
+        get("/datasets/{name}/report/html", super::browse::report_html),
+        get("/datasets/{name}/report/file", super::browse::report_file),
     ]
 }
 

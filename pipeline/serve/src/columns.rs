@@ -68,16 +68,60 @@ fn batches(
     }))
 }
 
+/// The range and mean of a number column's finite values, and how many are not finite.
+struct Numbers {
+    min: f64,
+    max: f64,
+    sum: f64,
+    finite: u64,
+    non_finite: u64,
+}
+
+impl Numbers {
+    fn new() -> Self {
+        Numbers {
+            min: f64::INFINITY,
+            max: f64::NEG_INFINITY,
+            sum: 0.0,
+            finite: 0,
+            non_finite: 0,
+        }
+    }
+
+    /// Counts one non-null value (`None`: not readable as a number).
+    fn add(&mut self, value: Option<f64>) {
+        match value {
+            Some(v) if v.is_finite() => {
+                self.min = self.min.min(v);
+                self.max = self.max.max(v);
+                self.sum += v;
+                self.finite += 1;
+            }
+            _ => self.non_finite += 1,
+        }
+    }
+
+    fn json(&self) -> Value {
+        let Numbers {
+            min,
+            max,
+            sum,
+            finite,
+            non_finite,
+        } = self;
+        if *finite > 0 {
+            json!({ "min": min, "max": max, "mean": sum / *finite as f64,
+                    "non_finite": non_finite })
+        } else {
+            json!({ "min": null, "max": null, "mean": null, "non_finite": non_finite })
+        }
+    }
+}
+
 /// What is counted of one column.
 enum Tally {
     /// Integers and floats: finite values only.
-    Number {
-        min: f64,
-        max: f64,
-        sum: f64,
-        finite: u64,
-        non_finite: u64,
-    },
+    Number(Numbers),
     /// Strings and booleans: each value's count (by a hash of it; the first spelling shown).
     Values {
         counts: HashMap<u64, (String, u64)>,
@@ -129,13 +173,7 @@ fn tally_for(name: &str, data_type: &DataType) -> Tally {
         return Tally::Frames(shape);
     }
     match data_type {
-        t if number_type(t) => Tally::Number {
-            min: f64::INFINITY,
-            max: f64::NEG_INFINITY,
-            sum: 0.0,
-            finite: 0,
-            non_finite: 0,
-        },
+        t if number_type(t) => Tally::Number(Numbers::new()),
         DataType::Utf8 | DataType::LargeUtf8 | DataType::Utf8View | DataType::Boolean => {
             Tally::Values {
                 counts: HashMap::new(),
@@ -224,21 +262,7 @@ impl ColumnTally {
             }
             self.count += 1;
             match &mut self.tally {
-                Tally::Number {
-                    min,
-                    max,
-                    sum,
-                    finite,
-                    non_finite,
-                } => match number(a, i) {
-                    Some(v) if v.is_finite() => {
-                        *min = min.min(v);
-                        *max = max.max(v);
-                        *sum += v;
-                        *finite += 1;
-                    }
-                    _ => *non_finite += 1,
-                },
+                Tally::Number(numbers) => numbers.add(number(a, i)),
                 Tally::Values {
                     counts,
                     capped,
@@ -271,21 +295,7 @@ impl ColumnTally {
     fn json(&self, rows: u64) -> Value {
         let mut out = json!({ "name": self.name, "type": self.data_type });
         let (kind, extra) = match &self.tally {
-            Tally::Number {
-                min,
-                max,
-                sum,
-                finite,
-                non_finite,
-            } => (
-                "number",
-                if *finite > 0 {
-                    json!({ "min": min, "max": max, "mean": sum / *finite as f64,
-                            "non_finite": non_finite })
-                } else {
-                    json!({ "min": null, "max": null, "mean": null, "non_finite": non_finite })
-                },
-            ),
+            Tally::Number(numbers) => ("number", numbers.json()),
             Tally::Values {
                 counts,
                 capped,

@@ -142,6 +142,16 @@ pub enum IkError {
     },
 }
 
+impl IkError {
+    /// The frame of the bad bone, when the fault is in one.
+    pub fn frame(&self) -> Option<usize> {
+        match self {
+            IkError::BoneLength { frame, .. } | IkError::ZeroBone { frame, .. } => Some(*frame),
+            _ => None,
+        }
+    }
+}
+
 /// Reflection across the midline plane (the plane of up and forward).
 fn mirror(v: DVec3, lateral: DVec3) -> DVec3 {
     v - 2.0 * v.dot(lateral) * lateral

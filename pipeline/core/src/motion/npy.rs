@@ -67,6 +67,16 @@ pub enum NpyError {
     },
 }
 
+impl NpyError {
+    /// The frame holding the bad value, when the fault is in one.
+    pub fn frame(&self) -> Option<usize> {
+        match self {
+            NpyError::NotFinite { frame, .. } | NpyError::OutOfRange { frame, .. } => Some(*frame),
+            _ => None,
+        }
+    }
+}
+
 /// Reads a joint-position array from the bytes of a `.npy` file.
 pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
     if let Some(shape) = overflowing_shape(bytes) {

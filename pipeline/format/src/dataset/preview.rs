@@ -407,21 +407,7 @@ fn draw_background(
 ) -> Draw {
     let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
     let px = pixel_map(scene, scale, size, x0, y0);
-    let (gx, gy) = scene.ground;
-    let steps = |r: [f64; 2]| {
-        let n = ((r[1] - r[0]) / GRID_M).round().clamp(0.0, 400.0) as usize;
-        (0..=n).map(move |i| r[0] + i as f64 * GRID_M)
-    };
-    for x in steps(gx) {
-        let a = px(project(DVec3::new(x, gy[0], 0.0)).0);
-        let b = px(project(DVec3::new(x, gy[1], 0.0)).0);
-        root.draw(&PathElement::new(vec![a, b], GRID))?;
-    }
-    for y in steps(gy) {
-        let a = px(project(DVec3::new(gx[0], y, 0.0)).0);
-        let b = px(project(DVec3::new(gx[1], y, 0.0)).0);
-        root.draw(&PathElement::new(vec![a, b], GRID))?;
-    }
+    draw_ground(&root, &px, scene, grid_steps(scene.ground.0))?;
     let caption = TextStyle::from((FONT, CAPTION_PX).into_font()).color(&INK);
     let id = TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK);
     let mut y = y0 - title.height as i32 + TITLE_PAD as i32;
@@ -709,28 +695,36 @@ fn draw_grid_cell(
 ) -> Draw {
     let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
     let px = pixel_map(scene, scale, size, x0, y0);
-    let (gx, gy) = scene.ground;
-    for x in [gx[0], gx[1]] {
-        root.draw(&PathElement::new(
-            vec![
-                px(project(DVec3::new(x, gy[0], 0.0)).0),
-                px(project(DVec3::new(x, gy[1], 0.0)).0),
-            ],
-            GRID,
-        ))?;
-    }
-    let n = ((gy[1] - gy[0]) / GRID_M).round().clamp(0.0, 400.0) as usize;
-    for i in 0..=n {
-        let y = gy[0] + i as f64 * GRID_M;
-        root.draw(&PathElement::new(
-            vec![
-                px(project(DVec3::new(gx[0], y, 0.0)).0),
-                px(project(DVec3::new(gx[1], y, 0.0)).0),
-            ],
-            GRID,
-        ))?;
-    }
+    let gx = scene.ground.0;
+    draw_ground(&root, &px, scene, [gx[0], gx[1]].into_iter())?;
     root.present()?;
+    Ok(())
+}
+
+/// Every [`GRID_M`] from the start of the ground range `r` to about its end.
+fn grid_steps(r: [f64; 2]) -> impl Iterator<Item = f64> {
+    let n = ((r[1] - r[0]) / GRID_M).round().clamp(0.0, 400.0) as usize;
+    (0..=n).map(move |i| r[0] + i as f64 * GRID_M)
+}
+
+/// The ground's lines along y at `xs`, then across it at every [`grid_steps`] of its depth.
+fn draw_ground(
+    root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    px: &impl Fn([f64; 2]) -> (i32, i32),
+    scene: &Scene,
+    xs: impl Iterator<Item = f64>,
+) -> Draw {
+    let (gx, gy) = scene.ground;
+    for x in xs {
+        let a = px(project(DVec3::new(x, gy[0], 0.0)).0);
+        let b = px(project(DVec3::new(x, gy[1], 0.0)).0);
+        root.draw(&PathElement::new(vec![a, b], GRID))?;
+    }
+    for y in grid_steps(gy) {
+        let a = px(project(DVec3::new(gx[0], y, 0.0)).0);
+        let b = px(project(DVec3::new(gx[1], y, 0.0)).0);
+        root.draw(&PathElement::new(vec![a, b], GRID))?;
+    }
     Ok(())
 }
 

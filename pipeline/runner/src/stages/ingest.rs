@@ -7,8 +7,8 @@ use crate::source::CaptureFile;
 use crate::stage::{CachedStage, CaptureStage};
 use motionforge_core::base::{Reject, RejectReason, Stamp};
 use motionforge_core::motion::bvh::FPS_RANGE;
-use motionforge_core::motion::ik::{IkError, PositionLayout, motion_from_positions};
-use motionforge_core::motion::npy::{NpyError, read_joint_positions};
+use motionforge_core::motion::ik::{PositionLayout, motion_from_positions};
+use motionforge_core::motion::npy::read_joint_positions;
 use motionforge_core::motion::{Motion, ProfileSpec, read_bvh};
 use motionforge_sources::annotate::span::{Note, NoteKind};
 use motionforge_sources::clip::{Capture, CaptureRef};
@@ -282,12 +282,7 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
     let array = match read_joint_positions(input.bytes) {
         Ok(a) => a,
         Err(e) => {
-            let frame = match &e {
-                NpyError::NotFinite { frame, .. } | NpyError::OutOfRange { frame, .. } => {
-                    Some(*frame as u64)
-                }
-                _ => None,
-            };
+            let frame = e.frame().map(|f| f as u64);
             return refuse(RejectReason::Positions, e.to_string(), frame);
         }
     };
@@ -307,12 +302,7 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
         return refuse(RejectReason::Empty, "capture has no frames".into(), None);
     }
     let fps = input.fps_override.unwrap_or(config.fps);
-    if !FPS_RANGE.contains(&fps) {
-        let message = format!(
-            "frame rate {fps} is outside the plausible range {} to {} fps",
-            FPS_RANGE.start(),
-            FPS_RANGE.end()
-        );
+    if let Some(message) = implausible_fps(fps) {
         return refuse(RejectReason::Fps, message, None);
     }
     let Some(layout) = PositionLayout::from_profile(input.profile) else {
@@ -334,12 +324,7 @@ fn run_positions(input: &CaptureInput<'_>, config: &PositionsConfig) -> IngestOu
     let (motion, fit) = match motion_from_positions(&layout, &body, fps, config.bone_tolerance) {
         Ok(m) => m,
         Err(e) => {
-            let frame = match &e {
-                IkError::BoneLength { frame, .. } | IkError::ZeroBone { frame, .. } => {
-                    Some(*frame as u64)
-                }
-                _ => None,
-            };
+            let frame = e.frame().map(|f| f as u64);
             return refuse(RejectReason::Positions, e.to_string(), frame);
         }
     };
@@ -416,12 +401,7 @@ fn run_amass(input: &CaptureInput<'_>, config: &AmassConfig) -> IngestOutput {
             None,
         );
     };
-    if !FPS_RANGE.contains(&fps) {
-        let message = format!(
-            "frame rate {fps} is outside the plausible range {} to {} fps",
-            FPS_RANGE.start(),
-            FPS_RANGE.end()
-        );
+    if let Some(message) = implausible_fps(fps) {
         return refuse(RejectReason::Fps, message, None);
     }
     let gender = match model_gender(
@@ -502,4 +482,15 @@ fn accepted(
         }),
         rejects: Vec::new(),
     }
+}
+
+/// Why `fps` cannot be a capture's frame rate, when it is outside [`FPS_RANGE`].
+fn implausible_fps(fps: f64) -> Option<String> {
+    (!FPS_RANGE.contains(&fps)).then(|| {
+        format!(
+            "frame rate {fps} is outside the plausible range {} to {} fps",
+            FPS_RANGE.start(),
+            FPS_RANGE.end()
+        )
+    })
 }
