@@ -765,7 +765,7 @@ fn own_cpu_ticks() -> u64 {
 }
 
 /// This thread's CPU time in seconds (user + system); 0 where unreadable.
-fn thread_cpu_seconds() -> f64 {
+pub(super) fn thread_cpu_seconds() -> f64 {
     let mut now = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
@@ -1269,7 +1269,7 @@ impl Results<'_> {
             )?;
             writeln!(
                 out,
-                "against bvhio: {:.1}x faster (bvhio {:.3} s wall / full build {lo:.3} s wall; target at least 20x); per CPU second {:.1}x (bvhio {:.3} s / build {cpu:.3} s)",
+                "against bvhio: {:.3}x faster (bvhio {:.3} s wall / full build {lo:.3} s wall; target at least 20x); per CPU second {:.3}x (bvhio {:.3} s / build {cpu:.3} s)",
                 b.wall_s / lo.max(1e-9),
                 b.wall_s,
                 b.cpu_s / cpu.max(1e-9),

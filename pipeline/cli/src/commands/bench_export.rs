@@ -146,6 +146,79 @@ impl Reference {
     }
 }
 
+/// The export's own computation of the rows, without reading shards or writing files:
+/// `humanml3d::vectors` over the same joint arrays as the reference, on this thread.
+struct VectorsAlone {
+    rows: usize,
+    wall_s: f64,
+    cpu_s: f64,
+}
+
+/// Times `humanml3d::vectors` on every `joints/*.npy` of the export in `out` (read first, not
+/// timed), best of `repeat` passes on this thread.
+fn vectors_alone(out: &Path, repeat: usize) -> Result<VectorsAlone> {
+    let dir = out.join("joints");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    files.sort();
+    let motions = files
+        .iter()
+        .map(|f| joints_npy(f))
+        .collect::<Result<Vec<_>>>()?;
+    let mut alone = VectorsAlone {
+        rows: 0,
+        wall_s: f64::INFINITY,
+        cpu_s: f64::INFINITY,
+    };
+    for _ in 0..repeat.max(1) {
+        alone.rows = 0;
+        let cpu0 = super::bench_build::thread_cpu_seconds();
+        let t0 = Instant::now();
+        for (file, motion) in files.iter().zip(&motions) {
+            let rows = motionforge::humanml3d::vectors(motion)
+                .with_context(|| format!("{}", file.display()))?;
+            alone.rows += rows.len() / motionforge::humanml3d::DIM;
+            std::hint::black_box(rows);
+        }
+        alone.wall_s = alone.wall_s.min(t0.elapsed().as_secs_f64());
+        alone.cpu_s = alone
+            .cpu_s
+            .min(super::bench_build::thread_cpu_seconds() - cpu0);
+    }
+    Ok(alone)
+}
+
+/// The positions of a `(T, 22, 3)` little-endian float32 `.npy` file as the export writes it
+/// (format 1.0, C order).
+fn joints_npy(path: &Path) -> Result<Vec<glam::DVec3>> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bad = |what: &str| anyhow::anyhow!("{}: {what}", path.display());
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" || bytes[6] != 1 {
+        return Err(bad("not a version 1 .npy file"));
+    }
+    let header_len = usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
+    let header = bytes
+        .get(10..10 + header_len)
+        .ok_or_else(|| bad("header runs past the end"))?;
+    let header = String::from_utf8_lossy(header);
+    if !header.contains("'<f4'") || !header.contains("'fortran_order': False") {
+        return Err(bad("not C-order little-endian float32"));
+    }
+    let data = &bytes[10 + header_len..];
+    if data.len() % (4 * 3 * motionforge::humanml3d::NUM_JOINTS) != 0 {
+        return Err(bad("not a whole number of 22-joint frames"));
+    }
+    Ok(data
+        .chunks_exact(12)
+        .map(|p| {
+            let f = |i: usize| f64::from(f32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]));
+            glam::DVec3::new(f(0), f(4), f(8))
+        })
+        .collect())
+}
+
 /// Runs the benchmark and prints its figures (or JSON with `--json`).
 pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
     let repeat = args.repeat.max(1);
@@ -181,6 +254,7 @@ pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
             args.dataset.display()
         );
     }
+    let alone = vectors_alone(&out, repeat)?;
     let repeat_arg = repeat.to_string();
     let printed = run_python_script(
         &python,
@@ -199,6 +273,7 @@ pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
         wall,
         cpu,
         reference,
+        alone,
         load: (start_load, end_load),
     };
     if ui.json() {
@@ -222,6 +297,7 @@ struct Figures {
     wall: f64,
     cpu: f64,
     reference: Reference,
+    alone: VectorsAlone,
     load: (Option<String>, Option<String>),
 }
 
@@ -278,6 +354,15 @@ impl Figures {
             "per wall second: {:.2}x the reference (target 15x on 2 cores)",
             self.wall_ratio()
         )?;
+        let alone = &self.alone;
+        let alone_rate = alone.rows as f64 / alone.cpu_s.max(1e-9);
+        writeln!(
+            out,
+            "vectors alone: {:.3} s CPU, {:.0} rows per CPU second on one thread, {:.2}x the reference (humanml3d::vectors over the same joints, no shard reading or file writing)",
+            alone.cpu_s,
+            alone_rate,
+            alone_rate / self.reference_rows_per(r.cpu_s)
+        )?;
         writeln!(
             out,
             "agreement: max |export - reference| {:.2e} over {} rows; {} clips of another shape",
@@ -314,6 +399,12 @@ impl Figures {
                 "cpu_s": r.cpu_s,
                 "rows_per_wall_second": self.reference_rows_per(r.wall_s),
                 "rows_per_cpu_second": self.reference_rows_per(r.cpu_s),
+            },
+            "vectors_alone": {
+                "rows": self.alone.rows,
+                "wall_s": self.alone.wall_s,
+                "cpu_s": self.alone.cpu_s,
+                "rows_per_cpu_second": self.alone.rows as f64 / self.alone.cpu_s.max(1e-9),
             },
             "ratio_per_cpu_second": self.cpu_ratio(),
             "ratio_per_wall_second": self.wall_ratio(),
