@@ -964,6 +964,166 @@ fn bench_build_json_lists_the_copies_and_keeps_the_folder() {
 }
 
 #[test]
+fn bench_build_bvhio_times_bvhio_beside_the_build() {
+    // Two captures (with their sidecars): bvhio is slow, and only the figures are checked.
+    let dir = tempfile::tempdir().unwrap();
+    let subset = common::shared_data().join("bandai-namco-2-subset/data");
+    for bvh in common::bvh_files(&subset).iter().take(2) {
+        for file in [bvh.clone(), bvh.with_extension("json")] {
+            std::fs::copy(&file, dir.path().join(file.file_name().unwrap())).unwrap();
+        }
+    }
+    let python = common::python();
+    let out = run(
+        &[
+            "bench",
+            "--build",
+            "--bvhio",
+            "--python",
+            python.to_str().unwrap(),
+            "--data",
+            dir.path().to_str().unwrap(),
+            "--repeat",
+            "1",
+        ],
+        &repo(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    for prefix in ["bvhio:", "against bvhio:"] {
+        assert!(
+            number_after(&stdout, prefix) > 0.0,
+            "`{prefix}` is not positive in:\n{stdout}"
+        );
+    }
+    let line = stdout.lines().find(|l| l.starts_with("bvhio:")).unwrap();
+    // bvhio read the same two files, every frame of them.
+    assert!(line.contains("reading 2 files"), "{line}");
+    let frames: u64 = common::bvh_files(&subset)
+        .iter()
+        .take(2)
+        .map(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            let line = text
+                .lines()
+                .find_map(|l| l.trim().strip_prefix("Frames:"))
+                .unwrap();
+            line.trim().parse::<u64>().unwrap()
+        })
+        .sum();
+    assert!(line.contains(&format!("({frames} frames)")), "{line}");
+    assert!(stdout.contains("target at least 20x"), "{stdout}");
+    // Copies would make the build read more than bvhio: refused.
+    let refused = run(
+        &[
+            "bench",
+            "--build",
+            "--bvhio",
+            "--copies",
+            "2",
+            "--data",
+            dir.path().to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused.stderr).contains("--copies"),
+        "{}",
+        text(&refused.stderr)
+    );
+}
+
+#[test]
+fn bench_export_times_the_export_beside_the_numpy_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    common::build_demo(dir.path());
+    let ds = dir.path().join("demo");
+    let python = common::python();
+    let out = run(
+        &[
+            "bench",
+            "--export",
+            ds.to_str().unwrap(),
+            "--repeat",
+            "1",
+            "--python",
+            python.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    // Timings are not asserted: every figure is there and positive.
+    for prefix in [
+        "export:",
+        "reference:",
+        "per CPU second:",
+        "per wall second:",
+        "vectors alone:",
+    ] {
+        assert!(
+            number_after(&stdout, prefix) > 0.0,
+            "`{prefix}` is not positive in:\n{stdout}"
+        );
+    }
+    // Both sides in both units, and the load they ran under.
+    for (needle, lines) in [
+        ("rows/s wall", 2),
+        ("rows per CPU second", 3),
+        ("load average:", 1),
+    ] {
+        assert_eq!(
+            stdout.matches(needle).count(),
+            lines,
+            "`{needle}` in:\n{stdout}"
+        );
+    }
+    // The reference computed the same rows as the export (float32 rounding apart).
+    let json = run(
+        &[
+            "--json",
+            "bench",
+            "--export",
+            ds.to_str().unwrap(),
+            "--repeat",
+            "1",
+            "--python",
+            python.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(json.status.success(), "{}", text(&json.stderr));
+    let value: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    let rows = value["rows"].as_u64().unwrap();
+    assert!(rows > 0, "{value}");
+    assert_eq!(value["reference"]["rows"].as_u64(), Some(rows), "{value}");
+    assert_eq!(
+        value["agreement"]["rows_compared"].as_u64(),
+        Some(rows),
+        "{value}"
+    );
+    assert_eq!(value["agreement"]["shape_mismatches"], 0, "{value}");
+    let diff = value["agreement"]["max_abs_diff"].as_f64().unwrap();
+    assert!(
+        diff < 1e-3,
+        "the reference differs from the export by {diff}: {value}"
+    );
+    // Without a Python, the bench says how to get one.
+    let missing = Command::new(BIN)
+        .args(["bench", "--export", ds.to_str().unwrap()])
+        .env_remove("MOTIONFORGE_PYTHON")
+        .output()
+        .unwrap();
+    assert!(!missing.status.success());
+    assert!(
+        text(&missing.stderr).contains("MOTIONFORGE_PYTHON"),
+        "{}",
+        text(&missing.stderr)
+    );
+}
+
+#[test]
 fn bench_captions_tags_each_distinct_caption_of_the_file() {
     let file = common::shared_data().join("sinc/clean_labels.txt");
     let distinct: std::collections::BTreeSet<String> = std::fs::read_to_string(&file)

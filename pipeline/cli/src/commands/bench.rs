@@ -12,11 +12,13 @@ use motionforge::motion::{MirrorPlan, OffsetPolicy, read_bvh};
 
 use super::bench_amass::{AmassBench, bench_amass};
 use super::bench_build::{BuildBench, bench_build};
+use super::bench_export::{ExportBench, bench_export};
 use super::mirror::load_profile;
 use crate::ui::Ui;
 
 /// Measure BVH read, forward kinematics and mirroring throughput on a folder of captures; or,
-/// with --build, a whole build of the folder stage by stage beside a bare number scan.
+/// with --build, a whole build of the folder stage by stage beside a bare number scan; with
+/// --export, `export humanml3d` beside a NumPy reference of HumanML3D's computation.
 ///
 /// `bench --build` writes a config (file-name labels and sidecars as in fixtures/demo.toml,
 /// mirror and synthetic pairs on, default features, 30 fps) into a temporary folder and runs:
@@ -27,7 +29,8 @@ use crate::ui::Ui;
 #[command(after_help = examples!(
     "  motionforge bench --repeat 1
   motionforge bench --build --data ../shared/data/bandai-namco-1/data --repeat 1
-  motionforge bench --captions ../shared/data/sinc/clean_labels.txt"
+  motionforge bench --captions ../shared/data/sinc/clean_labels.txt
+  motionforge bench --export out/bench --repeat 1 --python $(scripts/python-env.sh)"
 ))]
 pub(crate) struct BenchArgs {
     /// Folder of BVH files (all must share one skeleton profile).
@@ -83,12 +86,33 @@ pub(crate) struct BenchArgs {
     /// of this text file, one a line, on one thread: captions per second.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["build", "write_frames", "previews", "amass"])]
     captions: Option<PathBuf>,
+    /// Instead, time `export humanml3d` of this built dataset folder (wall and CPU, rows/s),
+    /// beside a NumPy reference of HumanML3D's `process_file` (scripts/humanml3d_reference.py)
+    /// run on one thread over the same joint sequences: the ratios per CPU and per wall second.
+    #[arg(long, value_name = "DATASET", conflicts_with_all = ["build", "write_frames", "previews", "amass", "captions"])]
+    export: Option<PathBuf>,
+    /// With --build: also time `bvhio` (Python, one thread) reading every BVH file of the
+    /// folder and computing every joint's world position in every frame; prints the build's
+    /// wall time over bvhio's.
+    #[arg(long, requires = "build")]
+    bvhio: bool,
+    /// With --export or --bvhio: the Python to run the reference with (NumPy, bvhio); default
+    /// `MOTIONFORGE_PYTHON`, as the tests (`$(scripts/python-env.sh)`).
+    #[arg(long, value_name = "PYTHON")]
+    python: Option<PathBuf>,
 }
 
 /// `motionforge bench`.
 pub(crate) fn run(args: BenchArgs, ui: &Ui) -> Result<ExitCode> {
     if let Some(file) = &args.captions {
         bench_captions(file)?;
+    } else if let Some(dataset) = args.export {
+        let bench = ExportBench {
+            dataset,
+            repeat: args.repeat,
+            python: args.python,
+        };
+        bench_export(&bench, ui)?;
     } else if let Some(dataset) = &args.previews {
         super::preview::bench_previews(dataset)?;
     } else if let (Some(dir), Some(body_model)) = (&args.amass, &args.body_model) {
@@ -114,6 +138,7 @@ pub(crate) fn run(args: BenchArgs, ui: &Ui) -> Result<ExitCode> {
             keep: args.keep,
             pattern: args.pattern,
             threads: args.threads.map(usize::from),
+            bvhio: args.bvhio.then_some(args.python),
         };
         bench_build(&bench, ui)?;
     } else {

@@ -33,7 +33,13 @@ pub(crate) struct BuildBench {
     /// Threads of the rayon pool the builds and the plan run on; default rayon's own
     /// (`RAYON_NUM_THREADS`, else one per CPU).
     pub(crate) threads: Option<usize>,
+    /// Also time bvhio reading the folder and computing world positions: `Some` with the
+    /// `--python` given, if any.
+    pub(crate) bvhio: Option<Option<PathBuf>>,
 }
+
+/// `scripts/bvhio_reference.py`, carried in the binary so the bench runs from anywhere.
+const BVHIO_REFERENCE: &str = include_str!("../../../../scripts/bvhio_reference.py");
 
 /// The first line of the config the bench writes: marks a `--keep` folder as the bench's own.
 pub(super) const CONFIG_MARKER: &str = "# written by `motionforge bench --build`";
@@ -44,6 +50,9 @@ pub(super) const OUTPUT_DIR: &str = "out";
 pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let copies = args.copies.max(1);
     let repeat = args.repeat.max(1);
+    if args.bvhio.is_some() && copies > 1 {
+        bail!("--bvhio reads the folder once: it cannot be combined with --copies");
+    }
     let input = Input::list(&args.data)?;
     let pattern = match &args.pattern {
         Some(p) => p.clone(),
@@ -105,6 +114,10 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
 
     let scan = scan(&input, copies, repeat)?;
     let encode = encode_reference(&dataset.join(DATA_DIR), config.dataset.zstd_level, repeat)?;
+    let bvhio = match &args.bvhio {
+        Some(python) => Some(bvhio_reference(&input.dir, python.as_deref(), &work.path)?),
+        None => None,
+    };
     let end_load = load_average();
 
     let result = Results {
@@ -123,6 +136,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         plan_stale,
         scan,
         encode,
+        bvhio,
         cache,
         shards,
         load: (start_load, end_load),
@@ -660,6 +674,45 @@ fn encode_reference(data: &Path, zstd_level: i32, repeat: usize) -> Result<Encod
     Ok(reference)
 }
 
+// ---- the bvhio reference --------------------------------------------------------------------
+
+/// What bvhio spent reading the folder and computing every joint's world position per frame.
+struct BvhioReference {
+    version: String,
+    files: u64,
+    frames: u64,
+    positions: u64,
+    wall_s: f64,
+    cpu_s: f64,
+}
+
+/// Runs `scripts/bvhio_reference.py` (embedded) over `dir` on one thread, from `work`.
+fn bvhio_reference(dir: &Path, python: Option<&Path>, work: &Path) -> Result<BvhioReference> {
+    let python = super::bench_export::reference_python(python)?;
+    let printed = super::bench_export::run_python_script(
+        &python,
+        work,
+        "bvhio_reference.py",
+        BVHIO_REFERENCE,
+        &[dir.as_os_str()],
+    )?;
+    let value: serde_json::Value = serde_json::from_str(printed.trim())
+        .with_context(|| format!("the bvhio reference printed {printed:?}"))?;
+    let number = |key: &str| {
+        value[key]
+            .as_f64()
+            .with_context(|| format!("no number `{key}` in the bvhio reference's {value}"))
+    };
+    Ok(BvhioReference {
+        version: value["bvhio"].as_str().unwrap_or("?").to_string(),
+        files: number("files")? as u64,
+        frames: number("frames")? as u64,
+        positions: number("positions")? as u64,
+        wall_s: number("wall_s")?,
+        cpu_s: number("cpu_s")?,
+    })
+}
+
 // ---- machine readings ------------------------------------------------------------------------
 
 /// Resets the process's peak resident memory to its current size (Linux `5 > clear_refs`), so
@@ -708,7 +761,7 @@ fn own_cpu_ticks() -> u64 {
 }
 
 /// This thread's CPU time in seconds (user + system); 0 where unreadable.
-fn thread_cpu_seconds() -> f64 {
+pub(super) fn thread_cpu_seconds() -> f64 {
     let mut now = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
@@ -841,6 +894,7 @@ struct Results<'a> {
     plan_stale: bool,
     scan: Scan,
     encode: EncodeReference,
+    bvhio: Option<BvhioReference>,
     cache: BTreeMap<String, u64>,
     shards: Vec<u64>,
     load: (Option<String>, Option<String>),
@@ -1196,6 +1250,28 @@ impl Results<'_> {
             self.load.1.as_deref().unwrap_or("n/a"),
             others.join(", ")
         )?;
+        if let Some(b) = &self.bvhio {
+            let (lo, _) = self.full_range();
+            let cpu = self.best().map_or(0.0, |r| r.cpu_seconds);
+            writeln!(
+                out,
+                "bvhio: {:.3} s wall, {:.3} s CPU, one thread: bvhio {} reading {} files ({} frames) and computing {} world positions",
+                b.wall_s,
+                b.cpu_s,
+                b.version,
+                b.files,
+                grouped(b.frames),
+                grouped(b.positions)
+            )?;
+            writeln!(
+                out,
+                "against bvhio: {:.3}x faster (bvhio {:.3} s wall / full build {lo:.3} s wall; target at least 20x); per CPU second {:.3}x (bvhio {:.3} s / build {cpu:.3} s)",
+                b.wall_s / lo.max(1e-9),
+                b.wall_s,
+                b.cpu_s / cpu.max(1e-9),
+                b.cpu_s
+            )?;
+        }
         if let Some(dir) = &self.kept {
             writeln!(out, "kept: {}", dir.display())?;
         }
@@ -1297,6 +1373,15 @@ impl Results<'_> {
             "cache_bytes_total": self.cache.values().sum::<u64>(),
             "shard_bytes": self.shards.iter().sum::<u64>(),
             "shards": self.shards.len(),
+            "bvhio": self.bvhio.as_ref().map(|b| serde_json::json!({
+                "version": b.version,
+                "files": b.files,
+                "frames": b.frames,
+                "positions": b.positions,
+                "wall_s": b.wall_s,
+                "cpu_s": b.cpu_s,
+                "build_speedup_wall": b.wall_s / lo.max(1e-9),
+            })),
             "load_average": { "start": self.load.0, "end": self.load.1 },
             "kept": self.kept,
         })

@@ -11,6 +11,7 @@ use motionforge::config::Config;
 pub(crate) mod bench;
 mod bench_amass;
 mod bench_build;
+mod bench_export;
 pub(crate) mod build;
 pub(crate) mod clean;
 pub(crate) mod clips;
