@@ -88,21 +88,26 @@ pub enum ExportError {
         /// The error.
         source: std::io::Error,
     },
-    /// A shard cannot be read.
-    #[error("{}: {message}", path.display())]
-    Table {
+    /// A shard's frames column cannot be decoded.
+    #[error("{}: {problem}", path.display())]
+    Frames {
         /// The shard.
         path: PathBuf,
-        /// What went wrong.
-        message: String,
+        /// What the column holds instead (in the message, not a cause: the message is whole).
+        problem: motionforge_format::io::parquet::FrameColumnError,
+    },
+    /// A shard holds more rows on the second read (its frames) than on the first (its entries):
+    /// it changed during the export.
+    #[error("{}: more rows on the second read than on the first", path.display())]
+    ShardChanged {
+        /// The shard.
+        path: PathBuf,
     },
     /// The folder is not a built dataset.
-    #[error("{}: {message}", path.display())]
+    #[error("{}: no clip table (data/*.parquet); build the dataset first", path.display())]
     NotADataset {
         /// The folder.
         path: PathBuf,
-        /// What is missing.
-        message: String,
     },
     /// The output folder exists.
     #[error("{} exists; pass --force to replace it", path.display())]
@@ -238,7 +243,6 @@ fn clip_tables(dataset: &Path) -> Result<Vec<OpenShard>, ExportError> {
     dataset::open_shards(dataset).map_err(|e| match e {
         DatasetError::NotADataset { .. } => ExportError::NotADataset {
             path: dataset.to_path_buf(),
-            message: "no clip table (data/*.parquet); build the dataset first".into(),
         },
         e => ExportError::Dataset(e),
     })
@@ -265,12 +269,11 @@ impl ClipExport<'_> {
         let mut next = 0;
         for frames in read_frames(shard)? {
             let frames = frames?;
-            let group = rows.get(next..next + frames.len()).ok_or_else(|| {
-                table_err(
-                    shard.path(),
-                    "more rows on the second read than on the first",
-                )
-            })?;
+            let group =
+                rows.get(next..next + frames.len())
+                    .ok_or_else(|| ExportError::ShardChanged {
+                        path: shard.path().to_path_buf(),
+                    })?;
             next += frames.len();
             let done: Vec<Result<Result<Done, Skipped>, ExportError>> = group
                 .par_iter()
@@ -444,13 +447,6 @@ fn placements(
     Ok(out)
 }
 
-fn table_err(path: &Path, e: impl std::fmt::Display) -> ExportError {
-    ExportError::Table {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    }
-}
-
 /// The shard's rows with only `columns` (each required) decoded, [`BATCH_ROWS`] at a time.
 fn batches(
     shard: &OpenShard,
@@ -567,7 +563,12 @@ fn frames_of(batch: &ShardBatch) -> Result<Vec<Frames>, ExportError> {
             Err(e @ motionforge_format::io::parquet::FrameColumnError::Shape { .. }) => {
                 Err(e.to_string())
             }
-            Err(e) => return Err(table_err(batch.path(), e)),
+            Err(problem) => {
+                return Err(ExportError::Frames {
+                    path: batch.path().to_path_buf(),
+                    problem,
+                });
+            }
         };
         out.push(Frames {
             skeleton: skeleton[i].clone().unwrap_or_default(),
