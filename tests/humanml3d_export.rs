@@ -207,14 +207,23 @@ fn an_existing_folder_is_kept_without_force_and_a_skeleton_without_a_map_is_skip
 /// How text-to-motion's `Text2MotionDatasetV2` (and T2M-GPT's and MoMask's copies) read a
 /// HumanML3D folder, step by step; any exception drops the clip silently there, so here it fails.
 const LOADER: &str = r#"
-import sys, os, numpy as np
+import io, sys, os, numpy as np
 root, split = sys.argv[1], sys.argv[2]
-mean, std = np.load(os.path.join(root, 'Mean.npy')), np.load(os.path.join(root, 'Std.npy'))
+def load(*path):
+    # Each file is byte for byte what np.save writes for its array (header spelling included).
+    path = os.path.join(root, *path)
+    array, saved = np.load(path), io.BytesIO()
+    np.save(saved, array)
+    assert saved.getvalue() == open(path, 'rb').read(), path
+    return array
+mean, std = load('Mean.npy'), load('Std.npy')
 assert mean.shape == (263,) and std.shape == (263,) and (std > 0).all()
 names = [l.strip() for l in open(os.path.join(root, split + '.txt'))]
 kept = 0
 for name in names:
-    motion = np.load(os.path.join(root, 'new_joint_vecs', name + '.npy'))
+    motion = load('new_joint_vecs', name + '.npy')
+    load('new_joints', name + '.npy')
+    load('joints', name + '.npy')
     assert motion.ndim == 2 and motion.shape[1] == 263, (name, motion.shape)
     if len(motion) < 40 or len(motion) >= 200:
         continue

@@ -398,6 +398,13 @@ fn text_statistics(rows: &[ClipRow]) -> TextStats {
     let mut vocabulary = std::collections::BTreeSet::new();
     let mut words_per_caption = Vec::new();
     let mut verbs: BTreeMap<String, usize> = BTreeMap::new();
+    let captions: Vec<&str> = clips
+        .iter()
+        .flat_map(|r| r.texts.iter().map(String::as_str))
+        .collect();
+    // Tagged together first, which is cheaper than one at a time; a caption that cannot be
+    // tagged is left out of the verbs below as before.
+    let _ = motionforge_language::caption::remember_all(&captions);
     for caption in clips.iter().flat_map(|r| &r.texts) {
         let words = caption_words(caption);
         words_per_caption.push(words.len() as f64);

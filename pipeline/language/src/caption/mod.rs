@@ -228,31 +228,67 @@ fn check_length(caption: &str) -> Result<(), CaptionError> {
 /// A caption longer than [`MAX_CAPTION_CHARS`] is refused ([`CaptionError::TooLong`]).
 pub fn tokens(caption: &str) -> Result<Vec<Token>, CaptionError> {
     check_length(caption)?;
-    // The network costs about 0.3 ms a caption; datasets repeat captions (every take of an
-    // action from its file name, a caption and its paraphrases' sources), so results are kept.
+    if let Some(hit) = remembered(caption) {
+        return Ok(hit);
+    }
+    let out = tag_captions(&[caption])?.pop().unwrap_or_else(|| {
+        Err(CaptionError::NoWords {
+            caption: caption.to_string(),
+        })
+    })?;
+    remember(caption, &out);
+    Ok(out)
+}
+
+/// Tags the captions [`tokens`] does not remember yet, all together, and remembers them (as far
+/// as its memory bound allows), so later calls of [`tokens`] and [`caption_line`] find them.
+/// Together is about twice as cheap as one at a time: the network's weights are packed for
+/// its matrix products once for all (`docs/performance.md`, "Captions tagged in batches").
+/// Captions that cannot be tagged are left for [`tokens`] to refuse with its error.
+pub fn remember_all(captions: &[&str]) -> Result<(), CaptionError> {
+    let mut seen = std::collections::HashSet::new();
+    let todo: Vec<&str> = captions
+        .iter()
+        .copied()
+        .filter(|c| over_length(c).is_none() && seen.insert(*c) && remembered(c).is_none())
+        .collect();
+    for (caption, out) in todo.iter().zip(tag_captions(&todo)?) {
+        if let Ok(out) = out {
+            remember(caption, &out);
+        }
+    }
+    Ok(())
+}
+
+/// The results [`tokens`] keeps. The network costs about 0.3 ms a caption; datasets repeat
+/// captions (every take of an action from its file name, a caption and its paraphrases'
+/// sources), so results are kept.
+fn memo() -> &'static Mutex<Memo> {
     static SEEN: OnceLock<Mutex<Memo>> = OnceLock::new();
-    let seen = SEEN.get_or_init(Mutex::default);
-    if let Some(hit) = seen
+    SEEN.get_or_init(Mutex::default)
+}
+
+fn remembered(caption: &str) -> Option<Vec<Token>> {
+    memo()
         .lock()
         .ok()
         .and_then(|m| m.captions.get(caption).cloned())
-    {
-        return Ok(hit);
-    }
-    let out = tag_caption(caption)?;
+}
+
+fn remember(caption: &str, out: &[Token]) {
     let size = caption.len()
         + out
             .iter()
             .map(|t| std::mem::size_of::<Token>() + t.word.len())
             .sum::<usize>();
-    if let Ok(mut m) = seen.lock()
+    if let Ok(mut m) = memo().lock()
         && m.captions.len() < MEMO_CAPTIONS
         && m.bytes + size <= MEMO_BYTES
+        && !m.captions.contains_key(caption)
     {
         m.bytes += size;
-        m.captions.insert(caption.to_string(), out.clone());
+        m.captions.insert(caption.to_string(), out.to_vec());
     }
-    Ok(out)
 }
 
 /// The captions [`tokens`] remembers, and about how many bytes they hold.
@@ -267,20 +303,32 @@ const MEMO_CAPTIONS: usize = 1 << 16;
 /// ...and how many bytes of captions and tokens at most, however long the captions are.
 const MEMO_BYTES: usize = 64 << 20;
 
-fn tag_caption(caption: &str) -> Result<Vec<Token>, CaptionError> {
+/// Each caption's tokens, the network run over all of them together.
+fn tag_captions(captions: &[&str]) -> Result<Vec<Result<Vec<Token>, CaptionError>>, CaptionError> {
     let tagger = tagger()?;
     let net = spacy()?;
-    let pieces = split_words(&caption.replace('-', ""));
-    let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
-    let input = spacy_input(&pieces, net);
-    let penn = net.tag(&input);
-    let tags = penn
+    let pieces: Vec<Vec<Piece>> = captions
+        .iter()
+        .map(|c| split_words(&c.replace('-', "")))
+        .collect();
+    let inputs: Vec<Vec<SpacyToken>> = pieces.iter().map(|p| spacy_input(p, net)).collect();
+    let texts: Vec<&[SpacyToken]> = inputs.iter().map(Vec::as_slice).collect();
+    let penn = net.tag_many(&texts);
+    Ok(captions
         .iter()
         .zip(&pieces)
-        .map(|(penn, p)| pos234(penn, &p.text))
-        .collect();
-    let base: Vec<bool> = penn.iter().map(|t| is_base_form(t)).collect();
-    finish(caption, &analysed, tags, &base, tagger)
+        .zip(penn)
+        .map(|((caption, pieces), penn)| {
+            let analysed: Vec<Word> = pieces.iter().map(|p| tagger.analyse(&p.text)).collect();
+            let tags = penn
+                .iter()
+                .zip(pieces)
+                .map(|(penn, p)| pos234(penn, &p.text))
+                .collect();
+            let base: Vec<bool> = penn.iter().map(|t| is_base_form(t)).collect();
+            finish(caption, &analysed, tags, &base, tagger)
+        })
+        .collect())
 }
 
 /// True for the Penn tags whose words spaCy's English lemmatiser leaves as they are (lower-cased):

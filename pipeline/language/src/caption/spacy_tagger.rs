@@ -24,6 +24,8 @@ const PIECES: usize = 3;
 /// maxout pieces and a window of three rows, each of `width` floats), so a long text is encoded
 /// in pieces of this many tokens (docs/performance.md, "Caption tagger memory").
 const CHUNK_TOKENS: usize = 256;
+/// Tokens of several texts encoded at once by [`SpacyTagger::tag_many`].
+const BATCH_TOKENS: usize = 1024;
 
 /// One token as spaCy's tokenizer gives it.
 pub(crate) struct SpacyToken<'a> {
@@ -388,13 +390,9 @@ impl SpacyTagger {
     }
 
     /// The Penn Treebank tag of each token.
+    #[cfg(test)]
     pub(crate) fn tag(&self, tokens: &[SpacyToken]) -> Vec<&str> {
-        let labels = self.out_b.len();
-        let mut out = Vec::with_capacity(tokens.len());
-        self.scores_in_chunks(tokens, CHUNK_TOKENS, |scores| {
-            out.extend(scores.chunks_exact(labels).map(|row| self.best(row)));
-        });
-        out
+        self.tag_many(&[tokens]).pop().unwrap_or_default()
     }
 
     /// The label with the highest score (the first of equal ones).
@@ -408,93 +406,228 @@ impl SpacyTagger {
         self.labels[best.0].as_str()
     }
 
+    /// The Penn Treebank tags of each of several texts, computed together: every layer is one
+    /// matrix product over the rows of all of them. The weights are packed once a product, which
+    /// for one short caption costs as much as the product itself (`docs/performance.md`,
+    /// "Captions tagged in batches"); each row's arithmetic is the same as alone, so the tags
+    /// (and the scores, bit for bit) are those of [`SpacyTagger::tag`].
+    pub(crate) fn tag_many(&self, texts: &[&[SpacyToken]]) -> Vec<Vec<&str>> {
+        let mut out: Vec<Vec<&str>> = texts.iter().map(|t| Vec::with_capacity(t.len())).collect();
+        let windows = texts.iter().enumerate().flat_map(|(i, tokens)| {
+            (0..tokens.len()).step_by(CHUNK_TOKENS).map(move |from| {
+                let to = tokens.len().min(from + CHUNK_TOKENS);
+                (i, Window { tokens, from, to })
+            })
+        });
+        // Batches of at most BATCH_TOKENS tokens asked for, so memory stays bounded.
+        let mut batch: Vec<(usize, Window)> = Vec::new();
+        let mut asked = 0;
+        for (i, window) in windows {
+            let len = window.to - window.from;
+            if asked + len > BATCH_TOKENS && !batch.is_empty() {
+                self.tag_batch(&batch, &mut out);
+                batch.clear();
+                asked = 0;
+            }
+            asked += len;
+            batch.push((i, window));
+        }
+        self.tag_batch(&batch, &mut out);
+        out
+    }
+
+    /// Appends the tags of each window of `batch` to its text's tags in `out`.
+    fn tag_batch<'s>(&'s self, batch: &[(usize, Window)], out: &mut [Vec<&'s str>]) {
+        let labels = self.out_b.len();
+        let windows: Vec<Window> = batch.iter().map(|(_, w)| *w).collect();
+        for ((i, _), scores) in batch.iter().zip(self.scores(&windows)) {
+            if let Some(tags) = out.get_mut(*i) {
+                tags.extend(scores.chunks_exact(labels).map(|row| self.best(row)));
+            }
+        }
+    }
+
     /// The label scores (before the bias) of every token, `chunk` tokens at a time in order:
     /// the network's buffers then hold `chunk` tokens and their neighbours however long the
     /// text is, and each token's scores are those of one pass over the whole text.
+    #[cfg(test)]
     fn scores_in_chunks(&self, tokens: &[SpacyToken], chunk: usize, mut each: impl FnMut(&[f32])) {
         let mut from = 0;
         while from < tokens.len() {
             let to = tokens.len().min(from + chunk.max(1));
-            each(&self.scores(tokens, from, to));
+            let window = Window { tokens, from, to };
+            for scores in self.scores(&[window]) {
+                each(&scores);
+            }
             from = to;
         }
     }
 
-    /// The label scores of `tokens[from..to]`, computed over just the rows they depend on.
+    /// The label scores of each window's `tokens[from..to]`, computed over just the rows they
+    /// depend on, all windows' rows in one matrix product a layer.
     ///
-    /// The encoder runs over the text with `pad` zero rows at each end, as thinc pads a
+    /// The encoder runs over a text with `pad` zero rows at each end, as thinc pads a
     /// document; the rows are numbered here from the first of those. Residual layer `l` (from 0)
     /// changes the rows within `depth - 1 - l` of a token and reads one row either side, so a
-    /// token's result depends only on the rows within `depth` of it: the window `[a, b)` takes
-    /// those of the tokens asked for. A row at the window's edge that is not the document's
+    /// token's result depends only on the rows within `depth` of it: the span `[a, b)` takes
+    /// those of the tokens asked for. A row at the span's edge that is not the document's
     /// edge is computed with a zero neighbour, but that error moves inwards one row a layer and
     /// stops `depth` rows short of the first token asked for.
-    fn scores(&self, tokens: &[SpacyToken], from: usize, to: usize) -> Vec<f32> {
-        let (w, pad, n) = (self.width, self.pad, tokens.len());
+    fn scores(&self, windows: &[Window]) -> Vec<Vec<f32>> {
+        let w = self.width;
         let depth = self.layers.len() - 1;
-        let total = n + 2 * pad;
-        let (first, end) = (pad + from, pad + to);
-        let a = first.saturating_sub(depth);
-        let b = total.min(end + depth);
-        // The tokens inside the window; its other rows are padding.
-        let (t0, t1) = (a.max(pad) - pad, b.min(pad + n) - pad);
-        let mut features = vec![0.0f32; (t1 - t0) * ATTRS.len() * w];
-        for (t, row) in tokens[t0..t1]
+        let spans: Vec<Span> = windows
             .iter()
-            .zip(features.chunks_exact_mut(ATTRS.len() * w))
-        {
-            let ids = self.attributes(t);
-            for (((table, rows, seed), id), slot) in
-                self.embed.iter().zip(ids).zip(row.chunks_exact_mut(w))
-            {
-                for key in hash_id(id, *seed) {
-                    let r = key as usize % rows;
-                    for (s, e) in slot.iter_mut().zip(&table[r * w..(r + 1) * w]) {
-                        *s += e;
-                    }
-                }
+            .scan(0, |rows, win| {
+                let span = Span::of(win, self.pad, depth, *rows);
+                *rows += span.b - span.a;
+                Some(span)
+            })
+            .collect();
+        let total_rows: usize = spans.iter().map(|s| s.b - s.a).sum();
+        // Layer 0 mixes each token's embeddings; its rows go to the tokens' places in `x`.
+        let token_rows: usize = spans.iter().map(|s| s.t1 - s.t0).sum();
+        let mut features = vec![0.0f32; token_rows * ATTRS.len() * w];
+        let mut rows = features.chunks_exact_mut(ATTRS.len() * w);
+        for (win, span) in windows.iter().zip(&spans) {
+            for (t, row) in win.tokens[span.t0..span.t1].iter().zip(&mut rows) {
+                self.embed_into(t, row);
             }
         }
-        let mut x = vec![0.0f32; (b - a) * w];
-        let at = t0 + pad - a;
-        self.layers[0].apply(&features, t1 - t0, &mut x[at * w..(at + t1 - t0) * w]);
+        let mut mixed = vec![0.0f32; token_rows * w];
+        self.layers[0].apply(&features, token_rows, &mut mixed);
+        let mut x = vec![0.0f32; total_rows * w];
+        let mut mixed_rows = mixed.chunks_exact(w);
+        for span in &spans {
+            let at = span.offset + span.t0 + self.pad - span.a;
+            for (dst, src) in x[at * w..]
+                .chunks_exact_mut(w)
+                .zip(&mut mixed_rows)
+                .take(span.t1 - span.t0)
+            {
+                dst.copy_from_slice(src);
+            }
+        }
         for (l, layer) in self.layers[1..].iter().enumerate() {
             let margin = depth - (l + 1);
-            // The rows a pass over the whole document changes at this layer, inside the window.
-            let lo = pad.saturating_sub(margin).max(a);
-            let hi = (pad + n + margin).min(b);
-            if lo >= hi {
+            // The rows a pass over the whole document changes at this layer, inside each span.
+            let changed: Vec<(usize, usize)> = spans
+                .iter()
+                .map(|s| {
+                    let lo = self.pad.saturating_sub(margin).max(s.a);
+                    let hi = (self.pad + s.n + margin).min(s.b);
+                    (lo, hi.max(lo))
+                })
+                .collect();
+            let m: usize = changed.iter().map(|(lo, hi)| hi - lo).sum();
+            if m == 0 {
                 continue;
             }
-            let m = hi - lo;
             let mut window = vec![0.0f32; m * 3 * w];
-            for (i, win) in window.chunks_exact_mut(3 * w).enumerate() {
-                let r = lo + i - a;
-                if r > 0 {
-                    win[..w].copy_from_slice(&x[(r - 1) * w..r * w]);
-                }
-                win[w..2 * w].copy_from_slice(&x[r * w..(r + 1) * w]);
-                if a + r + 1 < b {
-                    win[2 * w..].copy_from_slice(&x[(r + 1) * w..(r + 2) * w]);
+            let mut wins = window.chunks_exact_mut(3 * w);
+            for (span, &(lo, hi)) in spans.iter().zip(&changed) {
+                let xs = &x[span.offset * w..(span.offset + span.b - span.a) * w];
+                for (r, win) in (lo - span.a..hi - span.a).zip(&mut wins) {
+                    if r > 0 {
+                        win[..w].copy_from_slice(&xs[(r - 1) * w..r * w]);
+                    }
+                    win[w..2 * w].copy_from_slice(&xs[r * w..(r + 1) * w]);
+                    if span.a + r + 1 < span.b {
+                        win[2 * w..].copy_from_slice(&xs[(r + 1) * w..(r + 2) * w]);
+                    }
                 }
             }
             let mut out = vec![0.0f32; m * w];
             layer.apply(&window, m, &mut out);
-            for (dst, add) in x[(lo - a) * w..(hi - a) * w].iter_mut().zip(&out) {
-                *dst += add;
+            let mut added = out.chunks_exact(w);
+            for (span, &(lo, hi)) in spans.iter().zip(&changed) {
+                let rows = (span.offset + lo - span.a)..(span.offset + hi - span.a);
+                for (dst, add) in x[rows.start * w..rows.end * w]
+                    .chunks_exact_mut(w)
+                    .zip(&mut added)
+                {
+                    for (d, a) in dst.iter_mut().zip(add) {
+                        *d += a;
+                    }
+                }
             }
         }
+        let asked: usize = windows.iter().map(|win| win.to - win.from).sum();
+        let mut rows = Vec::with_capacity(asked * w);
+        for span in &spans {
+            let first = span.offset + span.first - span.a;
+            rows.extend_from_slice(&x[first * w..(first + span.end - span.first) * w]);
+        }
         let labels = self.out_b.len();
-        let mut scores = vec![0.0f32; (to - from) * labels];
-        matmul_t(
-            &x[(first - a) * w..(end - a) * w],
-            to - from,
-            w,
-            &self.out_w,
-            labels,
-            &mut scores,
-        );
-        scores
+        let mut scores = vec![0.0f32; asked * labels];
+        matmul_t(&rows, asked, w, &self.out_w, labels, &mut scores);
+        let mut rest = scores.as_slice();
+        windows
+            .iter()
+            .map(|win| {
+                let (mine, after) = rest.split_at((win.to - win.from) * labels);
+                rest = after;
+                mine.to_vec()
+            })
+            .collect()
+    }
+
+    /// Adds a token's six embedding rows (four hashed rows of each table) into `row`.
+    fn embed_into(&self, t: &SpacyToken, row: &mut [f32]) {
+        let w = self.width;
+        let ids = self.attributes(t);
+        for (((table, rows, seed), id), slot) in
+            self.embed.iter().zip(ids).zip(row.chunks_exact_mut(w))
+        {
+            for key in hash_id(id, *seed) {
+                let r = key as usize % rows;
+                for (s, e) in slot.iter_mut().zip(&table[r * w..(r + 1) * w]) {
+                    *s += e;
+                }
+            }
+        }
+    }
+}
+
+/// Tokens `from..to` of a text, whose scores are asked for.
+#[derive(Clone, Copy)]
+struct Window<'t, 'a> {
+    tokens: &'t [SpacyToken<'a>],
+    from: usize,
+    to: usize,
+}
+
+/// Where a [`Window`]'s rows lie: `[a, b)` of its padded text (the rows its tokens depend on),
+/// its tokens `t0..t1` among them, the rows asked for `first..end`, and its first row's place
+/// in the batch's buffer.
+struct Span {
+    a: usize,
+    b: usize,
+    t0: usize,
+    t1: usize,
+    first: usize,
+    end: usize,
+    n: usize,
+    offset: usize,
+}
+
+impl Span {
+    fn of(win: &Window, pad: usize, depth: usize, offset: usize) -> Span {
+        let n = win.tokens.len();
+        let total = n + 2 * pad;
+        let (first, end) = (pad + win.from, pad + win.to);
+        let a = first.saturating_sub(depth);
+        let b = total.min(end + depth);
+        Span {
+            a,
+            b,
+            t0: a.max(pad) - pad,
+            t1: b.min(pad + n) - pad,
+            first,
+            end,
+            n,
+            offset,
+        }
     }
 }
 
@@ -565,6 +698,53 @@ mod tests {
             assert!(cut(chunk) == whole, "cut every {chunk} tokens");
         }
         assert_eq!(m.tag(&tokens[..3]), ["DT", "NN", "VBZ"]);
+    }
+
+    #[test]
+    fn texts_scored_together_get_the_bits_they_get_alone() {
+        let m = SpacyTagger::bundled().unwrap();
+        let long: Vec<String> = (0..CHUNK_TOKENS + 40)
+            .map(|i| ["walk", "forward", "and", "wave", "twice", ","][i % 6].to_string())
+            .collect();
+        let texts: Vec<Vec<&str>> = vec![
+            "a person walks forward , then turns around"
+                .split(' ')
+                .collect(),
+            vec!["jump"],
+            vec![],
+            long.iter().map(String::as_str).collect(),
+            "raise left arm".split(' ').collect(),
+        ];
+        let tokens: Vec<Vec<SpacyToken>> = texts.iter().map(|t| spaced(t)).collect();
+        // Whole short texts in one product, against each alone.
+        let short: Vec<Window> = tokens
+            .iter()
+            .filter(|t| !t.is_empty() && t.len() < CHUNK_TOKENS)
+            .map(|t| Window {
+                tokens: t,
+                from: 0,
+                to: t.len(),
+            })
+            .collect();
+        let bits = |s: Vec<f32>| s.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let together: Vec<_> = m.scores(&short).into_iter().map(bits).collect();
+        let alone: Vec<_> = short
+            .iter()
+            .map(|w| bits(m.scores(&[*w]).remove(0)))
+            .collect();
+        assert!(together == alone);
+        // Tags of a batch with an empty and a long text, against one pass over each text.
+        let refs: Vec<&[SpacyToken]> = tokens.iter().map(Vec::as_slice).collect();
+        let tagged = m.tag_many(&refs);
+        assert_eq!(tagged.len(), texts.len());
+        for (t, tags) in tokens.iter().zip(&tagged) {
+            let mut whole = Vec::new();
+            m.scores_in_chunks(t, t.len().max(1), |s| {
+                whole.extend(s.chunks_exact(m.out_b.len()).map(|row| m.best(row)))
+            });
+            assert_eq!(tags, &whole);
+        }
+        assert_eq!(tagged[4], ["VB", "JJ", "NN"]);
     }
 
     #[test]
