@@ -15,6 +15,7 @@
 //! finger, jaw or eye motion: those joints take half the rotation of a body joint in the same
 //! frame (so they move with the capture's timing), which exercises every joint of the chain.
 use crate::common;
+use common::project::{ConfigSpec, Source};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -553,40 +554,22 @@ fn the_humanml3d_frame_rate_mode_takes_every_int_fps_over_20th_frame_from_frame_
     );
 }
 
-/// A config of one AMASS source over `captures` (globs), with `extra` lines in its `[sources.amass]`.
-fn amass_config(dir: &Path, captures: &[&str], extra: &str) -> PathBuf {
-    let captures: Vec<String> = captures.iter().map(|c| format!("{c:?}")).collect();
-    let text = format!(
-        r#"[dataset]
-name = "amass-test"
-output = "out"
-fps = 20.0
-seed = 7
-
-[synthetic]
-exhaustive = true
-
-[[sources]]
-name = "amass"
-captures = [{}]
-profile = "smplh-52"
-licence = "test data written by the test"
-
-[sources.labels]
-kind = "filename"
-pattern = "{{action}}_{{take}}"
-action = "{{action}}"
-text = "a person does a {{action}}"
-
-[sources.amass]
-body_model = "models"
-{extra}
-"#,
-        captures.join(", ")
-    );
-    let path = dir.join("amass.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+/// A config of one AMASS source over `captures` (globs), with `extra` keys and values in its
+/// `[sources.amass]`.
+fn amass_config(dir: &Path, captures: &[&str], extra: &[(&str, &str)]) -> PathBuf {
+    let source = Source::new("amass", "smplh-52", captures)
+        .licence("test data written by the test")
+        .filename_labels("{action}_{take}", "{action}", "a person does a {action}")
+        .amass("models");
+    let source = extra.iter().fold(source, |source, (key, value)| {
+        source.set(&format!("amass.{key}"), *value)
+    });
+    ConfigSpec::new("amass-test")
+        .set("dataset.fps", 20.0)
+        .seed(7)
+        .set("synthetic.exhaustive", true)
+        .source(source)
+        .write(dir.join("amass.toml"))
 }
 
 fn motionforge() -> Command {
@@ -641,7 +624,7 @@ fn an_amass_build_goes_end_to_end_and_refuses_bad_files_by_name() {
         ],
         "sequences": sequences,
     }));
-    let config = amass_config(s.dir.path(), &["*.npz"], "frame_rate = \"humanml3d\"");
+    let config = amass_config(s.dir.path(), &["*.npz"], &[("frame_rate", "humanml3d")]);
     common::run_ok(
         motionforge()
             .args(["build", "--quiet", "--config"])
@@ -787,7 +770,7 @@ fn a_body_model_missing_a_key_or_a_gender_is_a_config_error_naming_the_path() {
         "models": [s.model(Family::SmplH, "male", 3, &["J_regressor"])],
         "sequences": [s.sequence("walk_001_poses.npz", Family::SmplH, "male", &BETAS, 120.0)],
     }));
-    let config = amass_config(s.dir.path(), &["*.npz"], "");
+    let config = amass_config(s.dir.path(), &["*.npz"], &[]);
     let out = motionforge()
         .args(["config", "check", "--config"])
         .arg(&config)
@@ -799,7 +782,7 @@ fn a_body_model_missing_a_key_or_a_gender_is_a_config_error_naming_the_path() {
     assert!(err.contains("smplh/male/model.npz"), "{err}");
     assert!(err.contains("no array `J_regressor`"), "{err}");
 
-    let config = amass_config(s.dir.path(), &["*.npz"], "gender = \"neutral\"");
+    let config = amass_config(s.dir.path(), &["*.npz"], &[("gender", "neutral")]);
     let out = motionforge()
         .args(["config", "check", "--config"])
         .arg(&config)
@@ -1107,36 +1090,19 @@ fn humanml3d_index_rows_cut_from_amass_files_export_the_notebooks_joints_and_mir
         csv.push('\n');
     }
     std::fs::write(s.path("index.csv"), csv).unwrap();
-    let config = s.path("hml.toml");
-    std::fs::write(
-        &config,
-        r#"[dataset]
-name = "hml"
-output = "out"
-fps = 20
-
-[synthetic]
-enabled = false
-
-[[sources]]
-name = "amass"
-captures = ["amass/**/*_poses.npz"]
-profile = "smplh-52"
-
-[sources.labels]
-kind = "frame_index"
-path = "index.csv"
-fps = 20
-humanml3d_cuts = true
-default_text = "a person moves"
-
-[sources.amass]
-body_model = "models"
-frame_rate = "humanml3d"
-humanml3d_gender = true
-"#,
-    )
-    .unwrap();
+    let config = ConfigSpec::new("hml")
+        .fps(20)
+        .synthetic(false)
+        .source(
+            Source::new("amass", "smplh-52", &["amass/**/*_poses.npz"])
+                .frame_index_labels("index.csv", 20)
+                .set("labels.humanml3d_cuts", true)
+                .set("labels.default_text", "a person moves")
+                .amass("models")
+                .set("amass.frame_rate", "humanml3d")
+                .set("amass.humanml3d_gender", true),
+        )
+        .write(s.path("hml.toml"));
     common::run_ok(
         motionforge()
             .args(["build", "--quiet", "--config"])
@@ -1234,46 +1200,21 @@ fn babel_feat_p_paths_find_amass_files_and_a_wrong_duration_is_reported() {
         "sequences": [short, long],
     }));
     let babel = common::shared_data().join("babel/babel_records_from_notebook_outputs.json");
-    let config = s.path("babel.toml");
-    std::fs::write(
-        &config,
-        format!(
-            r#"[dataset]
-name = "babel"
-output = "out"
-
-[synthetic]
-enabled = false
-
-[[sources]]
-name = "babel"
-captures = ["amass/**/*_poses.npz"]
-profile = "smplh-52"
-
-[sources.labels]
-kind = "babel"
-path = {babel:?}
-
-[sources.amass]
-body_model = "models"
-
-[[sources]]
-name = "humanml3d"
-captures = ["amass/**/*_poses.npz"]
-profile = "smplh-52"
-
-[sources.labels]
-kind = "frame_index"
-path = "index.csv"
-fps = 20
-default_text = "a person moves"
-
-[sources.amass]
-body_model = "models"
-"#
-        ),
-    )
-    .unwrap();
+    let captures = ["amass/**/*_poses.npz"];
+    let config = ConfigSpec::new("babel")
+        .synthetic(false)
+        .source(
+            Source::new("babel", "smplh-52", &captures)
+                .babel_labels(&babel.to_string_lossy())
+                .amass("models"),
+        )
+        .source(
+            Source::new("humanml3d", "smplh-52", &captures)
+                .frame_index_labels("index.csv", 20)
+                .set("labels.default_text", "a person moves")
+                .amass("models"),
+        )
+        .write(s.path("babel.toml"));
     // HumanML3D's real rows of the two captures.
     let index = std::fs::read_to_string(common::shared_data().join("humanml3d/index.csv")).unwrap();
     let mut rows = String::from("source_path,start_frame,end_frame,new_name\n");

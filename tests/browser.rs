@@ -8,6 +8,7 @@ use crate::common;
 
 use std::collections::BTreeSet;
 
+use common::project::ConfigSpec;
 use common::repo;
 use common::service::start_service;
 use motionforge::build::{BuildOptions, build};
@@ -455,25 +456,22 @@ async fn browser_reads_take_bounded_memory_however_many_readers_there_are() {
 fn one_clip_shards_config(dir: &std::path::Path) -> std::path::PathBuf {
     let captures = dir.join("captures");
     common::copy_dir(&repo().join("fixtures/bandai-namco-1/data"), &captures);
-    let demo = std::fs::read_to_string(repo().join("fixtures/demo.toml")).unwrap();
     // The demo's dataset, mirror, motion types and Bandai Namco source; not its CMU source.
-    let bandai = demo.split("\n[[sources]]\nname = \"cmu\"").next().unwrap();
-    let text = bandai
-        .replace(
-            "output = \"../out\"",
-            &format!("output = {:?}\nshard_bytes = 1024", dir.join("out")),
-        )
-        .replace(
-            "\"bandai-namco-1/data/*.bvh\"",
-            &format!("{:?}", captures.join("*.bvh")),
+    let spec = ConfigSpec::demo()
+        .only_sources(&["bandai-namco-1"])
+        .output(dir.join("out"))
+        .shard_bytes(1024)
+        .set_in_source(
+            "bandai-namco-1",
+            "captures",
+            vec![captures.join("*.bvh").to_string_lossy().into_owned()],
         );
+    let text = spec.render();
     assert!(
         text.contains("shard_bytes") && !text.contains("cmu/"),
         "{text}"
     );
-    let path = dir.join("bandai.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+    spec.write(dir.join("bandai.toml"))
 }
 
 /// Reads while a rebuild replaces every shard see the old dataset or the new one, never an

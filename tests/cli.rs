@@ -9,6 +9,7 @@ use std::process::{Command, Output};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use common::project::ConfigSpec;
 use common::repo;
 use indicatif::{ProgressDrawTarget, TermLike};
 use motionforge::config::Config;
@@ -1511,32 +1512,15 @@ fn the_old_spellings_still_work_and_warn_naming_the_new_one() {
 
 // ---- an LLM server that is not there -----------------------------------------------------------
 
-/// The demo config with its paths made absolute (so it can live in a temporary folder), its
-/// output `out` beside it, and `extra` appended.
-fn demo_copy(extra: &str) -> String {
-    let fixtures = repo().join("fixtures");
-    let demo = std::fs::read_to_string(fixtures.join("demo.toml")).unwrap();
-    demo.replace("output = \"../out\"", "output = \"out\"")
-        .replace(
-            "[\"bandai-namco-1/",
-            &format!("[\"{}/bandai-namco-1/", fixtures.display()),
-        )
-        .replace("[\"cmu/", &format!("[\"{}/cmu/", fixtures.display()))
-        .replace(
-            "\"humanml3d/",
-            &format!("\"{}/humanml3d/", fixtures.display()),
-        )
-        + extra
-}
-
 #[test]
 fn a_dead_llm_server_stops_the_build_at_once_without_a_progress_line_per_prompt() {
     let dir = tempfile::tempdir().unwrap();
     let url = crate::common::llm::dead_url();
-    let config = demo_copy(&format!(
-        "\n[llm]\nbase_url = \"{url}\"\nmodel = \"m\"\n\n[part_labels]\nlabeller = \"llm\"\n"
-    ));
-    std::fs::write(dir.path().join("llm.toml"), config).unwrap();
+    ConfigSpec::demo()
+        .set("llm.base_url", url.as_str())
+        .set("llm.model", "m")
+        .set("part_labels.labeller", "llm")
+        .write(dir.path().join("llm.toml"));
     let out = run(&["build", "--config", "llm.toml"], dir.path());
     let err = text(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
@@ -1725,7 +1709,7 @@ fn plan_then_build(dir: &Path, config: &str) -> serde_json::Value {
 #[test]
 fn plan_counts_every_stage_as_the_next_build_does_also_after_a_seed_change() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("demo.toml"), demo_copy("")).unwrap();
+    ConfigSpec::demo().write(dir.path().join("demo.toml"));
     let first = plan_then_build(dir.path(), "demo.toml");
     assert_eq!(first["stages"][0]["to_run"], 9, "{first}");
     let again = plan_then_build(dir.path(), "demo.toml");
@@ -1736,8 +1720,9 @@ fn plan_counts_every_stage_as_the_next_build_does_also_after_a_seed_change() {
         "ten clips labelled, not one cache entry: {again}"
     );
 
-    let seeded = demo_copy("").replace("seed = 42", "seed = 7");
-    std::fs::write(dir.path().join("seeded.toml"), seeded).unwrap();
+    ConfigSpec::demo()
+        .seed(7)
+        .write(dir.path().join("seeded.toml"));
     let through = run(
         &["plan", "--config", "seeded.toml", "--through", "label"],
         dir.path(),

@@ -303,14 +303,7 @@ fn one_thread_and_two_threads_write_the_same_shards() {
         .into_iter()
         .map(|threads| {
             let out = tempfile::tempdir().unwrap();
-            run_ok(
-                Command::new(env!("CARGO_BIN_EXE_motionforge"))
-                    .env("RAYON_NUM_THREADS", threads)
-                    .args(["build", "--config"])
-                    .arg(repo().join("fixtures/demo.toml"))
-                    .arg("--output")
-                    .arg(out.path()),
-            );
+            run_ok(common::demo_build(out.path()).env("RAYON_NUM_THREADS", threads));
             let dataset = out.path().join("demo");
             (out, dataset)
         })

@@ -8,6 +8,7 @@ use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use common::project::{ConfigSpec, Source};
 use common::repo;
 use serde_json::Value;
 
@@ -92,49 +93,29 @@ impl Case {
         .unwrap();
     }
 
-    fn config(&self, extra_bandai: &str, with_cmu: bool) -> PathBuf {
-        let mut toml = format!(
-            r#"
-[dataset]
-name = "hard"
-output = "out"
-fps = 30
-seed = 7
-
-[mirror]
-enabled = true
-
-[[sources]]
-name = "bandai"
-captures = ["bandai/*.bvh"]
-profile = "bandai-namco"
-{extra_bandai}
-
-[sources.labels]
-kind = "filename"
-pattern = "dataset-1_{{content}}_{{style}}_{{take}}"
-action = "{{content}}"
-text = "{{content}}, {{style}} style"
-sidecar = true
-"#
+    /// The Bandai captures labelled from their names (and sidecars), mirrored; with the CMU take
+    /// and its event log if `with_cmu`.
+    fn spec(with_cmu: bool) -> ConfigSpec {
+        let spec = ConfigSpec::new("hard").fps(30).seed(7).mirror(true).source(
+            Source::new("bandai", "bandai-namco", &["bandai/*.bvh"])
+                .filename_labels(
+                    "dataset-1_{content}_{style}_{take}",
+                    "{content}",
+                    "{content}, {style} style",
+                )
+                .set("labels.sidecar", true),
         );
         if with_cmu {
-            toml.push_str(
-                r#"
-[[sources]]
-name = "cmu"
-captures = ["cmu/01_01.bvh"]
-profile = "cmu"
-
-[sources.labels]
-kind = "event_log"
-path = "cmu/01_01.csv"
-"#,
-            );
+            spec.source(
+                Source::new("cmu", "cmu", &["cmu/01_01.bvh"]).event_log_labels("cmu/01_01.csv"),
+            )
+        } else {
+            spec
         }
-        let path = self.path("hard.toml");
-        std::fs::write(&path, toml).unwrap();
-        path
+    }
+
+    fn config(&self, spec: ConfigSpec) -> PathBuf {
+        spec.write(self.path("hard.toml"))
     }
 
     fn dataset(&self) -> PathBuf {
@@ -285,7 +266,7 @@ fn damaged_real_captures_cost_one_reject_each_under_a_2_gb_address_space() {
     log.push_str("6.0,turn around\n");
     std::fs::write(case.path("cmu/01_01.csv"), log).unwrap();
 
-    let config = case.config("", true);
+    let config = case.config(Case::spec(true));
     let out = run_limited(&build_args(&config));
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
@@ -379,7 +360,7 @@ fn absurd_frame_rate_overrides_are_refused_before_any_work() {
     let case = Case::new();
     case.capture("walk_normal", &bandai("walk_normal"));
     case.capture("kick_normal", &bandai("kick_normal"));
-    let config = case.config("fps_override = { \"*\" = 0.001 }", false);
+    let config = case.config(Case::spec(false).set_in_source("bandai", "fps_override.*", 0.001));
     let out = run_limited(&build_args(&config));
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
@@ -392,7 +373,7 @@ fn absurd_frame_rate_overrides_are_refused_before_any_work() {
         r#"{"dataset-1_kick_normal_001": 0.001, "dataset-1_walk_normal_001": 30}"#,
     )
     .unwrap();
-    let config = case.config("fps_table = \"fps.json\"", false);
+    let config = case.config(Case::spec(false).set_in_source("bandai", "fps_table", "fps.json"));
     let out = run_limited(&build_args(&config));
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     let rejects = case.rejects();
@@ -410,7 +391,7 @@ fn a_build_with_no_rows_says_why_and_exits_4() {
     let walk = bandai("walk_normal");
     case.capture("walk_normal", &set_header(&walk, "Frame Time:", "1000"));
     case.capture("kick_normal", &set_header(&walk, "Frames:", "1e12"));
-    let config = case.config("", false);
+    let config = case.config(Case::spec(false));
     let out = run_limited(&build_args(&config));
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(4), "{stderr}");
@@ -440,12 +421,7 @@ fn a_build_with_no_rows_says_why_and_exits_4() {
 fn a_dataset_name_longer_than_a_file_name_can_be_is_a_config_error() {
     let case = Case::new();
     case.capture("walk_normal", &bandai("walk_normal"));
-    let config = case.config("", false);
-    let toml = std::fs::read_to_string(&config).unwrap().replace(
-        "name = \"hard\"",
-        &format!("name = \"{}\"", "n".repeat(300)),
-    );
-    std::fs::write(&config, toml).unwrap();
+    let config = case.config(Case::spec(false).name(&"n".repeat(300)));
     let out = Command::new(BIN)
         .args(["config", "check", "--config"])
         .arg(&config)
@@ -490,32 +466,12 @@ fn many_distinct_clips_of_one_capture_keep_memory_bounded() {
         "seq_ann": {"labels": []},
     }});
     std::fs::write(case.path("babel.json"), record.to_string()).unwrap();
-    let config = case.path("many.toml");
-    std::fs::write(
-        &config,
-        r#"
-[dataset]
-name = "hard"
-output = "out"
-fps = 30
-
-[mirror]
-enabled = true
-
-[synthetic]
-enabled = false
-
-[[sources]]
-name = "cmu"
-captures = ["cmu/01_01.bvh"]
-profile = "cmu"
-
-[sources.labels]
-kind = "babel"
-path = "babel.json"
-"#,
-    )
-    .unwrap();
+    let config = ConfigSpec::new("hard")
+        .fps(30)
+        .mirror(true)
+        .synthetic(false)
+        .source(Source::new("cmu", "cmu", &["cmu/01_01.bvh"]).babel_labels("babel.json"))
+        .write(case.path("many.toml"));
     let out = run_limited_to(1200, &build_args(&config));
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     let report = case.json("build-report.json");
@@ -545,12 +501,11 @@ fn a_huge_annotation_text_is_dropped_at_segmentation_under_a_1_gb_address_space(
         "seq_ann": {"labels": []},
     }});
     std::fs::write(case.path("babel.json"), record.to_string()).unwrap();
-    let config = case.path("huge.toml");
-    std::fs::write(
-        &config,
-        "[dataset]\nname = \"hard\"\noutput = \"out\"\nfps = 30\n\n[synthetic]\nenabled = false\n\n[[sources]]\nname = \"cmu\"\ncaptures = [\"cmu/01_01.bvh\"]\nprofile = \"cmu\"\n\n[sources.labels]\nkind = \"babel\"\npath = \"babel.json\"\n",
-    )
-    .unwrap();
+    let config = ConfigSpec::new("hard")
+        .fps(30)
+        .synthetic(false)
+        .source(Source::new("cmu", "cmu", &["cmu/01_01.bvh"]).babel_labels("babel.json"))
+        .write(case.path("huge.toml"));
     let out = run_limited_to(1024, &build_args(&config));
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     let report = case.json("build-report.json");

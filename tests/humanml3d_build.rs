@@ -18,6 +18,8 @@ use motionforge::motion::{ProfileSpec, SignedAxis, read_bvh};
 use motionforge::source::CaptureFile;
 use motionforge::stages::ingest;
 
+use common::project::{ConfigSpec, Project};
+
 /// A `.npy` file's shape and values (as f64).
 fn npy(path: &Path) -> (Vec<u64>, Vec<f64>) {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -64,19 +66,15 @@ fn humanml3d_mirror(frames: &[[DVec3; 22]]) -> Vec<[DVec3; 22]> {
 }
 
 /// A copy of the fixture folder whose dataset goes to `<copy>/out`.
-fn fixture_copy() -> (tempfile::TempDir, PathBuf) {
-    let dir = tempfile::tempdir().unwrap();
-    let src = common::repo().join("fixtures/humanml3d-joints");
-    let dst = dir.path().join("humanml3d-joints");
-    common::copy_dir(&src, &dst);
-    let config = dst.join("build.toml");
-    let text = std::fs::read_to_string(&config).unwrap();
-    std::fs::write(
-        &config,
-        text.replace("output = \"../../out\"", "output = \"out\""),
-    )
-    .unwrap();
-    (dir, config)
+fn fixture_copy() -> (Project, PathBuf) {
+    let config = Path::new("humanml3d-joints/build.toml");
+    let bundled = ConfigSpec::from_file(&common::repo().join("fixtures").join(config));
+    let project = Project::new()
+        .fixture("humanml3d-joints")
+        .config_at(config, bundled.output("out"))
+        .build();
+    let config = project.join(config);
+    (project, config)
 }
 
 fn motionforge() -> Command {

@@ -5,15 +5,11 @@ use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 fn start(output: &Path) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(common::repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(output)
+    common::demo_build(output)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -115,13 +111,7 @@ fn assert_same(dataset: &Path, expected: &BTreeMap<String, Vec<u8>>, what: &str)
 
 /// Runs a build to the end; its report (stage counts) as JSON.
 fn finish(output: &Path) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["--json", "build", "--config"])
-        .arg(common::repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(output)
-        .output()
-        .unwrap();
+    let out = common::demo_build(output).arg("--json").output().unwrap();
     assert!(
         out.status.success(),
         "resumed build failed: {}",
@@ -211,11 +201,8 @@ fn a_resumed_build_reuses_finished_work() {
     finish(dir.path());
     // A kill right after a complete build leaves everything reusable: the next run re-runs
     // nothing.
-    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--json", "--config"])
-        .arg(common::repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(dir.path())
+    let out = common::demo_build(dir.path())
+        .arg("--json")
         .output()
         .unwrap();
     assert!(out.status.success());

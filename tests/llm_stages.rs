@@ -725,7 +725,8 @@ fn flagged_labels_fall_back_drop_or_stay_as_configured() {
     assert!(rows.iter().all(|r| r.ends_with("|None|None")), "{rows:?}");
 
     // keep: the answer's parts, marked as the LLM's; the answer with no part gets the motion's.
-    let (dir, config) = scratch(base.set("part_labels.on_invalid", "keep"));
+    let keep = base.set("part_labels.on_invalid", "keep");
+    let (dir, config) = scratch(keep.clone());
     let report = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(report.labels.checks.kept, 3);
     let rows = originals(&dir);
@@ -738,17 +739,9 @@ fn flagged_labels_fall_back_drop_or_stay_as_configured() {
     assert!(walk.ends_with("|embedded:velocity"), "{walk}");
 
     // Paraphrases have no embedded fallback: the config says so.
-    let path = dir.path().join("bad.toml");
-    fs::write(
-        &path,
-        fs::read_to_string(dir.path().join("build.toml"))
-            .unwrap()
-            .replace(
-                "[paraphrases]\n",
-                "[paraphrases]\non_invalid = \"embedded\"\n",
-            ),
-    )
-    .unwrap();
+    let path = keep
+        .set("paraphrases.on_invalid", "embedded")
+        .write(dir.join("bad.toml"));
     let err = Config::load(&path).unwrap_err().to_string();
     assert!(
         err.contains("paraphrases.on_invalid") && err.contains("no embedded paraphraser"),
@@ -786,7 +779,7 @@ fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
     let t = std::time::Instant::now();
     let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
         .args(["build", "--config"])
-        .arg(dir.path().join("build.toml"))
+        .arg(dir.config_path())
         .output()
         .unwrap();
     assert!(t.elapsed() < std::time::Duration::from_secs(10));
@@ -802,7 +795,7 @@ fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
     let check = |probe: bool| {
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_motionforge"));
         cmd.args(["config", "check", "--config"])
-            .arg(dir.path().join("build.toml"));
+            .arg(dir.config_path());
         if probe {
             cmd.arg("--probe");
         }
@@ -818,7 +811,7 @@ fn a_dead_endpoint_stops_the_build_within_seconds_with_one_clear_error() {
     let (dir, _config) = scratch(llm_spec(&server));
     let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
         .args(["config", "check", "--probe", "--config"])
-        .arg(dir.path().join("build.toml"))
+        .arg(dir.config_path())
         .output()
         .unwrap();
     assert!(

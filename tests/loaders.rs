@@ -6,6 +6,8 @@ use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use common::project::ConfigSpec;
+
 #[test]
 fn hugging_face_datasets_and_duckdb_open_the_demo() {
     let out = tempfile::tempdir().unwrap();
@@ -103,20 +105,10 @@ fn python_ok(script: &str, args: &[&Path], dir: Option<&Path>) -> String {
 /// The demo's config in `dir` with every derived feature switched on (`rotations_6d` and
 /// `joint_velocities` are opt-in), its fixture paths made absolute.
 fn demo_with_every_feature(dir: &Path) -> PathBuf {
-    let fixtures = std::fs::canonicalize(common::repo().join("fixtures")).unwrap();
-    let f = fixtures.display();
-    let text = std::fs::read_to_string(fixtures.join("demo.toml"))
-        .unwrap()
-        .replace("\"bandai-namco-1/", &format!("\"{f}/bandai-namco-1/"))
-        .replace("\"cmu/", &format!("\"{f}/cmu/"))
-        .replace("\"humanml3d/", &format!("\"{f}/humanml3d/"));
-    let path = dir.join("demo.toml");
-    std::fs::write(
-        &path,
-        format!("{text}\n[features]\nrotations_6d = true\nvelocities = true\n"),
-    )
-    .unwrap();
-    path
+    ConfigSpec::demo()
+        .set("features.rotations_6d", true)
+        .set("features.velocities", true)
+        .write(dir.join("demo.toml"))
 }
 
 /// Without PyTorch: `datasets` `load_dataset(...).with_format("numpy")` gives every per-frame

@@ -3,6 +3,7 @@ use crate::common;
 
 use std::process::Command;
 
+use common::project::{ConfigSpec, Source};
 use common::*;
 use glam::{DQuat, DVec3, EulerRot};
 use motionforge::motion::*;
@@ -221,7 +222,11 @@ fn every_command_has_help() {
 fn a_config_error_exits_with_code_2_and_names_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("bad.toml");
-    std::fs::write(&cfg, "[dataset]\nname = \"x\"\noutput = \"o\"\nfps = 0\n[[sources]]\nname = \"s\"\ncaptures = [\"*.bvh\"]\nprofile = \"cmu\"\n[sources.labels]\nkind = \"filename\"\npattern = \"{a}\"\naction = \"{a}\"\ntext = \"{a}\"\n").unwrap();
+    ConfigSpec::new("x")
+        .output("o")
+        .fps(0)
+        .source(Source::new("s", "cmu", &["*.bvh"]).filename_labels("{a}", "{a}", "{a}"))
+        .write(&cfg);
     let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
         .args(["build", "--config"])
         .arg(&cfg)

@@ -6,17 +6,17 @@ use crate::common;
 use motionforge::build::{BuildOptions, Plan, Stage, build, plan, status};
 use motionforge::config::Config;
 
+use common::project::Project;
+
 /// A copy of the bundled fixtures (so a test may edit a capture) and its config writing into
 /// the copy.
-fn scratch() -> (tempfile::TempDir, Config) {
-    let dir = tempfile::tempdir().unwrap();
-    common::copy_dir(
-        &common::repo().join("fixtures"),
-        &dir.path().join("fixtures"),
-    );
-    let mut config = Config::load(&dir.path().join("fixtures/demo.toml")).unwrap();
-    config.dataset.output = dir.path().join("out");
-    (dir, config)
+fn scratch() -> (Project, Config) {
+    let project = Project::new()
+        .copy(common::repo().join("fixtures"), "fixtures")
+        .build();
+    let mut config = Config::load(&project.join("fixtures/demo.toml")).unwrap();
+    config.dataset.output = project.join("out");
+    (project, config)
 }
 
 fn stage(plan: &Plan, stage: Stage) -> &motionforge::build::StagePlan {

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
+use common::project::{ConfigSpec, Source};
 use common::*;
 use motionforge::annotate::event_log::{EventLogFormat, read_event_log};
 use motionforge::annotate::span::{CaptureAnnotation, Hand, Span};
@@ -737,20 +738,11 @@ fn the_loop_build_plan_capture_read_back_rebuild_adds_the_session_to_the_counts(
     )
     .unwrap();
 
-    let fixtures = repo().join("fixtures");
-    let fixtures = fixtures.display();
-    let config = std::fs::read_to_string(repo().join("fixtures/demo.toml"))
-        .unwrap()
-        .replace("output = \"../out\"", "output = \"out\"")
-        .replace(
-            "\"bandai-namco-1/",
-            &format!("\"{fixtures}/bandai-namco-1/"),
+    ConfigSpec::demo()
+        .source(
+            Source::new("sessions", "cmu", &["sessions/*.bvh"]).event_log_labels("sessions/*.csv"),
         )
-        .replace("\"cmu/", &format!("\"{fixtures}/cmu/"))
-        .replace("\"humanml3d/", &format!("\"{fixtures}/humanml3d/"))
-        + "\n[[sources]]\nname = \"sessions\"\ncaptures = [\"sessions/*.bvh\"]\nprofile = \"cmu\"\n\
-           [sources.labels]\nkind = \"event_log\"\npath = \"sessions/*.csv\"\n";
-    std::fs::write(work.path().join("motionforge.toml"), config).unwrap();
+        .write(work.path().join("motionforge.toml"));
     run_ok(
         motionforge()
             .args(["build", "--config"])

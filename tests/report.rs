@@ -16,26 +16,6 @@ use motionforge::report::{
     write_report,
 };
 
-fn repo() -> PathBuf {
-    common::repo()
-}
-
-/// Builds the demo into `dir` with the binary, as a user would.
-fn build_demo(dir: &Path) {
-    let out = Command::new(env!("CARGO_BIN_EXE_motionforge"))
-        .args(["build", "--config"])
-        .arg(repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(dir)
-        .output()
-        .expect("run motionforge");
-    assert!(
-        out.status.success(),
-        "demo build failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 /// The clip tables of a build, wherever the build put them: every `.parquet` with a `clip_id`
 /// column (tables are moving from `<out>/clips.parquet` to sharded `data/<split>-*.parquet`).
 fn clip_tables(dir: &Path) -> Vec<PathBuf> {
@@ -286,7 +266,7 @@ fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
 fn demo_report_matches_pyarrow_and_is_reproducible() {
     let tmp = tempfile::tempdir().unwrap();
     let build = tmp.path().join("build");
-    build_demo(&build);
+    common::build_demo(&build);
     let tables = clip_tables(&build);
     let rows = read_rows(&tables).unwrap();
     assert!(!rows.is_empty());
@@ -576,7 +556,7 @@ fn demo_report_matches_pyarrow_and_is_reproducible() {
 fn violins_stay_within_each_types_data_range() {
     let tmp = tempfile::tempdir().unwrap();
     let build = tmp.path().join("build");
-    build_demo(&build);
+    common::build_demo(&build);
     let rows = read_rows(&clip_tables(&build)).unwrap();
     let by_type = lengths_by_type(&rows);
     assert!(!by_type.is_empty());
@@ -931,7 +911,7 @@ fn measure_figure_text(report: &Path) {
 fn split_column_gives_per_split_composition() {
     let tmp = tempfile::tempdir().unwrap();
     let build = tmp.path().join("build");
-    build_demo(&build);
+    common::build_demo(&build);
     let tables = clip_tables(&build);
     let with_split = tmp.path().join("split.parquet");
     let script = r#"

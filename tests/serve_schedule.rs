@@ -13,6 +13,7 @@ use motionforge::serve::{Service, ServiceSetup, Token, load_configs};
 use serde_json::Value;
 use tokio::sync::{mpsc, watch};
 
+use common::project::ConfigSpec;
 use common::repo;
 
 fn at(text: &str) -> DateTime<Utc> {
@@ -130,25 +131,18 @@ async fn the_loop_queues_a_dataset_when_the_manual_clock_reaches_its_time() {
 #[test]
 fn a_bad_schedule_is_refused_naming_the_key_value_and_form() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(repo().join("fixtures/demo.toml"))
-        .unwrap()
-        .replace("[dataset]\n", "[dataset]\nschedule = \"every night\"\n");
-    let path = dir.path().join("nightly.toml");
-    std::fs::write(&path, text).unwrap();
+    let path = ConfigSpec::demo()
+        .schedule("every night")
+        .write(dir.path().join("nightly.toml"));
     let err = load_configs(&[path]).unwrap_err().to_string();
     assert!(err.contains("nightly.toml"), "{err}");
     assert!(err.contains("dataset.schedule"), "{err}");
     assert!(err.contains("\"every night\""), "{err}");
     assert!(err.contains("five fields"), "{err}");
 
-    let good = dir.path().join("good.toml");
-    std::fs::write(
-        &good,
-        std::fs::read_to_string(repo().join("fixtures/demo.toml"))
-            .unwrap()
-            .replace("[dataset]\n", "[dataset]\nschedule = \"0 3 * * *\"\n"),
-    )
-    .unwrap();
+    let good = ConfigSpec::demo()
+        .schedule("0 3 * * *")
+        .write(dir.path().join("good.toml"));
     let configs = load_configs(std::slice::from_ref(&good)).unwrap();
     assert_eq!(configs[0].dataset.schedule.as_deref(), Some("0 3 * * *"));
     // When to build is not what to build: the config fingerprint must not see it.

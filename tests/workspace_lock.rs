@@ -8,16 +8,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::repo;
 use motionforge::build::lock::{Holder, LockError, WorkspaceLock};
 
 fn build_cmd(output: &Path, extra: &[&str]) -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_motionforge"));
-    cmd.args(["build", "--config"])
-        .arg(repo().join("fixtures/demo.toml"))
-        .arg("--output")
-        .arg(output)
-        .args(extra);
+    let mut cmd = common::demo_build(output);
+    cmd.args(extra);
     cmd
 }
 

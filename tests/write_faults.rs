@@ -9,6 +9,7 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use common::project::ConfigSpec;
 use common::repo;
 use motionforge::build::sha256_hex;
 
@@ -169,23 +170,6 @@ fn assert_nothing_half_written_looks_complete(dataset: &Path) {
     }
 }
 
-/// The demo config rewritten with absolute input paths, so it can live in a scratch folder and
-/// be edited.
-fn demo_config_in(dir: &Path, extra_dataset_keys: &str, extra_tables: &str) -> PathBuf {
-    let fixtures = repo().join("fixtures");
-    let fixtures = std::fs::canonicalize(fixtures).unwrap();
-    let f = fixtures.display();
-    let text = std::fs::read_to_string(repo().join("fixtures/demo.toml"))
-        .unwrap()
-        .replace("\"bandai-namco-1/", &format!("\"{f}/bandai-namco-1/"))
-        .replace("\"cmu/", &format!("\"{f}/cmu/"))
-        .replace("\"humanml3d/", &format!("\"{f}/humanml3d/"))
-        .replace("seed = 42\n", &format!("seed = 42\n{extra_dataset_keys}"));
-    let path = dir.join("demo.toml");
-    std::fs::write(&path, format!("{text}\n{extra_tables}")).unwrap();
-    path
-}
-
 #[test]
 fn an_unwritable_output_folder_fails_naming_the_folder() {
     let dir = tempfile::tempdir().unwrap();
@@ -310,7 +294,7 @@ fn a_full_disk_while_writing_shards_fails_naming_the_shard_and_leaves_no_partial
 fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for() {
     let dir = tempfile::tempdir().unwrap();
     let output = dir.path().join("out");
-    let config = demo_config_in(dir.path(), "", "");
+    let config = ConfigSpec::demo().write(dir.path().join("demo.toml"));
     let first = Command::new(BIN)
         .args(build_args(&config, &output))
         .output()
@@ -320,11 +304,12 @@ fn a_full_disk_during_a_rewrite_leaves_no_shard_the_manifest_does_not_vouch_for(
     let before = dataset_files(&dataset);
     // One clip per shard, and a feature change so every row changes (the opt-in columns make
     // the longest shard large enough to pass the limit below).
-    let config = demo_config_in(
-        dir.path(),
-        "shard_bytes = 1024\n",
-        "[features]\ncontact_speed = 0.5\nrotations_6d = true\nvelocities = true\n",
-    );
+    let config = ConfigSpec::demo()
+        .shard_bytes(1024)
+        .set("features.contact_speed", 0.5)
+        .set("features.rotations_6d", true)
+        .set("features.velocities", true)
+        .write(dir.path().join("demo.toml"));
     // About 400 kB: the first single-clip shards fit, a later, longer one (470 kB) does not.
     let run = with_size_limit(800, &build_args(&config, &output));
     assert_eq!(run.status.code(), Some(1), "{}", text(&run.stderr));

@@ -129,15 +129,21 @@ pub(crate) fn run_ok(command: &mut std::process::Command) -> std::process::Outpu
     out
 }
 
+/// The binary set to build the bundled demo (`fixtures/demo.toml`, in place) into `output`; its
+/// dataset folder is `output/demo`. More arguments (`--json`, `--wait`) may follow.
+pub(crate) fn demo_build(output: &Path) -> std::process::Command {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"));
+    command
+        .args(["build", "--config"])
+        .arg(repo().join("fixtures/demo.toml"))
+        .arg("--output")
+        .arg(output);
+    command
+}
+
 /// Builds the demo config into `output` with the binary; its dataset folder is `output/demo`.
 pub(crate) fn build_demo(output: &Path) -> std::process::Output {
-    run_ok(
-        std::process::Command::new(env!("CARGO_BIN_EXE_motionforge"))
-            .args(["build", "--config"])
-            .arg(repo().join("fixtures/demo.toml"))
-            .arg("--output")
-            .arg(output),
-    )
+    run_ok(&mut demo_build(output))
 }
 
 /// The walk, kick and bye takes most LLM-stage tests label.

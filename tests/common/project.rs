@@ -133,6 +133,13 @@ impl ProjectBuilder {
         self.config_toml(text)
     }
 
+    /// The config, rendered from its spec into `path` (a config inside a copied fixture folder,
+    /// whose relative paths are the fixture's).
+    pub(crate) fn config_at(self, path: impl AsRef<Path>, spec: ConfigSpec) -> Self {
+        let text = spec.render();
+        self.file(path, text)
+    }
+
     /// The config as TOML text, written as it is into `build.toml`.
     pub(crate) fn config_toml(self, text: impl Into<String>) -> Self {
         self.file(CONFIG_FILE, text)
@@ -179,8 +186,49 @@ impl ConfigSpec {
         .set("dataset.output", "out")
     }
 
+    /// The bundled demo (`fixtures/demo.toml`) with its inputs' paths made absolute, so that it
+    /// builds from any folder, into `out` beside the config.
+    pub(crate) fn demo() -> ConfigSpec {
+        let fixtures = std::fs::canonicalize(super::repo().join("fixtures")).unwrap();
+        let mut spec = ConfigSpec::from_file(&fixtures.join("demo.toml")).output("out");
+        let absolute = |value: &mut Value| {
+            if let Value::String(path) = value {
+                *path = fixtures.join(&*path).to_string_lossy().into_owned();
+            }
+        };
+        let Some(Value::Array(sources)) = spec.table.get_mut("sources") else {
+            panic!("the demo config has no sources");
+        };
+        for source in sources {
+            if let Some(Value::Array(captures)) = source.get_mut("captures") {
+                captures.iter_mut().for_each(absolute);
+            }
+            if let Some(path) = source.get_mut("labels").and_then(|l| l.get_mut("path")) {
+                absolute(path);
+            }
+        }
+        spec
+    }
+
+    /// A config file as it is (a bundled fixture's), to change and write elsewhere.
+    pub(crate) fn from_file(path: &Path) -> ConfigSpec {
+        let text =
+            std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        ConfigSpec {
+            table: text
+                .parse()
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+        }
+    }
+
+    /// `dataset.name`.
+    pub(crate) fn name(self, name: &str) -> Self {
+        self.set("dataset.name", name)
+    }
+
     /// `dataset.output`.
-    pub(crate) fn output(self, output: &str) -> Self {
+    pub(crate) fn output(self, output: impl AsRef<Path>) -> Self {
+        let output = output.as_ref().to_string_lossy().into_owned();
         self.set("dataset.output", output)
     }
 
@@ -192,6 +240,48 @@ impl ConfigSpec {
     /// `dataset.seed`.
     pub(crate) fn seed(self, seed: i64) -> Self {
         self.set("dataset.seed", seed)
+    }
+
+    /// `dataset.schedule`, when `serve` rebuilds the dataset (a cron expression).
+    pub(crate) fn schedule(self, cron: &str) -> Self {
+        self.set("dataset.schedule", cron)
+    }
+
+    /// `dataset.shard_bytes`, the size a shard is cut at.
+    pub(crate) fn shard_bytes(self, bytes: i64) -> Self {
+        self.set("dataset.shard_bytes", bytes)
+    }
+
+    /// Only the `[[sources]]` entries with these names, in their order.
+    pub(crate) fn only_sources(mut self, names: &[&str]) -> Self {
+        if let Some(Value::Array(sources)) = self.table.get_mut("sources") {
+            sources.retain(|s| {
+                s.get("name")
+                    .and_then(Value::as_str)
+                    .is_some_and(|n| names.contains(&n))
+            });
+        }
+        self
+    }
+
+    /// Sets the value at a dotted key of the `[[sources]]` entry named `source`.
+    pub(crate) fn set_in_source(
+        mut self,
+        source: &str,
+        key: &str,
+        value: impl Into<Value>,
+    ) -> Self {
+        let Some(Value::Array(sources)) = self.table.get_mut("sources") else {
+            panic!("no sources to set {key} in");
+        };
+        let Some(Value::Table(entry)) = sources
+            .iter_mut()
+            .find(|s| s.get("name").and_then(Value::as_str) == Some(source))
+        else {
+            panic!("no source named {source}");
+        };
+        set_dotted(entry, key, value.into());
+        self
     }
 
     /// One more `[[sources]]` entry.
@@ -246,6 +336,13 @@ impl ConfigSpec {
     pub(crate) fn render(&self) -> String {
         toml::to_string(&self.table).unwrap()
     }
+
+    /// Writes the config to `path` (for tests whose folder is not a [`Project`]); returns `path`.
+    pub(crate) fn write(&self, path: impl AsRef<Path>) -> PathBuf {
+        let path = path.as_ref();
+        std::fs::write(path, self.render()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        path.to_path_buf()
+    }
 }
 
 /// One `[[sources]]` entry.
@@ -274,6 +371,35 @@ impl Source {
             "{content}",
             "{content}",
         )
+    }
+
+    /// `licence`, the terms the source's captures are under.
+    pub(crate) fn licence(self, licence: &str) -> Self {
+        self.set("licence", licence)
+    }
+
+    /// `[sources.labels]` of kind `frame_index`: cuts and texts from the index CSV at `path`,
+    /// whose frames are counted at `fps`.
+    pub(crate) fn frame_index_labels(self, path: &str, fps: i64) -> Self {
+        self.set("labels.kind", "frame_index")
+            .set("labels.path", path)
+            .set("labels.fps", fps)
+    }
+
+    /// `[sources.labels]` of kind `babel`: BABEL records at `path`.
+    pub(crate) fn babel_labels(self, path: &str) -> Self {
+        self.set("labels.kind", "babel").set("labels.path", path)
+    }
+
+    /// `[sources.labels]` of kind `event_log`: instruction logs at `path`.
+    pub(crate) fn event_log_labels(self, path: &str) -> Self {
+        self.set("labels.kind", "event_log")
+            .set("labels.path", path)
+    }
+
+    /// `[sources.amass]` with the body models in `body_model`.
+    pub(crate) fn amass(self, body_model: &str) -> Self {
+        self.set("amass.body_model", body_model)
     }
 
     /// `[sources.labels]` of kind `filename`.

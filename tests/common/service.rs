@@ -43,23 +43,9 @@ pub(crate) async fn get(client: &reqwest::Client, url: &str) -> (u16, Value) {
 /// Writes a copy of the demo config into `dir` that builds into `output` (its sources still the
 /// repository's fixtures), for commands such as `serve` that take no `--output`; returns its path.
 pub(crate) fn demo_config_file(dir: &Path, output: &Path) -> PathBuf {
-    let fixtures = super::repo().join("fixtures");
-    let fixtures = fixtures.to_str().unwrap();
-    let mut text = std::fs::read_to_string(super::repo().join("fixtures/demo.toml")).unwrap();
-    assert!(
-        text.contains("output = \"../out\""),
-        "the demo config changed"
-    );
-    text = text.replace(
-        "output = \"../out\"",
-        &format!("output = {:?}", output.to_str().unwrap()),
-    );
-    for folder in ["bandai-namco-1/", "cmu/", "humanml3d/"] {
-        text = text.replace(&format!("\"{folder}"), &format!("\"{fixtures}/{folder}"));
-    }
-    let path = dir.join("demo.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+    super::project::ConfigSpec::demo()
+        .output(output)
+        .write(dir.join("demo.toml"))
 }
 
 /// A `motionforge serve` process on a free loopback port; killed (SIGKILL) when dropped.
