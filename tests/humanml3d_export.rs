@@ -432,16 +432,25 @@ fn an_interrupted_forced_export_leaves_the_old_export_or_the_new_one() {
     let old_ref = dir.path().join("old-ref");
     let new_ref = dir.path().join("new-ref");
     common::run_ok(&mut export_cmd(&small, &old_ref));
-    let started = std::time::Instant::now();
     common::run_ok(&mut export_cmd(&demo, &new_ref));
-    let whole = started.elapsed();
     let (old, new) = (tree(&old_ref), tree(&new_ref));
     assert_ne!(old, new);
 
+    // A whole run as the attempts below make it: the demo's export forced over the small one
+    // (which also removes the old export at its end).
     let out = dir.path().join("out");
+    common::run_ok(&mut export_cmd(&small, &out));
+    let started = std::time::Instant::now();
+    common::run_ok(&mut export_cmd(&demo, &out));
+    let whole = started.elapsed();
     let mut rng = fastrand::Rng::with_seed(30);
     let (mut saw_old, mut saw_new) = (0, 0);
-    for attempt in 0..20 {
+    // At least 20 kills; more, reaching further past a whole run, while one outcome is unseen
+    // (a loaded machine stretches a run's end).
+    for attempt in 0..60u32 {
+        if attempt >= 20 && saw_old > 0 && saw_new > 0 {
+            break;
+        }
         common::run_ok(&mut export_cmd(&small, &out));
         let mut child = export_cmd(&demo, &out)
             .stdout(std::process::Stdio::null())
@@ -449,7 +458,8 @@ fn an_interrupted_forced_export_leaves_the_old_export_or_the_new_one() {
             .spawn()
             .unwrap();
         // Anywhere from the start to a little past a whole run.
-        let delay = whole.mul_f64(rng.f64() * 1.2);
+        let reach = 1.2 + 0.1 * f64::from(attempt.saturating_sub(20));
+        let delay = whole.mul_f64(rng.f64() * reach);
         std::thread::sleep(delay);
         let _ = child.kill();
         child.wait().unwrap();

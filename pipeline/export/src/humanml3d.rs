@@ -276,15 +276,18 @@ struct ClipExport<'a> {
 impl ClipExport<'_> {
     /// Exports the clips of one shard (`rows`, its entries in row order). A row group at a
     /// time: converted and written on all cores, then counted in row order (so Mean and Std do
-    /// not depend on scheduling).
+    /// not depend on scheduling). While a group is converted, the next one is read and decoded
+    /// beside it, so the shard's reading does not leave the cores waiting.
     fn shard<'e>(
         &self,
         shard: &OpenShard,
         rows: &[&'e Entry],
         tally: &mut Tally<'e>,
     ) -> Result<(), ExportError> {
+        let mut groups = read_frames(shard)?;
         let mut next = 0;
-        for frames in read_frames(shard)? {
+        let mut ready = groups.next();
+        while let Some(frames) = ready.take() {
             let frames = frames?;
             let group =
                 rows.get(next..next + frames.len())
@@ -292,17 +295,23 @@ impl ClipExport<'_> {
                         path: shard.path().to_path_buf(),
                     })?;
             next += frames.len();
-            let done: Vec<Result<Result<Done, Skipped>, ExportError>> = group
-                .par_iter()
-                .zip(&frames)
-                .map(|(entry, frames)| self.clip(entry, frames))
-                .collect();
+            let (done, following) = rayon::join(
+                || {
+                    group
+                        .par_iter()
+                        .zip(&frames)
+                        .map(|(entry, frames)| self.clip(entry, frames))
+                        .collect::<Vec<Result<Result<Done, Skipped>, ExportError>>>()
+                },
+                || groups.next(),
+            );
             for (entry, done) in group.iter().zip(done) {
                 match done? {
                     Ok(done) => tally.add(entry, done),
                     Err(skipped) => tally.summary.skipped.push(skipped),
                 }
             }
+            ready = following;
         }
         Ok(())
     }

@@ -190,6 +190,73 @@ fn vectors_alone(out: &Path, repeat: usize) -> Result<VectorsAlone> {
     Ok(alone)
 }
 
+/// Writing the export's files alone: every file of the export in `out` written again, same
+/// relative path and size, into a fresh folder beside it, on the export's thread pool, as the
+/// export writes them (one `fs::write` each); best of `repeat` passes. The bytes are zeros: the
+/// kernel's work for a file does not depend on what it holds, and the export's 1.2 GB need not
+/// be held in memory.
+struct FilesAlone {
+    files: usize,
+    bytes: u64,
+    wall_s: f64,
+    cpu_s: f64,
+}
+
+fn files_alone(out: &Path, repeat: usize) -> Result<FilesAlone> {
+    use rayon::prelude::*;
+    let mut files: Vec<(PathBuf, u64)> = Vec::new();
+    let mut dirs: Vec<PathBuf> = vec![PathBuf::new()];
+    let mut pending = vec![PathBuf::new()];
+    while let Some(rel) = pending.pop() {
+        let dir = out.join(&rel);
+        for entry in
+            std::fs::read_dir(&dir).with_context(|| format!("cannot list {}", dir.display()))?
+        {
+            let entry = entry.with_context(|| format!("cannot list {}", dir.display()))?;
+            let meta = entry.metadata()?;
+            let child = rel.join(entry.file_name());
+            if meta.is_dir() {
+                dirs.push(child.clone());
+                pending.push(child);
+            } else {
+                files.push((child, meta.len()));
+            }
+        }
+    }
+    files.sort();
+    let largest = files.iter().map(|(_, n)| *n).max().unwrap_or(0);
+    let zeros = vec![0u8; usize::try_from(largest)?];
+    let copy = out.with_extension("files-alone");
+    let mut alone = FilesAlone {
+        files: files.len(),
+        bytes: files.iter().map(|(_, n)| n).sum(),
+        wall_s: f64::INFINITY,
+        cpu_s: f64::INFINITY,
+    };
+    for _ in 0..repeat.max(1) {
+        if copy.exists() {
+            std::fs::remove_dir_all(&copy)?;
+        }
+        let cpu0 = process_cpu_seconds();
+        let t0 = Instant::now();
+        for dir in &dirs {
+            std::fs::create_dir_all(copy.join(dir))?;
+        }
+        files.par_iter().try_for_each(|(rel, size)| {
+            let path = copy.join(rel);
+            let size = usize::try_from(*size)
+                .unwrap_or(zeros.len())
+                .min(zeros.len());
+            std::fs::write(&path, &zeros[..size])
+                .with_context(|| format!("cannot write {}", path.display()))
+        })?;
+        alone.wall_s = alone.wall_s.min(t0.elapsed().as_secs_f64());
+        alone.cpu_s = alone.cpu_s.min(process_cpu_seconds() - cpu0);
+    }
+    std::fs::remove_dir_all(&copy)?;
+    Ok(alone)
+}
+
 /// The positions of a `(T, 22, 3)` little-endian float32 `.npy` file as the export writes it
 /// (format 1.0, C order).
 fn joints_npy(path: &Path) -> Result<Vec<glam::DVec3>> {
@@ -255,6 +322,7 @@ pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
         );
     }
     let alone = vectors_alone(&out, repeat)?;
+    let files = files_alone(&out, repeat)?;
     let repeat_arg = repeat.to_string();
     let printed = run_python_script(
         &python,
@@ -274,6 +342,7 @@ pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
         cpu,
         reference,
         alone,
+        files,
         load: (start_load, end_load),
     };
     if ui.json() {
@@ -298,6 +367,7 @@ struct Figures {
     cpu: f64,
     reference: Reference,
     alone: VectorsAlone,
+    files: FilesAlone,
     load: (Option<String>, Option<String>),
 }
 
@@ -318,6 +388,12 @@ impl Figures {
     /// The export's rows per wall second over the reference's.
     fn wall_ratio(&self) -> f64 {
         self.rows_per(self.wall) / self.reference_rows_per(self.reference.wall_s)
+    }
+
+    /// The export's CPU seconds without those of writing its files alone, over the reference's.
+    fn cpu_ratio_without_files(&self) -> f64 {
+        let rest = (self.cpu - self.files.cpu_s).max(1e-9);
+        self.rows_per(rest) / self.reference_rows_per(self.reference.cpu_s)
     }
 
     fn print(&self) -> std::io::Result<()> {
@@ -363,6 +439,22 @@ impl Figures {
             alone_rate,
             alone_rate / self.reference_rows_per(r.cpu_s)
         )?;
+        let files = &self.files;
+        writeln!(
+            out,
+            "files alone: {} files, {:.1} MB written as the export writes them (same paths and sizes, {} threads): {:.3} s wall, {:.3} s CPU",
+            files.files,
+            files.bytes as f64 / 1e6,
+            self.threads,
+            files.wall_s,
+            files.cpu_s
+        )?;
+        writeln!(
+            out,
+            "export without writing its files: {:.3} s CPU, {:.2}x the reference per CPU second",
+            self.cpu - files.cpu_s,
+            self.cpu_ratio_without_files()
+        )?;
         writeln!(
             out,
             "agreement: max |export - reference| {:.2e} over {} rows; {} clips of another shape",
@@ -406,6 +498,13 @@ impl Figures {
                 "cpu_s": self.alone.cpu_s,
                 "rows_per_cpu_second": self.alone.rows as f64 / self.alone.cpu_s.max(1e-9),
             },
+            "files_alone": {
+                "files": self.files.files,
+                "bytes": self.files.bytes,
+                "wall_s": self.files.wall_s,
+                "cpu_s": self.files.cpu_s,
+            },
+            "ratio_per_cpu_second_without_files": self.cpu_ratio_without_files(),
             "ratio_per_cpu_second": self.cpu_ratio(),
             "ratio_per_wall_second": self.wall_ratio(),
             "agreement": {
