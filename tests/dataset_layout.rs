@@ -329,3 +329,71 @@ fn one_thread_and_two_threads_write_the_same_shards() {
         fs::read(two.join("manifest.json")).unwrap()
     );
 }
+
+/// With more threads than shards, a shard's row groups are read and encoded side by side
+/// (issue 34): the groups are still cut at the same rows, so a shard of several row groups is
+/// the same bytes on 1 thread and on 16.
+#[test]
+fn row_groups_encoded_side_by_side_write_the_same_shards() {
+    let data = common::shared_data().join("bandai-namco-1").join("data");
+    let mut stems: Vec<String> = fs::read_dir(&data)
+        .unwrap()
+        .filter_map(|e| {
+            let name = e.unwrap().file_name().to_string_lossy().into_owned();
+            name.strip_suffix(".bvh").map(str::to_string)
+        })
+        .collect();
+    stems.sort();
+    // Every other capture: enough rows, with mirrors, for several row groups of 64 in a shard.
+    let stems: Vec<&str> = stems
+        .iter()
+        .step_by(2)
+        .take(100)
+        .map(String::as_str)
+        .collect();
+    let built: Vec<(Project, std::path::PathBuf)> = ["1", "16"]
+        .into_iter()
+        .map(|threads| {
+            let project = Project::new()
+                .captures("bandai-namco-1", &stems)
+                .config(
+                    ConfigSpec::new("groups")
+                        .mirror(true)
+                        .synthetic(true)
+                        .source(Source::bandai1("bandai")),
+                )
+                .build();
+            run_ok(
+                project
+                    .motionforge(&["build", "--config", "build.toml", "-q"])
+                    .env("RAYON_NUM_THREADS", threads),
+            );
+            let dataset = project.dataset();
+            (project, dataset)
+        })
+        .collect();
+    let (one, many) = (&built[0].1, &built[1].1);
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&fs::read(one.join("manifest.json")).unwrap()).unwrap();
+    let most_rows = manifest["splits"]
+        .as_object()
+        .unwrap()
+        .values()
+        .flat_map(|split| split["shards"].as_array().unwrap())
+        .map(|s| s["rows"].as_u64().unwrap())
+        .max()
+        .unwrap();
+    assert!(most_rows > 128, "the largest shard has {most_rows} rows");
+    assert_eq!(shards(one).len(), shards(many).len());
+    for (a, b) in shards(one).iter().zip(shards(many)) {
+        assert!(
+            fs::read(a).unwrap() == fs::read(&b).unwrap(),
+            "{} differs between 1 and 16 threads",
+            a.file_name().unwrap().to_string_lossy()
+        );
+    }
+    assert_eq!(
+        fs::read(one.join("manifest.json")).unwrap(),
+        fs::read(many.join("manifest.json")).unwrap()
+    );
+}

@@ -21,6 +21,7 @@ use motionforge_format::io::parquet::{
 };
 use motionforge_sources::clip::{Clip, Split};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// What the last write recorded: its inputs' fingerprint, each shard's content fingerprint, and
 /// the outputs' checksums with their stat data.
@@ -287,6 +288,8 @@ struct ShardJob<'a> {
     /// Whether normalisation statistics are gathered (over every split; each profile then takes
     /// the training split's, or the first split's that holds it).
     stats: bool,
+    /// Shards being written now ([`groups_in_flight`]).
+    active: AtomicUsize,
 }
 
 /// What writing (or keeping) one shard gave.
@@ -342,8 +345,8 @@ impl ShardJob<'_> {
         let (sha256, bytes) = match kept {
             Some(kept) => {
                 if let Some(stats) = &mut stats {
-                    self.each_row_group(&rows, |rows| {
-                        rows.iter().for_each(|r| stats.add_row(r));
+                    self.each_row_group(&rows, |groups| {
+                        groups.iter().flatten().for_each(|r| stats.add_row(r));
                         Ok(())
                     })
                     .map_err(|e| e.into_build(self.output.join(&plan.file)))?;
@@ -382,14 +385,17 @@ impl ShardJob<'_> {
                     self.skeletons_json,
                     self.companions.zstd_level,
                 )?;
-                self.each_row_group(clips, |rows| {
+                self.each_row_group(clips, |groups| {
                     if let Some(stats) = stats.as_deref_mut() {
-                        rows.iter().for_each(|r| stats.add_row(r));
+                        groups.iter().flatten().for_each(|r| stats.add_row(r));
                     }
-                    // The rows' arrays are copied into the batch: let them go before encoding.
-                    let batch = rows_to_batch(&rows)?;
-                    drop(rows);
-                    Ok(writer.write_batch(&batch)?)
+                    // The rows' arrays are copied into the batches: let them go before encoding.
+                    let batches = groups
+                        .par_iter()
+                        .map(|rows| rows_to_batch(rows))
+                        .collect::<Result<Vec<_>, _>>()?;
+                    drop(groups);
+                    Ok(writer.write_batches(&batches)?)
                 })?;
                 let (_, sha256, bytes) = writer.finish()?.finish();
                 Ok::<_, TableOrBuild>((sha256, bytes))
@@ -415,23 +421,34 @@ impl ShardJob<'_> {
         })
     }
 
-    /// Calls `each` with the shard's rows, one row group at a time, in row order. A group's
-    /// frames are read in storage order (neighbours on disk together) and its rows prepared on
-    /// all cores; while `each` takes a group (the writer encodes it), the next group is read and
-    /// prepared beside it, so a shard's reading and encoding overlap instead of taking turns.
+    /// Calls `each` with the shard's rows, a few row groups at a time ([`groups_in_flight`]), in
+    /// row order. A group's frames are read in storage order (neighbours on disk together) and
+    /// its rows prepared on all cores, the groups of a window side by side; while `each` takes a
+    /// window (the writer encodes its groups), the next window is read and prepared beside it, so
+    /// a shard's reading and encoding overlap instead of taking turns.
     fn each_row_group(
         &self,
         clips: &[(Clip, MotionRef)],
-        mut each: impl FnMut(Vec<Row<'_>>) -> Result<(), TableOrBuild> + Send,
+        mut each: impl FnMut(Vec<Vec<Row<'_>>>) -> Result<(), TableOrBuild> + Send,
     ) -> Result<(), TableOrBuild> {
-        // Each shard reads with its own recent-entry memory, so parallel shards do not evict
-        // each other's chunks.
-        let motions = self.table.motions.sibling();
-        let mut ready: Option<Vec<Row<'_>>> = None;
-        for group in clips.chunks(ROWS_PER_GROUP) {
+        let _active = Active::enter(&self.active);
+        // Each slot of a window reads with its own recent-entry memory, so parallel shards and
+        // groups do not evict each other's chunks.
+        let mut motions = vec![self.table.motions.sibling()];
+        let mut ready: Option<Vec<Vec<Row<'_>>>> = None;
+        let mut at = 0;
+        while at < clips.len() {
+            let width = groups_in_flight(self.active.load(Ordering::Relaxed));
+            while motions.len() < width {
+                motions.push(self.table.motions.sibling());
+            }
+            // Windows are whole row groups from the shard's start, so the groups (and the
+            // file's bytes) do not depend on the width.
+            let window = &clips[at..clips.len().min(at + ROWS_PER_GROUP * width)];
+            at += window.len();
             let (done, rows) = match ready.take() {
-                Some(rows) => rayon::join(|| each(rows), || self.group_rows(&motions, group)),
-                None => (Ok(()), self.group_rows(&motions, group)),
+                Some(rows) => rayon::join(|| each(rows), || self.window_rows(&motions, window)),
+                None => (Ok(()), self.window_rows(&motions, window)),
             };
             done?;
             ready = Some(rows?);
@@ -440,6 +457,20 @@ impl ShardJob<'_> {
             Some(rows) => each(rows),
             None => Ok(()),
         }
+    }
+
+    /// The rows of a window's row groups, side by side, each group read through its own slot
+    /// of `motions`.
+    fn window_rows<'c>(
+        &self,
+        motions: &[crate::motions::MotionSource],
+        window: &'c [(Clip, MotionRef)],
+    ) -> Result<Vec<Vec<Row<'c>>>, TableOrBuild> {
+        window
+            .par_chunks(ROWS_PER_GROUP)
+            .zip(motions.par_iter())
+            .map(|(group, motions)| self.group_rows(motions, group))
+            .collect()
     }
 
     /// One row group's rows: its frames read in storage order, its rows made on all cores.
@@ -482,6 +513,33 @@ impl ShardJob<'_> {
                 Ok(Row::new(clip, motion, profile, &self.companions.features))
             })
             .collect::<Result<Vec<Row<'c>>, TableOrBuild>>()
+    }
+}
+
+/// How many row groups of a shard are read, prepared and encoded side by side while `active`
+/// shards are being written: the pool's threads shared among them, two threads a group (a
+/// group's columns keep about 2.3 cores busy: three frame arrays hold 95% of its bytes), at
+/// least one and at most eight. One on 2 cores, as before; when the largest shard is the last
+/// one left on 16 cores, eight, so it does not bound the stage alone. The groups in flight, and
+/// the memory they hold (rows, batch, encoded chunks), then grow with the threads, not with
+/// threads times shards.
+fn groups_in_flight(active: usize) -> usize {
+    (rayon::current_num_threads() / (2 * active.max(1))).clamp(1, 8)
+}
+
+/// Counts a shard as being written while it lives.
+struct Active<'a>(&'a AtomicUsize);
+
+impl<'a> Active<'a> {
+    fn enter(count: &'a AtomicUsize) -> Active<'a> {
+        count.fetch_add(1, Ordering::Relaxed);
+        Active(count)
+    }
+}
+
+impl Drop for Active<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
     }
 }
 
@@ -548,6 +606,7 @@ pub(super) fn write_outputs(
         output,
         staging: &staging,
         stats: with_stats,
+        active: AtomicUsize::new(0),
     };
     // Shards are written on all cores; their results are taken in shard order, so the manifest,
     // the merged statistics and the error reported (the first shard's that failed) are the same

@@ -989,60 +989,37 @@ impl<W: Write + Send> ShardWriter<W> {
     /// rows, as `ArrowWriter` cuts it: the caller can let the rows go before the encoder's
     /// buffers grow.
     pub fn write_batch(&mut self, batch: &RecordBatch) -> Result<(), TableError> {
-        let mut start = 0;
-        while start < batch.num_rows() {
-            let rows = ROWS_PER_GROUP.min(batch.num_rows() - start);
-            self.write_group(&batch.slice(start, rows))?;
-            start += rows;
-        }
-        Ok(())
+        self.write_batches(std::slice::from_ref(batch))
     }
 
-    /// One row group: the leaves' levels and the leaves' encoding (zstd included) on all the
-    /// pool's threads, the chunks appended in schema order on this one.
-    fn write_group(&mut self, batch: &RecordBatch) -> Result<(), TableError> {
+    /// Encodes the batches as [`write_batch`](Self::write_batch) would one after the other, but
+    /// every row group of them at once on the pool's threads (each group's leaves too); the
+    /// groups are then appended in order, so the file is the same bytes.
+    pub fn write_batches(&mut self, batches: &[RecordBatch]) -> Result<(), TableError> {
         use rayon::prelude::*;
-        let fields = self.schema.fields();
-        if batch.num_columns() != fields.len() {
-            return Err(ParquetError::General(format!(
-                "a batch of {} columns for a table of {}",
-                batch.num_columns(),
-                fields.len()
-            ))
-            .into());
-        }
-        let writers = self
-            .columns
-            .create_column_writers(self.file.flushed_row_groups().len())?;
-        let leaves = fields
-            .as_ref()
-            .par_iter()
-            .zip(batch.columns().par_iter())
-            .map(|(field, column)| compute_leaves(field, column))
-            .collect::<Result<Vec<Vec<ArrowLeafColumn>>, ParquetError>>()?;
-        let leaves: Vec<ArrowLeafColumn> = leaves.into_iter().flatten().collect();
-        if leaves.len() != writers.len() {
-            return Err(ParquetError::General(format!(
-                "{} leaf columns for {} column writers",
-                leaves.len(),
-                writers.len()
-            ))
-            .into());
-        }
-        let chunks = writers
-            .into_par_iter()
-            .zip(leaves.par_iter())
-            .map(|(mut writer, leaf)| {
-                writer.write(leaf)?;
-                writer.close()
+        let groups: Vec<RecordBatch> = batches
+            .iter()
+            .flat_map(|batch| {
+                (0..batch.num_rows())
+                    .step_by(ROWS_PER_GROUP)
+                    .map(|start| batch.slice(start, ROWS_PER_GROUP.min(batch.num_rows() - start)))
             })
-            .collect::<Result<Vec<ArrowColumnChunk>, ParquetError>>()?;
-        drop(leaves);
-        let mut group = self.file.next_row_group()?;
-        for chunk in chunks {
-            chunk.append_to_row_group(&mut group)?;
+            .collect();
+        let first = self.file.flushed_row_groups().len();
+        let (columns, schema) = (&self.columns, &self.schema);
+        let encoded = groups
+            .par_iter()
+            .enumerate()
+            .map(|(i, group)| encode_group(columns, schema, group, first + i))
+            .collect::<Result<Vec<_>, TableError>>()?;
+        drop(groups);
+        for chunks in encoded {
+            let mut group = self.file.next_row_group()?;
+            for chunk in chunks {
+                chunk.append_to_row_group(&mut group)?;
+            }
+            group.close()?;
         }
-        group.close()?;
         Ok(())
     }
 
@@ -1050,6 +1027,50 @@ impl<W: Write + Send> ShardWriter<W> {
     pub fn finish(self) -> Result<W, TableError> {
         Ok(self.file.into_inner()?)
     }
+}
+
+/// One row group's column chunks: the leaves' levels and the leaves' encoding (zstd included)
+/// on all the pool's threads. `index` is the group's place in the file.
+fn encode_group(
+    columns: &ArrowRowGroupWriterFactory,
+    schema: &SchemaRef,
+    batch: &RecordBatch,
+    index: usize,
+) -> Result<Vec<ArrowColumnChunk>, TableError> {
+    use rayon::prelude::*;
+    let fields = schema.fields();
+    if batch.num_columns() != fields.len() {
+        return Err(ParquetError::General(format!(
+            "a batch of {} columns for a table of {}",
+            batch.num_columns(),
+            fields.len()
+        ))
+        .into());
+    }
+    let writers = columns.create_column_writers(index)?;
+    let leaves = fields
+        .as_ref()
+        .par_iter()
+        .zip(batch.columns().par_iter())
+        .map(|(field, column)| compute_leaves(field, column))
+        .collect::<Result<Vec<Vec<ArrowLeafColumn>>, ParquetError>>()?;
+    let leaves: Vec<ArrowLeafColumn> = leaves.into_iter().flatten().collect();
+    if leaves.len() != writers.len() {
+        return Err(ParquetError::General(format!(
+            "{} leaf columns for {} column writers",
+            leaves.len(),
+            writers.len()
+        ))
+        .into());
+    }
+    Ok(writers
+        .into_par_iter()
+        .zip(leaves.par_iter())
+        .map(|(mut writer, leaf)| {
+            writer.write(leaf)?;
+            writer.close()
+        })
+        .collect::<Result<Vec<ArrowColumnChunk>, ParquetError>>()?)
 }
 
 /// Streams clips with their frames into a Parquet file, one row group at a time, at the default
