@@ -78,27 +78,28 @@ impl Ledger {
     }
 
     /// Why an item whose stamp is `now` is not in the cache, compared with the last run.
-    pub fn why(&self, stage: &str, key: &str, now: &Stamp) -> String {
+    pub fn why(&self, stage: &str, key: &str, now: &Stamp) -> crate::plan::StaleReason {
+        use crate::plan::StaleReason;
         let Some(before) = self.stages.get(stage).and_then(|s| s.entries.get(key)) else {
-            return "new".to_string();
+            return StaleReason::New;
         };
-        let changed: Vec<&str> = now
+        let changed: Vec<String> = now
             .parts
             .iter()
             .filter(|(name, digest)| before.parts.get(*name) != Some(*digest))
-            .map(|(name, _)| name.as_str())
+            .map(|(name, _)| name.clone())
             .chain(
                 before
                     .parts
                     .keys()
                     .filter(|name| !now.parts.contains_key(*name))
-                    .map(String::as_str),
+                    .cloned(),
             )
             .collect();
         if changed.is_empty() {
-            "cache entry missing (cleaned or pruned)".to_string()
+            StaleReason::CacheEntryMissing
         } else {
-            format!("changed: {}", changed.join(", "))
+            StaleReason::Changed(changed)
         }
     }
 }
