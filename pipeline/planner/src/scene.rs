@@ -76,8 +76,9 @@ pub enum SceneError {
         /// 1-based line, where known.
         line: Option<usize>,
         /// The parser's error. Not a `#[source]`: the message quotes its short form, and its
-        /// full form (the file's lines) would be appended by whatever prints the causes.
-        error: toml::de::Error,
+        /// full form (the file's lines) would be appended by whatever prints the causes. Boxed:
+        /// it is large, and errors are rare.
+        error: Box<toml::de::Error>,
     },
     /// The file is TOML but not of the scene's shape.
     #[error("scene {}{}: {}{}", path.display(), at_line(*line), key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default(), error.message().trim_end())]
@@ -88,8 +89,9 @@ pub enum SceneError {
         line: Option<usize>,
         /// The dotted key of the value, `None` for the whole file.
         key: Option<String>,
-        /// What the reader expected there (not a `#[source]`, as for [`SceneError::Syntax`]).
-        error: toml::de::Error,
+        /// What the reader expected there (not a `#[source]`, and boxed, as for
+        /// [`SceneError::Syntax`]).
+        error: Box<toml::de::Error>,
     },
     /// Values parse but are not acceptable: every problem found.
     #[error("{}", invalid_message(path, problems, *unlisted))]
@@ -527,7 +529,7 @@ impl Scene {
         let tree = toml::de::DeTable::parse(text).map_err(|error| SceneError::Syntax {
             path: path.to_path_buf(),
             line: error.span().map(|s| line_of(text, s.start)),
-            error,
+            error: Box::new(error),
         })?;
         // The tree goes into the deserializer whole (no copy kept: it is the largest thing
         // reading holds); lines are looked up in a second parse, only if there is a problem.
@@ -546,7 +548,7 @@ impl Scene {
                 path: path.to_path_buf(),
                 line,
                 key,
-                error: e.into_inner(),
+                error: Box::new(e.into_inner()),
             }
         })?;
         let mut problems = Problems {

@@ -306,7 +306,7 @@ pub(crate) fn write_figures(
     for spec in &FIGURES {
         let fail = |problem: FigureProblem| ReportError::Figure {
             figure: spec.stem.to_string(),
-            problem,
+            problem: Box::new(problem),
         };
         let mut svg = String::new();
         {

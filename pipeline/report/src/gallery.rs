@@ -15,7 +15,7 @@ const SIZE: u32 = 200;
 fn gallery_err(problem: impl Into<FigureProblem>) -> ReportError {
     ReportError::Figure {
         figure: "gallery".into(),
-        problem: problem.into(),
+        problem: Box::new(problem.into()),
     }
 }
 

@@ -203,8 +203,8 @@ pub enum ReportError {
     Figure {
         /// The figure's file stem (`gallery` for the gallery).
         figure: String,
-        /// What failed.
-        problem: FigureProblem,
+        /// What failed (boxed: a dataset error is large, and this is the rare case).
+        problem: Box<FigureProblem>,
     },
     /// The bundled font could not be registered with the plotting library.
     #[error("the bundled font could not be loaded")]
