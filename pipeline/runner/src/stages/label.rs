@@ -440,13 +440,13 @@ pub struct ImportReport {
 pub enum ImportError {
     /// The file is not a JSON object of text -> answers.
     #[error(
-        "{file}: expected a JSON object of action text -> [answer, ...] (SINC's gpt3-labels-list.json): {message}"
+        "{file}: expected a JSON object of action text -> [answer, ...] (SINC's gpt3-labels-list.json): {source}"
     )]
     Format {
         /// The file.
         file: String,
-        /// What was wrong.
-        message: String,
+        /// The reader's error.
+        source: serde_json::Error,
     },
     /// A prompt does not render.
     #[error(transparent)]
@@ -469,12 +469,11 @@ pub fn import_answers(
     llm: &LlmConfig,
     cache: &mut ResponseCache,
 ) -> Result<ImportReport, ImportError> {
-    let format = |message: String| ImportError::Format {
-        file: file.to_string(),
-        message,
-    };
     let map: BTreeMap<String, Vec<String>> =
-        serde_json::from_str(json).map_err(|e| format(e.to_string()))?;
+        serde_json::from_str(json).map_err(|source| ImportError::Format {
+            file: file.to_string(),
+            source,
+        })?;
     let mut report = ImportReport::default();
     let mut batch: Vec<(
         motionforge_llm::cache::CacheKey,
