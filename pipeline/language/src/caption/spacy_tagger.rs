@@ -313,15 +313,12 @@ impl SpacyTagger {
         let header: Header =
             serde_json::from_slice(&bytes[..split]).map_err(SpacyModelError::Header)?;
         if header.format != FORMAT || header.dtype != "f16le" {
-            return Err(SpacyModelError::Format {
-                format: header.format,
-                dtype: header.dtype,
-            });
+            let (format, dtype) = (header.format, header.dtype);
+            return Err(SpacyModelError::Format { format, dtype });
         }
         if header.attrs != ATTRS || header.seeds.len() != ATTRS.len() {
-            return Err(SpacyModelError::Attrs {
-                attrs: header.attrs,
-            });
+            let attrs = header.attrs;
+            return Err(SpacyModelError::Attrs { attrs });
         }
         let body = &bytes[split + 1..];
         // Check the sizes the header claims against the bytes there before allocating anything.
