@@ -3,7 +3,7 @@
 
 use crate::common;
 
-use motionforge::build::{BuildOptions, Plan, Stage, build, plan, status};
+use motionforge::build::{BuildOptions, Plan, Stage, StaleReason, build, plan, status};
 use motionforge::config::Config;
 
 use common::project::Project;
@@ -37,12 +37,12 @@ fn plan_names_new_captures_then_nothing_after_a_build() {
     let before = plan(&config, &BuildOptions::default()).unwrap();
     let ingest = stage(&before, Stage::Ingest);
     assert_eq!(ingest.to_run, 9, "{before:#?}");
-    assert_eq!(ingest.reasons.get("new"), Some(&9));
+    assert_eq!(ingest.reasons.get(&StaleReason::New), Some(&9));
     // Nothing past ingest can be known before it runs.
     assert!(
         stage(&before, Stage::Write)
             .reasons
-            .contains_key("ingest re-runs first")
+            .contains_key(&StaleReason::Upstream(Stage::Ingest))
     );
     // Planning computed and wrote nothing.
     assert!(!config.dataset_dir().join("data").exists());
@@ -74,7 +74,7 @@ fn plan_says_which_config_key_changed_and_the_build_agrees() {
     let compose = stage(&p, Stage::Compose);
     assert_eq!(
         compose.reasons.keys().collect::<Vec<_>>(),
-        ["changed: config dataset.seed"]
+        [&StaleReason::Changed(vec!["config dataset.seed".into()])]
     );
     let report = build(&config, &BuildOptions::default()).unwrap();
     assert_eq!(ran(&report, "mirror"), 0);
@@ -98,7 +98,7 @@ fn plan_names_the_capture_whose_file_changed() {
     assert_eq!(ingest.to_run, 1, "{p:#?}");
     assert_eq!(
         ingest.reasons.keys().collect::<Vec<_>>(),
-        ["changed: file content"]
+        [&StaleReason::Changed(vec!["file content".into()])]
     );
     assert!(ingest.examples[0].contains("dataset-1_kick_normal_001.bvh"));
     let report = build(&config, &BuildOptions::default()).unwrap();

@@ -89,7 +89,7 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
                 stage
                     .reasons
                     .keys()
-                    .map(String::as_str)
+                    .map(ToString::to_string)
                     .collect::<Vec<_>>()
                     .join(", ")
             )?;

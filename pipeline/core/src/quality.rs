@@ -105,24 +105,70 @@ impl Default for Thresholds {
     }
 }
 
+/// A plausibility check a clip can fail, named as the build report counts it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Check {
+    /// [`Plausibility::foot_skate`] above [`Thresholds::max_foot_skate`].
+    FootSkating,
+    /// [`Plausibility::ground_penetration`] above [`Thresholds::max_ground_penetration`].
+    GroundPenetration,
+    /// [`Plausibility::self_distance`] below [`Thresholds::min_self_distance`].
+    SelfPenetration,
+    /// [`Plausibility::lean`] above [`Thresholds::max_lean`].
+    Lean,
+}
+
+impl Check {
+    /// Every check, in the order they are made.
+    pub const ALL: &'static [Check] = &[
+        Check::FootSkating,
+        Check::GroundPenetration,
+        Check::SelfPenetration,
+        Check::Lean,
+    ];
+
+    /// The check's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Check::FootSkating => "foot_skating",
+            Check::GroundPenetration => "ground_penetration",
+            Check::SelfPenetration => "self_penetration",
+            Check::Lean => "lean",
+        }
+    }
+}
+
+impl std::fmt::Display for Check {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 impl Plausibility {
-    /// The reasons the clip fails `t`, in a fixed order: `foot_skating`, `ground_penetration`,
-    /// `self_penetration`, `lean`. Empty for a plausible clip. A metric that is NaN fails.
-    pub fn failures(&self, t: &Thresholds) -> Vec<&'static str> {
+    /// The checks the clip fails against `t`, in the order of [`Check::ALL`]. Empty for a
+    /// plausible clip. A metric that is NaN fails.
+    pub fn failed_checks(&self, t: &Thresholds) -> Vec<Check> {
         let mut out = Vec::new();
         if !at_most(self.foot_skate, t.max_foot_skate) {
-            out.push("foot_skating");
+            out.push(Check::FootSkating);
         }
         if !at_most(self.ground_penetration, t.max_ground_penetration) {
-            out.push("ground_penetration");
+            out.push(Check::GroundPenetration);
         }
         if !at_most(t.min_self_distance, self.self_distance) {
-            out.push("self_penetration");
+            out.push(Check::SelfPenetration);
         }
         if !at_most(self.lean, t.max_lean) {
-            out.push("lean");
+            out.push(Check::Lean);
         }
         out
+    }
+
+    /// The names of the checks the clip fails `t`, in a fixed order: `foot_skating`,
+    /// `ground_penetration`, `self_penetration`, `lean`. Empty for a plausible clip. A metric
+    /// that is NaN fails.
+    pub fn failures(&self, t: &Thresholds) -> Vec<&'static str> {
+        self.failed_checks(t).into_iter().map(Check::name).collect()
     }
 }
 

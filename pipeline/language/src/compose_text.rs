@@ -368,11 +368,17 @@ struct Words {
 
 /// Why the composer's word file cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("schemas/compose_text.toml: {0}")]
-pub struct WordsError(String);
+pub enum WordsError {
+    /// The file does not parse or has unknown keys.
+    #[error("schemas/compose_text.toml: {0}")]
+    Toml(#[source] toml::de::Error),
+    /// A list the composer cannot do without is empty.
+    #[error("schemas/compose_text.toml: `verbs` must not be empty, nor any `subjects` phrase")]
+    Empty,
+}
 
 fn load_words(text: &str) -> Result<Words, WordsError> {
-    let f: WordFile = toml::from_str(text).map_err(|e| WordsError(e.to_string()))?;
+    let f: WordFile = toml::from_str(text).map_err(WordsError::Toml)?;
     let list = |v: Vec<String>| -> Vec<&'static str> {
         v.into_iter().map(motionforge_core::base::leak).collect()
     };
@@ -405,9 +411,7 @@ fn load_words(text: &str) -> Result<Words, WordsError> {
             .collect(),
     };
     if words.verbs.is_empty() || words.subjects.iter().any(Vec::is_empty) {
-        return Err(WordsError(
-            "`verbs` must not be empty, nor any `subjects` phrase".into(),
-        ));
+        return Err(WordsError::Empty);
     }
     Ok(words)
 }

@@ -35,12 +35,12 @@ pub enum CacheError {
         source: std::io::Error,
     },
     /// A record could not be encoded as JSON.
-    #[error("{path}: cannot encode cache record: {message}")]
+    #[error("{path}: cannot encode cache record: {source}")]
     Encode {
         /// The cache file.
         path: PathBuf,
-        /// The encoder's message.
-        message: String,
+        /// The encoder's error.
+        source: serde_json::Error,
     },
 }
 
@@ -284,12 +284,12 @@ impl ResponseCache {
     pub fn insert_many(&mut self, entries: Vec<(CacheKey, CacheEntry)>) -> Result<(), CacheError> {
         let mut buffer = Vec::new();
         for (key, entry) in &entries {
-            serde_json::to_writer(&mut buffer, &RecordOut { key: &key.0, entry }).map_err(|e| {
-                CacheError::Encode {
+            serde_json::to_writer(&mut buffer, &RecordOut { key: &key.0, entry }).map_err(
+                |source| CacheError::Encode {
                     path: self.path.clone(),
-                    message: e.to_string(),
-                }
-            })?;
+                    source,
+                },
+            )?;
             buffer.push(b'\n');
         }
         let written = self

@@ -203,7 +203,8 @@ impl LlmConfig {
     }
 }
 
-/// Errors of the LLM client. Cloneable because one result answers every duplicate of a prompt.
+/// Errors of the LLM client. Cloneable because one result answers every duplicate of a prompt:
+/// so a lower layer's error (reqwest's, I/O's, the cache's; none is `Clone`) is kept as its text.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum LlmError {
     /// A config value is out of range.
@@ -296,12 +297,34 @@ pub enum LlmError {
         /// The cache error.
         message: String,
     },
-    /// The async runtime or HTTP client could not be set up, or a request task died.
-    #[error("LLM client: {message}")]
-    Internal {
-        /// What failed.
+    /// The async runtime could not be started.
+    #[error("LLM client: cannot start the async runtime: {message}")]
+    Runtime {
+        /// The I/O error's text (kept as text: the error is cloned, and `std::io::Error` is not
+        /// `Clone`).
         message: String,
     },
+    /// The HTTP client could not be built.
+    #[error("LLM client: cannot build the HTTP client: {message}")]
+    HttpClient {
+        /// reqwest's message (kept as text: `reqwest::Error` is not `Clone`).
+        message: String,
+    },
+    /// The task driving the requests (or the probe) panicked.
+    #[error("LLM client: {} driver panicked", if *.probe { "probe" } else { "request" })]
+    DriverPanicked {
+        /// True for the probe, false for the requests.
+        probe: bool,
+    },
+    /// The client's runtime was shut down before the call.
+    #[error("LLM client: runtime already shut down")]
+    ShutDown,
+    /// The semaphore bounding concurrent requests was closed under a request.
+    #[error("LLM client: request semaphore closed")]
+    SemaphoreClosed,
+    /// A request task ended without handing back its result.
+    #[error("LLM client: request task ended without a result")]
+    TaskLost,
 }
 
 impl LlmError {
@@ -477,8 +500,8 @@ impl LlmClient {
             .thread_name("motionforge-llm")
             .enable_all()
             .build()
-            .map_err(|e| LlmError::Internal {
-                message: format!("cannot start the async runtime: {e}"),
+            .map_err(|e| LlmError::Runtime {
+                message: e.to_string(),
             })?;
         // reqwest's connector registers with the runtime it is built in.
         let http = {
@@ -486,8 +509,8 @@ impl LlmClient {
             reqwest::Client::builder()
                 .user_agent(concat!("motionforge/", env!("CARGO_PKG_VERSION")))
                 .build()
-                .map_err(|e| LlmError::Internal {
-                    message: format!("cannot build the HTTP client: {e}"),
+                .map_err(|e| LlmError::HttpClient {
+                    message: e.to_string(),
                 })?
         };
 
@@ -556,28 +579,20 @@ impl LlmClient {
         observe: &(dyn Fn(RequestEvent) + Sync),
     ) -> Vec<Result<Answer, LlmError>> {
         self.block(
-            || internal_errors(prompts.len(), "request driver panicked"),
+            || failed_all(prompts.len(), LlmError::DriverPanicked { probe: false }),
             || self.run(prompts, cache, observe),
         )
-        .unwrap_or_else(|| internal_errors(prompts.len(), "runtime already shut down"))
+        .unwrap_or_else(|| failed_all(prompts.len(), LlmError::ShutDown))
     }
 
     /// Asks the endpoint for its model list (`GET {base_url}/models`, at most 5 s). Any HTTP answer
     /// shows that a server listens; only a connection failure or silence is an error.
     pub fn probe(&self) -> Result<Probe, LlmError> {
         self.block(
-            || {
-                Err(LlmError::Internal {
-                    message: "probe driver panicked".into(),
-                })
-            },
+            || Err(LlmError::DriverPanicked { probe: true }),
             || self.shared.probe(),
         )
-        .unwrap_or_else(|| {
-            Err(LlmError::Internal {
-                message: "runtime already shut down".into(),
-            })
-        })
+        .unwrap_or(Err(LlmError::ShutDown))
     }
 
     /// Runs `work` on the client's runtime; on a helper thread when called inside another runtime
@@ -657,9 +672,7 @@ impl LlmClient {
             tokio::spawn(async move {
                 let result = match shared.semaphore.acquire().await {
                     Ok(_permit) => shared.request(&prompt).await,
-                    Err(_) => Err(LlmError::Internal {
-                        message: "request semaphore closed".into(),
-                    }),
+                    Err(_) => Err(LlmError::SemaphoreClosed),
                 };
                 let _ = tx.send((slot, result));
             });
@@ -709,13 +722,7 @@ impl LlmClient {
 fn finish(results: Vec<Option<Result<Answer, LlmError>>>) -> Vec<Result<Answer, LlmError>> {
     results
         .into_iter()
-        .map(|r| {
-            r.unwrap_or_else(|| {
-                Err(LlmError::Internal {
-                    message: "request task ended without a result".into(),
-                })
-            })
-        })
+        .map(|r| r.unwrap_or(Err(LlmError::TaskLost)))
         .collect()
 }
 
@@ -728,13 +735,8 @@ impl Drop for LlmClient {
     }
 }
 
-fn internal_errors(n: usize, message: &str) -> Vec<Result<Answer, LlmError>> {
-    vec![
-        Err(LlmError::Internal {
-            message: message.to_string(),
-        });
-        n
-    ]
+fn failed_all(n: usize, error: LlmError) -> Vec<Result<Answer, LlmError>> {
+    vec![Err(error); n]
 }
 
 /// Why one attempt failed, before the attempt count is known.
@@ -745,8 +747,31 @@ enum Failure {
         retry_after: Option<f64>,
     },
     Timeout,
-    Transport(String),
-    Bad(String),
+    Transport(reqwest::Error),
+    Bad(BadAnswer),
+}
+
+/// Why a success response holds no usable answer.
+#[derive(Debug, thiserror::Error)]
+enum BadAnswer {
+    #[error("body is not JSON ({source}): {preview}")]
+    NotJson {
+        source: serde_json::Error,
+        /// The start of the body.
+        preview: String,
+    },
+    #[error("no choices in response: {preview}")]
+    NoChoices {
+        /// The start of the body.
+        preview: String,
+    },
+    #[error("{field} is missing or not a string: {preview}")]
+    NoText {
+        /// Where the answer should be (`choices[0].text`...).
+        field: &'static str,
+        /// The start of the first choice.
+        preview: String,
+    },
 }
 
 impl Failure {
@@ -771,8 +796,14 @@ impl Failure {
                 attempts,
             },
             Failure::Timeout => LlmError::Timeout { attempts },
-            Failure::Transport(message) => LlmError::Connect { message, attempts },
-            Failure::Bad(message) => LlmError::BadResponse { message, attempts },
+            Failure::Transport(e) => LlmError::Connect {
+                message: error_chain(&e),
+                attempts,
+            },
+            Failure::Bad(bad) => LlmError::BadResponse {
+                message: bad.to_string(),
+                attempts,
+            },
         }
     }
 }
@@ -831,11 +862,11 @@ impl Shared {
                 }
                 Err(f) => f,
             };
-            if let Failure::Transport(message) = &failure {
+            if let Failure::Transport(e) = &failure {
                 let failures = self.connect_failures.fetch_add(1, Ordering::SeqCst) + 1;
                 if failures >= self.breaker_limit {
                     self.breaker_open.store(true, Ordering::SeqCst);
-                    return Err(self.circuit_open(message.clone()));
+                    return Err(self.circuit_open(error_chain(e)));
                 }
             } else if !matches!(failure, Failure::Timeout) {
                 // The server answered something: it is there.
@@ -961,7 +992,7 @@ impl Shared {
         {
             Err(_) => return Err(Failure::Timeout),
             Ok(Err(e)) if e.is_timeout() => return Err(Failure::Timeout),
-            Ok(Err(e)) => return Err(Failure::Transport(error_chain(&e))),
+            Ok(Err(e)) => return Err(Failure::Transport(e)),
             Ok(Ok(parts)) => parts,
         };
         if !(200..300).contains(&status) {
@@ -985,22 +1016,19 @@ fn parse_retry_after(value: &str) -> Option<f64> {
         .filter(|s| s.is_finite() && *s >= 0.0)
 }
 
-fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<(String, String), String> {
-    let value: Value = serde_json::from_slice(bytes).map_err(|e| {
-        format!(
-            "body is not JSON ({e}): {}",
-            preview(&String::from_utf8_lossy(bytes))
-        )
+fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<(String, String), BadAnswer> {
+    let value: Value = serde_json::from_slice(bytes).map_err(|source| BadAnswer::NotJson {
+        source,
+        preview: preview(&String::from_utf8_lossy(bytes)),
     })?;
     let Some(choice) = value
         .get("choices")
         .and_then(Value::as_array)
         .and_then(|c| c.first())
     else {
-        return Err(format!(
-            "no choices in response: {}",
-            preview(&value.to_string())
-        ));
+        return Err(BadAnswer::NoChoices {
+            preview: preview(&value.to_string()),
+        });
     };
     let (field, text) = match kind {
         RequestKind::Chat => (
@@ -1010,10 +1038,10 @@ fn parse_answer(kind: RequestKind, bytes: &[u8]) -> Result<(String, String), Str
         RequestKind::Completion => ("choices[0].text", choice.get("text")),
     };
     let Some(text) = text.and_then(Value::as_str) else {
-        return Err(format!(
-            "{field} is missing or not a string: {}",
-            preview(&choice.to_string())
-        ));
+        return Err(BadAnswer::NoText {
+            field,
+            preview: preview(&choice.to_string()),
+        });
     };
     // Both endpoints put `finish_reason` on the choice; a server that sends none (or null) gets
     // FINISH_UNREPORTED, so its answers are not taken for entries of older versions.

@@ -149,16 +149,13 @@ struct Words {
 
 const WORDS_TOML: &str = include_str!("../../../schemas/paraphrase.toml");
 
-static WORDS: LazyLock<Result<Words, String>> = LazyLock::new(|| {
-    let file: WordFile =
-        toml::from_str(WORDS_TOML).map_err(|e| format!("schemas/paraphrase.toml: {e}"))?;
+static WORDS: LazyLock<Result<Words, ParaphraseWordsError>> = LazyLock::new(|| {
+    let file: WordFile = toml::from_str(WORDS_TOML).map_err(ParaphraseWordsError::Toml)?;
     let mut group_of: HashMap<String, Vec<usize>> = HashMap::new();
     for (i, group) in file.synonyms.iter().enumerate() {
         for word in group {
             if word.contains(char::is_whitespace) || word.is_empty() {
-                return Err(format!(
-                    "schemas/paraphrase.toml: synonym `{word}` must be one lowercase word"
-                ));
+                return Err(ParaphraseWordsError::NotOneWord { word: word.clone() });
             }
             group_of.entry(word.to_lowercase()).or_default().push(i);
         }
@@ -171,15 +168,21 @@ static WORDS: LazyLock<Result<Words, String>> = LazyLock::new(|| {
 
 /// Why the paraphrase word lists cannot be used (a build with a broken `schemas/` file).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0}")]
-pub struct ParaphraseWordsError(String);
+pub enum ParaphraseWordsError {
+    /// The file is not the expected TOML.
+    #[error("schemas/paraphrase.toml: {0}")]
+    Toml(#[source] toml::de::Error),
+    /// A synonym is blank or more than one word.
+    #[error("schemas/paraphrase.toml: synonym `{word}` must be one lowercase word")]
+    NotOneWord {
+        /// The synonym as written.
+        word: String,
+    },
+}
 
 /// Loads the word lists once; the build calls it before the stage so a broken file stops it.
 pub fn check_words() -> Result<(), ParaphraseWordsError> {
-    WORDS
-        .as_ref()
-        .map(|_| ())
-        .map_err(|e| ParaphraseWordsError(e.clone()))
+    WORDS.as_ref().map(|_| ()).map_err(Clone::clone)
 }
 
 static MARKUP: LazyLock<Regex> = LazyLock::new(|| {

@@ -31,24 +31,52 @@ pub struct PlanStep {
 }
 
 /// Why a task-plan answer is not valid.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum PlanError {
     /// No JSON array in the answer.
     #[error("the answer contains no JSON array of steps")]
     NoArray,
     /// The array does not parse.
     #[error("the JSON array does not parse: {0}")]
-    Json(String),
+    Json(#[source] serde_json::Error),
     /// The array is empty.
     #[error("the plan has no steps")]
     Empty,
     /// A step is malformed.
-    #[error("step {index}: {message}")]
+    #[error("step {index}: {problem}")]
     Step {
         /// 1-based position in the array.
         index: usize,
-        /// What is wrong.
-        message: String,
+        /// What is wrong with it.
+        problem: StepProblem,
+    },
+}
+
+/// What is wrong with one step of a task plan.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StepProblem {
+    /// The step is not a JSON object.
+    #[error("expected an object {{step, step_id, category}}")]
+    NotAnObject,
+    /// `step` is missing, not a string, or blank.
+    #[error("`step` must be a non-empty string")]
+    NoText,
+    /// `step_id` is missing or not a whole number.
+    #[error("`step_id` must be a whole number")]
+    NoId,
+    /// `step_id` is not the step's position.
+    #[error("`step_id` is {id}, expected {index} (ids run 1..n in order)")]
+    OutOfOrder {
+        /// The id given.
+        id: u64,
+        /// The step's 1-based position.
+        index: usize,
+    },
+    /// `category` is missing or not one of the three.
+    #[error("`category` is {}, expected locomotion, grasp or interaction", .found.as_ref().map_or_else(|| "missing".to_string(), |c| format!("`{c}`")))]
+    Category {
+        /// The category given (trimmed, lowercased), `None` when missing.
+        found: Option<String>,
     },
 }
 
@@ -63,35 +91,30 @@ fn json_array(answer: &str) -> Option<&str> {
 /// order, categories `locomotion`, `grasp` or `interaction`, and non-empty steps.
 pub fn parse_task_plan(answer: &str) -> Result<Vec<PlanStep>, PlanError> {
     let array = json_array(answer).ok_or(PlanError::NoArray)?;
-    let values: Vec<serde_json::Value> =
-        serde_json::from_str(array).map_err(|e| PlanError::Json(e.to_string()))?;
+    let values: Vec<serde_json::Value> = serde_json::from_str(array).map_err(PlanError::Json)?;
     if values.is_empty() {
         return Err(PlanError::Empty);
     }
     let mut steps = Vec::with_capacity(values.len());
     for (i, v) in values.iter().enumerate() {
         let index = i + 1;
-        let bad = |message: String| PlanError::Step { index, message };
-        let obj = v
-            .as_object()
-            .ok_or_else(|| bad("expected an object {step, step_id, category}".into()))?;
+        let bad = |problem: StepProblem| PlanError::Step { index, problem };
+        let obj = v.as_object().ok_or_else(|| bad(StepProblem::NotAnObject))?;
         let step = obj
             .get("step")
             .and_then(|s| s.as_str())
             .map(str::trim)
             .filter(|s| !s.is_empty())
-            .ok_or_else(|| bad("`step` must be a non-empty string".into()))?;
+            .ok_or_else(|| bad(StepProblem::NoText))?;
         let id = obj
             .get("step_id")
             .and_then(|s| {
                 s.as_u64()
                     .or_else(|| s.as_str().and_then(|t| t.trim().parse().ok()))
             })
-            .ok_or_else(|| bad("`step_id` must be a whole number".into()))?;
+            .ok_or_else(|| bad(StepProblem::NoId))?;
         if id != index as u64 {
-            return Err(bad(format!(
-                "`step_id` is {id}, expected {index} (ids run 1..n in order)"
-            )));
+            return Err(bad(StepProblem::OutOfOrder { id, index }));
         }
         let category = match obj
             .get("category")
@@ -101,14 +124,7 @@ pub fn parse_task_plan(answer: &str) -> Result<Vec<PlanStep>, PlanError> {
             Some(c) if c == "locomotion" => StepCategory::Locomotion,
             Some(c) if c == "grasp" => StepCategory::Grasp,
             Some(c) if c == "interaction" => StepCategory::Interaction,
-            other => {
-                return Err(bad(format!(
-                    "`category` is {}, expected locomotion, grasp or interaction",
-                    other
-                        .map(|c| format!("`{c}`"))
-                        .unwrap_or_else(|| "missing".into())
-                )));
-            }
+            found => return Err(bad(StepProblem::Category { found })),
         };
         steps.push(PlanStep {
             step: step.to_string(),

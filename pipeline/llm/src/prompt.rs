@@ -41,7 +41,7 @@ const BUNDLED: [(&str, &str); 6] = [
 pub const TEMPLATES: [&str; 4] = ["part_labels", "task_plan", "paraphrase", "pair_compat"];
 
 /// Why a prompt cannot be rendered.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum PromptError {
     /// The template is unknown.
     #[error(
@@ -49,30 +49,33 @@ pub enum PromptError {
     )]
     Unknown(String),
     /// A template does not parse or does not render.
-    #[error("template `{template}`{}: {message}", line.map(|l| format!(" line {l}")).unwrap_or_default())]
+    #[error("template `{template}`{}: {}", line.map(|l| format!(" line {l}")).unwrap_or_default(), template_problem(error, missing))]
     Template {
         /// Template file.
         template: String,
         /// 1-based line, where known.
         line: Option<usize>,
-        /// What went wrong (for a missing variable, its name).
-        message: String,
+        /// minijinja's error. Not a `#[source]`: the message quotes its detail, and its full
+        /// form would be appended by whatever prints the causes.
+        error: minijinja::Error,
+        /// Variables the template uses that were not given, sorted.
+        missing: Vec<String>,
     },
     /// A data file does not parse.
-    #[error("prompt data `{file}`: {message}")]
+    #[error("prompt data `{file}`: {source}")]
     Data {
         /// Data file.
         file: String,
-        /// The parser's message.
-        message: String,
+        /// The parser's error.
+        source: toml::de::Error,
     },
     /// A prompts folder cannot be read.
-    #[error("{path}: {message}")]
+    #[error("{}: {source}", path.display())]
     Io {
         /// The file.
-        path: String,
+        path: std::path::PathBuf,
         /// The error.
-        message: String,
+        source: std::io::Error,
     },
 }
 
@@ -134,9 +137,9 @@ impl Prompts {
         for name in BUNDLED.iter().map(|(n, _)| *n) {
             let path = dir.join(name);
             if path.is_file() {
-                let text = std::fs::read_to_string(&path).map_err(|e| PromptError::Io {
-                    path: path.display().to_string(),
-                    message: e.to_string(),
+                let text = std::fs::read_to_string(&path).map_err(|source| PromptError::Io {
+                    path: path.clone(),
+                    source,
                 })?;
                 files.insert(name.to_string(), text);
             }
@@ -150,14 +153,15 @@ impl Prompts {
         let mut data = BTreeMap::new();
         for (name, text) in &files {
             if let Some(stem) = name.strip_suffix(".toml") {
-                let table: toml::Table = toml::from_str(text).map_err(|e| PromptError::Data {
-                    file: name.clone(),
-                    message: e.to_string(),
-                })?;
+                let table: toml::Table =
+                    toml::from_str(text).map_err(|source| PromptError::Data {
+                        file: name.clone(),
+                        source,
+                    })?;
                 data.insert(stem.to_string(), table);
             } else if let Some(stem) = name.strip_suffix(".j2") {
                 env.add_template_owned(stem.to_string(), text.clone())
-                    .map_err(|e| template_error(stem, &e))?;
+                    .map_err(|e| template_error(stem, e, Vec::new()))?;
             }
         }
         Ok(Prompts { env, data })
@@ -187,17 +191,7 @@ impl Prompts {
                 .filter(|v| !context.contains_key(v))
                 .collect();
             missing.sort();
-            let mut err = template_error(template, &e);
-            if let PromptError::Template { message, .. } = &mut err
-                && !missing.is_empty()
-            {
-                *message = format!(
-                    "missing variable{} `{}` ({message})",
-                    if missing.len() > 1 { "s" } else { "" },
-                    missing.join("`, `")
-                );
-            }
-            err
+            template_error(template, e, missing)
         })?;
         Ok(rendered.trim_end().to_string() + "\n")
     }
@@ -247,15 +241,30 @@ pub fn vars<const N: usize>(pairs: [(&str, Value); N]) -> BTreeMap<String, Value
     pairs.into_iter().map(|(k, v)| (k.to_string(), v)).collect()
 }
 
-fn template_error(template: &str, e: &minijinja::Error) -> PromptError {
+fn template_error(template: &str, error: minijinja::Error, missing: Vec<String>) -> PromptError {
     PromptError::Template {
-        template: format!("{}.j2", e.name().unwrap_or(template)),
-        line: e.line(),
-        message: e
-            .detail()
-            .map(str::to_string)
-            .unwrap_or_else(|| e.kind().to_string()),
+        template: format!("{}.j2", error.name().unwrap_or(template)),
+        line: error.line(),
+        error,
+        missing,
     }
+}
+
+/// What went wrong in a template: minijinja's detail (or the kind of error), after the variables
+/// that were not given.
+fn template_problem(error: &minijinja::Error, missing: &[String]) -> String {
+    let detail = error
+        .detail()
+        .map(str::to_string)
+        .unwrap_or_else(|| error.kind().to_string());
+    if missing.is_empty() {
+        return detail;
+    }
+    format!(
+        "missing variable{} `{}` ({detail})",
+        if missing.len() > 1 { "s" } else { "" },
+        missing.join("`, `")
+    )
 }
 
 #[cfg(test)]

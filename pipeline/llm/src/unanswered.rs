@@ -14,8 +14,10 @@ pub enum Unanswered {
     /// Offline (`--offline` or the config's `offline`) and the cache has no answer.
     Offline,
     /// The client could not be created (bad `[llm]` value, unset key variable).
+    // The error's text, not the error: read back from the words the stage cache and reports hold.
     Client(String),
     /// The request failed after its last retry.
+    // The error's text, not the error: read back from the words the stage cache and reports hold.
     RequestFailed(String),
 }
 

@@ -68,15 +68,30 @@ pub enum SceneError {
         /// The limit, in bytes.
         limit: usize,
     },
-    /// The file is not TOML of the scene's shape.
-    #[error("scene {}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
-    Parse {
+    /// The file is not TOML.
+    #[error("scene {}{}: {}", path.display(), at_line(*line), error.message().trim_end())]
+    Syntax {
         /// The scene file.
         path: PathBuf,
         /// 1-based line, where known.
         line: Option<usize>,
-        /// The key and what the parser expected.
-        message: String,
+        /// The parser's error. Not a `#[source]`: the message quotes its short form, and its
+        /// full form (the file's lines) would be appended by whatever prints the causes. Boxed:
+        /// it is large, and errors are rare.
+        error: Box<toml::de::Error>,
+    },
+    /// The file is TOML but not of the scene's shape.
+    #[error("scene {}{}: {}{}", path.display(), at_line(*line), key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default(), error.message().trim_end())]
+    Shape {
+        /// The scene file.
+        path: PathBuf,
+        /// 1-based line, where known.
+        line: Option<usize>,
+        /// The dotted key of the value, `None` for the whole file.
+        key: Option<String>,
+        /// What the reader expected there (not a `#[source]`, and boxed, as for
+        /// [`SceneError::Syntax`]).
+        error: Box<toml::de::Error>,
     },
     /// Values parse but are not acceptable: every problem found.
     #[error("{}", invalid_message(path, problems, *unlisted))]
@@ -102,6 +117,11 @@ pub struct SceneProblem {
     pub line: Option<usize>,
     /// What is wrong and what is expected.
     pub message: String,
+}
+
+/// `:line`, or nothing when the line is not known.
+fn at_line(line: Option<usize>) -> String {
+    line.map(|l| format!(":{l}")).unwrap_or_default()
 }
 
 fn invalid_message(path: &Path, problems: &[SceneProblem], unlisted: usize) -> String {
@@ -506,10 +526,10 @@ impl Scene {
             });
         }
         let taxonomy = Taxonomy::bundled()?;
-        let tree = toml::de::DeTable::parse(text).map_err(|e| SceneError::Parse {
+        let tree = toml::de::DeTable::parse(text).map_err(|error| SceneError::Syntax {
             path: path.to_path_buf(),
-            line: e.span().map(|s| line_of(text, s.start)),
-            message: e.message().trim_end().to_string(),
+            line: error.span().map(|s| line_of(text, s.start)),
+            error: Box::new(error),
         })?;
         // The tree goes into the deserializer whole (no copy kept: it is the largest thing
         // reading holds); lines are looked up in a second parse, only if there is a problem.
@@ -523,16 +543,12 @@ impl Scene {
                 .span()
                 .map(|s| lines.at(s.start))
                 .or_else(|| lines.line(&steps(&keys)));
-            let key = e.path().to_string();
-            let key = if key == "." {
-                String::new()
-            } else {
-                format!("{key}: ")
-            };
-            SceneError::Parse {
+            let key = Some(e.path().to_string()).filter(|k| k != ".");
+            SceneError::Shape {
                 path: path.to_path_buf(),
                 line,
-                message: format!("{key}{}", e.inner().message().trim_end()),
+                key,
+                error: Box::new(e.into_inner()),
             }
         })?;
         let mut problems = Problems {

@@ -19,7 +19,7 @@ use super::stats::{
     MetricInfo, SplitComposition, Stats, kde, lengths_by_type, metric_values, quantile,
     silverman_bandwidth, types_in_report_order, whiskers,
 };
-use super::{ClipRow, ReportError};
+use super::{ClipRow, FigureProblem, ReportError};
 use motionforge_core::base::write_atomic;
 use motionforge_sources::clip::SourceKind;
 
@@ -251,11 +251,11 @@ fn svg_options() -> &'static usvg::Options<'static> {
 
 /// The SVG plotters wrote, given its printed size: `width`/`height` in inches (the viewBox keeps
 /// the drawing units), so an SVG viewer, usvg and a paper all see the figure at its size.
-fn with_printed_size(svg: &str, spec: &FigureSpec) -> Result<String, String> {
+fn with_printed_size(svg: &str, spec: &FigureSpec) -> Result<String, FigureProblem> {
     let (w, h) = spec.inches();
     let drawn = format!("width=\"{}\" height=\"{}\"", spec.width, spec.height);
     if !svg.contains(&drawn) {
-        return Err(format!("the SVG has no `{drawn}` to give its printed size"));
+        return Err(FigureProblem::NoSize(drawn));
     }
     Ok(svg.replacen(&drawn, &format!("width=\"{w}in\" height=\"{h}in\""), 1))
 }
@@ -263,18 +263,17 @@ fn with_printed_size(svg: &str, spec: &FigureSpec) -> Result<String, String> {
 /// PDF and PNG of one figure's SVG. The PDF embeds the subset of DejaVu Sans its text uses (text
 /// stays text, searchable), written by svg2pdf with no date or random id, so the same SVG gives
 /// the same bytes. The PNG is the SVG rasterised by resvg at [`DPI`] on white.
-fn pdf_and_png(svg: &str, spec: &FigureSpec) -> Result<(Vec<u8>, Vec<u8>), String> {
-    let tree = usvg::Tree::from_str(svg, svg_options()).map_err(|e| e.to_string())?;
+fn pdf_and_png(svg: &str, spec: &FigureSpec) -> Result<(Vec<u8>, Vec<u8>), FigureProblem> {
+    let tree = usvg::Tree::from_str(svg, svg_options()).map_err(FigureProblem::Svg)?;
     // usvg measures in CSS pixels (96 per inch): a PDF point is 1/72 in.
     let pdf = svg2pdf::to_pdf(
         &tree,
         svg2pdf::ConversionOptions::default(),
         svg2pdf::PageOptions { dpi: 96.0 },
     )
-    .map_err(|e| e.to_string())?;
+    .map_err(FigureProblem::Pdf)?;
     let (w, h) = (spec.width, spec.height);
-    let mut pixmap = resvg::tiny_skia::Pixmap::new(w, h)
-        .ok_or_else(|| format!("cannot make a {w} x {h} image"))?;
+    let mut pixmap = resvg::tiny_skia::Pixmap::new(w, h).ok_or(FigureProblem::Canvas(w, h))?;
     pixmap.fill(resvg::tiny_skia::Color::WHITE);
     let scale = f64::from(DPI) / 96.0;
     resvg::render(
@@ -288,8 +287,8 @@ fn pdf_and_png(svg: &str, spec: &FigureSpec) -> Result<(Vec<u8>, Vec<u8>), Strin
         .chunks_exact(4)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    let png =
-        motionforge_format::dataset::preview::png_bytes(&rgb, (w, h)).map_err(|e| e.to_string())?;
+    let png = motionforge_format::dataset::preview::png_bytes(&rgb, (w, h))
+        .map_err(FigureProblem::Dataset)?;
     Ok((pdf, png))
 }
 
@@ -320,16 +319,16 @@ fn write_figure(
     stats: &Stats,
     dir: &Path,
 ) -> Result<Vec<PathBuf>, ReportError> {
-    let fail = |message: String| ReportError::Figure {
+    let fail = |problem: FigureProblem| ReportError::Figure {
         figure: spec.stem.to_string(),
-        message,
+        problem: Box::new(problem),
     };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (spec.width, spec.height)).into_drawing_area();
         render(spec, &root, rows, stats)
             .and_then(|()| root.present().map_err(Into::into))
-            .map_err(|e| fail(e.to_string()))?;
+            .map_err(|e| fail(FigureProblem::Plot(e)))?;
     }
     let svg = with_printed_size(&svg, spec).map_err(fail)?;
     let (pdf, png) = pdf_and_png(&svg, spec).map_err(fail)?;

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::{ClipRow, ReportError};
+use super::{ClipRow, FigureProblem, ReportError};
 use motionforge_format::dataset::{self, preview};
 
 /// Poses per filmstrip.
@@ -12,10 +12,10 @@ const STRIP_FRAMES: usize = 6;
 /// Pixels of one pose.
 const SIZE: u32 = 200;
 
-fn gallery_err(e: impl std::fmt::Display) -> ReportError {
+fn gallery_err(problem: impl Into<FigureProblem>) -> ReportError {
     ReportError::Figure {
         figure: "gallery".into(),
-        message: e.to_string(),
+        problem: Box::new(problem.into()),
     }
 }
 
@@ -65,10 +65,10 @@ pub(crate) fn write_gallery(
     for (motion_type, clip_id) in chosen {
         let frames = dataset::read_clip_in(dataset, &clips, clip_id).map_err(gallery_err)?;
         let skeleton = skeletons.get(&frames.info.skeleton).ok_or_else(|| {
-            gallery_err(format!(
-                "skeleton `{}` of `{clip_id}` is not in skeletons.json",
-                frames.info.skeleton
-            ))
+            gallery_err(FigureProblem::NoSkeleton {
+                skeleton: frames.info.skeleton.clone(),
+                clip_id: clip_id.to_string(),
+            })
         })?;
         let panel = preview::Panel {
             frames: &frames,

@@ -92,6 +92,57 @@ impl ClipRow {
     }
 }
 
+/// Why a row's value cannot be used by the statistics.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ValueProblem {
+    /// A required column is null.
+    #[error("`{0}` is null")]
+    Null(&'static str),
+    /// The frame rate is not a positive number.
+    #[error("`fps` is {0}, not a positive rate")]
+    Fps(f64),
+    /// The frame count is negative (or beyond what the platform counts).
+    #[error("`num_frames` is {0}")]
+    Frames(i64),
+    /// The goal is not two numbers.
+    #[error("`goal_pelvis` has {0} values, expected [x, y]")]
+    Goal(usize),
+}
+
+/// Why a figure (or the gallery) could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum FigureProblem {
+    /// The plotting library failed.
+    #[error("{0}")]
+    Plot(#[source] Box<dyn std::error::Error + Send + Sync>),
+    /// The drawn SVG lacks the size attributes its printed size replaces.
+    #[error("the SVG has no `{0}` to give its printed size")]
+    NoSize(String),
+    /// The SVG does not read back.
+    #[error("{0}")]
+    Svg(#[source] svg2pdf::usvg::Error),
+    /// The PDF could not be made (svg2pdf's error is `Display` but not `std::error::Error`).
+    #[error("{0}")]
+    Pdf(svg2pdf::ConversionError),
+    /// The raster image could not be allocated.
+    #[error("cannot make a {0} x {1} image")]
+    Canvas(u32, u32),
+    /// Reading the dataset, drawing a preview or encoding a PNG failed.
+    #[error("{0}")]
+    Dataset(#[from] motionforge_format::dataset::DatasetError),
+    /// The dataset's `skeletons.json` cannot be read.
+    #[error("{0}")]
+    Skeletons(#[from] motionforge_format::io::skeletons::SkeletonsError),
+    /// A clip's skeleton is not in `skeletons.json`.
+    #[error("skeleton `{skeleton}` of `{clip_id}` is not in skeletons.json")]
+    NoSkeleton {
+        /// The skeleton's id.
+        skeleton: String,
+        /// The clip.
+        clip_id: String,
+    },
+}
+
 /// Errors of reading tables and writing a report; each names the file involved.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
@@ -109,9 +160,8 @@ pub enum ReportError {
     /// A clip table cannot be found, opened or decoded, or lacks a column the report needs.
     #[error(transparent)]
     Dataset(#[from] motionforge_format::dataset::DatasetError),
-    /// A value that the statistics cannot use (a null in a required column, a negative frame
-    /// count, a non-positive frame rate, a goal that is not `[x, y]`).
-    #[error("{path}: row {row} ({clip_id}): {message}")]
+    /// A value that the statistics cannot use.
+    #[error("{path}: row {row} ({clip_id}): {problem}")]
     InvalidValue {
         /// The table.
         path: PathBuf,
@@ -120,23 +170,41 @@ pub enum ReportError {
         /// The row's clip id, when it could be read.
         clip_id: String,
         /// What is wrong.
-        message: String,
+        problem: ValueProblem,
     },
     /// A JSON file (the build report) could not be parsed.
-    #[error("{path}: {message}")]
+    #[error("{path}: {source}")]
     Json {
         /// The file.
         path: PathBuf,
-        /// The parser's message.
-        message: String,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// A count of the build report (`drops_by_reason`...) is not a map from name to count.
+    #[error("{path}: `{key}`: {source}")]
+    Counts {
+        /// The build report.
+        path: PathBuf,
+        /// The key of the counts.
+        key: &'static str,
+        /// The reader's error.
+        source: serde_json::Error,
+    },
+    /// `stats.json` could not be encoded.
+    #[error("{path}: {source}")]
+    Encode {
+        /// The file.
+        path: PathBuf,
+        /// The encoder's error.
+        source: serde_json::Error,
     },
     /// A figure could not be drawn.
-    #[error("figure {figure}: {message}")]
+    #[error("figure {figure}: {problem}")]
     Figure {
-        /// The figure's file stem.
+        /// The figure's file stem (`gallery` for the gallery).
         figure: String,
-        /// The plotting library's message.
-        message: String,
+        /// What failed (boxed: a dataset error is large, and this is the rare case).
+        problem: Box<FigureProblem>,
     },
     /// The bundled font could not be registered with the plotting library.
     #[error("the bundled font could not be loaded")]
@@ -194,9 +262,9 @@ fn write_report_with(
 
     // Last, so a report cut short by a crash has no `stats.json` and does not look finished.
     let json_path = out_dir.join("stats.json");
-    let mut json = serde_json::to_string_pretty(stats).map_err(|e| ReportError::Json {
+    let mut json = serde_json::to_string_pretty(stats).map_err(|source| ReportError::Encode {
         path: json_path.clone(),
-        message: e.to_string(),
+        source,
     })?;
     json.push('\n');
     motionforge_core::base::write_atomic(&json_path, json.as_bytes())?;

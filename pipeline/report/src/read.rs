@@ -7,7 +7,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use super::stats::{NO_SPLIT, NULL_SPLIT};
-use super::{ClipRow, ReportError};
+use super::{ClipRow, ReportError, ValueProblem};
 use motionforge_format::dataset::{OpenShard, ShardBatch};
 use motionforge_format::io::schema::Column;
 
@@ -75,26 +75,25 @@ fn read_batch(b: &ShardBatch, rows: &mut Vec<ClipRow>) -> Result<(), ReportError
 
     for i in 0..b.num_rows() {
         let clip_id = clip_ids[i].clone().unwrap_or_default();
-        let invalid = |message: String| ReportError::InvalidValue {
+        let invalid = |problem: ValueProblem| ReportError::InvalidValue {
             path: b.path().to_path_buf(),
             row: b.first_row() + i,
             clip_id: clip_id.clone(),
-            message,
+            problem,
         };
+        let null = |column: &'static str| invalid(ValueProblem::Null(column));
         if clip_ids[i].is_none() {
-            return Err(invalid("`clip_id` is null".into()));
+            return Err(null("clip_id"));
         }
-        let source_kind = kinds[i]
-            .clone()
-            .ok_or_else(|| invalid("`source_kind` is null".into()))?;
-        let mirrored = mirrored[i].ok_or_else(|| invalid("`mirrored` is null".into()))?;
-        let fps = fps[i].ok_or_else(|| invalid("`fps` is null".into()))?;
+        let source_kind = kinds[i].clone().ok_or_else(|| null("source_kind"))?;
+        let mirrored = mirrored[i].ok_or_else(|| null("mirrored"))?;
+        let fps = fps[i].ok_or_else(|| null("fps"))?;
         if !(fps.is_finite() && fps > 0.0) {
-            return Err(invalid(format!("`fps` is {fps}, not a positive rate")));
+            return Err(invalid(ValueProblem::Fps(fps)));
         }
-        let num_frames = frames[i].ok_or_else(|| invalid("`num_frames` is null".into()))?;
-        let frames = usize::try_from(num_frames)
-            .map_err(|_| invalid(format!("`num_frames` is {num_frames}")))?;
+        let num_frames = frames[i].ok_or_else(|| null("num_frames"))?;
+        let frames =
+            usize::try_from(num_frames).map_err(|_| invalid(ValueProblem::Frames(num_frames)))?;
         let split = match &splits {
             None => NO_SPLIT.to_string(),
             Some(s) => s[i].clone().unwrap_or_else(|| NULL_SPLIT.to_string()),
@@ -103,10 +102,7 @@ fn read_batch(b: &ShardBatch, rows: &mut Vec<ClipRow>) -> Result<(), ReportError
             None => None,
             Some(g) if g.len() == 2 => Some([g[0], g[1]]),
             Some(g) => {
-                return Err(invalid(format!(
-                    "`goal_pelvis` has {} values, expected [x, y]",
-                    g.len()
-                )));
+                return Err(invalid(ValueProblem::Goal(g.len())));
             }
         };
         let values: Vec<Option<f64>> = metrics.iter().map(|m| m[i]).collect();
@@ -149,16 +145,18 @@ pub fn read_build_counts(
         path: path.to_path_buf(),
         source,
     })?;
-    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| ReportError::Json {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    let counts = |key: &str| -> Result<BTreeMap<String, usize>, ReportError> {
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|source| ReportError::Json {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let counts = |key: &'static str| -> Result<BTreeMap<String, usize>, ReportError> {
         match json.get(key) {
             None | Some(serde_json::Value::Null) => Ok(BTreeMap::new()),
-            Some(v) => serde_json::from_value(v.clone()).map_err(|e| ReportError::Json {
+            Some(v) => serde_json::from_value(v.clone()).map_err(|source| ReportError::Counts {
                 path: path.to_path_buf(),
-                message: format!("`{key}`: {e}"),
+                key,
+                source,
             }),
         }
     };

@@ -92,14 +92,17 @@ impl HeldClips {
         if pending.is_empty() {
             return Ok(());
         }
-        let encode = |message: String| {
-            BuildError::Workspace(motionforge_core::base::WorkspaceError::Encode {
-                what: "held clips".into(),
-                message,
-            })
-        };
-        let bytes = postcard::to_stdvec(&*pending).map_err(|e| encode(e.to_string()))?;
-        let packed = zstd::bulk::compress(&bytes, LEVEL).map_err(|e| encode(e.to_string()))?;
+        use motionforge_core::base::WorkspaceError;
+        const WHAT: &str = "held clips";
+        let bytes = postcard::to_stdvec(&*pending).map_err(|source| WorkspaceError::Encode {
+            what: WHAT.into(),
+            source,
+        })?;
+        let packed =
+            zstd::bulk::compress(&bytes, LEVEL).map_err(|source| WorkspaceError::Compress {
+                what: WHAT.into(),
+                source,
+            })?;
         self.blocks.push((packed.into_boxed_slice(), bytes.len()));
         pending.clear();
         Ok(())

@@ -44,7 +44,7 @@ pub use motionforge_core::base::{
     Dropped, Fingerprint, Reject, Stamp, WorkspaceError, sha256_hex, temp_path, write_atomic,
     write_atomic_with,
 };
-pub use plan::{Plan, StagePlan, StageStatus, Status, plan, status};
+pub use plan::{Plan, StagePlan, StageStatus, StaleReason, Status, plan, status};
 pub use workspace::{ConfigRecord, Ledger, Miss, SeenStamps, StageLedger, Workspace};
 
 use capture::{Item, Shared};

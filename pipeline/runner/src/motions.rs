@@ -430,10 +430,11 @@ impl<'w> MotionSpill<'w> {
         if self.pending.is_empty() {
             return Ok(());
         }
-        let bytes = postcard::to_stdvec(&self.pending).map_err(|e| WorkspaceError::Encode {
-            what: format!("{SEGMENT_CHUNKS} chunk"),
-            message: e.to_string(),
-        })?;
+        let bytes =
+            postcard::to_stdvec(&self.pending).map_err(|source| WorkspaceError::Encode {
+                what: format!("{SEGMENT_CHUNKS} chunk"),
+                source,
+            })?;
         let name: Arc<str> = sha256_hex(&bytes).into();
         self.workspace.store_bytes(SEGMENT_CHUNKS, &name, &bytes)?;
         let start = self.refs.len() - self.pending.len();

@@ -197,15 +197,16 @@ pub(super) fn written(
     output: &Path,
     workspace: &Workspace,
     fingerprint: &str,
-) -> Result<(), String> {
+) -> Result<(), crate::plan::StaleReason> {
+    use crate::plan::StaleReason;
     let Some(recorded) = Recorded::load(workspace) else {
-        return Err("never written".to_string());
+        return Err(StaleReason::NeverWritten);
     };
     if !recorded.outputs_match(output) {
-        return Err("output files changed or missing".to_string());
+        return Err(StaleReason::OutputsChanged);
     }
     if recorded.state.table_fingerprint != fingerprint {
-        return Err("rows changed".to_string());
+        return Err(StaleReason::RowsChanged);
     }
     Ok(())
 }

@@ -23,7 +23,7 @@ pub struct StagePlan {
     /// Items that would be computed.
     pub to_run: usize,
     /// Why, with how many items each reason covers.
-    pub reasons: BTreeMap<String, usize>,
+    pub reasons: BTreeMap<StaleReason, usize>,
     /// A few items that would run, with their reason.
     pub examples: Vec<String>,
 }
@@ -39,7 +39,7 @@ impl StagePlan {
         }
     }
 
-    fn stale(&mut self, key: &str, reason: String) {
+    fn stale(&mut self, key: &str, reason: StaleReason) {
         self.to_run += 1;
         if key != "*" && self.examples.len() < 5 {
             self.examples.push(format!("{key}: {reason}"));
@@ -50,6 +50,116 @@ impl StagePlan {
     /// True when nothing would run.
     pub fn fresh(&self) -> bool {
         self.to_run == 0
+    }
+}
+
+/// Why a stage (or one of its items) would run. Shown, and written in `plan --json`, as words
+/// (`new`, `changed: file content`); ordered by those words, so reasons list as they always did.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum StaleReason {
+    /// The last run did not see the item.
+    New,
+    /// The item's stamp is the one of the last run, but its cache entry is gone.
+    CacheEntryMissing,
+    /// These parts of the item's stamp (`file content`, `config dataset.seed`...) differ from the
+    /// last run's.
+    Changed(Vec<String>),
+    /// An earlier stage is stale, so everything after it runs.
+    Upstream(Stage),
+    /// An LLM stage's text has no cached answer.
+    NoCachedAnswer,
+    /// Labels whose texts have no cached LLM answer (asked when the build is online).
+    LabelsNotCached,
+    /// The dataset was never written.
+    NeverWritten,
+    /// Files of the written dataset were changed or removed since.
+    OutputsChanged,
+    /// The written rows are not those of the clip table now.
+    RowsChanged,
+    /// The report is missing or its last run did not finish.
+    ReportUnfinished,
+}
+
+const NEW: &str = "new";
+const CACHE_ENTRY_MISSING: &str = "cache entry missing (cleaned or pruned)";
+const CHANGED: &str = "changed: ";
+const UPSTREAM: &str = " re-runs first";
+const NO_CACHED_ANSWER: &str = "no cached LLM answer";
+const LABELS_NOT_CACHED: &str = "texts without a cached LLM answer (asked when online)";
+const NEVER_WRITTEN: &str = "never written";
+const OUTPUTS_CHANGED: &str = "output files changed or missing";
+const ROWS_CHANGED: &str = "rows changed";
+const REPORT_UNFINISHED: &str = "report missing or unfinished";
+
+impl std::fmt::Display for StaleReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StaleReason::New => f.write_str(NEW),
+            StaleReason::CacheEntryMissing => f.write_str(CACHE_ENTRY_MISSING),
+            StaleReason::Changed(parts) => write!(f, "{CHANGED}{}", parts.join(", ")),
+            StaleReason::Upstream(stage) => write!(f, "{stage}{UPSTREAM}"),
+            StaleReason::NoCachedAnswer => f.write_str(NO_CACHED_ANSWER),
+            StaleReason::LabelsNotCached => f.write_str(LABELS_NOT_CACHED),
+            StaleReason::NeverWritten => f.write_str(NEVER_WRITTEN),
+            StaleReason::OutputsChanged => f.write_str(OUTPUTS_CHANGED),
+            StaleReason::RowsChanged => f.write_str(ROWS_CHANGED),
+            StaleReason::ReportUnfinished => f.write_str(REPORT_UNFINISHED),
+        }
+    }
+}
+
+impl std::str::FromStr for StaleReason {
+    type Err = String;
+
+    /// Reads the words back (`plan --json` holds them).
+    fn from_str(s: &str) -> Result<StaleReason, String> {
+        let fixed = [
+            StaleReason::New,
+            StaleReason::CacheEntryMissing,
+            StaleReason::NoCachedAnswer,
+            StaleReason::LabelsNotCached,
+            StaleReason::NeverWritten,
+            StaleReason::OutputsChanged,
+            StaleReason::RowsChanged,
+            StaleReason::ReportUnfinished,
+        ];
+        if let Some(reason) = fixed.into_iter().find(|r| r.to_string() == s) {
+            return Ok(reason);
+        }
+        if let Some(parts) = s.strip_prefix(CHANGED) {
+            return Ok(StaleReason::Changed(
+                parts.split(", ").map(str::to_string).collect(),
+            ));
+        }
+        if let Some(stage) = s.strip_suffix(UPSTREAM) {
+            return stage.parse().map(StaleReason::Upstream);
+        }
+        Err(format!("unknown reason to run `{s}`"))
+    }
+}
+
+impl Ord for StaleReason {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.to_string().cmp(&other.to_string())
+    }
+}
+
+impl PartialOrd for StaleReason {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Serialize for StaleReason {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for StaleReason {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let words = String::deserialize(deserializer)?;
+        words.parse().map_err(serde::de::Error::custom)
     }
 }
 
@@ -116,7 +226,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
                 continue;
             }
             if plan.to_run == 0 {
-                plan.stale("*", format!("{first} re-runs first"));
+                plan.stale("*", StaleReason::Upstream(first));
             }
         }
     }
@@ -132,14 +242,15 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
     ] {
         if let Some(plan) = plans.get_mut(&stage).filter(|_| enabled) {
             plan.items = plan.items.max(report.texts);
+            // The report keeps reasons as their words; read back, the variant decides.
             let asked: usize = report
                 .skipped
                 .iter()
-                .filter(|(reason, _)| **reason == Unanswered::Offline.to_string())
+                .filter(|(reason, _)| Unanswered::from((*reason).clone()).is_offline_miss())
                 .map(|(_, n)| n)
                 .sum();
             for _ in 0..asked {
-                plan.stale("text", "no cached LLM answer".to_string());
+                plan.stale("text", StaleReason::NoCachedAnswer);
             }
         }
     }
@@ -153,7 +264,7 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         if asked > 0 {
             *label
                 .reasons
-                .entry("texts without a cached LLM answer (asked when online)".to_string())
+                .entry(StaleReason::LabelsNotCached)
                 .or_insert(0) += asked;
         }
     }
@@ -163,17 +274,17 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         if let Some(plan) = plans.get_mut(&Stage::Write)
             && let Err(why) = write_fresh.clone()
         {
-            let reason = match why.as_str() {
-                "rows changed" => ledger.why(Stage::Write.name(), "*", &stamp),
+            let reason = match why {
+                StaleReason::RowsChanged => ledger.why(Stage::Write.name(), "*", &stamp),
                 _ => why,
             };
             plan.stale("*", reason);
         }
         if let Some(plan) = plans.get_mut(&Stage::Report) {
             if write_fresh.is_err() {
-                plan.stale("*", "write re-runs first".to_string());
+                plan.stale("*", StaleReason::Upstream(Stage::Write));
             } else if !report_is_current(&staged.output, workspace, &stamp.fingerprint) {
-                plan.stale("*", "report missing or unfinished".to_string());
+                plan.stale("*", StaleReason::ReportUnfinished);
             }
         }
     }
@@ -220,7 +331,7 @@ pub struct StageStatus {
     /// Items that would run now.
     pub to_run: usize,
     /// Why they would run.
-    pub reasons: BTreeMap<String, usize>,
+    pub reasons: BTreeMap<StaleReason, usize>,
     /// When it last ran (seconds since the Unix epoch), if ever.
     pub last_run: Option<u64>,
     /// Items it covered then.
@@ -288,4 +399,45 @@ pub fn status(config: &Config) -> Result<Status, BuildError> {
         splits,
         stages,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reasons_read_back_from_their_words_and_list_in_word_order() {
+        let reasons = [
+            StaleReason::New,
+            StaleReason::CacheEntryMissing,
+            StaleReason::Changed(vec!["file content".into(), "config dataset.seed".into()]),
+            StaleReason::Upstream(Stage::Ingest),
+            StaleReason::NoCachedAnswer,
+            StaleReason::LabelsNotCached,
+            StaleReason::NeverWritten,
+            StaleReason::OutputsChanged,
+            StaleReason::RowsChanged,
+            StaleReason::ReportUnfinished,
+        ];
+        for reason in &reasons {
+            assert_eq!(
+                reason.to_string().parse::<StaleReason>().as_ref(),
+                Ok(reason)
+            );
+        }
+        assert_eq!(
+            StaleReason::Upstream(Stage::Write).to_string(),
+            "write re-runs first"
+        );
+        let counted: BTreeMap<StaleReason, usize> =
+            reasons.iter().cloned().map(|r| (r, 1)).collect();
+        let json = serde_json::to_string(&counted).unwrap();
+        let words: BTreeMap<String, usize> = serde_json::from_str(&json).unwrap();
+        assert_eq!(serde_json::to_string(&words).unwrap(), json);
+        assert_eq!(
+            serde_json::from_str::<BTreeMap<StaleReason, usize>>(&json).unwrap(),
+            counted
+        );
+        assert!("gremlins".parse::<StaleReason>().is_err());
+    }
 }

@@ -73,7 +73,7 @@ pub(super) fn compose(
                         label::normalize_text(&a.text),
                         label::normalize_text(&b.text),
                     );
-                    vetoed.0.contains(&key).then_some("llm_incompatible")
+                    vetoed.0.contains(&key)
                 },
                 |clip, recipe| {
                     // The composite's skeleton is a copy made when its source was read (a

@@ -78,27 +78,28 @@ impl Ledger {
     }
 
     /// Why an item whose stamp is `now` is not in the cache, compared with the last run.
-    pub fn why(&self, stage: &str, key: &str, now: &Stamp) -> String {
+    pub fn why(&self, stage: &str, key: &str, now: &Stamp) -> crate::plan::StaleReason {
+        use crate::plan::StaleReason;
         let Some(before) = self.stages.get(stage).and_then(|s| s.entries.get(key)) else {
-            return "new".to_string();
+            return StaleReason::New;
         };
-        let changed: Vec<&str> = now
+        let changed: Vec<String> = now
             .parts
             .iter()
             .filter(|(name, digest)| before.parts.get(*name) != Some(*digest))
-            .map(|(name, _)| name.as_str())
+            .map(|(name, _)| name.clone())
             .chain(
                 before
                     .parts
                     .keys()
                     .filter(|name| !now.parts.contains_key(*name))
-                    .map(String::as_str),
+                    .cloned(),
             )
             .collect();
         if changed.is_empty() {
-            "cache entry missing (cleaned or pruned)".to_string()
+            StaleReason::CacheEntryMissing
         } else {
-            format!("changed: {}", changed.join(", "))
+            StaleReason::Changed(changed)
         }
     }
 }
@@ -197,10 +198,11 @@ impl SeenStamps {
 
     /// Every stamp, in the order added.
     pub fn into_vec(self) -> Result<Vec<Miss>, WorkspaceError> {
+        use motionforge_core::base::ReadBackProblem;
         use std::os::unix::fs::FileExt;
-        let damaged = |e: String| WorkspaceError::Encode {
+        let damaged = |problem: ReadBackProblem| WorkspaceError::ReadBack {
             what: "the stamps seen in this build, read back".to_string(),
-            message: e,
+            problem,
         };
         let mut all = Vec::with_capacity(self.blocks.len() * SEEN_BLOCK + self.pending.len());
         for block in &self.blocks {
@@ -210,17 +212,17 @@ impl SeenStamps {
                     let file = self
                         .spill
                         .as_ref()
-                        .ok_or_else(|| damaged("the spill file is gone".into()))?;
+                        .ok_or_else(|| damaged(ReadBackProblem::SpillGone))?;
                     let mut bytes = vec![0u8; *packed];
                     file.read_exact_at(&mut bytes, *at)
-                        .map_err(|e| damaged(e.to_string()))?;
+                        .map_err(|e| damaged(ReadBackProblem::Io(e)))?;
                     (*len, std::borrow::Cow::Owned(bytes))
                 }
             };
-            let encoded =
-                zstd::bulk::decompress(&packed, len).map_err(|e| damaged(e.to_string()))?;
+            let encoded = zstd::bulk::decompress(&packed, len)
+                .map_err(|e| damaged(ReadBackProblem::Io(e)))?;
             let block: Vec<Miss> =
-                postcard::from_bytes(&encoded).map_err(|e| damaged(e.to_string()))?;
+                postcard::from_bytes(&encoded).map_err(|e| damaged(ReadBackProblem::Decode(e)))?;
             all.extend(block);
         }
         all.extend(self.pending);
@@ -359,9 +361,9 @@ impl Workspace {
         fingerprint: &str,
         value: &T,
     ) -> Result<(), WorkspaceError> {
-        let encode = |e: postcard::Error| WorkspaceError::Encode {
+        let encode = |source: postcard::Error| WorkspaceError::Encode {
             what: format!("{stage} output"),
-            message: e.to_string(),
+            source,
         };
         // Sized first: grown by doubling, the buffer of a large entry (the compose stage's, 21 MB
         // at four times Bandai Namco 2) held up to twice its size at the build's peak.

@@ -30,13 +30,81 @@ pub(crate) enum Ended {
     /// It wrote its report.
     Succeeded(Box<BuildReport>),
     /// It exited with an error, or could not be started, or gave no report.
-    Failed(String),
+    Failed(BuildFailure),
     /// A signal ended it.
     Killed {
         /// The signal number.
         signal: i32,
         /// What to record: the signal and the process's last lines.
         message: String,
+    },
+}
+
+/// Why a build process failed (recorded in the build's history as these words).
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum BuildFailure {
+    /// The job file could not be written.
+    #[error("cannot write the build job {}: {source}", job.display())]
+    WriteJob {
+        /// The job file.
+        job: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The builder could not be started.
+    #[error("cannot start the build process {}: {source}", builder.display())]
+    Start {
+        /// The builder executable.
+        builder: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The process was started without its output pipes.
+    #[error("the build process has no output pipes")]
+    NoPipes,
+    /// Waiting for the process failed.
+    #[error("cannot wait for the build process: {0}")]
+    Wait(#[source] std::io::Error),
+    /// The process exited 0 without a readable report.
+    #[error("the build process exited 0 but {problem}{last_lines}")]
+    NoReport {
+        /// What is wrong with the report.
+        problem: ReportProblem,
+        /// Its last output lines (see [`last_lines`]).
+        last_lines: String,
+    },
+    /// The process said why it failed (its `failed` event).
+    // The message of another process, which sends it as text.
+    #[error("{0}")]
+    Reported(String),
+    /// The process exited non-zero without saying why.
+    #[error("the build process exited with code {}{last_lines}", code.map_or_else(|| "an unknown status".to_string(), |c| c.to_string()))]
+    Exited {
+        /// Its exit code, `None` when it has none.
+        code: Option<i32>,
+        /// Its last output lines (see [`last_lines`]).
+        last_lines: String,
+    },
+}
+
+/// Why the report of a process that exited 0 cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum ReportProblem {
+    /// The report file cannot be read.
+    #[error("its report {} is missing: {source}", path.display())]
+    Missing {
+        /// The report file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The report is not a build report.
+    #[error("its report {} does not parse: {source}", path.display())]
+    Parse {
+        /// The report file.
+        path: PathBuf,
+        /// The error.
+        source: serde_json::Error,
     },
 }
 
@@ -83,11 +151,11 @@ pub(crate) async fn run(builder: &Path, jobs_dir: &Path, job: Job, log: &BuildLo
     let written = serde_json::to_vec(&job)
         .map_err(std::io::Error::other)
         .and_then(|json| write_atomic(&files.job, &json));
-    if let Err(e) = written {
-        return Ended::Failed(format!(
-            "cannot write the build job {}: {e}",
-            files.job.display()
-        ));
+    if let Err(source) = written {
+        return Ended::Failed(BuildFailure::WriteJob {
+            job: files.job.clone(),
+            source,
+        });
     }
 
     let mut command = Command::new(builder);
@@ -104,18 +172,18 @@ pub(crate) async fn run(builder: &Path, jobs_dir: &Path, job: Job, log: &BuildLo
         .kill_on_drop(true);
     let mut child = match command.spawn() {
         Ok(child) => child,
-        Err(e) => {
-            return Ended::Failed(format!(
-                "cannot start the build process {}: {e}",
-                builder.display()
-            ));
+        Err(source) => {
+            return Ended::Failed(BuildFailure::Start {
+                builder: builder.to_path_buf(),
+                source,
+            });
         }
     };
     // Held open until the process has ended: its end of file tells the process the service is
     // gone. (`Child::wait` would close it if it were left in `child`.)
     let stdin = child.stdin.take();
     let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
-        return Ended::Failed("the build process has no output pipes".into());
+        return Ended::Failed(BuildFailure::NoPipes);
     };
 
     let seen = Mutex::new(Seen::default());
@@ -141,23 +209,27 @@ pub(crate) async fn run(builder: &Path, jobs_dir: &Path, job: Job, log: &BuildLo
     let seen = std::mem::take(&mut *seen.lock().unwrap_or_else(|e| e.into_inner()));
 
     match status {
-        Err(e) => Ended::Failed(format!("cannot wait for the build process: {e}")),
+        Err(e) => Ended::Failed(BuildFailure::Wait(e)),
         Ok(status) if status.success() => match read_report(&files.report) {
             Ok(report) => Ended::Succeeded(Box::new(report)),
-            Err(why) => Ended::Failed(format!(
-                "the build process exited 0 but {why}{}",
-                last_lines(&seen)
-            )),
+            Err(problem) => Ended::Failed(BuildFailure::NoReport {
+                problem,
+                last_lines: last_lines(&seen),
+            }),
         },
         Ok(status) => ended_badly(status, seen),
     }
 }
 
-fn read_report(path: &Path) -> Result<BuildReport, String> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| format!("its report {} is missing: {e}", path.display()))?;
-    serde_json::from_slice(&bytes)
-        .map_err(|e| format!("its report {} does not parse: {e}", path.display()))
+fn read_report(path: &Path) -> Result<BuildReport, ReportProblem> {
+    let bytes = std::fs::read(path).map_err(|source| ReportProblem::Missing {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_slice(&bytes).map_err(|source| ReportProblem::Parse {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// The record of a process that exited non-zero or was killed.
@@ -177,15 +249,12 @@ fn ended_badly(status: ExitStatus, seen: Seen) -> Ended {
             ),
         };
     }
-    let code = status
-        .code()
-        .map_or_else(|| "an unknown status".to_string(), |c| c.to_string());
     match seen.failure {
-        Some(message) => Ended::Failed(message),
-        None => Ended::Failed(format!(
-            "the build process exited with code {code}{}",
-            last_lines(&seen)
-        )),
+        Some(message) => Ended::Failed(BuildFailure::Reported(message)),
+        None => Ended::Failed(BuildFailure::Exited {
+            code: status.code(),
+            last_lines: last_lines(&seen),
+        }),
     }
 }
 
@@ -380,12 +449,12 @@ mod tests {
             "only the last lines: {message}"
         );
         // Exit code 3 (a wait status holds it shifted by 8), no failed event: the code and tail.
-        let Ended::Failed(message) = ended_badly(ExitStatus::from_raw(3 << 8), Seen::default())
+        let Ended::Failed(failure) = ended_badly(ExitStatus::from_raw(3 << 8), Seen::default())
         else {
             panic!("not failed");
         };
         assert_eq!(
-            message,
+            failure.to_string(),
             "the build process exited with code 3; it printed nothing"
         );
     }

@@ -113,7 +113,7 @@ async fn run_build(shared: &Arc<Shared>, dataset: &str, id: BuildId) {
                 duration_ms,
             }
         }
-        Ended::Failed(why) => failed(&log, why, duration_ms),
+        Ended::Failed(why) => failed(&log, why.to_string(), duration_ms),
         Ended::Killed { signal, message } => {
             if child::is_stop_request(signal) {
                 // Under systemd a stop signals every process of the unit at once: when the

@@ -14,9 +14,9 @@ mod write;
 pub use reject::{DropReason, Dropped, MAX_MESSAGE_CHARS, Reject, RejectReason};
 pub use tally::{Named, Tally};
 pub use write::{
-    Fingerprint, HashingWriter, Stamp, WorkspaceError, encoded_sha256, hex, io_err, io_hint,
-    replace_dir, restore_replaced, sha256_hex, sibling, temp_path, write_atomic, write_atomic_with,
-    write_replaceable_with,
+    Fingerprint, HashingWriter, ReadBackProblem, Stamp, WorkspaceError, encoded_sha256, hex,
+    io_err, io_hint, replace_dir, restore_replaced, sha256_hex, sibling, temp_path, write_atomic,
+    write_atomic_with, write_replaceable_with,
 };
 
 /// `path` with `.` removed and `dir/..` folded lexically (no file system access), so paths print

@@ -33,16 +33,46 @@ pub enum WorkspaceError {
         source: std::io::Error,
     },
     /// A value could not be serialised for the cache.
-    #[error("cannot encode {what}: {message}")]
+    #[error("cannot encode {what}: {source}")]
     Encode {
         /// What was being encoded.
         what: String,
-        /// The encoder's message.
-        message: String,
+        /// The encoder's error.
+        source: postcard::Error,
+    },
+    /// Encoded bytes could not be compressed for the cache.
+    #[error("cannot encode {what}: {source}")]
+    Compress {
+        /// What was being compressed.
+        what: String,
+        /// The compressor's error.
+        source: std::io::Error,
+    },
+    /// Values a build set aside (in memory or a temporary file) do not come back whole.
+    #[error("cannot encode {what}: {problem}")]
+    ReadBack {
+        /// What was read back.
+        what: String,
+        /// What failed.
+        problem: ReadBackProblem,
     },
     /// Another process is building the same dataset folder, or its lock cannot be taken.
     #[error(transparent)]
     Lock(#[from] super::lock::LockError),
+}
+
+/// Why values set aside during a build do not come back.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadBackProblem {
+    /// The temporary file they were spilled to is gone.
+    #[error("the spill file is gone")]
+    SpillGone,
+    /// Reading or decompressing them failed.
+    #[error("{0}")]
+    Io(#[source] std::io::Error),
+    /// They do not decode.
+    #[error("{0}")]
+    Decode(#[source] postcard::Error),
 }
 
 /// What to do about the I/O errors a person can fix, for error messages.
@@ -86,12 +116,13 @@ pub fn encoded_sha256<T: Serialize + ?Sized>(
     value: &T,
     what: &str,
 ) -> Result<String, WorkspaceError> {
-    let hashing = postcard::to_io(value, HashingWriter::new(std::io::sink())).map_err(|e| {
-        WorkspaceError::Encode {
-            what: what.to_string(),
-            message: e.to_string(),
-        }
-    })?;
+    let hashing =
+        postcard::to_io(value, HashingWriter::new(std::io::sink())).map_err(|source| {
+            WorkspaceError::Encode {
+                what: what.to_string(),
+                source,
+            }
+        })?;
     Ok(hashing.finish().1)
 }
 

@@ -19,11 +19,11 @@ pub struct JointArray {
 }
 
 /// Why a `.npy` file is not a joint-position array.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum NpyError {
     /// The header cannot be read.
     #[error("not a NumPy .npy file: {0}")]
-    Header(String),
+    Header(#[source] std::io::Error),
     /// The values are not float32 or float64.
     #[error("values are `{0}`; expected float32 (`<f4`) or float64 (`<f8`)")]
     DType(String),
@@ -82,7 +82,7 @@ pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
     if let Some(shape) = overflowing_shape(bytes) {
         return Err(NpyError::Shape { shape });
     }
-    let file = npyz::NpyFile::new(bytes).map_err(|e| NpyError::Header(e.to_string()))?;
+    let file = npyz::NpyFile::new(bytes).map_err(NpyError::Header)?;
     if file.order() == npyz::Order::Fortran {
         return Err(NpyError::FortranOrder);
     }
@@ -110,7 +110,7 @@ pub fn read_joint_positions(bytes: &[u8]) -> Result<JointArray, NpyError> {
     if expected > found {
         return Err(NpyError::Truncated { expected, found });
     }
-    let file = npyz::NpyFile::new(bytes).map_err(|e| NpyError::Header(e.to_string()))?;
+    let file = npyz::NpyFile::new(bytes).map_err(NpyError::Header)?;
     let flat: Vec<f64> = match width {
         8 => file
             .into_vec::<f64>()

@@ -281,12 +281,12 @@ impl SmplPlacement {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ProfileError {
     /// The profile TOML does not parse.
-    #[error("profile `{name}`: {message}")]
+    #[error("profile `{name}`: {source}")]
     Parse {
         /// Profile name or file.
         name: String,
-        /// The parser's message.
-        message: String,
+        /// The parser's error.
+        source: toml::de::Error,
     },
     /// No bundled profile of that name.
     #[error(
@@ -364,9 +364,9 @@ const BUNDLED: [(&str, &str); 5] = [
 impl ProfileSpec {
     /// Parses a profile from TOML text.
     pub fn from_toml(name: &str, text: &str) -> Result<ProfileSpec, ProfileError> {
-        toml::from_str(text).map_err(|e| ProfileError::Parse {
+        toml::from_str(text).map_err(|source| ProfileError::Parse {
             name: name.to_string(),
-            message: e.to_string(),
+            source,
         })
     }
 

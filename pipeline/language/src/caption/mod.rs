@@ -24,6 +24,7 @@ use serde::Deserialize;
 
 mod spacy_tagger;
 
+pub use self::spacy_tagger::SpacyModelError;
 use self::spacy_tagger::{SpacyTagger, SpacyToken};
 
 const RULES_TOML: &str = include_str!("../../../../schemas/caption-tagger.toml");
@@ -144,7 +145,7 @@ pub struct Token {
 }
 
 /// Why a caption cannot become a HumanML3D caption line.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum CaptionError {
     /// `#` separates the line's four fields; readers would drop the clip.
     #[error(
@@ -192,9 +193,78 @@ pub enum CaptionError {
         /// Its length in characters.
         chars: usize,
     },
-    /// The bundled tagger data did not load (a build with broken `schemas/` files).
+    /// The bundled tagger rules or word lists did not load (a build with broken `schemas/`
+    /// files). The error is the one the load left, read once for the whole run.
     #[error("caption tagger data: {0}")]
-    Data(String),
+    Rules(#[source] &'static TaggerDataError),
+    /// The bundled spaCy tagger model did not load (as for [`CaptionError::Rules`]).
+    #[error("caption tagger data: {0}")]
+    Model(#[source] &'static SpacyModelError),
+}
+
+/// Why the rule tagger's bundled files do not load.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TaggerDataError {
+    /// The rules file does not parse or has unknown keys.
+    #[error("schemas/caption-tagger.toml: {0}")]
+    Rules(#[source] toml::de::Error),
+    /// An entry names a tag that is not a Universal POS tag.
+    #[error("schemas/caption-tagger.toml {entry}: `{tag}` is not a Universal POS tag")]
+    UnknownTag {
+        /// The entry (`[closed] the`, `[lemma.rules]`...).
+        entry: String,
+        /// The tag.
+        tag: String,
+    },
+    /// An entry gives no tag.
+    #[error("schemas/caption-tagger.toml {entry}: no tag")]
+    NoTag {
+        /// The entry.
+        entry: String,
+    },
+    /// A lemma rule is for a closed-class tag.
+    #[error("schemas/caption-tagger.toml [lemma.rules]: {tag} is not open-class")]
+    NotOpenClass {
+        /// The tag as written.
+        tag: String,
+    },
+    /// A line of the word lexicon is not a word with four counts.
+    #[error("schemas/pos-lexicon.tsv line {line}: {problem}: {text:?}")]
+    Lexicon {
+        /// 1-based line.
+        line: usize,
+        /// What is wrong with it.
+        problem: LexiconLine,
+        /// The line.
+        text: String,
+    },
+    /// A line of the exceptions is not `form<TAB>NOUN|VERB|ADJ<TAB>lemma`.
+    #[error(
+        "schemas/pos-exceptions.tsv line {line}: not `form<TAB>NOUN|VERB|ADJ<TAB>lemma`: {text:?}"
+    )]
+    Exception {
+        /// 1-based line.
+        line: usize,
+        /// The line.
+        text: String,
+    },
+}
+
+/// What is wrong with a line of `schemas/pos-lexicon.tsv`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum LexiconLine {
+    /// The first column is empty.
+    #[error("no word")]
+    NoWord,
+    /// The line ends before the four counts.
+    #[error("fewer than five columns")]
+    Short,
+    /// A count is neither a number nor `-`.
+    #[error("a count is not a number or '-'")]
+    Count,
+    /// More columns, or no count given.
+    #[error("not a word with four counts, one at least given")]
+    Shape,
 }
 
 /// The longest caption, in characters, that is read or tagged. Real captions are a sentence or
@@ -370,11 +440,11 @@ pub fn spacy_attributes(caption: &str) -> Result<Vec<(String, [u64; 6])>, Captio
 }
 
 fn spacy() -> Result<&'static SpacyTagger, CaptionError> {
-    static MODEL: OnceLock<Result<SpacyTagger, String>> = OnceLock::new();
+    static MODEL: OnceLock<Result<SpacyTagger, SpacyModelError>> = OnceLock::new();
     MODEL
         .get_or_init(SpacyTagger::bundled)
         .as_ref()
-        .map_err(|e| CaptionError::Data(e.clone()))
+        .map_err(CaptionError::Model)
 }
 
 /// A Penn Treebank tag as spaCy 2.3.4 turns it into a coarse tag: its morphology rules for
@@ -893,11 +963,11 @@ struct Tagger {
 }
 
 fn tagger() -> Result<&'static Tagger, CaptionError> {
-    static TAGGER: OnceLock<Result<Tagger, String>> = OnceLock::new();
+    static TAGGER: OnceLock<Result<Tagger, TaggerDataError>> = OnceLock::new();
     TAGGER
         .get_or_init(|| Tagger::load(RULES_TOML, LEXICON_TSV, EXCEPTIONS_TSV))
         .as_ref()
-        .map_err(|e| CaptionError::Data(e.clone()))
+        .map_err(CaptionError::Rules)
 }
 
 fn open_index(tag: Upos) -> Option<usize> {
@@ -905,17 +975,22 @@ fn open_index(tag: Upos) -> Option<usize> {
 }
 
 impl Tagger {
-    fn load(rules: &str, lexicon: &str, exceptions: &str) -> Result<Tagger, String> {
-        let file: RulesFile =
-            toml::from_str(rules).map_err(|e| format!("schemas/caption-tagger.toml: {e}"))?;
-        let tags = |s: &str, what: &str| -> Result<Vec<Upos>, String> {
+    fn load(rules: &str, lexicon: &str, exceptions: &str) -> Result<Tagger, TaggerDataError> {
+        let file: RulesFile = toml::from_str(rules).map_err(TaggerDataError::Rules)?;
+        let tags = |s: &str, entry: &str| -> Result<Vec<Upos>, TaggerDataError> {
             let v: Vec<Upos> = s
                 .split_whitespace()
-                .map(Upos::from_str)
-                .collect::<Result<_, _>>()
-                .map_err(|e| format!("schemas/caption-tagger.toml {what}: {e}"))?;
+                .map(|tag| {
+                    Upos::from_str(tag).map_err(|_| TaggerDataError::UnknownTag {
+                        entry: entry.to_string(),
+                        tag: tag.to_string(),
+                    })
+                })
+                .collect::<Result<_, _>>()?;
             if v.is_empty() {
-                return Err(format!("schemas/caption-tagger.toml {what}: no tag"));
+                return Err(TaggerDataError::NoTag {
+                    entry: entry.to_string(),
+                });
             }
             Ok(v)
         };
@@ -926,9 +1001,8 @@ impl Tagger {
         let mut suffixes: [Vec<(String, String)>; 4] = Default::default();
         for (pos, list) in &file.lemma.rules {
             let tag = tags(pos, "[lemma.rules]")?[0];
-            let i = open_index(tag).ok_or_else(|| {
-                format!("schemas/caption-tagger.toml [lemma.rules]: {pos} is not open-class")
-            })?;
+            let i = open_index(tag)
+                .ok_or_else(|| TaggerDataError::NotOpenClass { tag: pos.clone() })?;
             suffixes[i] = list.iter().map(|[a, b]| (a.clone(), b.clone())).collect();
         }
         let mut guess = Vec::new();
@@ -1270,48 +1344,47 @@ fn inflection(word: &str, tag: Upos) -> Form {
     }
 }
 
-fn parse_lexicon(text: &str) -> Result<HashMap<String, [Option<u32>; 4]>, String> {
+fn parse_lexicon(text: &str) -> Result<HashMap<String, [Option<u32>; 4]>, TaggerDataError> {
     let mut map = HashMap::with_capacity(80_000);
     for (n, line) in text.lines().enumerate() {
         if line.starts_with('#') || line.is_empty() {
             continue;
         }
-        let bad = |why: &str| format!("schemas/pos-lexicon.tsv line {}: {why}: {line:?}", n + 1);
+        let bad = |problem: LexiconLine| TaggerDataError::Lexicon {
+            line: n + 1,
+            problem,
+            text: line.to_string(),
+        };
         let mut cells = line.split('\t');
         let word = cells
             .next()
             .filter(|w| !w.is_empty())
-            .ok_or_else(|| bad("no word"))?;
+            .ok_or_else(|| bad(LexiconLine::NoWord))?;
         let mut counts = [None; 4];
         for c in &mut counts {
-            let cell = cells.next().ok_or_else(|| bad("fewer than five columns"))?;
+            let cell = cells.next().ok_or_else(|| bad(LexiconLine::Short))?;
             *c = match cell {
                 "-" => None,
-                n => Some(
-                    n.parse::<u32>()
-                        .map_err(|_| bad("a count is not a number or '-'"))?,
-                ),
+                n => Some(n.parse::<u32>().map_err(|_| bad(LexiconLine::Count))?),
             };
         }
         if cells.next().is_some() || counts.iter().all(Option::is_none) {
-            return Err(bad("not a word with four counts, one at least given"));
+            return Err(bad(LexiconLine::Shape));
         }
         map.insert(word.to_string(), counts);
     }
     Ok(map)
 }
 
-fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<(Upos, String)>>, String> {
+fn parse_exceptions(text: &str) -> Result<HashMap<String, Vec<(Upos, String)>>, TaggerDataError> {
     let mut map: HashMap<String, Vec<(Upos, String)>> = HashMap::new();
     for (n, line) in text.lines().enumerate() {
         if line.starts_with('#') || line.is_empty() {
             continue;
         }
-        let bad = || {
-            format!(
-                "schemas/pos-exceptions.tsv line {}: not `form<TAB>NOUN|VERB|ADJ<TAB>lemma`: {line:?}",
-                n + 1
-            )
+        let bad = || TaggerDataError::Exception {
+            line: n + 1,
+            text: line.to_string(),
         };
         let [form, tag, lemma] = line.split('\t').collect::<Vec<_>>()[..] else {
             return Err(bad());
@@ -1343,11 +1416,25 @@ mod tests {
         let err = Tagger::load(RULES_TOML, "walk\t1\tx\t-\t-\n", EXCEPTIONS_TSV)
             .err()
             .unwrap();
-        assert!(err.contains("pos-lexicon.tsv line 1"), "{err}");
+        assert!(
+            matches!(
+                err,
+                TaggerDataError::Lexicon {
+                    line: 1,
+                    problem: LexiconLine::Count,
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("pos-lexicon.tsv line 1"), "{err}");
         let err = Tagger::load(RULES_TOML, LEXICON_TSV, "feet\tNOUN\n")
             .err()
             .unwrap();
-        assert!(err.contains("pos-exceptions.tsv line 1"), "{err}");
+        assert!(
+            err.to_string().contains("pos-exceptions.tsv line 1"),
+            "{err}"
+        );
         let err = Tagger::load(
             "[closed]\nthe = \"DETERMINER\"\n",
             LEXICON_TSV,
@@ -1355,7 +1442,8 @@ mod tests {
         )
         .err()
         .unwrap();
-        assert!(err.contains("caption-tagger.toml"), "{err}");
+        assert!(matches!(err, TaggerDataError::Rules(_)), "{err:?}");
+        assert!(err.to_string().contains("caption-tagger.toml"), "{err}");
     }
 
     #[test]

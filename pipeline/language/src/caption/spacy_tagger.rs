@@ -225,31 +225,102 @@ impl Maxout {
     }
 }
 
+/// Why the exported spaCy tagger model does not load (a build with a broken `schemas/` file).
+#[derive(Debug, thiserror::Error)]
+pub enum SpacyModelError {
+    /// No line break ends the JSON header.
+    #[error("{FILE}: no header line")]
+    NoHeader,
+    /// The header is not the expected JSON.
+    #[error("{FILE}: header: {0}")]
+    Header(#[source] serde_json::Error),
+    /// Another format or value type than this reader's.
+    #[error("{FILE}: format {format:?} / dtype {dtype:?}, expected {FORMAT:?} / \"f16le\"")]
+    Format {
+        /// The header's format.
+        format: String,
+        /// The header's value type.
+        dtype: String,
+    },
+    /// Other token attributes than this reader's, or not one seed each.
+    #[error("{FILE}: attributes {attrs:?}, expected {ATTRS:?} with one seed each")]
+    Attrs {
+        /// The header's attributes.
+        attrs: Vec<String>,
+    },
+    /// A tensor's shape multiplies beyond what can be counted.
+    #[error("{FILE}: tensor {name}: shape {shape:?} overflows")]
+    ShapeOverflow {
+        /// The tensor.
+        name: String,
+        /// Its shape.
+        shape: Vec<usize>,
+    },
+    /// The tensors' sizes add up beyond what can be counted.
+    #[error("{FILE}: tensor sizes overflow")]
+    SizesOverflow,
+    /// The header lists another number of weights than the file holds.
+    #[error("{FILE}: the header lists {need} weights, the file holds {bytes} bytes of them")]
+    Size {
+        /// Weights listed.
+        need: usize,
+        /// Bytes after the header.
+        bytes: usize,
+    },
+    /// A weight is NaN or infinite.
+    #[error("{FILE}: tensor {name} holds a non-finite weight")]
+    NonFinite {
+        /// The tensor.
+        name: String,
+    },
+    /// A tensor the network needs is missing.
+    #[error("{FILE}: no tensor {name}")]
+    NoTensor {
+        /// The tensor.
+        name: String,
+    },
+    /// A tensor has another shape than the network needs.
+    #[error("{FILE}: tensor {name} has shape {shape:?}, expected {want:?}")]
+    Shape {
+        /// The tensor.
+        name: String,
+        /// Its shape.
+        shape: Vec<usize>,
+        /// The shape needed.
+        want: Vec<usize>,
+    },
+    /// No `layernorm0.G` tensor gives the network's width.
+    #[error("{FILE}: no layernorm0.G to give the width")]
+    NoWidth,
+    /// A `lexeme_norm` key is not a hash.
+    #[error("{FILE}: lexeme_norm key {key:?} is not a 64-bit hash")]
+    NormKey {
+        /// The key.
+        key: String,
+    },
+}
+
 impl SpacyTagger {
     /// The bundled model.
-    pub(crate) fn bundled() -> Result<SpacyTagger, String> {
+    pub(crate) fn bundled() -> Result<SpacyTagger, SpacyModelError> {
         SpacyTagger::load(MODEL)
     }
 
     /// Reads an exported model: a JSON header line, then half floats (`tools/export-caption-tagger.py`).
-    pub(crate) fn load(bytes: &[u8]) -> Result<SpacyTagger, String> {
+    pub(crate) fn load(bytes: &[u8]) -> Result<SpacyTagger, SpacyModelError> {
         let split = bytes
             .iter()
             .position(|&b| b == b'\n')
-            .ok_or_else(|| format!("{FILE}: no header line"))?;
+            .ok_or(SpacyModelError::NoHeader)?;
         let header: Header =
-            serde_json::from_slice(&bytes[..split]).map_err(|e| format!("{FILE}: header: {e}"))?;
+            serde_json::from_slice(&bytes[..split]).map_err(SpacyModelError::Header)?;
         if header.format != FORMAT || header.dtype != "f16le" {
-            return Err(format!(
-                "{FILE}: format {:?} / dtype {:?}, expected {FORMAT:?} / \"f16le\"",
-                header.format, header.dtype
-            ));
+            let (format, dtype) = (header.format, header.dtype);
+            return Err(SpacyModelError::Format { format, dtype });
         }
         if header.attrs != ATTRS || header.seeds.len() != ATTRS.len() {
-            return Err(format!(
-                "{FILE}: attributes {:?}, expected {ATTRS:?} with one seed each",
-                header.attrs
-            ));
+            let attrs = header.attrs;
+            return Err(SpacyModelError::Attrs { attrs });
         }
         let body = &bytes[split + 1..];
         // Check the sizes the header claims against the bytes there before allocating anything.
@@ -258,16 +329,17 @@ impl SpacyTagger {
             let n = shape
                 .iter()
                 .try_fold(1usize, |a, &d| a.checked_mul(d))
-                .ok_or_else(|| format!("{FILE}: tensor {name}: shape {shape:?} overflows"))?;
-            need = need
-                .checked_add(n)
-                .ok_or_else(|| format!("{FILE}: tensor sizes overflow"))?;
+                .ok_or_else(|| SpacyModelError::ShapeOverflow {
+                    name: name.clone(),
+                    shape: shape.clone(),
+                })?;
+            need = need.checked_add(n).ok_or(SpacyModelError::SizesOverflow)?;
         }
         if need.checked_mul(2) != Some(body.len()) {
-            return Err(format!(
-                "{FILE}: the header lists {need} weights, the file holds {} bytes of them",
-                body.len()
-            ));
+            return Err(SpacyModelError::Size {
+                need,
+                bytes: body.len(),
+            });
         }
         let mut tensors: HashMap<&str, (&[usize], Vec<f32>)> = HashMap::new();
         let mut at = 0;
@@ -278,19 +350,21 @@ impl SpacyTagger {
                 .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
                 .collect::<Vec<f32>>();
             if values.iter().any(|v| !v.is_finite()) {
-                return Err(format!("{FILE}: tensor {name} holds a non-finite weight"));
+                return Err(SpacyModelError::NonFinite { name: name.clone() });
             }
             at += 2 * n;
             tensors.insert(name.as_str(), (shape.as_slice(), values));
         }
-        let mut take = |name: &str, want: &[usize]| -> Result<Vec<f32>, String> {
+        let mut take = |name: &str, want: &[usize]| -> Result<Vec<f32>, SpacyModelError> {
             let (shape, v) = tensors
                 .remove(name)
-                .ok_or_else(|| format!("{FILE}: no tensor {name}"))?;
+                .ok_or_else(|| SpacyModelError::NoTensor { name: name.into() })?;
             if shape != want {
-                return Err(format!(
-                    "{FILE}: tensor {name} has shape {shape:?}, expected {want:?}"
-                ));
+                return Err(SpacyModelError::Shape {
+                    name: name.into(),
+                    shape: shape.to_vec(),
+                    want: want.to_vec(),
+                });
             }
             Ok(v)
         };
@@ -300,7 +374,7 @@ impl SpacyTagger {
             .find(|(n, _)| n == "layernorm0.G")
             .and_then(|(_, s)| s.first().copied())
             .filter(|&w| w > 0)
-            .ok_or_else(|| format!("{FILE}: no layernorm0.G to give the width"))?;
+            .ok_or(SpacyModelError::NoWidth)?;
         let mut embed = Vec::new();
         for (attr, &seed) in ATTRS.iter().zip(&header.seeds) {
             let name = format!("embed.{attr}");
@@ -310,7 +384,7 @@ impl SpacyTagger {
                 .find(|(n, _)| *n == name)
                 .and_then(|(_, s)| s.first().copied())
                 .filter(|&r| r > 0)
-                .ok_or_else(|| format!("{FILE}: no tensor {name}"))?;
+                .ok_or_else(|| SpacyModelError::NoTensor { name: name.clone() })?;
             embed.push((take(&name, &[rows, width])?, rows, seed));
         }
         let mut layers = Vec::new();
@@ -335,7 +409,7 @@ impl SpacyTagger {
         for (k, v) in header.lexeme_norm {
             let key: u64 = k
                 .parse()
-                .map_err(|_| format!("{FILE}: lexeme_norm key {k:?} is not a 64-bit hash"))?;
+                .map_err(|_| SpacyModelError::NormKey { key: k.clone() })?;
             lexeme_norm.insert(key, v);
         }
         Ok(SpacyTagger {
@@ -754,6 +828,7 @@ mod tests {
         assert!(SpacyTagger::load(b"no header").is_err());
         let cut = &MODEL[..MODEL.len() - 2];
         let err = SpacyTagger::load(cut).err().unwrap();
-        assert!(err.contains("weights"), "{err}");
+        assert!(matches!(err, SpacyModelError::Size { .. }), "{err}");
+        assert!(err.to_string().contains("weights"), "{err}");
     }
 }

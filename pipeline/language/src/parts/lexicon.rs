@@ -194,7 +194,7 @@ struct WordLists {
 pub enum LexiconError {
     /// The file does not parse or has unknown keys.
     #[error("schemas/lexicon.toml: {0}")]
-    Parse(String),
+    Parse(#[source] toml::de::Error),
     /// A phrase's meaning is not in the file's grammar.
     #[error("schemas/lexicon.toml: phrase `{phrase}`: {message}")]
     Meaning {
@@ -319,7 +319,7 @@ fn word_set(words: Vec<String>) -> WordSet {
 }
 
 fn load_lexicon(text: &str) -> Result<Lexicon, LexiconError> {
-    let file: LexiconFile = toml::from_str(text).map_err(|e| LexiconError::Parse(e.to_string()))?;
+    let file: LexiconFile = toml::from_str(text).map_err(LexiconError::Parse)?;
     let mut by_first: HashMap<&'static str, Vec<(Vec<&'static str>, Kind)>> = HashMap::new();
     let mut verbs = HashSet::new();
     let mut nouns = HashSet::new();

@@ -8,10 +8,11 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use motionforge_core::base::{Named, Tally};
 use motionforge_core::motion::canonical::dataset_positions;
 use motionforge_core::motion::compose::{Trim, action_kept, action_window, compose, contributions};
 use motionforge_core::motion::{BodyPart, Motion, Profile};
-use motionforge_core::quality::{Plausibility, plausibility};
+use motionforge_core::quality::{Check, Plausibility, plausibility};
 use motionforge_language::compose_text::compose_variants;
 use motionforge_language::parts::PartSet;
 use motionforge_sources::clip::{Clip, SourceKind, Split};
@@ -37,7 +38,43 @@ pub struct ComposeReport {
     pub composed: usize,
     /// Pairs dropped, each under one reason: the LLM veto, `action_cut` (the crop keeps less of
     /// the longer clip's action than `min_action_kept`) or the first plausibility check it fails.
-    pub dropped: BTreeMap<String, usize>,
+    pub dropped: Tally<PairDrop>,
+}
+
+/// Why a sampled pair became no composite: the keys of [`ComposeReport::dropped`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PairDrop {
+    /// The LLM pair check said the two actions cannot be done at once.
+    LlmIncompatible,
+    /// The crop keeps less of the longer clip's action than `min_action_kept`.
+    ActionCut,
+    /// The composite fails this plausibility check (the first it fails).
+    Implausible(Check),
+}
+
+impl Named for PairDrop {
+    const ALL: &'static [PairDrop] = &[
+        PairDrop::LlmIncompatible,
+        PairDrop::ActionCut,
+        PairDrop::Implausible(Check::FootSkating),
+        PairDrop::Implausible(Check::GroundPenetration),
+        PairDrop::Implausible(Check::SelfPenetration),
+        PairDrop::Implausible(Check::Lean),
+    ];
+
+    fn name(self) -> &'static str {
+        match self {
+            PairDrop::LlmIncompatible => "llm_incompatible",
+            PairDrop::ActionCut => "action_cut",
+            PairDrop::Implausible(check) => check.name(),
+        }
+    }
+}
+
+impl std::fmt::Display for PairDrop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// The stage's output.
@@ -455,8 +492,8 @@ pub struct Recipe<'c> {
 }
 
 /// Runs the stage: the sampled pairs composed, measured for plausibility, and kept or dropped by
-/// reason (real clips are measured when their rows are made, from the same positions). `veto` may refuse a pair before composition (the LLM check),
-/// naming the reason; `profile_of` binds a clip's skeleton profile; `motion_of` gives a clip's
+/// reason (real clips are measured when their rows are made, from the same positions). `veto`
+/// refuses a pair before composition (the LLM check); `profile_of` binds a clip's skeleton profile; `motion_of` gives a clip's
 /// frames (the clips may be held without them, one motion is read at a time); `keep` sees each
 /// composed clip, with how its frames were made, before it joins the output (the build keeps the
 /// recipe instead of the frames).
@@ -468,7 +505,7 @@ pub fn run<E: Send>(
     split_of: impl Fn(&Clip) -> Split,
     profile_of: impl Fn(&Clip) -> Option<Profile>,
     motion_of: impl Fn(&Clip) -> Result<Motion, E> + Sync,
-    veto: impl Fn(&Clip, &Clip) -> Option<&'static str>,
+    veto: impl Fn(&Clip, &Clip) -> bool,
     mut keep: impl FnMut(&mut Clip, Recipe<'_>) -> Result<(), E>,
 ) -> Result<ComposeOutput, E> {
     use rayon::prelude::*;
@@ -490,12 +527,12 @@ pub fn run<E: Send>(
     // Composed and measured in parallel a batch at a time (memory stays a batch of composites),
     // then kept in sampling order.
     for batch in pairs.chunks(PAIR_BATCH) {
-        let vetoes: Vec<Option<&'static str>> = batch.iter().map(|(a, b)| veto(a, b)).collect();
+        let vetoes: Vec<bool> = batch.iter().map(|(a, b)| veto(a, b)).collect();
         let made: Vec<Option<Made>> = batch
             .par_iter()
             .zip(&vetoes)
-            .map(|((a, b), vetoed)| {
-                if vetoed.is_some() {
+            .map(|((a, b), &vetoed)| {
+                if vetoed {
                     return Ok(None);
                 }
                 let Some(profile) = bound(a) else {
@@ -505,25 +542,22 @@ pub fn run<E: Send>(
             })
             .collect::<Result<_, E>>()?;
         for ((&(a, b), vetoed), made) in batch.iter().zip(vetoes).zip(made) {
-            if let Some(reason) = vetoed {
-                *out.report.dropped.entry(reason.to_string()).or_insert(0) += 1;
+            if vetoed {
+                out.report.dropped.add(PairDrop::LlmIncompatible);
                 continue;
             }
             let made = match made {
                 None => continue,
                 Some(Made::ActionCut) => {
-                    *out.report
-                        .dropped
-                        .entry("action_cut".to_string())
-                        .or_insert(0) += 1;
+                    out.report.dropped.add(PairDrop::ActionCut);
                     continue;
                 }
                 Some(Made::Composed(made)) => made,
             };
-            let failures = made.metrics.failures(&config.thresholds);
+            let failures = made.metrics.failed_checks(&config.thresholds);
             // Counted once, under the first check it fails, so composed + dropped = sampled.
-            if let Some(first) = failures.first() {
-                *out.report.dropped.entry(first.to_string()).or_insert(0) += 1;
+            if let Some(&first) = failures.first() {
+                out.report.dropped.add(PairDrop::Implausible(first));
                 continue;
             }
             let (mut clip, recipe) = made.into_clip(a, b);
@@ -660,8 +694,59 @@ impl Composed {
 
 #[cfg(test)]
 mod tests {
-    use super::{Rng, draw_pairs};
+    use super::{ComposeReport, PairDrop, Rng, draw_pairs};
+    use motionforge_core::base::Named;
+    use motionforge_core::quality::Check;
     use proptest::prelude::*;
+    use std::collections::BTreeMap;
+
+    /// The report as the stage cache held it when drops were counted under strings.
+    #[derive(serde::Serialize)]
+    struct StringKeyedReport {
+        candidates: usize,
+        compatible: usize,
+        sampled: usize,
+        composed: usize,
+        dropped: BTreeMap<String, usize>,
+    }
+
+    #[test]
+    fn drops_keep_their_names_and_a_report_cached_with_string_keys_still_decodes() {
+        let names: Vec<&str> = PairDrop::ALL.iter().map(|d| d.name()).collect();
+        assert_eq!(
+            names,
+            [
+                "llm_incompatible",
+                "action_cut",
+                "foot_skating",
+                "ground_penetration",
+                "self_penetration",
+                "lean"
+            ]
+        );
+        let old = StringKeyedReport {
+            candidates: 9,
+            compatible: 7,
+            sampled: 6,
+            composed: 1,
+            dropped: names.iter().map(|n| (n.to_string(), n.len())).collect(),
+        };
+        let report: ComposeReport =
+            postcard::from_bytes(&postcard::to_stdvec(&old).unwrap()).unwrap();
+        assert_eq!(
+            report.dropped.get(&PairDrop::Implausible(Check::Lean)),
+            Some(&4)
+        );
+        assert_eq!(report.dropped.get(&PairDrop::LlmIncompatible), Some(&16));
+        assert_eq!(
+            postcard::to_stdvec(&report).unwrap(),
+            postcard::to_stdvec(&old).unwrap()
+        );
+        assert_eq!(
+            serde_json::to_string(&report).unwrap(),
+            serde_json::to_string(&old).unwrap()
+        );
+    }
 
     /// The draw as it was first written, scanning the whole group for each candidate: the oracle
     /// [`draw_pairs`] is tested against.

@@ -80,14 +80,14 @@ pub enum LabelError {
     /// `on_miss = "fail"` and some texts have no answer.
     #[error("{} texts have no cached LLM answer and cannot be asked ({}): {}", texts.len(), reason, preview(texts))]
     Missing {
-        /// Why they cannot be asked.
-        reason: String,
+        /// Why they cannot be asked (the first text's reason).
+        reason: Unanswered,
         /// The texts.
         texts: Vec<String>,
     },
     /// The LLM client cannot be created.
     #[error("LLM client: {0}")]
-    Client(String),
+    Client(#[source] LlmError),
     /// The server is gone (the probe found nothing, or the circuit breaker opened).
     #[error("label: {0}")]
     Server(LlmError),
@@ -174,7 +174,7 @@ pub fn label_texts(
     };
     if !missing.is_empty() && input.config.on_miss == OnMiss::Fail {
         return Err(LabelError::Missing {
-            reason: missing[0].1.to_string(),
+            reason: missing[0].1.clone(),
             texts: missing.into_iter().map(|(t, _)| t).collect(),
         });
     }
@@ -233,7 +233,7 @@ fn asked_answers(
 ) -> Result<(Answers, Missing), LabelError> {
     let mut answers: Answers = Vec::with_capacity(texts.len());
     let mut missing: Missing = Vec::new();
-    let client = LlmClient::new(cfg.clone()).map_err(|e| LabelError::Client(e.to_string()))?;
+    let client = LlmClient::new(cfg.clone()).map_err(LabelError::Client)?;
     let asking = Asking {
         stage: NAME,
         progress: input.progress,
@@ -350,7 +350,7 @@ fn fallback_all(
 ) -> Result<BTreeMap<String, TextParts>, LabelError> {
     if on_miss == OnMiss::Fail {
         return Err(LabelError::Missing {
-            reason: reason.to_string(),
+            reason,
             texts: texts.to_vec(),
         });
     }
@@ -440,13 +440,13 @@ pub struct ImportReport {
 pub enum ImportError {
     /// The file is not a JSON object of text -> answers.
     #[error(
-        "{file}: expected a JSON object of action text -> [answer, ...] (SINC's gpt3-labels-list.json): {message}"
+        "{file}: expected a JSON object of action text -> [answer, ...] (SINC's gpt3-labels-list.json): {source}"
     )]
     Format {
         /// The file.
         file: String,
-        /// What was wrong.
-        message: String,
+        /// The reader's error.
+        source: serde_json::Error,
     },
     /// A prompt does not render.
     #[error(transparent)]
@@ -469,12 +469,11 @@ pub fn import_answers(
     llm: &LlmConfig,
     cache: &mut ResponseCache,
 ) -> Result<ImportReport, ImportError> {
-    let format = |message: String| ImportError::Format {
-        file: file.to_string(),
-        message,
-    };
     let map: BTreeMap<String, Vec<String>> =
-        serde_json::from_str(json).map_err(|e| format(e.to_string()))?;
+        serde_json::from_str(json).map_err(|source| ImportError::Format {
+            file: file.to_string(),
+            source,
+        })?;
     let mut report = ImportReport::default();
     let mut batch: Vec<(
         motionforge_llm::cache::CacheKey,

@@ -132,9 +132,8 @@ fn loaded() -> &'static Mutex<HashMap<(FileKey, usize), Loaded>> {
 /// when the file changes).
 pub fn load_model(path: &Path, num_betas: usize) -> Loaded {
     let Some(key) = file_key(path) else {
-        return Err(ModelError::Read {
+        return Err(ModelError::NotFound {
             path: path.to_path_buf(),
-            message: "no such file".into(),
         });
     };
     let key = (key, num_betas);

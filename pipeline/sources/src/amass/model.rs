@@ -120,12 +120,19 @@ pub const SMPLX_JOINTS: [&str; 55] = concat_names([
 /// Why a body model cannot be used: each names the file and the key.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ModelError {
+    /// The file is not there (or its metadata cannot be read).
+    #[error("body model {path}: cannot read: no such file")]
+    NotFound {
+        /// The model file.
+        path: PathBuf,
+    },
     /// The file cannot be read.
     #[error("body model {path}: cannot read: {message}")]
     Read {
         /// The model file.
         path: PathBuf,
-        /// The I/O error.
+        /// The I/O error's text: a loaded model (or its error) is cached and cloned, and
+        /// `std::io::Error` is not `Clone`.
         message: String,
     },
     /// The archive or one of its arrays is unreadable, or a key is missing.

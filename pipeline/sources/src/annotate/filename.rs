@@ -15,7 +15,7 @@ use super::span::{CaptureAnnotation, Span, Time};
 pub enum PatternError {
     /// The pattern is not a valid regex once placeholders are expanded.
     #[error("not a valid pattern: {0}")]
-    Regex(String),
+    Regex(#[source] regex::Error),
     /// An unclosed `{` in a pattern or template.
     #[error("unclosed `{{` in `{0}`")]
     Unclosed(String),
@@ -57,7 +57,7 @@ impl FilenamePattern {
             out.push('$');
             out
         };
-        let regex = Regex::new(&regex_text).map_err(|e| PatternError::Regex(e.to_string()))?;
+        let regex = Regex::new(&regex_text).map_err(PatternError::Regex)?;
         Ok(FilenamePattern {
             source: pattern.to_string(),
             regex,
