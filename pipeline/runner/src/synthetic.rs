@@ -167,18 +167,16 @@ fn llm_vetoes(
         crate::stages::compose::texts_to_check(clips, &config.synthetic, config.dataset.seed);
     let prompts = config.prompts()?;
     let mut cache = text::open_cache(shared)?;
-    let vetoed = crate::stages::augment::incompatible_pairs(
-        &texts,
-        &prompts,
-        config.llm.as_ref(),
+    let ask = crate::stages::augment::Asker {
+        llm: config.llm.as_ref(),
         offline,
-        cache.as_mut(),
-        &mut report,
-        crate::stages::augment::Asking {
+        cache: cache.as_mut(),
+        asking: crate::stages::augment::Asking {
             stage: "pair_check",
             progress,
         },
-    )
-    .map_err(text::augment_error)?;
+    };
+    let vetoed = crate::stages::augment::incompatible_pairs(&texts, &prompts, ask, &mut report)
+        .map_err(text::augment_error)?;
     Ok((vetoed, report))
 }

@@ -98,6 +98,25 @@ struct TextRequests<'a> {
     progress: &'a motionforge_core::progress::ProgressSink,
 }
 
+impl TextRequests<'_> {
+    /// Where `stage`'s prompts go, through `cache`.
+    fn asker<'c>(
+        &'c self,
+        stage: super::Stage,
+        cache: Option<&'c mut ResponseCache>,
+    ) -> augment::Asker<'c> {
+        augment::Asker {
+            llm: self.config.llm.as_ref(),
+            offline: self.offline,
+            cache,
+            asking: Asking {
+                stage: stage.name(),
+                progress: self.progress,
+            },
+        }
+    }
+}
+
 /// Runs the text stages and puts their results on the items' clips.
 pub(super) fn run(
     shared: &Shared<'_>,
@@ -325,14 +344,8 @@ fn paraphrase_stage(
         config.paraphrases.n,
         config.paraphrases.on_invalid,
         asks.prompts,
-        config.llm.as_ref(),
-        asks.offline,
-        cache,
+        asks.asker(Stage::Paraphrase, cache),
         &mut report,
-        Asking {
-            stage: Stage::Paraphrase.name(),
-            progress: asks.progress,
-        },
     )
     .map_err(augment_error)?;
     for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
@@ -357,7 +370,6 @@ fn plan_stage(
     outcome: &mut TextOutcome,
 ) -> Result<(), BuildError> {
     use super::Stage;
-    let config = asks.config;
     let texts: BTreeSet<String> = items
         .iter()
         .flat_map(|i| {
@@ -371,14 +383,8 @@ fn plan_stage(
     outcome.plans = augment::plan(
         &texts,
         asks.prompts,
-        config.llm.as_ref(),
-        asks.offline,
-        cache,
+        asks.asker(Stage::Plan, cache),
         &mut report,
-        Asking {
-            stage: Stage::Plan.name(),
-            progress: asks.progress,
-        },
     )
     .map_err(augment_error)?;
     for (text, reason) in &report.rejected {

@@ -168,16 +168,45 @@ impl Asking<'_> {
     }
 }
 
+/// Where an LLM stage's prompts go and how it reports them: the server (`None` without
+/// `[llm]`), whether only the cache may answer (`--offline`), the response cache, and the
+/// stage's name and progress.
+pub struct Asker<'a> {
+    /// The server's settings.
+    pub llm: Option<&'a LlmConfig>,
+    /// Answers from the cache only.
+    pub offline: bool,
+    /// The response cache (`None` without `[llm]`).
+    pub cache: Option<&'a mut ResponseCache>,
+    /// Where requests are reported.
+    pub asking: Asking<'a>,
+}
+
+impl Asker<'_> {
+    /// The same asker for one more round of requests (a plan's repairs).
+    fn again(&mut self) -> Asker<'_> {
+        Asker {
+            llm: self.llm,
+            offline: self.offline,
+            cache: self.cache.as_deref_mut(),
+            asking: self.asking,
+        }
+    }
+}
+
 /// Answers for `prompts`: from the cache when offline or without a server, else asked. A server
 /// that is gone stops the stage with the client's error.
 pub(crate) fn answers(
     prompts: &[String],
-    llm: Option<&LlmConfig>,
-    offline: bool,
-    cache: Option<&mut ResponseCache>,
+    ask: Asker<'_>,
     report: &mut AugmentReport,
-    asking: Asking<'_>,
 ) -> Result<Vec<Option<String>>, AugmentError> {
+    let Asker {
+        llm,
+        offline,
+        cache,
+        asking,
+    } = ask;
     let (Some(cfg), Some(cache)) = (llm, cache) else {
         *report
             .skipped
@@ -243,17 +272,13 @@ pub(crate) fn answers(
 /// Paraphrases of every text, each answer checked line by line (`llm::paraphrase`): the lines
 /// kept per normalised text. Refused lines are dropped, or kept with `on_invalid = "keep"`
 /// (duplicates never are); both are counted in `report.checks`.
-#[allow(clippy::too_many_arguments)]
 pub fn paraphrase(
     texts: &BTreeSet<String>,
     n: usize,
     on_invalid: OnInvalid,
     prompts: &Prompts,
-    llm: Option<&LlmConfig>,
-    offline: bool,
-    cache: Option<&mut ResponseCache>,
+    ask: Asker<'_>,
     report: &mut AugmentReport,
-    asking: Asking<'_>,
 ) -> Result<BTreeMap<String, Vec<String>>, AugmentError> {
     let texts: Vec<&String> = texts.iter().collect();
     report.texts = texts.len();
@@ -262,10 +287,7 @@ pub fn paraphrase(
         .map(|t| prompts.paraphrase(t, n))
         .collect::<Result<_, _>>()?;
     let mut out = BTreeMap::new();
-    for (t, answer) in texts
-        .iter()
-        .zip(answers(&rendered, llm, offline, cache, report, asking)?)
-    {
+    for (t, answer) in texts.iter().zip(answers(&rendered, ask, report)?) {
         let Some(answer) = answer else { continue };
         report.answered += 1;
         let checked = check_paraphrases(t, &answer, n);
@@ -306,11 +328,8 @@ pub fn paraphrase(
 pub fn incompatible_pairs(
     pairs: &[(String, String)],
     prompts: &Prompts,
-    llm: Option<&LlmConfig>,
-    offline: bool,
-    cache: Option<&mut ResponseCache>,
+    ask: Asker<'_>,
     report: &mut AugmentReport,
-    asking: Asking<'_>,
 ) -> Result<BTreeSet<(String, String)>, AugmentError> {
     report.texts = pairs.len();
     let rendered: Vec<String> = pairs
@@ -318,10 +337,7 @@ pub fn incompatible_pairs(
         .map(|(a, b)| prompts.pair_compat(a, b))
         .collect::<Result<_, _>>()?;
     let mut out = BTreeSet::new();
-    for (pair, answer) in pairs
-        .iter()
-        .zip(answers(&rendered, llm, offline, cache, report, asking)?)
-    {
+    for (pair, answer) in pairs.iter().zip(answers(&rendered, ask, report)?) {
         let Some(answer) = answer else { continue };
         report.answered += 1;
         let first = answer
@@ -351,11 +367,8 @@ pub fn incompatible_pairs(
 pub fn plan(
     texts: &BTreeSet<String>,
     prompts: &Prompts,
-    llm: Option<&LlmConfig>,
-    offline: bool,
-    mut cache: Option<&mut ResponseCache>,
+    mut ask: Asker<'_>,
     report: &mut AugmentReport,
-    asking: Asking<'_>,
 ) -> Result<BTreeMap<String, Vec<PlanStep>>, AugmentError> {
     let texts: Vec<&String> = texts.iter().collect();
     report.texts = texts.len();
@@ -363,14 +376,7 @@ pub fn plan(
         .iter()
         .map(|t| prompts.task_plan(t))
         .collect::<Result<_, _>>()?;
-    let first = answers(
-        &rendered,
-        llm,
-        offline,
-        cache.as_deref_mut(),
-        report,
-        asking,
-    )?;
+    let first = answers(&rendered, ask.again(), report)?;
     let mut out = BTreeMap::new();
     let mut repairs: Vec<(usize, String)> = Vec::new();
     for (i, answer) in first.iter().enumerate() {
@@ -390,7 +396,7 @@ pub fn plan(
     if !repairs.is_empty() {
         let again: Vec<String> = repairs.iter().map(|(_, p)| p.clone()).collect();
         let mut repair_report = AugmentReport::default();
-        let repaired = answers(&again, llm, offline, cache, &mut repair_report, asking)?;
+        let repaired = answers(&again, ask, &mut repair_report)?;
         report.checks.truncated += repair_report.checks.truncated;
         for ((i, _), answer) in repairs.iter().zip(repaired) {
             report.requests += repair_report.requests;
