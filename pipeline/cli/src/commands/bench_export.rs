@@ -273,17 +273,17 @@ fn files_alone(out: &Path, repeat: usize) -> Result<FilesAlone> {
     files.sort();
     let largest = files.iter().map(|(_, n)| *n).max().unwrap_or(0);
     let zeros = vec![0u8; usize::try_from(largest)?];
-    let copy = out.with_extension("files-alone");
     let mut alone = FilesAlone {
         files: files.len(),
         bytes: files.iter().map(|(_, n)| n).sum(),
         wall_s: f64::INFINITY,
         cpu_s: f64::INFINITY,
     };
-    for _ in 0..repeat.max(1) {
-        if copy.exists() {
-            std::fs::remove_dir_all(&copy)?;
-        }
+    // A folder a pass, as for the export's passes.
+    let copies: Vec<PathBuf> = (0..repeat.max(1))
+        .map(|pass| out.with_extension(format!("files-alone-{pass}")))
+        .collect();
+    for copy in &copies {
         let cpu0 = process_cpu_seconds();
         let t0 = Instant::now();
         for dir in &dirs {
@@ -300,7 +300,9 @@ fn files_alone(out: &Path, repeat: usize) -> Result<FilesAlone> {
         alone.wall_s = alone.wall_s.min(t0.elapsed().as_secs_f64());
         alone.cpu_s = alone.cpu_s.min(process_cpu_seconds() - cpu0);
     }
-    std::fs::remove_dir_all(&copy)?;
+    for copy in &copies {
+        std::fs::remove_dir_all(copy)?;
+    }
     Ok(alone)
 }
 
@@ -338,19 +340,20 @@ pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
     let repeat = args.repeat.max(1);
     let python = reference_python(args.python.as_deref())?;
     let scratch = Scratch::new("export")?;
-    let out = scratch.path.join("humanml3d");
     let threads = rayon::current_num_threads();
     let start_load = load_average();
     let (mut wall, mut cpu, mut user) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
     let mut summary = None;
     // Each pass is the command a user runs, in a process of its own: a pass in this process
     // would find the captions the one before tagged still remembered.
+    // Each pass writes a folder of its own, the earlier ones removed only after the last: ext4
+    // skips inodes freed moments before when it allocates, so creating 34,000 files right after
+    // removing 34,000 cost the kernel up to 18 s of a pass here, a cost of the benchmark's
+    // churn, not of an export.
     let exe = std::env::current_exe().context("cannot find this program to run the export")?;
-    for _ in 0..repeat {
-        if out.exists() {
-            std::fs::remove_dir_all(&out)
-                .with_context(|| format!("cannot remove {}", out.display()))?;
-        }
+    let mut passes = Vec::new();
+    for pass in 0..repeat {
+        let out = scratch.path.join(format!("humanml3d-{pass}"));
         let (cpu0, user0) = (children_cpu_seconds(), children_user_seconds());
         let t0 = Instant::now();
         let run = std::process::Command::new(&exe)
@@ -373,6 +376,14 @@ pub(crate) fn bench_export(args: &ExportBench, ui: &Ui) -> Result<()> {
             );
         }
         summary = Some(ExportCounts::read(&out)?);
+        passes.push(out);
+    }
+    let Some(out) = passes.pop() else {
+        bail!("no export ran");
+    };
+    for earlier in passes {
+        std::fs::remove_dir_all(&earlier)
+            .with_context(|| format!("cannot remove {}", earlier.display()))?;
     }
     let Some(summary) = summary else {
         bail!("no export ran");
