@@ -11,9 +11,9 @@ use motionforge::amass::{self, Family};
 
 use super::bench::bvh_timings;
 use super::bench_build::{
-    BuildRun, CONFIG_FILE, CONFIG_MARKER, OUTPUT_DIR, WorkDir, grouped, load_average, rss_mb,
-    timed_build,
+    BuildRun, CONFIG_FILE, CONFIG_MARKER, OUTPUT_DIR, WorkDir, grouped, rss_mb, timed_build,
 };
+use super::bench_machine::load_average;
 use super::load_checked;
 use crate::ui::Ui;
 

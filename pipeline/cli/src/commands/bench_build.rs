@@ -13,6 +13,13 @@ use motionforge::build::{BuildOptions, BuildReport, DATA_DIR, build, plan};
 use motionforge::progress::{Progress, ProgressSink};
 
 use super::bench::peak_rss_kb;
+use super::bench_floor::{
+    BvhioReference, EncodeReference, Scan, bvhio_reference, encode_reference, scan,
+};
+use super::bench_machine::{
+    CpuSnapshot, CpuUse, clock_ticks_per_second, folder_sizes, load_average, own_cpu_ticks,
+    reset_peak_rss, rss_kb, shard_sizes,
+};
 use super::load_checked;
 use crate::ui::Ui;
 
@@ -37,9 +44,6 @@ pub(crate) struct BuildBench {
     /// `--python` given, if any.
     pub(crate) bvhio: Option<Option<PathBuf>>,
 }
-
-/// `scripts/bvhio_reference.py`, carried in the binary so the bench runs from anywhere.
-const BVHIO_REFERENCE: &str = include_str!("../../../../scripts/bvhio_reference.py");
 
 /// The first line of the config the bench writes: marks a `--keep` folder as the bench's own.
 pub(super) const CONFIG_MARKER: &str = "# written by `motionforge bench --build`";
@@ -202,11 +206,11 @@ fn timed_plans(
 // ---- input -----------------------------------------------------------------------------------
 
 /// The captures of the data folder: paths, bytes and frames (from each file's `Frames:` line).
-struct Input {
-    dir: PathBuf,
-    files: Vec<PathBuf>,
-    bytes: u64,
-    frames: u64,
+pub(super) struct Input {
+    pub(super) dir: PathBuf,
+    pub(super) files: Vec<PathBuf>,
+    pub(super) bytes: u64,
+    pub(super) frames: u64,
 }
 
 impl Input {
@@ -545,358 +549,6 @@ fn phases(start: Mark, end: Mark, events: &[(Mark, Event)]) -> Vec<Phase> {
         0,
     ));
     phases
-}
-
-// ---- the bare scan ---------------------------------------------------------------------------
-
-/// The bare scan's best and range, and what it parsed.
-struct Scan {
-    seconds: Vec<f64>,
-    /// This thread's CPU seconds of each pass.
-    cpu_seconds: Vec<f64>,
-    /// This thread's CPU seconds hashing the same bytes (SHA-256, `copies` times over): the
-    /// `source_sha256` every row carries, fastest pass.
-    digest_cpu_seconds: f64,
-    numbers: u64,
-    bytes: u64,
-    peak_rss_kb: Option<u64>,
-}
-
-/// Every file's text in memory (not timed), then on this thread: split on ASCII whitespace and
-/// parse every token that parses as f64, `copies` times over, `repeat` times.
-fn scan(input: &Input, copies: usize, repeat: usize) -> Result<Scan> {
-    reset_peak_rss();
-    let texts: Vec<String> = input
-        .files
-        .iter()
-        .map(|f| std::fs::read_to_string(f).with_context(|| format!("cannot read {}", f.display())))
-        .collect::<Result<_>>()?;
-    let mut seconds = Vec::new();
-    let mut cpu_seconds = Vec::new();
-    let mut numbers = 0u64;
-    for _ in 0..repeat {
-        let cpu0 = thread_cpu_seconds();
-        let t0 = Instant::now();
-        let (mut sum, mut count) = (0.0f64, 0u64);
-        for _ in 0..copies {
-            for text in &texts {
-                for token in text.split_ascii_whitespace() {
-                    if let Ok(v) = token.parse::<f64>() {
-                        sum += v;
-                        count += 1;
-                    }
-                }
-            }
-        }
-        // The sum is used, so the parsing cannot be optimised away.
-        std::hint::black_box(sum);
-        seconds.push(t0.elapsed().as_secs_f64());
-        cpu_seconds.push(thread_cpu_seconds() - cpu0);
-        numbers = count;
-    }
-    let mut digest_cpu_seconds = f64::INFINITY;
-    for _ in 0..repeat {
-        let cpu0 = thread_cpu_seconds();
-        for _ in 0..copies {
-            for text in &texts {
-                std::hint::black_box(motionforge::base::sha256_hex(text.as_bytes()));
-            }
-        }
-        digest_cpu_seconds = digest_cpu_seconds.min(thread_cpu_seconds() - cpu0);
-    }
-    Ok(Scan {
-        seconds,
-        cpu_seconds,
-        digest_cpu_seconds,
-        numbers,
-        bytes: texts.iter().map(|t| t.len() as u64).sum::<u64>() * copies as u64,
-        peak_rss_kb: peak_rss_kb(),
-    })
-}
-
-// ---- the encode reference ------------------------------------------------------------------
-
-/// The encode reference: what arrow-rs's own writer spends encoding the table the build wrote.
-struct EncodeReference {
-    /// Wall seconds of each pass (all shards).
-    seconds: Vec<f64>,
-    /// This thread's CPU seconds of each pass.
-    cpu_seconds: Vec<f64>,
-    shards: usize,
-    rows: usize,
-    /// Bytes one pass wrote.
-    bytes: u64,
-    /// Whether every shard the reference wrote is byte for byte the build's.
-    identical: bool,
-    /// This thread's CPU seconds hashing the shards (SHA-256, the manifest's checksums), fastest
-    /// pass.
-    digest_cpu_seconds: f64,
-}
-
-/// Every finished shard read back into memory (not timed), then written again to memory by
-/// arrow-rs's `ArrowWriter` in one thread, with the shard writer's own properties
-/// ([`shard_properties`](motionforge::io::parquet::shard_properties): zstd at the dataset's
-/// level, BYTE_STREAM_SPLIT floats without dictionary, no statistics on frame lists, 8 MB pages,
-/// 64-row groups, the same key-value metadata); only the writes are timed, `repeat` times. One
-/// shard is in memory at a time.
-fn encode_reference(data: &Path, zstd_level: i32, repeat: usize) -> Result<EncodeReference> {
-    use parquet::arrow::ArrowWriter;
-    let shards = motionforge::dataset::open_clip_tables(data)
-        .with_context(|| format!("cannot list {}", data.display()))?;
-    let mut reference = EncodeReference {
-        seconds: vec![0.0; repeat],
-        cpu_seconds: vec![0.0; repeat],
-        shards: shards.len(),
-        rows: 0,
-        bytes: 0,
-        identical: true,
-        digest_cpu_seconds: 0.0,
-    };
-    for open in &shards {
-        let file = open.path();
-        let shard =
-            std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?;
-        let skeletons = open.key_value("motionforge.skeletons")?.unwrap_or_default();
-        // The reader copies the file's key-value metadata into the Arrow schema; the writer
-        // adds it back from the properties, so the schema the build wrote has none.
-        let fields = open.schema()?.fields().clone();
-        let schema = Arc::new(arrow_schema::Schema::new(fields.clone()));
-        let batches = open
-            .read_named(fields.iter().map(|f| f.name()))
-            .batch_rows(motionforge::io::parquet::ROWS_PER_GROUP)
-            .batches()?
-            .map(|b| b.map(|b| b.record_batch().clone()))
-            .collect::<Result<Vec<_>, _>>()
-            .with_context(|| format!("cannot read {}", file.display()))?;
-        reference.rows += batches.iter().map(|b| b.num_rows()).sum::<usize>();
-        let props = motionforge::io::parquet::shard_properties(&skeletons, zstd_level)?;
-        for pass in 0..repeat {
-            // Room for the whole file up front, as a file's pages would not be copied again.
-            let mut out = Vec::with_capacity(shard.len());
-            let cpu0 = thread_cpu_seconds();
-            let t0 = Instant::now();
-            let mut writer =
-                ArrowWriter::try_new(&mut out, Arc::clone(&schema), Some(props.clone()))?;
-            for batch in &batches {
-                writer.write(batch)?;
-            }
-            writer.close()?;
-            reference.seconds[pass] += t0.elapsed().as_secs_f64();
-            reference.cpu_seconds[pass] += thread_cpu_seconds() - cpu0;
-            if pass == 0 {
-                reference.bytes += out.len() as u64;
-                reference.identical &= out[..] == shard[..];
-            }
-        }
-        let mut digest = f64::INFINITY;
-        for _ in 0..repeat {
-            let cpu0 = thread_cpu_seconds();
-            std::hint::black_box(motionforge::base::sha256_hex(&shard));
-            digest = digest.min(thread_cpu_seconds() - cpu0);
-        }
-        reference.digest_cpu_seconds += digest;
-    }
-    Ok(reference)
-}
-
-// ---- the bvhio reference --------------------------------------------------------------------
-
-/// What bvhio spent reading the folder and computing every joint's world position per frame.
-struct BvhioReference {
-    version: String,
-    files: u64,
-    frames: u64,
-    positions: u64,
-    wall_s: f64,
-    cpu_s: f64,
-}
-
-/// Runs `scripts/bvhio_reference.py` (embedded) over `dir` on one thread, from `work`.
-fn bvhio_reference(dir: &Path, python: Option<&Path>, work: &Path) -> Result<BvhioReference> {
-    let python = super::bench_export::reference_python(python)?;
-    let printed = super::bench_export::run_python_script(
-        &python,
-        work,
-        "bvhio_reference.py",
-        BVHIO_REFERENCE,
-        &[dir.as_os_str()],
-    )?;
-    let value: serde_json::Value = serde_json::from_str(printed.trim())
-        .with_context(|| format!("the bvhio reference printed {printed:?}"))?;
-    let number = |key: &str| {
-        value[key]
-            .as_f64()
-            .with_context(|| format!("no number `{key}` in the bvhio reference's {value}"))
-    };
-    Ok(BvhioReference {
-        version: value["bvhio"].as_str().unwrap_or("?").to_string(),
-        files: number("files")? as u64,
-        frames: number("frames")? as u64,
-        positions: number("positions")? as u64,
-        wall_s: number("wall_s")?,
-        cpu_s: number("cpu_s")?,
-    })
-}
-
-// ---- machine readings ------------------------------------------------------------------------
-
-/// Resets the process's peak resident memory to its current size (Linux `5 > clear_refs`), so
-/// the next `VmHWM` reading covers what follows; silently does nothing where unsupported.
-fn reset_peak_rss() {
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
-}
-
-/// Resident memory of this process now in kB (Linux `VmRSS`), if readable.
-fn rss_kb() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-}
-
-/// The 1, 5 and 15 minute load averages (`/proc/loadavg`), as written.
-pub(super) fn load_average() -> Option<String> {
-    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
-    Some(
-        text.split_whitespace()
-            .take(3)
-            .collect::<Vec<_>>()
-            .join(" "),
-    )
-}
-
-/// This process's CPU time (user + system, all threads) in clock ticks; 0 where unreadable.
-fn own_cpu_ticks() -> u64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0;
-    };
-    // Fields after the command name (which may hold spaces): state is field 3, utime 14, stime 15.
-    let Some((_, rest)) = stat.rsplit_once(')') else {
-        return 0;
-    };
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let field = |n: usize| {
-        fields
-            .get(n - 3)
-            .and_then(|f| f.parse::<u64>().ok())
-            .unwrap_or(0)
-    };
-    field(14) + field(15)
-}
-
-/// This thread's CPU time in seconds (user + system); 0 where unreadable.
-pub(super) fn thread_cpu_seconds() -> f64 {
-    let mut now = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: clock_gettime writes one timespec, which lives on this stack frame.
-    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) } == 0;
-    if ok {
-        now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9
-    } else {
-        0.0
-    }
-}
-
-/// Clock ticks per second of `/proc` times.
-fn clock_ticks_per_second() -> f64 {
-    // SAFETY: sysconf reads a constant of the running system; no memory is passed.
-    let ticks = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
-    if ticks > 0 { ticks as f64 } else { 100.0 }
-}
-
-/// The machine's busy and total CPU ticks (`/proc/stat`) and this process's own, at a moment.
-struct CpuSnapshot {
-    busy: u64,
-    total: u64,
-    own: u64,
-}
-
-/// CPU use over a stretch: this process's, and everything else's, as shares of all CPUs.
-#[derive(Debug, Clone, Copy, Default)]
-struct CpuUse {
-    own: f64,
-    others: f64,
-}
-
-impl CpuSnapshot {
-    fn now() -> CpuSnapshot {
-        let (busy, total) = std::fs::read_to_string("/proc/stat")
-            .ok()
-            .and_then(|text| {
-                let line = text.lines().next()?;
-                let values: Vec<u64> = line
-                    .split_whitespace()
-                    .skip(1)
-                    .filter_map(|v| v.parse().ok())
-                    .collect();
-                // user nice system idle iowait irq softirq steal (guest time is inside user).
-                let total: u64 = values.iter().take(8).sum();
-                let idle =
-                    values.get(3).copied().unwrap_or(0) + values.get(4).copied().unwrap_or(0);
-                Some((total.saturating_sub(idle), total))
-            })
-            .unwrap_or((0, 0));
-        CpuSnapshot {
-            busy,
-            total,
-            own: own_cpu_ticks(),
-        }
-    }
-
-    /// The CPU use from this snapshot to now.
-    fn since(&self) -> CpuUse {
-        let now = CpuSnapshot::now();
-        let total = now.total.saturating_sub(self.total);
-        if total == 0 {
-            return CpuUse::default();
-        }
-        let busy = now.busy.saturating_sub(self.busy);
-        let own = now.own.saturating_sub(self.own).min(busy);
-        CpuUse {
-            own: own as f64 / total as f64,
-            others: (busy - own) as f64 / total as f64,
-        }
-    }
-}
-
-/// Bytes of the files under each sub-folder of `dir` (a stage's cache folder), recursively.
-fn folder_sizes(dir: &Path) -> Result<BTreeMap<String, u64>> {
-    let mut sizes = BTreeMap::new();
-    let entries =
-        std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))?;
-    for entry in entries {
-        let entry = entry?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        sizes.insert(name, tree_bytes(&entry.path())?);
-    }
-    Ok(sizes)
-}
-
-fn tree_bytes(path: &Path) -> Result<u64> {
-    let meta = std::fs::symlink_metadata(path)?;
-    if !meta.is_dir() {
-        return Ok(meta.len());
-    }
-    let mut bytes = 0;
-    for entry in std::fs::read_dir(path)? {
-        bytes += tree_bytes(&entry?.path())?;
-    }
-    Ok(bytes)
-}
-
-/// Bytes of every `*.parquet` shard in the dataset's data folder.
-fn shard_sizes(dir: &Path) -> Result<Vec<u64>> {
-    let mut sizes = Vec::new();
-    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))? {
-        let path = entry?.path();
-        if path.extension().is_some_and(|x| x == "parquet") {
-            sizes.push(std::fs::metadata(&path)?.len());
-        }
-    }
-    Ok(sizes)
 }
 
 // ---- results ---------------------------------------------------------------------------------

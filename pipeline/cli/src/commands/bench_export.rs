@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use super::bench_build::load_average;
+use super::bench_machine::load_average;
 use crate::ui::Ui;
 use anyhow::{Context, Result, bail};
 
@@ -221,7 +221,7 @@ fn vectors_alone(out: &Path, repeat: usize) -> Result<VectorsAlone> {
     };
     for _ in 0..repeat.max(1) {
         alone.rows = 0;
-        let cpu0 = super::bench_build::thread_cpu_seconds();
+        let cpu0 = super::bench_machine::thread_cpu_seconds();
         let t0 = Instant::now();
         for (file, motion) in files.iter().zip(&motions) {
             let rows = motionforge::humanml3d::vectors(motion)
@@ -232,7 +232,7 @@ fn vectors_alone(out: &Path, repeat: usize) -> Result<VectorsAlone> {
         alone.wall_s = alone.wall_s.min(t0.elapsed().as_secs_f64());
         alone.cpu_s = alone
             .cpu_s
-            .min(super::bench_build::thread_cpu_seconds() - cpu0);
+            .min(super::bench_machine::thread_cpu_seconds() - cpu0);
     }
     Ok(alone)
 }

@@ -12,6 +12,8 @@ pub(crate) mod bench;
 mod bench_amass;
 mod bench_build;
 mod bench_export;
+mod bench_floor;
+mod bench_machine;
 pub(crate) mod build;
 pub(crate) mod clean;
 pub(crate) mod clips;
