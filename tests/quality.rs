@@ -546,6 +546,9 @@ fn labels_that_contradict_the_motion_are_listed_and_dropped_on_request() {
     assert_eq!(report.label_contradictions.len(), 2);
     assert!(report.label_contradictions_dropped >= 2);
     assert_eq!(report.clips, kept - report.label_contradictions_dropped);
+    // `plan` sees the rows the build wrote (without the dropped ones): nothing to run.
+    let plan = motionforge::build::plan(&dropping, &BuildOptions::default()).unwrap();
+    assert!(plan.nothing_to_run(), "{plan:#?}");
     println!(
         "{} rows without the drop, {} with it ({} left out)",
         kept, report.clips, report.label_contradictions_dropped

@@ -70,12 +70,14 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
         plan.output.display()
     )?;
     for stage in &plan.stages {
-        if stage.fresh() && stage.items == 0 {
-            writeln!(out, "{:>10}  nothing to do", stage.stage.name())?;
+        if !stage.enabled {
+            writeln!(out, "{:>11}  off", stage.stage.name())?;
+        } else if stage.fresh() && stage.items == 0 {
+            writeln!(out, "{:>11}  nothing to do", stage.stage.name())?;
         } else if stage.fresh() {
             writeln!(
                 out,
-                "{:>10}  up to date ({} items)",
+                "{:>11}  up to date ({} items)",
                 stage.stage.name(),
                 stage.items
             )?;
@@ -84,7 +86,7 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
             // of 1 here read as one item where the build then ran ten).
             writeln!(
                 out,
-                "{:>10}  all to run: {}",
+                "{:>11}  all to run: {}",
                 stage.stage.name(),
                 stage
                     .reasons
@@ -96,14 +98,14 @@ pub(crate) fn print_plan(plan: &motionforge::build::Plan) -> std::io::Result<()>
         } else {
             writeln!(
                 out,
-                "{:>10}  {} of {} to run: {}",
+                "{:>11}  {} of {} to run: {}",
                 stage.stage.name(),
                 stage.to_run,
                 stage.items.max(stage.to_run),
                 reasons(&stage.reasons)
             )?;
             for example in &stage.examples {
-                writeln!(out, "{:>10}    {example}", "")?;
+                writeln!(out, "{:>11}    {example}", "")?;
             }
         }
     }
@@ -160,16 +162,22 @@ pub(crate) fn print_status(status: &motionforge::build::Status) -> std::io::Resu
     )?;
     writeln!(
         out,
-        "{:>10}  {:<6} {:<21} {:>6} {:>6} {:>6}",
+        "{:>11}  {:<6} {:<21} {:>6} {:>6} {:>6}",
         "stage", "state", "last run", "items", "ran", "reused"
     )?;
     for s in &status.stages {
         let last = s.last_run.map_or_else(|| "never".to_string(), utc);
         writeln!(
             out,
-            "{:>10}  {:<6} {:<21} {:>6} {:>6} {:>6}",
+            "{:>11}  {:<6} {:<21} {:>6} {:>6} {:>6}",
             s.stage.name(),
-            if s.fresh { "fresh" } else { "stale" },
+            if !s.enabled {
+                "off"
+            } else if s.fresh {
+                "fresh"
+            } else {
+                "stale"
+            },
             last,
             s.items,
             s.ran,
@@ -178,7 +186,7 @@ pub(crate) fn print_status(status: &motionforge::build::Status) -> std::io::Resu
         if !s.fresh {
             writeln!(
                 out,
-                "{:>10}    {} to run: {}",
+                "{:>11}    {} to run: {}",
                 "",
                 s.to_run,
                 reasons(&s.reasons)
@@ -195,6 +203,8 @@ fn skipped_stage(report: &BuildReport, stage: &str) -> Option<String> {
         &report.paraphrases
     } else if stage == Stage::Plan.name() {
         &report.plans
+    } else if stage == Stage::PairCheck.name() {
+        &report.pair_check
     } else {
         return None;
     };
@@ -267,7 +277,7 @@ pub(crate) fn print_report(report: &BuildReport, seconds: f64) -> std::io::Resul
                 stage.ran, stage.items, stage.reused
             )
         };
-        writeln!(out, "{:>10}  {what}", stage.stage)?;
+        writeln!(out, "{:>11}  {what}", stage.stage)?;
     }
     let ran =
         |stage: motionforge::build::Stage| report.stages.iter().any(|s| s.stage == stage.name());

@@ -7,32 +7,44 @@ use rayon::prelude::*;
 
 use super::capture::Shared;
 use super::motions::{self, MotionIndex, MotionSource};
-use super::{BuildError, sha256_hex};
-use crate::stage::CachedStage;
+use super::{BuildError, Stage, StageRun, sha256_hex};
+use crate::stage::{CachedStage, Versioned};
+use motionforge_core::progress::ProgressSink;
 use motionforge_sources::clip::Clip;
 
 /// The label check as the runner caches it: the findings of one capture's claiming clips (key:
-/// the capture path; stage-cache folder `label-check`).
+/// the capture path; stage-cache folder `label_check`).
 struct LabelCheck;
 
-impl CachedStage for LabelCheck {
-    const NAME: &'static str = "label-check";
+impl Versioned for LabelCheck {
+    const STAGE: Stage = Stage::LabelCheck;
     /// Bump when `quality::contradictions` changes.
     const VERSION: u32 = 1;
+}
+
+impl CachedStage for LabelCheck {
     type Output = Vec<motionforge_core::quality::Contradiction>;
 }
+
+/// The stage-cache folder of the label check before it was a stage of its own (emptied).
+const RETIRED_FOLDER: &str = "label-check";
+
+/// What the label check found: the contradictions and the stage's run.
+pub(super) type Findings = (Vec<motionforge_core::quality::Contradiction>, StageRun);
 
 /// The real single clips (mirrors included) whose motion contradicts what their text says
 /// (`quality::contradictions`), in `clip_id` order. Only clips whose text makes a claim the
 /// motion can be measured for are read. The findings are cached per capture, keyed by those
 /// clips (texts, skeletons, where their frames are) and the mirror's offset policy, so a rebuild
-/// reads no frames; captures are checked on all cores.
+/// reads no frames; captures are checked on all cores. `None` in probe mode when a capture's
+/// findings are not cached.
 pub(super) fn contradicting_labels(
     shared: &Shared<'_>,
     motions: &MotionSource,
     clips: &[Clip],
     index: &MotionIndex,
-) -> Result<Vec<motionforge_core::quality::Contradiction>, BuildError> {
+    progress: &ProgressSink,
+) -> Result<Option<Findings>, BuildError> {
     let mut by_capture: BTreeMap<(&str, &str), Vec<&Clip>> = BTreeMap::new();
     for clip in clips.iter().filter(|c| {
         c.kind == motionforge_sources::clip::SourceKind::RealSingle
@@ -46,6 +58,7 @@ pub(super) fn contradicting_labels(
     }
     // The skeleton profiles the clips are measured with.
     let profiles = sha256_hex(&serde_json::to_vec(&shared.specs).unwrap_or_default());
+    progress.stage_started(LabelCheck::NAME, by_capture.len() as u64);
     let checked = by_capture
         .par_iter()
         // Each thread reads with its own memory of recent chunks.
@@ -87,20 +100,38 @@ pub(super) fn contradicting_labels(
                         Ok(out)
                     },
                 )?;
-                Ok::<_, BuildError>((stamp.fingerprint, found.map(|(f, _)| f).unwrap_or_default()))
+                progress.advanced(LabelCheck::NAME, 1);
+                Ok::<_, BuildError>((stamp.fingerprint, found))
             },
         )
         .collect::<Result<Vec<_>, BuildError>>()?;
     let live: BTreeSet<String> = checked.iter().map(|(f, _)| f.clone()).collect();
     shared.workspace.prune(LabelCheck::NAME, &live);
-    let mut out: Vec<motionforge_core::quality::Contradiction> =
-        checked.into_iter().flat_map(|(_, found)| found).collect();
+    shared.workspace.prune(RETIRED_FOLDER, &BTreeSet::new());
+    let mut run = StageRun {
+        stage: LabelCheck::NAME.into(),
+        items: checked.len(),
+        ran: 0,
+        reused: 0,
+    };
+    let mut out: Vec<motionforge_core::quality::Contradiction> = Vec::new();
+    for (_, found) in checked {
+        let Some((found, ran)) = found else {
+            return Ok(None);
+        };
+        if ran {
+            run.ran += 1;
+        } else {
+            run.reused += 1;
+        }
+        out.extend(found);
+    }
     out.sort_by(|a, b| {
         a.clip_id
             .cmp(&b.clip_id)
             .then_with(|| a.claim.cmp(&b.claim))
     });
-    Ok(out)
+    Ok(Some((out, run)))
 }
 
 /// Leaves out of `clips` the ones in `contradictions` and the synthetic pairs made from them;

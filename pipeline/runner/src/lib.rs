@@ -26,6 +26,7 @@ mod motions;
 mod output;
 mod pack;
 mod plan;
+mod sinks;
 mod stage;
 mod steps;
 mod synthetic;
@@ -49,7 +50,7 @@ pub use workspace::{ConfigRecord, Ledger, Miss, SeenStamps, StageLedger, Workspa
 
 use capture::{Item, Shared};
 use motions::MotionIndex;
-use output::{Table, write_outputs};
+use steps::BuildState;
 
 use crate::config::Config;
 use crate::source::{SourceAnnotations, SourceError};
@@ -60,15 +61,12 @@ use motionforge_core::motion::ProfileSpec;
 use motionforge_format::io::parquet::TableError;
 use motionforge_sources::annotate::span::Note;
 use motionforge_sources::annotate::taxonomy::{Taxonomy, TaxonomyError, TypeMap};
-use motionforge_sources::clip::{Clip, SourceKind};
+use motionforge_sources::clip::SourceKind;
 
 pub use motionforge_core::base::layout::{
     CARD_FILE, DATA_DIR, MANIFEST_FILE, NORMALIZATION_DIR, PLANS_FILE, REJECTS_FILE, REPORT_FILE,
     REPORT_STATS, SKELETONS_FILE,
 };
-
-/// Version of the table-writing stage.
-const WRITE_VERSION: u32 = 4;
 
 /// The stages of a build in dependency order: each needs every one before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -86,8 +84,13 @@ pub enum Stage {
     Plan,
     /// Left/right mirrored copies of every clip.
     Mirror,
+    /// The optional LLM check of the texts of sampled pairs (`synthetic.llm_check`).
+    PairCheck,
     /// Synthetic simultaneous-action pairs, measured for plausibility.
     Compose,
+    /// Real clips whose motion contradicts their text, listed (and left out with
+    /// `label_check.drop`).
+    LabelCheck,
     /// Parquet shards, manifest, card, normalisation statistics.
     Write,
     /// Statistics report (tables, figures, stats.json).
@@ -96,20 +99,22 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in order.
-    pub const ALL: [Stage; 9] = [
+    pub const ALL: [Stage; 11] = [
         Stage::Ingest,
         Stage::Segment,
         Stage::Label,
         Stage::Paraphrase,
         Stage::Plan,
         Stage::Mirror,
+        Stage::PairCheck,
         Stage::Compose,
+        Stage::LabelCheck,
         Stage::Write,
         Stage::Report,
     ];
 
-    /// The stage's name in reports and on the command line.
-    pub fn name(self) -> &'static str {
+    /// The stage's name in reports, the stage cache, the ledger and on the command line.
+    pub const fn name(self) -> &'static str {
         match self {
             Stage::Ingest => ingest::NAME,
             Stage::Segment => segment::NAME,
@@ -117,7 +122,9 @@ impl Stage {
             Stage::Paraphrase => "paraphrase",
             Stage::Plan => "plan",
             Stage::Mirror => mirror::NAME,
+            Stage::PairCheck => "pair_check",
             Stage::Compose => crate::stages::compose::NAME,
+            Stage::LabelCheck => "label_check",
             Stage::Write => "write",
             Stage::Report => "report",
         }
@@ -414,68 +421,6 @@ pub struct BuildOptions {
     pub config_file: Option<PathBuf>,
 }
 
-/// The stages up to the write stage, as a loop over the build's steps ([`steps::STEPS`]); what
-/// they produced, before anything is written.
-fn run_stages<'a>(
-    config: &'a Config,
-    options: &BuildOptions,
-    probe: bool,
-) -> Result<Staged<'a>, BuildError> {
-    let mut build = BuildState::open(config, options, probe)?;
-    for step in steps::STEPS {
-        step.run(&mut build)?;
-    }
-    Ok(build.staged())
-}
-
-/// What a build carries from stage to stage: what every stage shares, each capture's item, and
-/// the stage runs so far.
-struct BuildState<'a, 'o> {
-    config: &'a Config,
-    options: &'o BuildOptions,
-    /// Plan mode: nothing that is not cached runs.
-    probe: bool,
-    /// The last stage to run.
-    through: Stage,
-    /// The dataset folder.
-    output: PathBuf,
-    files: Vec<source::CaptureFile>,
-    shared: Shared<'a>,
-    /// Where the held clips' frames are read from.
-    motions: motions::MotionSource,
-    /// One per capture file, in discovery order.
-    items: Vec<Item>,
-    /// In probe mode: some capture's ingest or segment output is not cached, so what follows
-    /// depends on outputs that do not exist yet.
-    upstream_pending: bool,
-    /// What each stage did; in probe mode, a whole-set stage (label, compose) whose output is not
-    /// cached counts what it would run.
-    stages: Vec<StageRun>,
-    /// What the text stages did.
-    text: text::TextOutcome,
-    /// Every capture's clips, once gathered (the items are then empty).
-    gathered: Gathered,
-    /// In probe mode: the first stage whose output is not cached.
-    blocked: Option<Stage>,
-    /// What the compose stage did.
-    compose: crate::stages::compose::ComposeReport,
-    /// What the LLM pair check did.
-    pair_check: crate::stages::augment::AugmentReport,
-}
-
-/// Every clip of the captures, originals and mirrors, with where their frames are, and what
-/// the stages dropped, noted and rejected, in their report order.
-#[derive(Default)]
-struct Gathered {
-    clips: Vec<Clip>,
-    index: MotionIndex,
-    rejects: Vec<Reject>,
-    drops_by_reason: Tally<DropReason>,
-    drops: Vec<Dropped>,
-    unmapped_labels: BTreeMap<String, usize>,
-    notes: Vec<Note>,
-}
-
 /// What every stage shares: each source's profile, annotations and frame-rate table, the motion
 /// types, and the file digests remembered from earlier builds (unless `forget_digests`).
 fn load_shared(
@@ -518,47 +463,20 @@ fn load_shared(
     })
 }
 
-/// What the per-capture `stage` did over `items`, reported as finished.
-fn capture_run(
-    items: &[Item],
-    stage: Stage,
-    progress: &motionforge_core::progress::ProgressSink,
-) -> StageRun {
+/// What the per-capture `stage` did over `items`.
+fn capture_run(items: &[Item], stage: Stage) -> StageRun {
     let ran: Vec<bool> = items.iter().filter_map(|i| i.ran(stage)).collect();
-    let run = StageRun {
+    StageRun {
         stage: stage.name().into(),
         items: ran.len(),
         ran: ran.iter().filter(|r| **r).count(),
         reused: ran.iter().filter(|r| !**r).count(),
-    };
-    progress.stage_finished(stage.name(), run.ran as u64, run.reused as u64);
-    run
+    }
 }
 
 /// The first stage a pending (probe-mode) capture stopped at.
 fn items_pending_stage(items: &[Item]) -> Option<Stage> {
     items.iter().filter_map(|i| i.pending).min()
-}
-
-/// What the stages produced, before anything is written.
-struct Staged<'a> {
-    shared: Shared<'a>,
-    output: PathBuf,
-    files: usize,
-    stages: Vec<StageRun>,
-    clips: Vec<Clip>,
-    rejects: Vec<Reject>,
-    notes: Vec<Note>,
-    drops_by_reason: Tally<DropReason>,
-    drops: Vec<Dropped>,
-    unmapped_labels: BTreeMap<String, usize>,
-    text: text::TextOutcome,
-    compose: crate::stages::compose::ComposeReport,
-    pair_check: crate::stages::augment::AugmentReport,
-    /// In probe mode: the first stage whose output is not cached.
-    blocked: Option<Stage>,
-    /// Where the frames of `clips` are (the clips are held without them).
-    index: MotionIndex,
 }
 
 /// Runs every stage of the build described by `config` and writes the dataset.
@@ -573,241 +491,28 @@ pub fn build(config: &Config, options: &BuildOptions) -> Result<BuildReport, Bui
     // One build per dataset folder at a time; released when this function returns.
     let _lock = lock::WorkspaceLock::acquire(&config.dataset_dir(), options.lock_wait)
         .map_err(WorkspaceError::from)?;
-    let mut staged = run_stages(config, options, false)?;
-    let written = write_and_report(config, options, &mut staged)?;
-    let Staged {
-        shared,
-        output,
-        files,
-        stages,
-        clips: _,
-        rejects,
-        notes,
-        drops_by_reason,
-        drops,
-        unmapped_labels,
-        text,
-        compose,
-        pair_check,
-        blocked: _,
-        index: _,
-    } = staged;
-    let (notes_by_kind, notes) = counted_notes(notes);
-    let counts = written.counts;
-    let report = BuildReport {
-        label_contradictions: written.label_contradictions,
-        label_contradictions_dropped: written.label_contradictions_dropped,
-        dataset: config.dataset.name.clone(),
-        output: output.clone(),
-        stages,
-        captures: files,
-        clips: written.clips,
-        mirrored: written.mirrored,
-        clips_by_effective_rate: written.clips_by_effective_rate,
-        kinds: counts.source_kind,
-        actions: written.actions,
-        motion_types: counts.motion_type,
-        unmapped_labels,
-        drops_by_reason,
-        drops,
-        notes_by_kind,
-        notes,
-        rejects_by_reason: counts.reject_reason,
-        rejects,
-        labels: text.label,
-        paraphrases: text.paraphrase,
-        plans: text.plan,
-        synthetic: compose,
-        pair_check,
-        table_fingerprint: written.table_fingerprint,
-        report_error: written.report_error.as_ref().map(ToString::to_string),
-    };
+    let mut state = BuildState::open(config, options, false)?;
+    steps::run_steps(&mut state, &steps::STAGES)?;
+    steps::run_steps(&mut state, &steps::SINKS)?;
+    let sinks::Finished {
+        report,
+        workspace,
+        stamps,
+        report_error,
+    } = state.finish();
     // A partial run (`run <stage>`) leaves the last full build's report in place.
     if options.through.unwrap_or(Stage::Report) == Stage::Report {
         let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
-        write_atomic(&output.join(REPORT_FILE), &json)?;
+        write_atomic(&report.output.join(REPORT_FILE), &json)?;
     }
-    save_ledger(&shared.workspace, &report.stages, written.stamps)?;
+    save_ledger(&workspace, &report.stages, stamps)?;
     if let Some(file) = &options.config_file {
-        workspace::ConfigRecord::save(&shared.workspace, file)?;
+        workspace::ConfigRecord::save(&workspace, file)?;
     }
-    match written.report_error {
+    match report_error {
         Some(e) => Err(BuildError::Report(Box::new(e))),
         None => Ok(report),
     }
-}
-
-/// What the write and report stages leave for the build report and the ledger.
-struct Written {
-    label_contradictions: Vec<motionforge_core::quality::Contradiction>,
-    label_contradictions_dropped: usize,
-    table_fingerprint: String,
-    counts: motionforge_format::io::manifest::Counts,
-    /// Rows of the table, and of them mirrored copies.
-    clips: usize,
-    mirrored: usize,
-    clips_by_effective_rate: BTreeMap<String, usize>,
-    actions: BTreeMap<String, usize>,
-    /// Why the statistics report could not be made, when it could not.
-    report_error: Option<motionforge_report::ReportError>,
-    /// Every stamp this build saw, the table's among them when it was written.
-    stamps: SeenStamps,
-}
-
-/// The check of texts against motions (dropping contradicting rows with `label_check.drop`),
-/// then the write stage (shards, manifest, card, normalisation) and the report stage, as far as
-/// the build goes. The staged clips are taken (written).
-fn write_and_report(
-    config: &Config,
-    options: &BuildOptions,
-    staged: &mut Staged<'_>,
-) -> Result<Written, BuildError> {
-    let shared = &staged.shared;
-    let mut clips = std::mem::take(&mut staged.clips);
-    let index = std::mem::take(&mut staged.index);
-    let motions = shared.motions();
-    let label_contradictions = label_check::contradicting_labels(shared, &motions, &clips, &index)?;
-    let label_contradictions_dropped = if config.label_check.drop {
-        label_check::drop_contradicting(&mut clips, &label_contradictions)
-    } else {
-        0
-    };
-    let workspace = &shared.workspace;
-    let (profiles, skeletons) = companions::skeletons_of(shared, &clips);
-    let table_stamp = table_stamp(config, &clips, &index, &staged.text.plans)?;
-    let table_fingerprint = table_stamp.fingerprint.clone();
-    let table = Table {
-        plans: &staged.text.plans,
-        profiles: &profiles,
-        skeletons: &skeletons,
-        rejects: &staged.rejects,
-        motions: &motions,
-    };
-    let companions = companions::Companions::of(
-        config,
-        &clips,
-        &staged.rejects,
-        staged.drops_by_reason.clone(),
-        &label_contradictions,
-        &table_fingerprint,
-    );
-    let counts = companions.manifest.counts.clone();
-    let through = options.through.unwrap_or(Stage::Report);
-    let mut stamps = workspace.take_seen();
-    // What the build report says of the clips, taken before the write stage takes them.
-    let n_clips = clips.len();
-    let n_mirrored = clips.iter().filter(|c| c.mirrored).count();
-    let clips_by_effective_rate = effective_rate_counts(&clips);
-    let actions = motionforge_format::io::manifest::action_counts(&clips);
-    let mut report_error = None;
-    if through >= Stage::Write {
-        options.progress.stage_started(Stage::Write.name(), 1);
-        let write_ran = write_outputs(
-            options.force,
-            &staged.output,
-            workspace,
-            &table_fingerprint,
-            &table,
-            &companions,
-            output::Rows { clips, index },
-        )?;
-        staged
-            .stages
-            .push(single_run(options, Stage::Write, write_ran));
-        stamps.push(Miss {
-            stage: Stage::Write.name().into(),
-            key: "*".into(),
-            stamp: table_stamp,
-        });
-        if through >= Stage::Report {
-            let (run, error) = report_stage(
-                options,
-                &staged.output,
-                workspace,
-                &table_fingerprint,
-                n_clips,
-            )?;
-            staged.stages.push(run);
-            report_error = error;
-        }
-    }
-    Ok(Written {
-        label_contradictions,
-        label_contradictions_dropped,
-        table_fingerprint,
-        counts,
-        clips: n_clips,
-        mirrored: n_mirrored,
-        clips_by_effective_rate,
-        actions,
-        report_error,
-        stamps,
-    })
-}
-
-/// Rows whose frames are at another rate than they are labelled, by that rate: clips whose
-/// capture has an effective rate, and synthetic pairs made of such a clip.
-fn effective_rate_counts(clips: &[Clip]) -> BTreeMap<String, usize> {
-    let rate_of: std::collections::HashMap<&str, f64> = clips
-        .iter()
-        .filter_map(|c| c.capture.effective_fps.map(|r| (c.clip_id.as_str(), r)))
-        .collect();
-    let mut counts = BTreeMap::new();
-    for clip in clips {
-        let rate = clip.capture.effective_fps.or_else(|| {
-            clip.composed_from
-                .iter()
-                .find_map(|id| rate_of.get(id.as_str()).copied())
-        });
-        if let Some(rate) = rate {
-            *counts.entry(format!("{rate:.2}")).or_insert(0) += 1;
-        }
-    }
-    counts
-}
-
-/// The report stage: the statistics report of the written shards, made again when they changed
-/// or it is missing, removed when the table has no rows. A failed report is returned, not
-/// raised: the dataset is written by now, and the build report records it.
-fn report_stage(
-    options: &BuildOptions,
-    output: &std::path::Path,
-    workspace: &Workspace,
-    table_fingerprint: &str,
-    n_clips: usize,
-) -> Result<(StageRun, Option<motionforge_report::ReportError>), BuildError> {
-    if n_clips == 0 {
-        // Nothing to describe: a report of an earlier build would describe rows that are gone.
-        let stale = output.join("report");
-        if stale.exists() {
-            std::fs::remove_dir_all(&stale).map_err(workspace::io_err(&stale))?;
-        }
-        let _ = std::fs::remove_file(workspace.root().join(REPORT_MARKER));
-        options.progress.stage_started(Stage::Report.name(), 0);
-        options.progress.stage_finished(Stage::Report.name(), 0, 0);
-        let run = StageRun {
-            stage: Stage::Report.name().into(),
-            items: 0,
-            ran: 0,
-            reused: 0,
-        };
-        return Ok((run, None));
-    }
-    // The report is derived from the shards: redo it when they changed or it is missing.
-    options.progress.stage_started(Stage::Report.name(), 1);
-    let report_ran = options.force || !report_is_current(output, workspace, table_fingerprint);
-    let mut report_error = None;
-    if report_ran {
-        let marker = workspace.root().join(REPORT_MARKER);
-        let _ = std::fs::remove_file(&marker);
-        // The dataset is written by now: a failed report (a full disk) is recorded in
-        // build-report.json and fails the build after it, rather than losing both.
-        match motionforge_report::report_dataset(output, None) {
-            Ok(_) => write_atomic(&marker, table_fingerprint.as_bytes())?,
-            Err(e) => report_error = Some(e),
-        }
-    }
-    Ok((single_run(options, Stage::Report, report_ran), report_error))
 }
 
 /// Annotation notes counted by kind, and listed up to a bound per kind: the report stays
@@ -824,53 +529,6 @@ fn counted_notes(
         motionforge_sources::annotate::span::NOTES_PER_KIND,
     );
     (notes_by_kind, notes)
-}
-
-/// The run of a stage with one item (write, report), reported as finished.
-fn single_run(options: &BuildOptions, stage: Stage, ran: bool) -> StageRun {
-    options
-        .progress
-        .stage_finished(stage.name(), u64::from(ran), u64::from(!ran));
-    StageRun {
-        stage: stage.name().into(),
-        items: 1,
-        ran: usize::from(ran),
-        reused: usize::from(!ran),
-    }
-}
-
-/// Inside the workspace: the table fingerprint the report in `report/` was made from.
-const REPORT_MARKER: &str = "report-of";
-
-/// True when `report/` is complete and made from the table with `fingerprint` (a crash between
-/// writing the shards and finishing the report leaves it stale, not current).
-fn report_is_current(output: &std::path::Path, workspace: &Workspace, fingerprint: &str) -> bool {
-    output.join(REPORT_STATS).is_file()
-        && std::fs::read_to_string(workspace.root().join(REPORT_MARKER))
-            .is_ok_and(|f| f == fingerprint)
-}
-
-/// The write stage's stamp: the table's input is exactly its rows (and the plans), so their
-/// encoding is the fingerprint.
-fn table_stamp(
-    config: &Config,
-    clips: &[Clip],
-    index: &MotionIndex,
-    plans: &BTreeMap<String, Vec<motionforge_llm::plans::PlanStep>>,
-) -> Result<Stamp, BuildError> {
-    // The rows without frames, and where their frames are (stage outputs named by content).
-    let encoded = motionforge_core::base::encoded_sha256(&(clips, index), "clip table")?;
-    Ok(Fingerprint::new(Stage::Write.name(), WRITE_VERSION)
-        .text("rows", &encoded)
-        .json("config features", &config.features)
-        .json("config dataset.shard_bytes", &config.dataset.shard_bytes)
-        .json("config dataset.zstd_level", &config.dataset.zstd_level)
-        .json("task plans", plans)
-        .json(
-            "schema version",
-            &motionforge_format::io::schema::SCHEMA_VERSION,
-        )
-        .stamp())
 }
 
 /// Records what this run did in the workspace ledger: for every stage it ran, when, its counts

@@ -1,7 +1,8 @@
 //! Clips as a build would write them, frames included, read without writing a dataset:
 //! `export-bvh` from a config and `bench --write-frames` take them this way.
 
-use super::{BuildError, BuildOptions, run_stages};
+use super::steps::run_stages;
+use super::{BuildError, BuildOptions};
 use crate::config::Config;
 use motionforge_core::motion::Profile;
 use motionforge_sources::clip::LoadedClip;
@@ -12,12 +13,13 @@ pub fn collect_clips(
     config: &Config,
     options: &BuildOptions,
 ) -> Result<Vec<LoadedClip>, BuildError> {
-    let staged = run_stages(config, options, false)?;
+    let staged = run_stages(config, options)?;
     let motions = staged.shared.motions();
-    staged
+    let gathered = &staged.gathered;
+    gathered
         .clips
         .iter()
-        .map(|c| motions.load(c, &staged.index))
+        .map(|c| motions.load(c, &gathered.index))
         .collect()
 }
 
@@ -33,9 +35,10 @@ pub fn find_clip(
     options: &BuildOptions,
     clip_id: &str,
 ) -> Result<(Option<ProfiledClip>, Vec<String>), BuildError> {
-    let staged = run_stages(config, options, false)?;
+    let staged = run_stages(config, options)?;
     let motions = staged.shared.motions();
-    let found = match staged.clips.iter().find(|c| c.clip_id == clip_id) {
+    let gathered = &staged.gathered;
+    let found = match gathered.clips.iter().find(|c| c.clip_id == clip_id) {
         None => None,
         Some(c) => {
             let spec = staged
@@ -54,10 +57,11 @@ pub fn find_clip(
                     error: Box::new(e),
                 }
             })?;
-            Some((motions.load(c, &staged.index)?, profile))
+            Some((motions.load(c, &gathered.index)?, profile))
         }
     };
-    Ok((found, staged.clips.into_iter().map(|c| c.clip_id).collect()))
+    let ids = gathered.clips.iter().map(|c| c.clip_id.clone()).collect();
+    Ok((found, ids))
 }
 
 /// A clip's motion as the dataset stores it: its row's f32 rotations and positions

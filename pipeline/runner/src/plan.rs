@@ -6,10 +6,8 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::{
-    BuildError, BuildOptions, Ledger, Stage, Workspace, output, report_is_current, run_stages,
-    table_stamp,
-};
+use super::steps::{self, BuildState};
+use super::{BuildError, BuildOptions, Ledger, Stage, Workspace, output, sinks};
 use crate::config::Config;
 
 /// What one stage would do.
@@ -17,6 +15,10 @@ use crate::config::Config;
 pub struct StagePlan {
     /// The stage.
     pub stage: Stage,
+    /// False when the config turns the stage off (`mirror.enabled`, `synthetic.llm_check`...):
+    /// it runs nothing.
+    #[serde(default = "on")]
+    pub enabled: bool,
     /// Items it covers (captures, or 1 for stages over the whole set) as far as known: items
     /// behind a stale stage are counted there.
     pub items: usize,
@@ -28,10 +30,16 @@ pub struct StagePlan {
     pub examples: Vec<String>,
 }
 
+/// A stage is on unless a plan says otherwise (plans written before stages could be off).
+fn on() -> bool {
+    true
+}
+
 impl StagePlan {
-    fn new(stage: Stage) -> StagePlan {
+    fn new(stage: Stage, enabled: bool) -> StagePlan {
         StagePlan {
             stage,
+            enabled,
             items: 0,
             to_run: 0,
             reasons: BTreeMap::new(),
@@ -192,14 +200,16 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         ..options.clone()
     };
     let through = options.through.unwrap_or(Stage::Report);
-    let staged = run_stages(config, &options, true)?;
+    let mut staged = BuildState::open(config, &options, true)?;
+    steps::run_steps(&mut staged, &steps::STAGES)?;
+    steps::run_steps(&mut staged, &steps::SINKS)?;
     let workspace: &Workspace = &staged.shared.workspace;
     let ledger = Ledger::load(workspace);
     let seen = workspace.take_seen().into_vec()?;
     let mut plans: BTreeMap<Stage, StagePlan> = Stage::ALL
         .into_iter()
         .filter(|s| *s <= through)
-        .map(|s| (s, StagePlan::new(s)))
+        .map(|s| (s, StagePlan::new(s, enabled(config, s))))
         .collect();
     // Per-item stages: every item seen is fresh (cached) or stale with a reason.
     for entry in &seen {
@@ -221,26 +231,20 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
     // Whatever comes after the first stale stage re-runs because of it.
     let blocked = staged.blocked;
     if let Some(first) = blocked {
-        for (stage, plan) in plans.iter_mut().filter(|(s, _)| **s > first) {
-            if !config.mirror.enabled && *stage == Stage::Mirror {
-                continue;
-            }
-            if plan.to_run == 0 {
+        for (_, plan) in plans.iter_mut().filter(|(s, _)| **s > first) {
+            if plan.enabled && plan.to_run == 0 {
                 plan.stale("*", StaleReason::Upstream(first));
             }
         }
     }
     // LLM-only stages: texts without a cached answer would be asked.
     let text = &staged.text;
-    for (stage, report, enabled) in [
-        (
-            Stage::Paraphrase,
-            &text.paraphrase,
-            config.paraphrases.enabled,
-        ),
-        (Stage::Plan, &text.plan, config.task_plans.enabled),
+    for (stage, report) in [
+        (Stage::Paraphrase, &text.paraphrase),
+        (Stage::Plan, &text.plan),
+        (Stage::PairCheck, &staged.pair_check),
     ] {
-        if let Some(plan) = plans.get_mut(&stage).filter(|_| enabled) {
+        if let Some(plan) = plans.get_mut(&stage).filter(|p| p.enabled) {
             plan.items = plan.items.max(report.texts);
             // The report keeps reasons as their words; read back, the variant decides.
             let asked: usize = report
@@ -268,14 +272,14 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
                 .or_insert(0) += asked;
         }
     }
-    if blocked.is_none() && through >= Stage::Write {
-        let stamp = table_stamp(config, &staged.clips, &staged.index, &text.plans)?;
+    if let Some(table) = staged.table.as_ref().filter(|_| through >= Stage::Write) {
+        let stamp = &table.stamp;
         let write_fresh = output::written(&staged.output, workspace, &stamp.fingerprint);
         if let Some(plan) = plans.get_mut(&Stage::Write)
             && let Err(why) = write_fresh.clone()
         {
             let reason = match why {
-                StaleReason::RowsChanged => ledger.why(Stage::Write.name(), "*", &stamp),
+                StaleReason::RowsChanged => ledger.why(Stage::Write.name(), "*", stamp),
                 _ => why,
             };
             plan.stale("*", reason);
@@ -283,7 +287,11 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         if let Some(plan) = plans.get_mut(&Stage::Report) {
             if write_fresh.is_err() {
                 plan.stale("*", StaleReason::Upstream(Stage::Write));
-            } else if !report_is_current(&staged.output, workspace, &stamp.fingerprint) {
+            } else if !sinks::report_is_current(
+                &staged.output,
+                workspace,
+                &sinks::report_stamp(&stamp.fingerprint).fingerprint,
+            ) {
                 plan.stale("*", StaleReason::ReportUnfinished);
             }
         }
@@ -293,6 +301,17 @@ pub fn plan(config: &Config, options: &BuildOptions) -> Result<Plan, BuildError>
         output: staged.output.clone(),
         stages: plans.into_values().collect(),
     })
+}
+
+/// False for a stage the config turns off: it runs nothing, whatever comes before it.
+fn enabled(config: &Config, stage: Stage) -> bool {
+    match stage {
+        Stage::Paraphrase => config.paraphrases.enabled,
+        Stage::Plan => config.task_plans.enabled,
+        Stage::Mirror => config.mirror.enabled,
+        Stage::PairCheck => config.synthetic.enabled && config.synthetic.llm_check,
+        _ => true,
+    }
 }
 
 /// Stages over the whole set have one cache entry, but a build counts their items (clips
@@ -326,6 +345,9 @@ fn count_as_a_build_does(plans: &mut BTreeMap<Stage, StagePlan>, runs: &[super::
 pub struct StageStatus {
     /// The stage.
     pub stage: Stage,
+    /// False when the config turns the stage off: it runs nothing.
+    #[serde(default = "on")]
+    pub enabled: bool,
     /// True when a build would reuse all of it.
     pub fresh: bool,
     /// Items that would run now.
@@ -383,6 +405,7 @@ pub fn status(config: &Config) -> Result<Status, BuildError> {
             let last = ledger.stages.get(p.stage.name());
             StageStatus {
                 stage: p.stage,
+                enabled: p.enabled,
                 fresh: p.fresh(),
                 to_run: p.to_run,
                 reasons: p.reasons,

@@ -1,10 +1,11 @@
-//! What the runner needs of a stage whose outputs the stage cache keeps.
+//! What the runner needs of a stage: its place and version ([`Versioned`]), and for a stage whose
+//! outputs the stage cache keeps, their type ([`CachedStage`]).
 //!
-//! A stage declares its name, version and output type once ([`CachedStage`]); the runner looks
-//! its output up by the stage's fingerprint, runs it on a miss, stores the output, records the
-//! stamp for the ledger and `plan`, and (for per-capture stages, [`CaptureStage`]) marks the
-//! capture's item pending, done or refused. The stage's code only says how to fingerprint its
-//! input and how to compute its output.
+//! The runner looks a cached stage's output up by the stage's fingerprint, runs it on a miss,
+//! stores the output, records the stamp for the ledger and `plan`, and (for per-capture stages,
+//! [`CaptureStage`]) marks the capture's item pending, done or refused. The stage's code only
+//! says how to fingerprint its input and how to compute its output; the build's loop over its
+//! steps (`steps.rs`) reports each stage's run and records it in the ledger.
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -13,20 +14,26 @@ use super::capture::Item;
 use super::{Reject, Stage, Workspace, WorkspaceError};
 use motionforge_core::base::{Fingerprint, Stamp};
 
-/// A stage whose outputs are cached, item by item.
-pub(crate) trait CachedStage {
-    /// Name in the stage cache, the ledger, progress lines and reports.
-    const NAME: &'static str;
+/// A stage as its fingerprints name it: its place among the build's stages and its version.
+pub(crate) trait Versioned {
+    /// Its place among the build's stages.
+    const STAGE: Stage;
+    /// Name in the stage cache, the ledger, progress lines and reports: the stage's.
+    const NAME: &'static str = Self::STAGE.name();
     /// Bump when the stage's output for the same input changes: every cached output of the
     /// stage (and of the stages fed by it) is then made again.
     const VERSION: u32;
-    /// What the cache keeps for one item.
-    type Output: Serialize + DeserializeOwned;
 
     /// The start of every fingerprint of the stage: its name and version.
     fn fingerprint() -> Fingerprint {
         Fingerprint::new(Self::NAME, Self::VERSION)
     }
+}
+
+/// A stage whose outputs are cached, item by item.
+pub(crate) trait CachedStage: Versioned {
+    /// What the cache keeps for one item.
+    type Output: Serialize + DeserializeOwned;
 
     /// The rejects an output carries, taken out of it for the build's list.
     fn take_rejects(_output: &mut Self::Output) -> Vec<Reject> {
@@ -35,10 +42,7 @@ pub(crate) trait CachedStage {
 }
 
 /// A stage run capture by capture, recorded on each capture's [`Item`].
-pub(crate) trait CaptureStage: CachedStage {
-    /// Its place among the build's stages.
-    const STAGE: Stage;
-}
+pub(crate) trait CaptureStage: CachedStage {}
 
 impl Workspace {
     /// The cached output of stage `S` for item `key`, or `compute`'s, stored; the flag says

@@ -1,80 +1,197 @@
-//! The build as a loop over its steps: each step is one stage (or the pass between stages that
-//! gathers every capture's clips), run on what the steps before it left in the [`BuildState`].
-//! Adding a stage is a [`Step`] and its line in [`STEPS`]; what a stage caches goes through
-//! [`crate::stage::CachedStage`]. The write and report stages, which only `build` runs (never
-//! `plan`), follow in `write_and_report`.
+//! The build as a loop over its steps: each step is one stage (or a pass between stages, such as
+//! the one that gathers every capture's clips), run on what the steps before it left in the
+//! [`BuildState`]. The loop decides which steps a run reaches (`--through`, and in probe mode the
+//! first stage whose output is missing), and reports and records every stage's run. Adding a
+//! stage is a [`Step`] and its line in [`STEPS`]; what a stage caches goes through
+//! [`crate::stage::CachedStage`].
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use rayon::prelude::*;
 
 use super::{
-    BuildError, BuildOptions, BuildState, Gathered, Item, MotionIndex, Stage, Staged, Workspace,
-    add_counts, capture, capture_run, items_pending_stage, load_shared, motions, source, synthetic,
+    BuildError, BuildOptions, Item, MotionIndex, Stage, StageRun, Workspace, add_counts, capture,
+    capture_run, items_pending_stage, label_check, load_shared, motions, sinks, source, synthetic,
     text,
 };
 use crate::config::Config;
 use crate::stages::{ingest, mirror};
-use motionforge_core::base::{Dropped, Reject, Tally};
+use motionforge_core::base::{DropReason, Dropped, Reject, Tally};
 use motionforge_sources::annotate::span::Note;
 use motionforge_sources::clip::Clip;
 
 /// One step of the build.
 pub(super) trait Step: Sync {
-    /// Runs the step on the build so far.
-    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<(), BuildError>;
-}
+    /// The stage the step runs (the first, for a step that runs two); `None` for a pass between
+    /// stages, which every run reaches.
+    fn stage(&self) -> Option<Stage>;
 
-/// Ingest and segment, capture by capture; each clip's split.
-struct IngestAndSegment;
-/// Body-part labels, paraphrases and task plans of the clips' texts.
-struct TextStages;
-/// Mirrored copies, capture by capture; the per-capture caches pruned.
-struct MirrorCopies;
-/// Every capture's clips, drops, notes and rejects in one sorted list.
-struct Gather;
-/// Synthetic pairs, with their plausibility and the optional LLM check.
-struct Compose;
-
-impl Step for IngestAndSegment {
-    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<(), BuildError> {
-        build.ingest_and_segment()
+    /// False for the stages only a build runs (write, report): `plan` works theirs out from the
+    /// table's stamp and the files on disk.
+    fn probes(&self) -> bool {
+        true
     }
+
+    /// Runs the step on the build so far; the runs of the stages it ran.
+    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<Vec<StageRun>, BuildError>;
 }
 
-impl Step for TextStages {
-    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<(), BuildError> {
-        build.text_stages()
-    }
+/// A step: its stage, whether `plan` runs it, and the [`BuildState`] method that runs it.
+macro_rules! step {
+    ($name:ident, $stage:expr, probes: $probes:expr, $method:ident, $doc:literal) => {
+        #[doc = $doc]
+        struct $name;
+
+        impl Step for $name {
+            fn stage(&self) -> Option<Stage> {
+                $stage
+            }
+
+            fn probes(&self) -> bool {
+                $probes
+            }
+
+            fn run(&self, build: &mut BuildState<'_, '_>) -> Result<Vec<StageRun>, BuildError> {
+                build.$method()
+            }
+        }
+    };
 }
 
-impl Step for MirrorCopies {
-    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<(), BuildError> {
-        build.mirror()
-    }
-}
+step!(IngestAndSegment, Some(Stage::Ingest), probes: true, ingest_and_segment,
+    "Ingest and segment, capture by capture; each clip's split.");
+step!(Label, Some(Stage::Label), probes: true, label,
+    "Body-part labels of the clips' texts.");
+step!(Paraphrase, Some(Stage::Paraphrase), probes: true, paraphrase,
+    "Paraphrases of the clips' texts.");
+step!(Plan, Some(Stage::Plan), probes: true, plan_texts,
+    "Task plans of the single actions' texts.");
+step!(MirrorCopies, Some(Stage::Mirror), probes: true, mirror,
+    "Mirrored copies, capture by capture.");
+step!(Gather, None, probes: true, gather,
+    "The per-capture caches pruned; every capture's clips, drops, notes and rejects in one sorted list.");
+step!(PairCheck, Some(Stage::PairCheck), probes: true, pair_check,
+    "The optional LLM check of the texts of the pairs compose will sample.");
+step!(Compose, Some(Stage::Compose), probes: true, compose,
+    "Synthetic pairs, with their plausibility.");
+step!(LabelCheck, Some(Stage::LabelCheck), probes: true, label_check,
+    "Real clips whose motion contradicts their text; left out with `label_check.drop`.");
+step!(Tabulate, None, probes: true, tabulate,
+    "The table's stamp, and what the build report and the write stage say of its rows.");
+step!(Write, Some(Stage::Write), probes: false, write,
+    "Shards, manifest, card, normalisation statistics.");
+step!(Report, Some(Stage::Report), probes: false, report,
+    "The statistics report of the written shards.");
 
-impl Step for Gather {
-    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<(), BuildError> {
-        build.gather();
-        Ok(())
-    }
-}
-
-impl Step for Compose {
-    fn run(&self, build: &mut BuildState<'_, '_>) -> Result<(), BuildError> {
-        build.compose()
-    }
-}
-
-/// The build's steps up to the write stage, in order.
-pub(super) const STEPS: [&dyn Step; 5] = [
+/// The build's stages up to the table, in order.
+pub(super) const STAGES: [&dyn Step; 9] = [
     &IngestAndSegment,
-    &TextStages,
+    &Label,
+    &Paraphrase,
+    &Plan,
     &MirrorCopies,
     &Gather,
+    &PairCheck,
     &Compose,
+    &LabelCheck,
 ];
+
+/// The build's steps from the table on: the sinks.
+pub(super) const SINKS: [&dyn Step; 3] = [&Tabulate, &Write, &Report];
+
+/// Runs every one of `steps` the build reaches: those of stages up to `--through`, in probe mode
+/// only those `plan` runs, and none of a stage after the first one whose output is missing
+/// (probe mode). Every stage's run is reported as finished and kept for the build report and
+/// ledger.
+pub(super) fn run_steps(
+    build: &mut BuildState<'_, '_>,
+    steps: &[&dyn Step],
+) -> Result<(), BuildError> {
+    for step in steps {
+        if let Some(stage) = step.stage() {
+            let reached = stage <= build.through
+                && build.blocked.is_none()
+                && (step.probes() || !build.probe);
+            if !reached {
+                continue;
+            }
+        }
+        for run in step.run(build)? {
+            build
+                .options
+                .progress
+                .stage_finished(&run.stage, run.ran as u64, run.reused as u64);
+            build.stages.push(run);
+        }
+    }
+    Ok(())
+}
+
+/// The clips as a build of `config` would write them, and where their frames are: every stage
+/// up to the table run (reusing the stage cache), nothing written but cache entries.
+pub(super) fn run_stages<'a, 'o>(
+    config: &'a Config,
+    options: &'o BuildOptions,
+) -> Result<BuildState<'a, 'o>, BuildError> {
+    let mut build = BuildState::open(config, options, false)?;
+    run_steps(&mut build, &STAGES)?;
+    Ok(build)
+}
+
+/// What a build carries from stage to stage: what every stage shares, each capture's item, the
+/// clips once gathered, and what each stage did.
+pub(super) struct BuildState<'a, 'o> {
+    pub(super) config: &'a Config,
+    pub(super) options: &'o BuildOptions,
+    /// Plan mode: nothing that is not cached runs.
+    pub(super) probe: bool,
+    /// The last stage to run.
+    pub(super) through: Stage,
+    /// The dataset folder.
+    pub(super) output: std::path::PathBuf,
+    pub(super) files: Vec<source::CaptureFile>,
+    pub(super) shared: capture::Shared<'a>,
+    /// Where the held clips' frames are read from.
+    pub(super) motions: motions::MotionSource,
+    /// One per capture file, in discovery order (empty once gathered).
+    items: Vec<Item>,
+    /// What each stage did; in probe mode, a whole-set stage (label, compose) whose output is not
+    /// cached counts what it would run.
+    pub(super) stages: Vec<StageRun>,
+    /// What the LLM stages ask with, once one of them has run.
+    llm: Option<text::LlmContext>,
+    /// What the text stages did.
+    pub(super) text: text::TextOutcome,
+    /// Every capture's clips, once gathered.
+    pub(super) gathered: Gathered,
+    /// In probe mode: the first stage whose output is not cached.
+    pub(super) blocked: Option<Stage>,
+    /// Text pairs the pair check said no to.
+    vetoed: synthetic::Vetoes,
+    /// What the LLM pair check did.
+    pub(super) pair_check: crate::stages::augment::AugmentReport,
+    /// What the compose stage did.
+    pub(super) compose: crate::stages::compose::ComposeReport,
+    /// What the label check found, and the rows it left out.
+    pub(super) label_check: sinks::LabelFindings,
+    /// The table as it will be written (unless an earlier stage is blocked).
+    pub(super) table: Option<sinks::Tabulated>,
+    /// What the write and report stages did.
+    pub(super) written: sinks::Written,
+}
+
+/// Every clip of the captures, originals and mirrors, with where their frames are, and what
+/// the stages dropped, noted and rejected, in their report order.
+#[derive(Default)]
+pub(super) struct Gathered {
+    pub(super) clips: Vec<Clip>,
+    pub(super) index: MotionIndex,
+    pub(super) rejects: Vec<Reject>,
+    pub(super) drops_by_reason: Tally<DropReason>,
+    pub(super) drops: Vec<Dropped>,
+    pub(super) unmapped_labels: BTreeMap<String, usize>,
+    pub(super) notes: Vec<Note>,
+}
 
 impl<'a, 'o> BuildState<'a, 'o> {
     /// The workspace (its stage cache cleared by `--force`), the checked word lists, the capture
@@ -111,19 +228,24 @@ impl<'a, 'o> BuildState<'a, 'o> {
             shared,
             motions,
             items: Vec::new(),
-            upstream_pending: false,
             stages: Vec::new(),
+            llm: None,
             text: text::TextOutcome::default(),
             gathered: Gathered::default(),
             blocked: None,
-            compose: Default::default(),
+            vetoed: Default::default(),
             pair_check: Default::default(),
+            compose: Default::default(),
+            label_check: Default::default(),
+            table: None,
+            written: Default::default(),
         })
     }
 
     /// Ingest and segment, capture by capture on all cores; then each clip's split, by capture,
-    /// set before labelling so every later copy (mirror, pair) inherits it.
-    fn ingest_and_segment(&mut self) -> Result<(), BuildError> {
+    /// set before labelling so every later copy (mirror, pair) inherits it. In probe mode, a
+    /// capture whose ingest or segment output is not cached blocks what follows.
+    fn ingest_and_segment(&mut self) -> Result<Vec<StageRun>, BuildError> {
         let progress = &self.options.progress;
         progress.stage_started(ingest::NAME, self.files.len() as u64);
         let shared = &self.shared;
@@ -137,84 +259,92 @@ impl<'a, 'o> BuildState<'a, 'o> {
             })
             .collect::<Result<_, _>>()?;
         std::mem::take(&mut self.shared.digests).save(&self.shared.workspace)?;
-        self.upstream_pending = items.iter().any(|i| i.pending.is_some());
+        self.blocked = items_pending_stage(&items);
         let splits = crate::stages::split::Splits::from_config(self.config)?;
         for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
             splits.assign(clip);
         }
-        self.stages
-            .push(capture_run(&items, Stage::Ingest, progress));
+        let mut runs = vec![capture_run(&items, Stage::Ingest)];
         if self.through >= Stage::Segment {
-            self.stages
-                .push(capture_run(&items, Stage::Segment, progress));
+            runs.push(capture_run(&items, Stage::Segment));
         }
         self.items = items;
-        Ok(())
+        Ok(runs)
     }
 
-    /// The text stages (labels, paraphrases, plans), unless a capture's upstream output is
-    /// pending.
-    fn text_stages(&mut self) -> Result<(), BuildError> {
-        let progress = &self.options.progress;
-        let text = if self.through >= Stage::Label && !self.upstream_pending {
-            text::run(
-                &self.shared,
-                &self.motions,
-                &mut self.items,
-                self.options.offline || self.probe,
-                self.through,
-                progress,
-            )?
-        } else {
-            text::TextOutcome {
-                pending: self.upstream_pending,
-                ..Default::default()
-            }
-        };
-        for run in &text.runs {
-            progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-        }
-        self.stages.extend(text.runs.iter().cloned());
+    /// How a text stage asks: the LLM context (opened on first use) and this build's options.
+    fn text_requests(&mut self) -> Result<text::TextRequests<'_>, BuildError> {
+        Ok(text::TextRequests {
+            llm: text::llm_context(&mut self.llm, &self.shared)?,
+            shared: &self.shared,
+            offline: self.options.offline || self.probe,
+            progress: &self.options.progress,
+        })
+    }
+
+    /// Part labels of the clips' texts; in probe mode, blocked when their assignment is not
+    /// cached.
+    fn label(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        let mut items = std::mem::take(&mut self.items);
+        let mut text = std::mem::take(&mut self.text);
+        let motions = self.motions.sibling();
+        let labelled = text::label(self.text_requests()?, &motions, &mut items, &mut text);
+        self.items = items;
         self.text = text;
-        Ok(())
+        let (run, assigned) = labelled?;
+        if !assigned {
+            self.blocked = Some(Stage::Label);
+        }
+        Ok(vec![run])
     }
 
-    /// Mirrored copies of every capture's labelled clips, on all cores (mirroring on, reached,
-    /// and the labels known); then the per-capture stage caches pruned, and in probe mode the
-    /// first stage whose output is missing.
-    fn mirror(&mut self) -> Result<(), BuildError> {
-        let run_mirror =
-            self.config.mirror.enabled && self.through >= Stage::Mirror && !self.text.pending;
-        if run_mirror {
-            let progress = &self.options.progress;
-            let shared = &self.shared;
-            progress.stage_started(mirror::NAME, self.items.len() as u64);
-            self.items
-                .par_iter_mut()
-                .map(|item| {
-                    let done = capture::mirror_capture(shared, item);
-                    progress.advanced(mirror::NAME, 1);
-                    done
-                })
-                .collect::<Result<Vec<()>, _>>()?;
+    /// Paraphrases of the clips' texts, when `paraphrases.enabled`.
+    fn paraphrase(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        if !self.config.paraphrases.enabled {
+            return Ok(Vec::new());
         }
-        let mirror_pending = self.items.iter().any(|i| i.pending == Some(Stage::Mirror));
-        let first_pending = items_pending_stage(&self.items);
-        self.prune_stage_caches();
-        if run_mirror {
-            let run = capture_run(&self.items, Stage::Mirror, &self.options.progress);
-            self.stages.push(run);
+        let mut items = std::mem::take(&mut self.items);
+        let mut text = std::mem::take(&mut self.text);
+        let run = text::paraphrase(self.text_requests()?, &mut items, &mut text);
+        self.items = items;
+        self.text = text;
+        Ok(vec![run?])
+    }
+
+    /// Task plans of the single actions' texts, when `task_plans.enabled`.
+    fn plan_texts(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        if !self.config.task_plans.enabled {
+            return Ok(Vec::new());
         }
-        self.blocked = if self.upstream_pending {
-            first_pending
-        } else if self.text.pending {
-            Some(Stage::Label)
-        } else if mirror_pending {
-            Some(Stage::Mirror)
-        } else {
-            None
-        };
-        Ok(())
+        let items = std::mem::take(&mut self.items);
+        let mut text = std::mem::take(&mut self.text);
+        let run = text::plan(self.text_requests()?, &items, &mut text);
+        self.items = items;
+        self.text = text;
+        Ok(vec![run?])
+    }
+
+    /// Mirrored copies of every capture's labelled clips, on all cores, when `mirror.enabled`;
+    /// in probe mode, blocked when a capture's copies are not cached.
+    fn mirror(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        if !self.config.mirror.enabled {
+            return Ok(Vec::new());
+        }
+        let progress = &self.options.progress;
+        let shared = &self.shared;
+        progress.stage_started(mirror::NAME, self.items.len() as u64);
+        self.items
+            .par_iter_mut()
+            .map(|item| {
+                let done = capture::mirror_capture(shared, item);
+                progress.advanced(mirror::NAME, 1);
+                done
+            })
+            .collect::<Result<Vec<()>, _>>()?;
+        if self.items.iter().any(|i| i.pending == Some(Stage::Mirror)) {
+            self.blocked = Some(Stage::Mirror);
+        }
+        Ok(vec![capture_run(&self.items, Stage::Mirror)])
     }
 
     /// Removes from the stage cache the per-capture outputs and frame chunks no capture of this
@@ -245,9 +375,11 @@ impl<'a, 'o> BuildState<'a, 'o> {
         }
     }
 
-    /// Takes every capture's clips, drops, notes and rejects (with the text stages' rejects),
-    /// each sorted so the outputs do not depend on scheduling or glob order.
-    fn gather(&mut self) {
+    /// The per-capture stage caches pruned; then every capture's clips, drops, notes and rejects
+    /// (with the text stages' rejects) taken, each sorted so the outputs do not depend on
+    /// scheduling or glob order.
+    fn gather(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        self.prune_stage_caches();
         let items = std::mem::take(&mut self.items);
         // Exactly: grown by doubling, the list kept up to a third of its capacity (a `Clip` is a few
         // hundred bytes before its strings) unused until the synthetic pairs are added.
@@ -302,72 +434,87 @@ impl<'a, 'o> BuildState<'a, 'o> {
             unmapped_labels,
             notes,
         };
+        Ok(Vec::new())
     }
 
-    /// Synthetic pairs from the labelled originals and mirrors, unless an earlier stage is
-    /// `blocked` (probe mode), which it becomes when the pairs themselves are not cached.
-    fn compose(&mut self) -> Result<(), BuildError> {
-        if self.through < Stage::Compose || self.blocked.is_some() {
-            return Ok(());
+    /// The LLM pair check, when `synthetic.enabled` and `synthetic.llm_check`: the text pairs of
+    /// the pairs compose will sample, asked through the response cache.
+    fn pair_check(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        let synthetic = &self.config.synthetic;
+        if !synthetic.enabled || !synthetic.llm_check {
+            return Ok(Vec::new());
         }
+        let clips = std::mem::take(&mut self.gathered.clips);
+        let checked = synthetic::llm_vetoes(self.text_requests()?, &clips);
+        self.gathered.clips = clips;
+        let (vetoed, report) = checked?;
+        let run = text::augment_run(Stage::PairCheck.name(), &report);
+        self.vetoed = vetoed;
+        self.pair_check = report;
+        Ok(vec![run])
+    }
+
+    /// Synthetic pairs from the labelled originals and mirrors; in probe mode, blocked when the
+    /// pairs are not cached.
+    fn compose(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        // No LLM stage follows: the response cache is let go before the build's peak.
+        self.llm = None;
         let progress = &self.options.progress;
         let gathered = &mut self.gathered;
         progress.stage_started(crate::stages::compose::NAME, gathered.clips.len() as u64);
-        match synthetic::compose(
+        let composed = synthetic::compose(
             &self.shared,
             &self.motions,
             &mut gathered.clips,
             &mut gathered.index,
-            self.options.offline || self.probe,
-            progress,
-        )? {
-            Some((report, check, run)) => {
-                progress.stage_finished(&run.stage, run.ran as u64, run.reused as u64);
-                self.compose = report;
-                self.pair_check = check;
-                self.stages.push(run);
-            }
-            None => {
-                // Probe mode, not cached: the pairs a build would compose (sampling is cheap,
-                // composing is not), so `plan` counts them as `build` does.
-                let clips: Vec<&Clip> = gathered.clips.iter().collect();
-                let (_, sampled) = crate::stages::compose::sample(
-                    &clips,
-                    &self.config.synthetic,
-                    self.config.dataset.seed,
-                    |c| c.split.clone(),
-                );
-                self.stages.push(super::StageRun {
-                    stage: crate::stages::compose::NAME.into(),
-                    items: sampled.sampled,
-                    ran: sampled.sampled,
-                    reused: 0,
-                });
-                self.blocked = Some(Stage::Compose);
-            }
+            &self.vetoed,
+        )?;
+        if let Some((report, run)) = composed {
+            self.compose = report;
+            return Ok(vec![run]);
         }
-        Ok(())
+        // Probe mode, not cached: the pairs a build would compose (sampling is cheap, composing
+        // is not), so `plan` counts them as `build` does.
+        let clips: Vec<&Clip> = gathered.clips.iter().collect();
+        let (_, sampled) = crate::stages::compose::sample(
+            &clips,
+            &self.config.synthetic,
+            self.config.dataset.seed,
+            |c| c.split.clone(),
+        );
+        self.blocked = Some(Stage::Compose);
+        Ok(vec![StageRun {
+            stage: crate::stages::compose::NAME.into(),
+            items: sampled.sampled,
+            ran: sampled.sampled,
+            reused: 0,
+        }])
     }
 
-    /// What the steps produced, for the write stage.
-    pub(super) fn staged(self) -> Staged<'a> {
-        let gathered = self.gathered;
-        Staged {
-            output: self.output,
-            files: self.files.len(),
-            stages: self.stages,
-            clips: gathered.clips,
-            rejects: gathered.rejects,
-            notes: gathered.notes,
-            drops_by_reason: gathered.drops_by_reason,
-            drops: gathered.drops,
-            unmapped_labels: gathered.unmapped_labels,
-            text: self.text,
-            compose: self.compose,
-            pair_check: self.pair_check,
-            blocked: self.blocked,
-            index: gathered.index,
-            shared: self.shared,
-        }
+    /// The check of texts against motions, dropping contradicting rows with `label_check.drop`;
+    /// in probe mode, blocked when a capture's findings are not cached.
+    fn label_check(&mut self) -> Result<Vec<StageRun>, BuildError> {
+        let gathered = &mut self.gathered;
+        let Some((contradictions, run)) = label_check::contradicting_labels(
+            &self.shared,
+            &self.motions,
+            &gathered.clips,
+            &gathered.index,
+            &self.options.progress,
+        )?
+        else {
+            self.blocked = Some(Stage::LabelCheck);
+            return Ok(Vec::new());
+        };
+        let dropped = if self.config.label_check.drop {
+            label_check::drop_contradicting(&mut gathered.clips, &contradictions)
+        } else {
+            0
+        };
+        self.label_check = sinks::LabelFindings {
+            contradictions,
+            dropped,
+        };
+        Ok(vec![run])
     }
 }

@@ -1,12 +1,13 @@
-//! The runner's side of the compose stage: its stamp over the clips it pairs (and the optional
-//! LLM pair check), its cached output, and the composites' frames added to the motion index.
+//! The runner's side of the pair check and the compose stage: the texts of sampled pairs asked
+//! of the LLM, the compose stage's stamp over the clips it pairs (and the pair check's vetoes),
+//! its cached output, and the composites' frames added to the motion index.
 
 use std::collections::BTreeSet;
 
 use super::capture::Shared;
 use super::motions::{self, MotionIndex, MotionSource};
-use super::{BuildError, StageRun, label, text};
-use crate::stage::CachedStage;
+use super::{BuildError, Stage, StageRun, label, text};
+use crate::stage::{CachedStage, Versioned};
 use motionforge_sources::clip::Clip;
 
 /// The compose stage's cache entry: the synthetic clips (their skeletons in the table), where
@@ -21,39 +22,37 @@ type ComposeEntry = (
 /// entry, key `*`).
 pub(crate) struct Compose;
 
-impl CachedStage for Compose {
-    const NAME: &'static str = crate::stages::compose::NAME;
+impl Versioned for Compose {
+    const STAGE: Stage = Stage::Compose;
     const VERSION: u32 = crate::stages::compose::VERSION;
+}
+
+impl CachedStage for Compose {
     type Output = ComposeEntry;
 }
 
-/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs);
-/// `None` in probe mode when its output is not cached.
+/// Text pairs the LLM said cannot be done at once (normalised first and second text).
+pub(super) type Vetoes = BTreeSet<(String, String)>;
+
+/// Runs the compose stage over `clips` (adding plausibility metrics and the synthetic pairs),
+/// leaving out the pairs whose texts are `vetoed`; `None` in probe mode when its output is not
+/// cached.
 pub(super) fn compose(
     shared: &Shared<'_>,
     motions: &MotionSource,
     clips: &mut Vec<Clip>,
     index: &mut MotionIndex,
-    offline: bool,
-    progress: &motionforge_core::progress::ProgressSink,
-) -> Result<
-    Option<(
-        crate::stages::compose::ComposeReport,
-        crate::stages::augment::AugmentReport,
-        StageRun,
-    )>,
-    BuildError,
-> {
+    vetoed: &Vetoes,
+) -> Result<Option<(crate::stages::compose::ComposeReport, StageRun)>, BuildError> {
     let config = shared.config;
     let all: Vec<&Clip> = clips.iter().collect();
     // The clips without frames, and where their frames are: together, the stage's input.
     let encoded = motionforge_core::base::encoded_sha256(&(&all, &*index), "clips to compose")?;
-    let vetoed = llm_vetoes(shared, &all, offline, progress)?;
     let stamp = Compose::fingerprint()
         .text("clips", &encoded)
         .json("config synthetic", &config.synthetic)
         .json("config dataset.seed", &config.dataset.seed)
-        .json("llm pair check", &vetoed.0)
+        .json("llm pair check", vetoed)
         .stamp();
     let composed = shared.workspace.run_stage::<Compose, BuildError>(
         "*",
@@ -73,7 +72,7 @@ pub(super) fn compose(
                         label::normalize_text(&a.text),
                         label::normalize_text(&b.text),
                     );
-                    vetoed.0.contains(&key)
+                    vetoed.contains(&key)
                 },
                 |clip, recipe| {
                     // The composite's skeleton is a copy made when its source was read (a
@@ -113,15 +112,14 @@ pub(super) fn compose(
     };
     if !skeletons.give_all(&mut composed.clips) || refs.len() != composed.clips.len() {
         return Err(BuildError::InconsistentCache {
-            stage: crate::stages::compose::NAME,
+            stage: Compose::NAME,
         });
     }
-    shared.workspace.prune(
-        crate::stages::compose::NAME,
-        &BTreeSet::from([stamp.fingerprint]),
-    );
+    shared
+        .workspace
+        .prune(Compose::NAME, &BTreeSet::from([stamp.fingerprint]));
     let run = StageRun {
-        stage: crate::stages::compose::NAME.into(),
+        stage: Compose::NAME.into(),
         items: composed.report.sampled,
         ran: if ran { composed.report.sampled } else { 0 },
         reused: if ran { 0 } else { composed.report.sampled },
@@ -141,42 +139,24 @@ pub(super) fn compose(
             .cmp(&b.clip_id)
             .then(a.capture.path.cmp(&b.capture.path))
     });
-    Ok(Some((composed.report, vetoed.1, run)))
+    Ok(Some((composed.report, run)))
 }
 
-/// Text pairs the LLM says cannot be done at once, for the sampled pairs (when `llm_check` is on),
-/// and what asking did.
-fn llm_vetoes(
-    shared: &Shared<'_>,
-    clips: &[&Clip],
-    offline: bool,
-    progress: &motionforge_core::progress::ProgressSink,
-) -> Result<
-    (
-        BTreeSet<(String, String)>,
-        crate::stages::augment::AugmentReport,
-    ),
-    BuildError,
-> {
-    let config = shared.config;
+/// The pair check: the text pairs of the pairs the compose stage will sample, asked of the LLM
+/// (through the response cache); the pairs it says cannot be done at once, and what asking did.
+pub(super) fn llm_vetoes(
+    asks: text::TextRequests<'_>,
+    clips: &[Clip],
+) -> Result<(Vetoes, crate::stages::augment::AugmentReport), BuildError> {
+    let config = asks.shared.config;
     let mut report = crate::stages::augment::AugmentReport::default();
-    if !config.synthetic.enabled || !config.synthetic.llm_check {
-        return Ok((BTreeSet::new(), report));
-    }
+    let clips: Vec<&Clip> = clips.iter().collect();
     let texts =
-        crate::stages::compose::texts_to_check(clips, &config.synthetic, config.dataset.seed);
-    let prompts = config.prompts()?;
-    let mut cache = text::open_cache(shared)?;
-    let ask = crate::stages::augment::Asker {
-        llm: config.llm.as_ref(),
-        offline,
-        cache: cache.as_mut(),
-        asking: crate::stages::augment::Asking {
-            stage: "pair_check",
-            progress,
-        },
-    };
-    let vetoed = crate::stages::augment::incompatible_pairs(&texts, &prompts, ask, &mut report)
+        crate::stages::compose::texts_to_check(&clips, &config.synthetic, config.dataset.seed);
+    let (prompts, asker) = asks
+        .llm
+        .requests(config, Stage::PairCheck, asks.offline, asks.progress);
+    let vetoed = crate::stages::augment::incompatible_pairs(&texts, prompts, asker, &mut report)
         .map_err(text::augment_error)?;
     Ok((vetoed, report))
 }

@@ -1,6 +1,8 @@
 //! Text stages over the whole dataset (each unique text is asked once, however many clips share
 //! it): part labels, paraphrases, task plans. They run between segmentation and mirroring, so
-//! mirrors inherit mirrored labels and paraphrases.
+//! mirrors inherit mirrored labels and paraphrases. What they ask with (the prompt templates and
+//! the LLM response cache) is opened once per build, when a stage first needs it
+//! ([`LlmContext`]), and shared with the pair check.
 
 use motionforge_core::base::RejectReason;
 use std::collections::{BTreeMap, BTreeSet};
@@ -9,9 +11,9 @@ use serde::{Deserialize, Serialize};
 
 use super::capture::{Item, Shared};
 use super::motions::MotionSource;
-use super::{BuildError, Reject, StageRun};
+use super::{BuildError, Reject, Stage, StageRun};
 use crate::config::{Config, Labeller};
-use crate::stage::CachedStage;
+use crate::stage::{CachedStage, Versioned};
 use crate::stages::augment::{self, Asking, AugmentError, AugmentReport};
 use crate::stages::label::{self, LabelInput, LabelReport, normalize_text};
 use motionforge_language::parts::PartSet;
@@ -27,17 +29,18 @@ const LABEL_VERSION: u32 = 2;
 /// the whole build at once (one entry, key `*`).
 pub(crate) struct Labels;
 
-impl CachedStage for Labels {
-    const NAME: &'static str = label::NAME;
+impl Versioned for Labels {
+    const STAGE: Stage = Stage::Label;
     const VERSION: u32 = LABEL_VERSION;
+}
+
+impl CachedStage for Labels {
     type Output = ClipLabels;
 }
 
 /// What the text stages produced.
 #[derive(Debug, Default)]
 pub(super) struct TextOutcome {
-    /// Per-stage work.
-    pub(super) runs: Vec<StageRun>,
     /// Labelling counts.
     pub(super) label: LabelReport,
     /// Paraphrase counts and skips.
@@ -48,8 +51,6 @@ pub(super) struct TextOutcome {
     pub(super) plans: BTreeMap<String, Vec<PlanStep>>,
     /// Texts whose LLM request failed after its last retry, and plans still invalid after repair.
     pub(super) rejects: Vec<Reject>,
-    /// In probe mode: the label assignment is not cached (labels, and all after, would run).
-    pub(super) pending: bool,
 }
 
 fn text_reject(stage: &str, text: &str, reason: RejectReason, message: String) -> Reject {
@@ -89,95 +90,95 @@ pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, B
         .map_err(|source| BuildError::LlmCache { path, source })
 }
 
-/// What the text stages ask with: the config, the prompt templates, whether requests may be sent,
-/// and where progress goes.
-struct TextRequests<'a> {
-    config: &'a Config,
-    prompts: &'a motionforge_llm::prompt::Prompts,
-    offline: bool,
-    progress: &'a motionforge_core::progress::ProgressSink,
+/// What the LLM stages ask with: the prompt templates and the response cache, opened once per
+/// build.
+pub(super) struct LlmContext {
+    prompts: motionforge_llm::prompt::Prompts,
+    cache: Option<ResponseCache>,
 }
 
-impl TextRequests<'_> {
-    /// Where `stage`'s prompts go, through `cache`.
-    fn asker<'c>(
-        &'c self,
-        stage: super::Stage,
-        cache: Option<&'c mut ResponseCache>,
-    ) -> augment::Asker<'c> {
-        augment::Asker {
-            llm: self.config.llm.as_ref(),
-            offline: self.offline,
-            cache,
+impl LlmContext {
+    /// The config's prompt templates and its response cache (when it can use one).
+    pub(super) fn open(shared: &Shared<'_>) -> Result<LlmContext, BuildError> {
+        Ok(LlmContext {
+            prompts: shared.config.prompts()?,
+            cache: open_cache(shared)?,
+        })
+    }
+
+    /// How `stage` asks: its prompts and where its requests go.
+    pub(super) fn requests<'c>(
+        &'c mut self,
+        config: &'c Config,
+        stage: Stage,
+        offline: bool,
+        progress: &'c motionforge_core::progress::ProgressSink,
+    ) -> (&'c motionforge_llm::prompt::Prompts, augment::Asker<'c>) {
+        let asker = augment::Asker {
+            llm: config.llm.as_ref(),
+            offline,
+            cache: self.cache.as_mut(),
             asking: Asking {
                 stage: stage.name(),
-                progress: self.progress,
+                progress,
             },
-        }
+        };
+        (&self.prompts, asker)
     }
 }
 
-/// Runs the text stages and puts their results on the items' clips.
-pub(super) fn run(
+/// The opened [`LlmContext`] in `slot`, opening it on first use.
+pub(super) fn llm_context<'s>(
+    slot: &'s mut Option<LlmContext>,
     shared: &Shared<'_>,
-    motions: &MotionSource,
-    items: &mut [Item],
-    offline: bool,
-    through: super::Stage,
-    progress: &motionforge_core::progress::ProgressSink,
-) -> Result<TextOutcome, BuildError> {
-    use super::Stage;
-    let config = shared.config;
-    let prompts = config.prompts()?;
-    let mut cache = open_cache(shared)?;
-    let mut outcome = TextOutcome::default();
-    let asks = TextRequests {
-        config,
-        prompts: &prompts,
-        offline,
-        progress,
+) -> Result<&'s mut LlmContext, BuildError> {
+    let context = match slot.take() {
+        Some(context) => context,
+        None => LlmContext::open(shared)?,
     };
-    if !label_stage(shared, motions, items, &asks, cache.as_mut(), &mut outcome)? {
-        outcome.pending = true;
-        return Ok(outcome);
-    }
-    if config.paraphrases.enabled && through >= Stage::Paraphrase {
-        paraphrase_stage(items, &asks, cache.as_mut(), &mut outcome)?;
-    }
-    if config.task_plans.enabled && through >= Stage::Plan {
-        plan_stage(items, &asks, cache.as_mut(), &mut outcome)?;
-    }
-    Ok(outcome)
+    Ok(slot.insert(context))
+}
+
+/// What a text stage works with: the build's shared state, the LLM context, whether requests may
+/// be sent, and where progress goes.
+pub(super) struct TextRequests<'a> {
+    pub(super) shared: &'a Shared<'a>,
+    pub(super) llm: &'a mut LlmContext,
+    pub(super) offline: bool,
+    pub(super) progress: &'a motionforge_core::progress::ProgressSink,
 }
 
 /// Part labels: every unique text labelled once, then each clip's labels from its text and its
-/// motion (one cached item for the whole dataset). False in probe mode when that assignment is not
-/// cached.
-fn label_stage(
-    shared: &Shared<'_>,
+/// motion (one cached item for the whole dataset). The stage's run, and false in probe mode when
+/// that assignment is not cached (the run then counts what a build would do).
+pub(super) fn label(
+    asks: TextRequests<'_>,
     motions: &MotionSource,
     items: &mut [Item],
-    asks: &TextRequests<'_>,
-    cache: Option<&mut ResponseCache>,
     outcome: &mut TextOutcome,
-) -> Result<bool, BuildError> {
-    let config = asks.config;
+) -> Result<(StageRun, bool), BuildError> {
+    let shared = asks.shared;
+    let config = shared.config;
     let mut report = LabelReport::default();
     let clips: Vec<&Clip> = items.iter().flat_map(|i| i.clips.iter()).collect();
+    let (prompts, asker) = asks
+        .llm
+        .requests(config, Stage::Label, asks.offline, asks.progress);
     let input = LabelInput {
         config: &config.part_labels,
         llm: config.llm.as_ref(),
-        prompts: asks.prompts,
+        prompts,
         offline: asks.offline,
         progress: asks.progress,
     };
-    let labels = label::label_texts(&clips, &input, cache, &mut report).map_err(|e| match e {
-        label::LabelError::Prompt(p) => BuildError::Prompt(p),
-        other => BuildError::Labels(Box::new(other)),
-    })?;
+    let labels =
+        label::label_texts(&clips, &input, asker.cache, &mut report).map_err(|e| match e {
+            label::LabelError::Prompt(p) => BuildError::Prompt(p),
+            other => BuildError::Labels(Box::new(other)),
+        })?;
     let segment_fps: Vec<&str> = items
         .iter()
-        .filter_map(|i| i.fingerprint(super::Stage::Segment))
+        .filter_map(|i| i.fingerprint(Stage::Segment))
         .collect();
     let stamp = Labels::fingerprint()
         .json("part labels", &labels)
@@ -192,17 +193,17 @@ fn label_stage(
     )?;
     let Some((assigned, ran)): Option<(ClipLabels, bool)> = assigned else {
         // Probe mode, not cached: what a build would run, so `plan` counts clips as `build` does.
-        outcome.runs.push(StageRun {
-            stage: label::NAME.into(),
+        let run = StageRun {
+            stage: Labels::NAME.into(),
             items: n_clips,
             ran: n_clips,
             reused: 0,
-        });
-        return Ok(false);
+        };
+        return Ok((run, false));
     };
     shared
         .workspace
-        .prune(label::NAME, &BTreeSet::from([stamp.fingerprint]));
+        .prune(Labels::NAME, &BTreeSet::from([stamp.fingerprint]));
     for clip in items.iter_mut().flat_map(|i| i.clips.iter_mut()) {
         if let Some((parts, source)) = assigned.by_clip.get(&clip.clip_id) {
             clip.parts = *parts;
@@ -214,13 +215,19 @@ fn label_stage(
     for (text, reason) in &report.missing {
         if reason.is_failure() {
             outcome.rejects.push(text_reject(
-                label::NAME,
+                Labels::NAME,
                 text,
                 RejectReason::LlmRequest,
                 reason.to_string(),
             ));
         }
     }
+    let run = StageRun {
+        stage: Labels::NAME.into(),
+        items: n_clips,
+        ran: if ran { n_clips } else { report.requests },
+        reused: if ran { 0 } else { n_clips },
+    };
     // Requests, cache hits and the answers' checks are this build's; the rest of the report is the
     // cached assignment's.
     outcome.label = LabelReport {
@@ -230,13 +237,7 @@ fn label_stage(
         checks: report.checks,
         ..assigned.report
     };
-    outcome.runs.push(StageRun {
-        stage: label::NAME.into(),
-        items: n_clips,
-        ran: if ran { n_clips } else { report.requests },
-        reused: if ran { 0 } else { n_clips },
-    });
-    Ok(true)
+    Ok((run, true))
 }
 
 /// One capture's labelled clips (id, parts, their sources), its label sources counted, and its
@@ -326,25 +327,26 @@ fn label_capture(
 }
 
 /// Paraphrases of every clip's caption (each unique text asked once).
-fn paraphrase_stage(
+pub(super) fn paraphrase(
+    asks: TextRequests<'_>,
     items: &mut [Item],
-    asks: &TextRequests<'_>,
-    cache: Option<&mut ResponseCache>,
     outcome: &mut TextOutcome,
-) -> Result<(), BuildError> {
-    use super::Stage;
-    let config = asks.config;
+) -> Result<StageRun, BuildError> {
+    let config = asks.shared.config;
     let texts: BTreeSet<String> = items
         .iter()
         .flat_map(|i| i.clips.iter().map(|c| normalize_text(&c.text)))
         .collect();
     let mut report = AugmentReport::default();
+    let (prompts, asker) =
+        asks.llm
+            .requests(config, Stage::Paraphrase, asks.offline, asks.progress);
     let found = augment::paraphrase(
         &texts,
         config.paraphrases.n,
         config.paraphrases.on_invalid,
-        asks.prompts,
-        asks.asker(Stage::Paraphrase, cache),
+        prompts,
+        asker,
         &mut report,
     )
     .map_err(augment_error)?;
@@ -354,22 +356,18 @@ fn paraphrase_stage(
             .cloned()
             .unwrap_or_default();
     }
-    outcome
-        .runs
-        .push(augment_run(Stage::Paraphrase.name(), &report));
+    let run = augment_run(Stage::Paraphrase.name(), &report);
     outcome.paraphrase = report;
-    Ok(())
+    Ok(run)
 }
 
 /// Task plans of every single action's text (each unique text asked once); plans still invalid
 /// after their repair are rejects.
-fn plan_stage(
+pub(super) fn plan(
+    asks: TextRequests<'_>,
     items: &[Item],
-    asks: &TextRequests<'_>,
-    cache: Option<&mut ResponseCache>,
     outcome: &mut TextOutcome,
-) -> Result<(), BuildError> {
-    use super::Stage;
+) -> Result<StageRun, BuildError> {
     let texts: BTreeSet<String> = items
         .iter()
         .flat_map(|i| {
@@ -380,13 +378,10 @@ fn plan_stage(
         })
         .collect();
     let mut report = AugmentReport::default();
-    outcome.plans = augment::plan(
-        &texts,
-        asks.prompts,
-        asks.asker(Stage::Plan, cache),
-        &mut report,
-    )
-    .map_err(augment_error)?;
+    let (prompts, asker) =
+        asks.llm
+            .requests(asks.shared.config, Stage::Plan, asks.offline, asks.progress);
+    outcome.plans = augment::plan(&texts, prompts, asker, &mut report).map_err(augment_error)?;
     for (text, reason) in &report.rejected {
         outcome.rejects.push(text_reject(
             Stage::Plan.name(),
@@ -395,9 +390,9 @@ fn plan_stage(
             reason.clone(),
         ));
     }
-    outcome.runs.push(augment_run(Stage::Plan.name(), &report));
+    let run = augment_run(Stage::Plan.name(), &report);
     outcome.plan = report;
-    Ok(())
+    Ok(run)
 }
 
 /// A prompt error stays a prompt error (exit code 2); a server that is gone is an LLM error.
@@ -408,7 +403,8 @@ pub(super) fn augment_error(e: AugmentError) -> BuildError {
     }
 }
 
-fn augment_run(stage: &str, report: &AugmentReport) -> StageRun {
+/// An LLM stage's run: texts it covers, asked this build, answered from the cache.
+pub(super) fn augment_run(stage: &str, report: &AugmentReport) -> StageRun {
     StageRun {
         stage: stage.into(),
         items: report.texts,

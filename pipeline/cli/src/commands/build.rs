@@ -52,8 +52,8 @@ pub(crate) struct BuildCommand {
 
 /// Run the named stages and every stage they depend on, nothing after them.
 ///
-/// Stages, in order: ingest, segment, label, paraphrase, plan, mirror, compose, write,
-/// report; each depends on all before it. `run segment` reads and cuts every capture and
+/// Stages, in order: ingest, segment, label, paraphrase, plan, mirror, pair_check, compose,
+/// label_check, write, report; each depends on all before it. `run segment` reads and cuts every capture and
 /// caches the result; a later `build` reuses it.
 #[derive(clap::Args)]
 #[command(after_help = examples!(

@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{AmassConfig, PositionsConfig};
 use crate::source::CaptureFile;
-use crate::stage::{CachedStage, CaptureStage};
+use crate::stage::{CachedStage, CaptureStage, Versioned};
 use motionforge_core::base::{Reject, RejectReason, Stamp};
 use motionforge_core::motion::bvh::FPS_RANGE;
 use motionforge_core::motion::ik::{PositionLayout, motion_from_positions};
@@ -22,9 +22,12 @@ pub const VERSION: u32 = 5;
 /// The stage as the runner caches it: one record per capture file.
 pub(crate) struct Ingest;
 
-impl CachedStage for Ingest {
-    const NAME: &'static str = NAME;
+impl Versioned for Ingest {
+    const STAGE: crate::Stage = crate::Stage::Ingest;
     const VERSION: u32 = VERSION;
+}
+
+impl CachedStage for Ingest {
     type Output = IngestRecord;
 
     fn take_rejects(output: &mut IngestRecord) -> Vec<Reject> {
@@ -32,9 +35,7 @@ impl CachedStage for Ingest {
     }
 }
 
-impl CaptureStage for Ingest {
-    const STAGE: crate::Stage = crate::Stage::Ingest;
-}
+impl CaptureStage for Ingest {}
 
 /// Kind of the note that an AMASS file's frames, taken at HumanML3D's stride, are at another
 /// rate than the 20 fps they are labelled with (counted in the build report's `notes_by_kind`).

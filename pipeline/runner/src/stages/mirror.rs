@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::motions::MotionRef;
-use crate::stage::{CachedStage, CaptureStage};
+use crate::stage::{CachedStage, CaptureStage, Versioned};
 use motionforge_core::base::{Reject, RejectReason, Stamp};
 use motionforge_core::motion::{BoundProfiles, MirrorPlan, OffsetPolicy, ProfileSpec};
 use motionforge_language::parts::PartSet;
@@ -23,9 +23,12 @@ pub const VERSION: u32 = 6;
 /// from the originals' when read), and where those are.
 pub(crate) struct Mirror;
 
-impl CachedStage for Mirror {
-    const NAME: &'static str = NAME;
+impl Versioned for Mirror {
+    const STAGE: crate::Stage = crate::Stage::Mirror;
     const VERSION: u32 = VERSION;
+}
+
+impl CachedStage for Mirror {
     type Output = (MirrorOutput, Vec<MotionRef>);
 
     fn take_rejects(output: &mut Self::Output) -> Vec<Reject> {
@@ -33,9 +36,7 @@ impl CachedStage for Mirror {
     }
 }
 
-impl CaptureStage for Mirror {
-    const STAGE: crate::Stage = crate::Stage::Mirror;
-}
+impl CaptureStage for Mirror {}
 
 /// Fingerprint of mirroring one segmented capture.
 pub fn fingerprint(

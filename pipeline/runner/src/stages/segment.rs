@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::SegmentConfig;
 use crate::motions::MotionRef;
-use crate::stage::{CachedStage, CaptureStage};
+use crate::stage::{CachedStage, CaptureStage, Versioned};
 use motionforge_core::base::{DropReason, Dropped, Stamp, Tally};
 use motionforge_core::motion::bvh::excerpt;
 use motionforge_core::motion::canonical::{canonical_frame, dataset_positions, hand_joint};
@@ -68,15 +68,16 @@ pub struct SegmentOutput {
 /// frames went (frame chunks stored as the clips are made).
 pub(crate) struct Segment;
 
-impl CachedStage for Segment {
-    const NAME: &'static str = NAME;
+impl Versioned for Segment {
+    const STAGE: crate::Stage = crate::Stage::Segment;
     const VERSION: u32 = VERSION;
+}
+
+impl CachedStage for Segment {
     type Output = (SegmentOutput, Vec<MotionRef>);
 }
 
-impl CaptureStage for Segment {
-    const STAGE: crate::Stage = crate::Stage::Segment;
-}
+impl CaptureStage for Segment {}
 
 /// Fingerprint of segmenting one capture.
 pub fn fingerprint(
