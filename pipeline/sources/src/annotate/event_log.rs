@@ -573,3 +573,137 @@ fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation
         ..CaptureAnnotation::default()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn csv(text: &str) -> String {
+        read_event_log(text, EventLogFormat::Csv, "log.csv", 30.0)
+            .unwrap_err()
+            .to_string()
+    }
+
+    fn json(text: &str) -> String {
+        read_event_log(text, EventLogFormat::Json, "log.json", 30.0)
+            .unwrap_err()
+            .to_string()
+    }
+
+    /// The texts of every event-log fault, as builds show them: they must not change.
+    #[test]
+    fn every_fault_reads_as_it_always_has() {
+        let cases = [
+            (
+                "",
+                "log.csv: empty file: expected a header naming `instruction` and `frame` or `time`",
+            ),
+            (
+                "frame,\"instruction\"x\n",
+                "log.csv:1: header: field 2: expected `,` or the line end after the closing quote, found `x`",
+            ),
+            (
+                "frame,Frame,instruction\n",
+                "log.csv:1: header names column `frame` twice",
+            ),
+            (
+                "frame,hand\n",
+                "log.csv:1: header has no `instruction` column (expected columns among frame, time, instruction, motion_type, hand, object, event, capture), found `frame,hand`",
+            ),
+            (
+                "instruction,hand \n",
+                "log.csv:1: header has neither a `frame` nor a `time` column, found `instruction,hand`",
+            ),
+            (
+                "frame,instruction\n\n3,\"walk\n",
+                "log.csv:3: field 2 opens a double quote that is not closed on this line",
+            ),
+            (
+                "frame,instruction\n3,wa\"lk\n",
+                "log.csv:2: field 2: a double quote inside an unquoted field (quote the whole field and double the quote: `\"\"`)",
+            ),
+            (
+                "frame,instruction\n3,walk,x\n",
+                "log.csv:2: expected 2 columns as in the header, found 3",
+            ),
+            (
+                "frame,instruction\n1,a\n-3,walk\n",
+                "log.csv:3: row 2: frame -3 is negative",
+            ),
+            (
+                "frame,instruction\n3.5,walk\n",
+                "log.csv:2: row 1: frame `3.5`: expected a whole frame number",
+            ),
+            (
+                "time,instruction\ninf,walk\n",
+                "log.csv:2: row 1: time `inf`: expected a finite, non-negative number of seconds",
+            ),
+            (
+                "time,instruction\nsoon,walk\n",
+                "log.csv:2: row 1: time `soon`: expected a number of seconds",
+            ),
+            (
+                "frame,time,instruction\n30,2.5,walk\n",
+                "log.csv:2: row 1: frame 30 (1 s at 30 fps) and time 2.5 s disagree; give one of them",
+            ),
+            (
+                "frame,time,instruction\n,,walk\n",
+                "log.csv:2: row 1: has neither a frame nor a time: expected one of them",
+            ),
+            (
+                "frame,instruction,event\n3,walk,jump\n",
+                "log.csv:2: row 1: event `jump`: expected `instruction`, `grasp` or `release`",
+            ),
+            (
+                "frame,instruction,hand\n3,walk,middle\n",
+                "log.csv:2: row 1: hand `middle`: expected `left`, `right` or `both`",
+            ),
+            (
+                "frame,instruction\n3,\n",
+                "log.csv:2: row 1: instruction event with no instruction text: expected the instruction",
+            ),
+        ];
+        for (text, want) in cases {
+            assert_eq!(csv(text), want, "{text}");
+        }
+        let err = read_event_log("frame,instruction\n3,walk\n", EventLogFormat::Csv, "l", 0.0)
+            .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "l:2: row 1: frame rows need a positive frame rate to be placed in time, got 0"
+        );
+        let cases = [
+            (
+                "[1,",
+                "log.json:1: not valid JSON: EOF while parsing a value at line 1 column 3",
+            ),
+            (
+                "3",
+                "log.json: expected an array of events or an object with an `events` array",
+            ),
+            (
+                "{\"events\": 3}",
+                "log.json: expected an array of events or an object with an `events` array",
+            ),
+            (
+                "{\"capture\": 3, \"events\": []}",
+                "log.json: `capture` must be a string, found 3",
+            ),
+            (
+                "[\n{\"frame\": 1, \"instruction\": \"a\"},\n[1]\n]",
+                "log.json:3: event 2: expected an object, found [1]",
+            ),
+            (
+                "[{\"frame\": [1]}]",
+                "log.json:1: event 1: `frame` must be a string or a number, found [1]",
+            ),
+            (
+                "[{\"frame\": -1, \"instruction\": \"a\"}]",
+                "log.json:1: row 1: frame -1 is negative",
+            ),
+        ];
+        for (text, want) in cases {
+            assert_eq!(json(text), want, "{text}");
+        }
+    }
+}

@@ -744,3 +744,53 @@ pub fn read_caption(text: &str) -> Option<String> {
         .find(|c| !c.is_empty())
         .map(str::to_string)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The texts of the index and BABEL file faults, as builds show them: they must not change.
+    #[test]
+    fn every_file_fault_reads_as_it_always_has() {
+        let index = |text: &str| read_frame_index(text, "index.csv").unwrap_err().to_string();
+        let cases = [
+            (
+                "\n",
+                "index.csv: empty file: expected the header `source_path,start_frame,end_frame,new_name`",
+            ),
+            (
+                "source_path,\"start_frame",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`: field 2 opens a double quote that is not closed on this line",
+            ),
+            (
+                "source_path,start_frame,new_name ",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`, found `source_path,start_frame,new_name` (no `end_frame` column)",
+            ),
+            (
+                "source_path,start_frame,end_frame,new_name,Start_Frame",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`: `start_frame` appears twice",
+            ),
+            (
+                "source_path,start_frame,end_frame,new_name,text",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`, found 5 columns: `source_path,start_frame,end_frame,new_name,text`",
+            ),
+        ];
+        for (text, want) in cases {
+            assert_eq!(index(text), want, "{text}");
+        }
+        let babel = |text: &str| {
+            super::super::babel::read_babel(text, "babel.json")
+                .map(|_| ())
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            babel("{"),
+            "babel.json:1: not valid JSON: EOF while parsing an object at line 1 column 1"
+        );
+        assert_eq!(
+            babel("[]"),
+            "babel.json: expected a JSON object of BABEL records keyed by sequence id"
+        );
+    }
+}
