@@ -156,13 +156,14 @@ pub enum MirrorFault {
     /// No type has the mirror's name.
     #[error("no type has that name")]
     NoSuchType,
-    /// The mirror type does not mirror back.
+    /// The mirror type does not mirror back. The names are boxed `str`s to keep
+    /// [`TaxonomyError`] as small as it was: build errors carry it by value.
     #[error("not mutual: `{other}` mirrors to {}", mirrored_name(.other_mirror.as_deref()))]
     NotMutual {
         /// The mirror type.
-        other: String,
+        other: Box<str>,
         /// Its own `mirror`, if any.
-        other_mirror: Option<String>,
+        other_mirror: Option<Box<str>>,
     },
 }
 
@@ -425,8 +426,8 @@ impl Taxonomy {
             };
             if other.mirror.as_deref() != Some(ty.name.as_str()) {
                 return Err(bad(MirrorFault::NotMutual {
-                    other: other.name.clone(),
-                    other_mirror: other.mirror.clone(),
+                    other: other.name.as_str().into(),
+                    other_mirror: other.mirror.as_deref().map(Box::from),
                 }));
             }
         }
