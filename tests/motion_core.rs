@@ -69,8 +69,15 @@ fn profile_pairs_can_be_overridden_and_bad_pairs_are_refused() {
     let mut spec = ProfileSpec::bundled("bandai-namco").unwrap();
     // Pairing a hand with a foot breaks the mirrored hierarchy: refused with the joint names.
     spec.pairs.insert("Hand_L".into(), "Foot_R".into());
-    let err = spec.bind(&bvh.skeleton).unwrap_err().to_string();
-    assert!(err.contains("not symmetric"), "{err}");
+    let err = spec.bind(&bvh.skeleton).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            motionforge::motion::profile::ProfileError::Asymmetric { .. }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("not symmetric"), "{err}");
 }
 
 #[test]

@@ -12,8 +12,8 @@ use std::sync::OnceLock;
 
 use common::project::{ConfigSpec, Source};
 use common::*;
-use motionforge::annotate::event_log::{EventLogFormat, read_event_log};
-use motionforge::annotate::span::{CaptureAnnotation, Hand, Span};
+use motionforge::annotate::event_log::{EventLogFormat, RowFault, read_event_log};
+use motionforge::annotate::span::{AnnotationFault, CaptureAnnotation, Hand, Span};
 use motionforge::annotate::taxonomy::{Taxonomy, TypeMap, TypeMapConfig};
 use motionforge::clip::{Capture, SourceKind};
 use motionforge::config::SegmentConfig;
@@ -257,9 +257,13 @@ fn check_session(seed: u64) -> Result<(), TestCaseError> {
     // Written with blank times, the log is refused rather than read as something else.
     let blank = read_event_log(&log, EventLogFormat::Csv, "living-room.csv", 30.0);
     prop_assert!(
-        blank
-            .as_ref()
-            .is_err_and(|e| e.message.contains("neither a frame nor a time")),
+        blank.as_ref().is_err_and(|e| matches!(
+            e.fault,
+            AnnotationFault::Row {
+                fault: RowFault::NoTime,
+                ..
+            }
+        )),
         "{blank:?}"
     );
 

@@ -205,13 +205,13 @@ impl LlmConfig {
 
 /// Errors of the LLM client. Cloneable because one result answers every duplicate of a prompt:
 /// so a lower layer's error (reqwest's, I/O's, the cache's; none is `Clone`) is kept as its text.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LlmError {
     /// A config value is out of range.
-    #[error("LLM config: {message}")]
+    #[error("LLM config: {fault}")]
     Config {
         /// What is wrong.
-        message: String,
+        fault: ConfigFault,
     },
     /// `api_key_env` names a variable that is unset or empty.
     #[error("environment variable {var} (api_key_env) is not set or empty")]
@@ -419,12 +419,13 @@ struct Shared {
     probed: AtomicBool,
 }
 
-fn seconds(name: &str, value: f64, allow_zero: bool) -> Result<Duration, LlmError> {
+fn seconds(key: &'static str, value: f64, allow_zero: bool) -> Result<Duration, LlmError> {
     let bad = || LlmError::Config {
-        message: format!(
-            "{name} must be a finite number {} seconds, got {value}",
-            if allow_zero { ">= 0" } else { "> 0" }
-        ),
+        fault: ConfigFault::Seconds {
+            key,
+            value,
+            allow_zero,
+        },
     };
     if !allow_zero && value <= 0.0 {
         return Err(bad());
@@ -432,45 +433,89 @@ fn seconds(name: &str, value: f64, allow_zero: bool) -> Result<Duration, LlmErro
     Duration::try_from_secs_f64(value).map_err(|_| bad())
 }
 
+/// Which `[llm]` value is out of range, and the value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConfigFault {
+    /// `base_url` is not an http or https URL.
+    #[error("base_url `{url}` is not an http(s) URL")]
+    BaseUrl {
+        /// The URL as configured.
+        url: String,
+    },
+    /// `model` is empty or blank.
+    #[error("model is empty")]
+    NoModel,
+    /// `temperature` is negative or not finite.
+    #[error("temperature must be finite and >= 0, got {0}")]
+    Temperature(f64),
+    /// A count that must be positive is 0.
+    #[error("{key} must be at least 1")]
+    Zero {
+        /// The config key (`concurrency`, `requests_per_minute`, `circuit_breaker_failures`).
+        key: &'static str,
+    },
+    /// `retry_max_tokens` does not raise `max_tokens`.
+    #[error("retry_max_tokens ({retry}) must be larger than max_tokens ({max})")]
+    RetryMaxTokens {
+        /// `retry_max_tokens`.
+        retry: u32,
+        /// `max_tokens`.
+        max: u32,
+    },
+    /// A duration is negative (or zero where it must be positive), not finite, or too long.
+    #[error(
+        "{key} must be a finite number {} seconds, got {value}",
+        if *allow_zero { ">= 0" } else { "> 0" }
+    )]
+    Seconds {
+        /// The config key.
+        key: &'static str,
+        /// The value (for `backoff_seconds`, also its largest doubling).
+        value: f64,
+        /// Whether 0 is allowed.
+        allow_zero: bool,
+    },
+}
+
 impl LlmClient {
     /// Checks the config, reads the API key from its environment variable and starts the runtime.
     pub fn new(config: LlmConfig) -> Result<LlmClient, LlmError> {
-        let config_err = |message: String| Err(LlmError::Config { message });
+        let config_err = |fault: ConfigFault| Err(LlmError::Config { fault });
         let root = config.base_url.trim_end_matches('/');
         match reqwest::Url::parse(root) {
             Ok(u) if matches!(u.scheme(), "http" | "https") => {}
             _ => {
-                return config_err(format!(
-                    "base_url `{}` is not an http(s) URL",
-                    config.base_url
-                ));
+                return config_err(ConfigFault::BaseUrl {
+                    url: config.base_url.clone(),
+                });
             }
         }
         if config.model.trim().is_empty() {
-            return config_err("model is empty".into());
+            return config_err(ConfigFault::NoModel);
         }
         if !(config.temperature.is_finite() && config.temperature >= 0.0) {
-            return config_err(format!(
-                "temperature must be finite and >= 0, got {}",
-                config.temperature
-            ));
+            return config_err(ConfigFault::Temperature(config.temperature));
         }
         if config.concurrency == 0 {
-            return config_err("concurrency must be at least 1".into());
+            return config_err(ConfigFault::Zero { key: "concurrency" });
         }
         if config.requests_per_minute == 0 {
-            return config_err("requests_per_minute must be at least 1".into());
+            return config_err(ConfigFault::Zero {
+                key: "requests_per_minute",
+            });
         }
         if config.circuit_breaker_failures == 0 {
-            return config_err("circuit_breaker_failures must be at least 1".into());
+            return config_err(ConfigFault::Zero {
+                key: "circuit_breaker_failures",
+            });
         }
         if let Some(bigger) = config.retry_max_tokens
             && bigger <= config.max_tokens
         {
-            return config_err(format!(
-                "retry_max_tokens ({bigger}) must be larger than max_tokens ({})",
-                config.max_tokens
-            ));
+            return config_err(ConfigFault::RetryMaxTokens {
+                retry: bigger,
+                max: config.max_tokens,
+            });
         }
         let timeout = seconds("timeout_seconds", config.timeout_seconds, false)?;
         let max_retry_after = seconds(
@@ -1099,5 +1144,111 @@ impl RateLimiter {
             start
         };
         tokio::time::sleep_until(start).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The texts of every config fault, as `config check` and builds show them: they must not
+    /// change.
+    #[test]
+    fn every_config_fault_reads_as_it_always_has() {
+        let base = || LlmConfig::new("http://h/v1", "m");
+        let cases = [
+            (
+                LlmConfig {
+                    base_url: "ftp://h".into(),
+                    ..base()
+                },
+                "LLM config: base_url `ftp://h` is not an http(s) URL",
+            ),
+            (
+                LlmConfig {
+                    model: " ".into(),
+                    ..base()
+                },
+                "LLM config: model is empty",
+            ),
+            (
+                LlmConfig {
+                    temperature: -1.5,
+                    ..base()
+                },
+                "LLM config: temperature must be finite and >= 0, got -1.5",
+            ),
+            (
+                LlmConfig {
+                    temperature: f64::NAN,
+                    ..base()
+                },
+                "LLM config: temperature must be finite and >= 0, got NaN",
+            ),
+            (
+                LlmConfig {
+                    concurrency: 0,
+                    ..base()
+                },
+                "LLM config: concurrency must be at least 1",
+            ),
+            (
+                LlmConfig {
+                    requests_per_minute: 0,
+                    ..base()
+                },
+                "LLM config: requests_per_minute must be at least 1",
+            ),
+            (
+                LlmConfig {
+                    circuit_breaker_failures: 0,
+                    ..base()
+                },
+                "LLM config: circuit_breaker_failures must be at least 1",
+            ),
+            (
+                LlmConfig {
+                    max_tokens: 100,
+                    retry_max_tokens: Some(90),
+                    ..base()
+                },
+                "LLM config: retry_max_tokens (90) must be larger than max_tokens (100)",
+            ),
+            (
+                LlmConfig {
+                    timeout_seconds: 0.0,
+                    ..base()
+                },
+                "LLM config: timeout_seconds must be a finite number > 0 seconds, got 0",
+            ),
+            (
+                LlmConfig {
+                    max_retry_after_seconds: -2.5,
+                    ..base()
+                },
+                "LLM config: max_retry_after_seconds must be a finite number >= 0 seconds, got -2.5",
+            ),
+            (
+                LlmConfig {
+                    backoff_seconds: f64::INFINITY,
+                    ..base()
+                },
+                "LLM config: backoff_seconds must be a finite number >= 0 seconds, got inf",
+            ),
+            (
+                LlmConfig {
+                    backoff_seconds: -1.0,
+                    ..base()
+                },
+                "LLM config: backoff_seconds must be a finite number >= 0 seconds, got -1",
+            ),
+        ];
+        for (config, want) in cases {
+            match LlmClient::new(config) {
+                Err(err @ LlmError::Config { .. }) => assert_eq!(err.to_string(), want),
+                Err(err) => panic!("{err}: not a config error; expected {want}"),
+                Ok(_) => panic!("accepted; expected {want}"),
+            }
+        }
     }
 }

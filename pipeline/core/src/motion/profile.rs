@@ -306,12 +306,12 @@ pub enum ProfileError {
         field: &'static str,
     },
     /// Left/right pairs that do not form a mirror-symmetric hierarchy.
-    #[error("profile `{profile}`: left/right pairs are not symmetric: {message}")]
+    #[error("profile `{profile}`: left/right pairs are not symmetric: {fault}")]
     Asymmetric {
         /// Profile name.
         profile: String,
         /// What is inconsistent.
-        message: String,
+        fault: SymmetryFault,
     },
     /// Up and forward are the same axis.
     #[error("profile `{0}`: up and forward axes must differ")]
@@ -327,14 +327,55 @@ pub enum ProfileError {
         joint: String,
     },
     /// An `[smpl22]` entry is not usable.
-    #[error("profile `{profile}`: `[smpl22]` entry `{joint}`: {message}")]
+    #[error("profile `{profile}`: `[smpl22]` entry `{joint}`: {fault}")]
     BadSmplJoint {
         /// Profile name.
         profile: String,
         /// The SMPL joint (or the unknown key).
         joint: String,
         /// What is wrong.
-        message: String,
+        fault: SmplJointFault,
+    },
+}
+
+/// How left/right pairs fail to describe a mirror-symmetric hierarchy (joints by name).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SymmetryFault {
+    /// `joint` pairs with `partner`, whose own partner is another joint.
+    #[error("`{joint}` pairs with `{partner}` but not back")]
+    NotMutual {
+        /// The joint.
+        joint: String,
+        /// Its partner.
+        partner: String,
+    },
+    /// The parent of `partner` is not the partner of the parent of `joint`.
+    #[error("the parent of `{partner}` does not mirror the parent of `{joint}`")]
+    ParentNotMirrored {
+        /// The joint.
+        joint: String,
+        /// Its partner.
+        partner: String,
+    },
+}
+
+/// What is wrong with one `[smpl22]` entry.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SmplJointFault {
+    /// The key is not an SMPL body joint.
+    #[error("not one of SMPL's 22 body joints")]
+    NotSmpl,
+    /// The entry names a joint the skeleton lacks.
+    #[error("the skeleton has no joint `{name}`")]
+    NoSuchJoint {
+        /// The joint as named.
+        name: String,
+    },
+    /// `at` is outside 0..=1.
+    #[error("`at` is {at}; expected 0 to 1")]
+    AtOutOfRange {
+        /// The value given.
+        at: f64,
     },
 }
 
@@ -377,23 +418,27 @@ impl ProfileSpec {
         smpl_names: &[&str; 22],
         joint_names: &[&str],
     ) -> Result<SmplPlacement, ProfileError> {
-        let bad = |joint: &str, message: String| ProfileError::BadSmplJoint {
+        let bad = |joint: &str, fault: SmplJointFault| ProfileError::BadSmplJoint {
             profile: self.name.clone(),
             joint: joint.to_string(),
-            message,
+            fault,
         };
         if let Some(unknown) = self
             .smpl22
             .keys()
             .find(|k| !smpl_names.contains(&k.as_str()))
         {
-            return Err(bad(unknown, "not one of SMPL's 22 body joints".into()));
+            return Err(bad(unknown, SmplJointFault::NotSmpl));
         }
         let index = |smpl: &str, name: &str| {
-            joint_names
-                .iter()
-                .position(|j| *j == name)
-                .ok_or_else(|| bad(smpl, format!("the skeleton has no joint `{name}`")))
+            joint_names.iter().position(|j| *j == name).ok_or_else(|| {
+                bad(
+                    smpl,
+                    SmplJointFault::NoSuchJoint {
+                        name: name.to_string(),
+                    },
+                )
+            })
         };
         let mut out = [(0usize, 0usize, 0.0f64); 22];
         for (slot, smpl) in out.iter_mut().zip(smpl_names) {
@@ -410,7 +455,7 @@ impl ProfileSpec {
                 }
                 Some(SmplJoint::Between { between, at }) => {
                     if !(0.0..=1.0).contains(at) {
-                        return Err(bad(smpl, format!("`at` is {at}; expected 0 to 1")));
+                        return Err(bad(smpl, SmplJointFault::AtOutOfRange { at: *at }));
                     }
                     (index(smpl, &between[0])?, index(smpl, &between[1])?, *at)
                 }
@@ -479,18 +524,18 @@ impl ProfileSpec {
         for j in 0..swap.len() {
             let s = swap[j];
             if swap[s] != j {
-                return Err(self.asymmetric(format!(
-                    "`{}` pairs with `{}` but not back",
-                    names[j], names[s]
-                )));
+                return Err(self.asymmetric(SymmetryFault::NotMutual {
+                    joint: names[j].to_string(),
+                    partner: names[s].to_string(),
+                }));
             }
             let parent_of_swap = skeleton.joints[s].parent;
             let swap_of_parent = skeleton.joints[j].parent.map(|p| swap[p]);
             if parent_of_swap != swap_of_parent {
-                return Err(self.asymmetric(format!(
-                    "the parent of `{}` does not mirror the parent of `{}`",
-                    names[s], names[j]
-                )));
+                return Err(self.asymmetric(SymmetryFault::ParentNotMirrored {
+                    joint: names[j].to_string(),
+                    partner: names[s].to_string(),
+                }));
             }
         }
         let mut part_of = vec![None; skeleton.len()];
@@ -531,10 +576,10 @@ impl ProfileSpec {
         })
     }
 
-    fn asymmetric(&self, message: String) -> ProfileError {
+    fn asymmetric(&self, fault: SymmetryFault) -> ProfileError {
         ProfileError::Asymmetric {
             profile: self.name.clone(),
-            message,
+            fault,
         }
     }
 }
@@ -759,5 +804,83 @@ mod tests {
             "the character's right becomes x"
         );
         assert_eq!(profile.world_reflection, Reflection::X);
+    }
+
+    /// The texts of the symmetry and `[smpl22]` faults: they must not change.
+    #[test]
+    fn every_fault_reads_as_it_always_has() {
+        let spec = ProfileSpec::bundled("smpl-22").unwrap();
+        let skeleton = spec.skeleton().unwrap();
+        let paired = |a: &str, b: &str| {
+            let mut spec = spec.clone();
+            spec.pairs.insert(a.into(), b.into());
+            spec.bind(&skeleton).unwrap_err()
+        };
+        let err = paired("right_hip", "left_knee");
+        assert!(
+            matches!(
+                err,
+                ProfileError::Asymmetric {
+                    fault: SymmetryFault::NotMutual { .. },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(
+            err.to_string(),
+            "profile `smpl-22`: left/right pairs are not symmetric: `left_hip` pairs with `right_hip` but not back"
+        );
+        let err = paired("left_hip", "right_knee");
+        assert!(
+            matches!(
+                err,
+                ProfileError::Asymmetric {
+                    fault: SymmetryFault::ParentNotMirrored { .. },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(
+            err.to_string(),
+            "profile `smpl-22`: left/right pairs are not symmetric: the parent of `right_knee` does not mirror the parent of `left_hip`"
+        );
+        let names: Vec<&str> = skeleton.names().collect();
+        let smpl = &crate::humanml3d::JOINTS;
+        let placed = |key: &str, joint: SmplJoint| {
+            let mut spec = spec.clone();
+            spec.smpl22.insert(key.into(), joint);
+            spec.smpl_placement(smpl, &names).unwrap_err()
+        };
+        let err = placed("tail", SmplJoint::Joint("pelvis".into()));
+        assert_eq!(
+            err.to_string(),
+            "profile `smpl-22`: `[smpl22]` entry `tail`: not one of SMPL's 22 body joints"
+        );
+        let err = placed("pelvis", SmplJoint::Joint("hips".into()));
+        assert_eq!(
+            err.to_string(),
+            "profile `smpl-22`: `[smpl22]` entry `pelvis`: the skeleton has no joint `hips`"
+        );
+        let between = SmplJoint::Between {
+            between: ["pelvis".into(), "spine1".into()],
+            at: 1.5,
+        };
+        let err = placed("pelvis", between);
+        assert!(
+            matches!(
+                err,
+                ProfileError::BadSmplJoint {
+                    fault: SmplJointFault::AtOutOfRange { at: 1.5 },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(
+            err.to_string(),
+            "profile `smpl-22`: `[smpl22]` entry `pelvis`: `at` is 1.5; expected 0 to 1"
+        );
     }
 }

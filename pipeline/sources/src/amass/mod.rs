@@ -21,11 +21,11 @@ use std::sync::{Arc, Mutex, OnceLock};
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
-pub use model::{BodyModel, Family, ModelError};
+pub use model::{BodyModel, Family, ModelError, ModelFault};
 use motionforge_core::motion::{Channel, Joint, Motion, Skeleton};
 pub use sequence::{
-    AmassError, AmassErrorKind, FileGender, Sequence, humanml3d_stride, is_not_a_motion,
-    read_sequence,
+    AmassError, AmassErrorKind, FileGender, Sequence, ShapeFault, humanml3d_stride,
+    is_not_a_motion, read_sequence,
 };
 
 /// Which body model a file gets.

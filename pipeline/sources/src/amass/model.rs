@@ -144,14 +144,79 @@ pub enum ModelError {
         source: NpzError,
     },
     /// An array's shape or values do not fit the others.
-    #[error("body model {path}: `{key}`: {message}")]
+    #[error("body model {path}: `{key}`: {fault}")]
     Shape {
         /// The model file.
         path: PathBuf,
         /// The key.
         key: &'static str,
         /// What is wrong.
-        message: String,
+        fault: ModelFault,
+    },
+}
+
+/// What is wrong with a body model's array: its shape, its values, or how it fits the others.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ModelFault {
+    /// Strings where numbers belong.
+    #[error("{kind} values, not numbers")]
+    NotNumbers {
+        /// The values' kind (`str`, `bytes`).
+        kind: &'static str,
+    },
+    /// A NaN or infinite value.
+    #[error("value {index} is not finite")]
+    NotFinite {
+        /// The value's position, in C order.
+        index: usize,
+    },
+    /// `v_template` is not `(vertices, 3)`.
+    #[error("shape {shape:?}; expected (vertices, 3)")]
+    TemplateShape {
+        /// The shape found.
+        shape: Vec<usize>,
+    },
+    /// `J_regressor` is not `(joints, vertices)`.
+    #[error("shape {shape:?}; expected (joints, {vertices})")]
+    RegressorShape {
+        /// The shape found.
+        shape: Vec<usize>,
+        /// Vertices of `v_template`.
+        vertices: usize,
+    },
+    /// `shapedirs` is not `(vertices, 3, betas)`.
+    #[error("shape {shape:?}; expected ({vertices}, 3, betas)")]
+    ShapedirsShape {
+        /// The shape found.
+        shape: Vec<usize>,
+        /// Vertices of `v_template`.
+        vertices: usize,
+    },
+    /// Fewer shape directions than `num_betas`.
+    #[error("holds {stored} shape directions; num_betas = {num_betas} needs that many")]
+    TooFewDirections {
+        /// Directions the file holds.
+        stored: usize,
+        /// Directions asked for.
+        num_betas: usize,
+    },
+    /// `kintree_table` is not integers of shape `(2, joints)`.
+    #[error("{kind} values of shape {shape:?}; expected integers of shape (2, {joints})")]
+    KintreeShape {
+        /// The values' kind.
+        kind: &'static str,
+        /// The shape found.
+        shape: Vec<usize>,
+        /// Joints of `J_regressor`.
+        joints: usize,
+    },
+    /// A joint whose parent is not a joint before it.
+    #[error("joint {joint} has parent {parent}; expected a joint before it")]
+    ParentOrder {
+        /// The joint.
+        joint: usize,
+        /// Its parent as stored.
+        parent: i64,
     },
 }
 
@@ -203,10 +268,7 @@ impl BodyModel {
         let vertices = match shape.as_slice() {
             [v, 3] if *v > 0 => *v,
             _ => {
-                return Err(file.shape_err(
-                    "v_template",
-                    format!("shape {shape:?}; expected (vertices, 3)"),
-                ));
+                return Err(file.shape_err("v_template", ModelFault::TemplateShape { shape }));
             }
         };
         let (shape, regressor) = file.floats("J_regressor")?;
@@ -215,7 +277,7 @@ impl BodyModel {
             _ => {
                 return Err(file.shape_err(
                     "J_regressor",
-                    format!("shape {shape:?}; expected (joints, {vertices})"),
+                    ModelFault::RegressorShape { shape, vertices },
                 ));
             }
         };
@@ -223,16 +285,15 @@ impl BodyModel {
         let stored = match shape.as_slice() {
             [v, 3, b] if *v == vertices => *b,
             _ => {
-                return Err(file.shape_err(
-                    "shapedirs",
-                    format!("shape {shape:?}; expected ({vertices}, 3, betas)"),
-                ));
+                return Err(
+                    file.shape_err("shapedirs", ModelFault::ShapedirsShape { shape, vertices })
+                );
             }
         };
         if num_betas > stored {
             return Err(file.shape_err(
                 "shapedirs",
-                format!("holds {stored} shape directions; num_betas = {num_betas} needs that many"),
+                ModelFault::TooFewDirections { stored, num_betas },
             ));
         }
         let parents = file.parents(joints)?;
@@ -285,11 +346,11 @@ struct ModelFile<'a> {
 }
 
 impl ModelFile<'_> {
-    fn shape_err(&self, key: &'static str, message: String) -> ModelError {
+    fn shape_err(&self, key: &'static str, fault: ModelFault) -> ModelError {
         ModelError::Shape {
             path: self.path.to_path_buf(),
             key,
-            message,
+            fault,
         }
     }
 
@@ -298,10 +359,10 @@ impl ModelFile<'_> {
         let array = self.npz.array(key).map_err(|e| npz_error(self.path, e))?;
         let values = array
             .floats()
-            .ok_or_else(|| self.shape_err(key, format!("{} values, not numbers", array.kind())))?
+            .ok_or_else(|| self.shape_err(key, ModelFault::NotNumbers { kind: array.kind() }))?
             .into_owned();
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            return Err(self.shape_err(key, format!("value {i} is not finite")));
+            return Err(self.shape_err(key, ModelFault::NotFinite { index: i }));
         }
         Ok((array.shape, values))
     }
@@ -317,11 +378,11 @@ impl ModelFile<'_> {
             _ => {
                 return Err(self.shape_err(
                     "kintree_table",
-                    format!(
-                        "{} values of shape {:?}; expected integers of shape (2, {joints})",
-                        kintree.kind(),
-                        kintree.shape
-                    ),
+                    ModelFault::KintreeShape {
+                        kind: kintree.kind(),
+                        shape: kintree.shape.clone(),
+                        joints,
+                    },
                 ));
             }
         };
@@ -336,7 +397,10 @@ impl ModelFile<'_> {
                 _ => {
                     return Err(self.shape_err(
                         "kintree_table",
-                        format!("joint {j} has parent {p}; expected a joint before it"),
+                        ModelFault::ParentOrder {
+                            joint: j,
+                            parent: p,
+                        },
                     ));
                 }
             }
@@ -391,5 +455,116 @@ impl ShapeArrays<'_> {
             }
         }
         (template, directions)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::npz::tests::{npy, zip};
+    use super::*;
+
+    fn f8(values: &[f64]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    fn i8s(values: &[i64]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    /// A model of 2 vertices, 2 joints and 2 shape directions, with `(key, npy bytes)` replacing
+    /// arrays.
+    fn model(changes: &[(&str, Vec<u8>)]) -> Vec<u8> {
+        let mut arrays: Vec<(String, Vec<u8>)> = vec![
+            ("v_template".into(), npy("<f8", "(2, 3)", &f8(&[0.0; 6]))),
+            ("shapedirs".into(), npy("<f8", "(2, 3, 2)", &f8(&[0.0; 12]))),
+            (
+                "J_regressor".into(),
+                npy("<f8", "(2, 2)", &f8(&[1.0, 0.0, 0.0, 1.0])),
+            ),
+            (
+                "kintree_table".into(),
+                npy("<i8", "(2, 2)", &i8s(&[-1, 0, 0, 1])),
+            ),
+            ("posedirs".into(), npy("<f8", "(1,)", &f8(&[0.0]))),
+            ("weights".into(), npy("<f8", "(1,)", &f8(&[0.0]))),
+            ("f".into(), npy("<i8", "(1,)", &i8s(&[0]))),
+        ];
+        for (key, bytes) in changes {
+            if let Some(a) = arrays.iter_mut().find(|(k, _)| k == key) {
+                a.1 = bytes.clone();
+            }
+        }
+        let named: Vec<(String, Vec<u8>)> = arrays
+            .into_iter()
+            .map(|(k, b)| (format!("{k}.npy"), b))
+            .collect();
+        let entries: Vec<(&str, Vec<u8>)> =
+            named.iter().map(|(k, b)| (k.as_str(), b.clone())).collect();
+        zip(&entries)
+    }
+
+    /// The texts of the shape faults, as errors show them: they must not change.
+    #[test]
+    fn every_shape_fault_reads_as_it_always_has() {
+        let path = Path::new("m/model.npz");
+        assert!(BodyModel::from_bytes(path, &model(&[]), 2).is_ok());
+        let cases: Vec<(&str, Vec<u8>, usize, &str)> = vec![
+            (
+                "v_template",
+                npy("<f8", "(3, 2)", &f8(&[0.0; 6])),
+                2,
+                "body model m/model.npz: `v_template`: shape [3, 2]; expected (vertices, 3)",
+            ),
+            (
+                "J_regressor",
+                npy("<f8", "(1, 4)", &f8(&[0.0; 4])),
+                2,
+                "body model m/model.npz: `J_regressor`: shape [1, 4]; expected (joints, 2)",
+            ),
+            (
+                "shapedirs",
+                npy("<f8", "(2, 6)", &f8(&[0.0; 12])),
+                2,
+                "body model m/model.npz: `shapedirs`: shape [2, 6]; expected (2, 3, betas)",
+            ),
+            (
+                "shapedirs",
+                npy("<f8", "(2, 3, 2)", &f8(&[0.0; 12])),
+                3,
+                "body model m/model.npz: `shapedirs`: holds 2 shape directions; num_betas = 3 needs that many",
+            ),
+            (
+                "v_template",
+                npy("<U2", "()", &[0u8; 8]),
+                2,
+                "body model m/model.npz: `v_template`: str values, not numbers",
+            ),
+            (
+                "v_template",
+                npy("<f8", "(2, 3)", &f8(&[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0])),
+                2,
+                "body model m/model.npz: `v_template`: value 2 is not finite",
+            ),
+            (
+                "kintree_table",
+                npy("<f8", "(2, 2)", &f8(&[0.0; 4])),
+                2,
+                "body model m/model.npz: `kintree_table`: float values of shape [2, 2]; expected integers of shape (2, 2)",
+            ),
+            (
+                "kintree_table",
+                npy("<i8", "(2, 2)", &i8s(&[-1, 1, 0, 1])),
+                2,
+                "body model m/model.npz: `kintree_table`: joint 1 has parent 1; expected a joint before it",
+            ),
+        ];
+        for (key, bytes, betas, want) in cases {
+            let err = BodyModel::from_bytes(path, &model(&[(key, bytes)]), betas).unwrap_err();
+            assert_eq!(err.to_string(), want);
+            assert!(
+                matches!(err, ModelError::Shape { key: k, .. } if k == key),
+                "{err}"
+            );
+        }
     }
 }

@@ -11,7 +11,7 @@ use std::io::Read;
 pub enum NpzError {
     /// The bytes are not a zip archive, or its directory is cut short or inconsistent.
     #[error("not a readable .npz (zip) archive: {0}")]
-    Archive(String),
+    Archive(ArchiveFault),
     /// The archive has no array of that name.
     #[error("no array `{key}`")]
     Missing {
@@ -19,20 +19,20 @@ pub enum NpzError {
         key: String,
     },
     /// The array's entry is damaged: cut short, a bad CRC, an unknown compression.
-    #[error("array `{key}`: {message}")]
+    #[error("array `{key}`: {fault}")]
     Entry {
         /// The array's name.
         key: String,
         /// What is wrong.
-        message: String,
+        fault: EntryFault,
     },
     /// The `.npy` header does not parse, or the values are of a type not read here.
-    #[error("array `{key}`: {message}")]
+    #[error("array `{key}`: {fault}")]
     Npy {
         /// The array's name.
         key: String,
         /// What is wrong.
-        message: String,
+        fault: NpyFault,
     },
     /// The header promises more values than the entry holds.
     #[error(
@@ -48,6 +48,120 @@ pub enum NpzError {
         /// Bytes there.
         found: u64,
     },
+}
+
+/// What is wrong with an archive's end records or central directory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum ArchiveFault {
+    /// No end-of-central-directory signature in the last 64 KiB.
+    #[error("no end-of-directory record (the file is cut short or is not a zip)")]
+    NoEndRecord,
+    /// The zip64 locator's offset field is missing.
+    #[error("zip64 locator cut short")]
+    Zip64LocatorCutShort,
+    /// The zip64 record's offset does not fit an address.
+    #[error("zip64 record offset out of range")]
+    Zip64OffsetOutOfRange,
+    /// The zip64 locator's offset holds no zip64 end record.
+    #[error("the zip64 locator points at no zip64 end record")]
+    NoZip64EndRecord,
+    /// The zip64 end record ends before its count, size and offset fields.
+    #[error("zip64 end record cut short")]
+    Zip64EndRecordCutShort,
+    /// The directory's offset and size reach past the file.
+    #[error("the directory lies past the end of the file (cut short?)")]
+    DirectoryPastEnd,
+    /// The entry count is more than the directory's bytes can hold.
+    #[error("the directory lists more entries than it has room for")]
+    TooManyEntries,
+    /// A directory record lacks its signature.
+    #[error("a directory record is damaged")]
+    RecordDamaged,
+    /// A directory record's name or extra field runs past the directory.
+    #[error("a directory record is cut short")]
+    RecordCutShort,
+}
+
+/// What is wrong with one array's entry in the archive.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EntryFault {
+    /// No local header signature where the directory points.
+    #[error("its local header is missing or damaged")]
+    LocalHeader,
+    /// The entry's compressed bytes reach past the file.
+    #[error("its {compressed} bytes run past the end of the file (cut short?)")]
+    PastEnd {
+        /// The compressed size the directory gives.
+        compressed: u64,
+    },
+    /// A stored entry whose compressed and uncompressed sizes differ.
+    #[error("stored sizes disagree")]
+    StoredSizes,
+    /// The deflate stream is damaged.
+    #[error("does not inflate: {0}")]
+    Inflate(
+        /// flate2's message (kept as text: the error is cloned, and `std::io::Error` is not
+        /// `Clone`).
+        String,
+    ),
+    /// The inflated bytes are not as many as the directory says.
+    #[error("inflates to {found} bytes, not the {expected} the directory gives")]
+    InflatedSize {
+        /// Bytes inflated (at most one past `expected`).
+        found: u64,
+        /// Bytes the directory gives.
+        expected: u64,
+    },
+    /// A compression method other than stored (0) and deflate (8).
+    #[error("compression method {0} (only stored and deflate, as NumPy writes)")]
+    Method(u16),
+    /// The bytes do not match the directory's CRC-32.
+    #[error("CRC mismatch: the bytes are damaged")]
+    Crc,
+}
+
+/// What is wrong with an `.npy` file's header or value type.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NpyFault {
+    /// The bytes do not start with `\x93NUMPY`.
+    #[error("not a NumPy .npy array (no magic string)")]
+    NoMagic,
+    /// A format version other than 1, 2 and 3.
+    #[error("unknown .npy version")]
+    UnknownVersion,
+    /// The header is longer than the bytes.
+    #[error("the header is cut short")]
+    HeaderCutShort,
+    /// The header is not UTF-8 or lacks `descr`, `fortran_order` or a readable `shape`.
+    #[error("the header does not parse")]
+    HeaderUnparsed,
+    /// A multi-dimensional array in Fortran order.
+    #[error("stored in Fortran order; expected C order")]
+    FortranOrder,
+    /// The shape's count of values (or of bytes) overflows 64 bits.
+    #[error("shape {shape:?} overflows")]
+    ShapeOverflows {
+        /// The shape the header gives.
+        shape: Vec<u64>,
+    },
+    /// A value type not read here.
+    #[error(
+        "values of type `{descr}`; expected floats (`<f4`, `<f8`), integers or a string{}",
+        pickled_note(descr)
+    )]
+    Dtype {
+        /// The header's `descr`, as written in the file.
+        descr: String,
+    },
+}
+
+/// Said of a `descr` with an object (`O`) type: NumPy pickles those.
+fn pickled_note(descr: &str) -> &'static str {
+    if descr.contains('O') {
+        " (this one is a pickled Python object)"
+    } else {
+        ""
+    }
 }
 
 /// One array's entry in the archive's central directory.
@@ -138,42 +252,41 @@ const LOCAL: u32 = 0x0403_4b50;
 impl<'a> Npz<'a> {
     /// Reads the archive's directory.
     pub fn new(bytes: &'a [u8]) -> Result<Npz<'a>, NpzError> {
-        let bad = |m: &str| NpzError::Archive(m.to_string());
+        let bad = NpzError::Archive;
         // The end record is in the last 22 + 65,535 bytes (its comment is at most that long).
         let floor = bytes.len().saturating_sub(22 + 0xffff);
         let eocd = (floor..bytes.len().saturating_sub(21))
             .rev()
             .find(|&i| u32_at(bytes, i) == Some(EOCD))
-            .ok_or_else(|| {
-                bad("no end-of-directory record (the file is cut short or is not a zip)")
-            })?;
+            .ok_or(bad(ArchiveFault::NoEndRecord))?;
         let mut count = u64::from(u16_at(bytes, eocd + 10).unwrap_or(0));
         let mut dir_size = u64::from(u32_at(bytes, eocd + 12).unwrap_or(0));
         let mut dir_offset = u64::from(u32_at(bytes, eocd + 16).unwrap_or(0));
         if eocd >= 20 && u32_at(bytes, eocd - 20) == Some(ZIP64_LOCATOR) {
-            let at = u64_at(bytes, eocd - 12).ok_or_else(|| bad("zip64 locator cut short"))?;
-            let at = usize::try_from(at).map_err(|_| bad("zip64 record offset out of range"))?;
+            let at = u64_at(bytes, eocd - 12).ok_or(bad(ArchiveFault::Zip64LocatorCutShort))?;
+            let at = usize::try_from(at).map_err(|_| bad(ArchiveFault::Zip64OffsetOutOfRange))?;
             if u32_at(bytes, at) != Some(ZIP64_EOCD) {
-                return Err(bad("the zip64 locator points at no zip64 end record"));
+                return Err(bad(ArchiveFault::NoZip64EndRecord));
             }
-            count = u64_at(bytes, at + 32).ok_or_else(|| bad("zip64 end record cut short"))?;
-            dir_size = u64_at(bytes, at + 40).ok_or_else(|| bad("zip64 end record cut short"))?;
-            dir_offset = u64_at(bytes, at + 48).ok_or_else(|| bad("zip64 end record cut short"))?;
+            let cut = || bad(ArchiveFault::Zip64EndRecordCutShort);
+            count = u64_at(bytes, at + 32).ok_or_else(cut)?;
+            dir_size = u64_at(bytes, at + 40).ok_or_else(cut)?;
+            dir_offset = u64_at(bytes, at + 48).ok_or_else(cut)?;
         }
         let start = usize::try_from(dir_offset).unwrap_or(usize::MAX);
         let end = start.saturating_add(usize::try_from(dir_size).unwrap_or(usize::MAX));
         let directory = bytes
             .get(start..end)
-            .ok_or_else(|| bad("the directory lies past the end of the file (cut short?)"))?;
+            .ok_or(bad(ArchiveFault::DirectoryPastEnd))?;
         // Each directory record takes 46 bytes at least: a count beyond that is a lie.
         if count > (directory.len() / 46) as u64 {
-            return Err(bad("the directory lists more entries than it has room for"));
+            return Err(bad(ArchiveFault::TooManyEntries));
         }
         let mut entries = Vec::with_capacity(count as usize);
         let mut at = 0usize;
         for _ in 0..count {
             if u32_at(directory, at) != Some(CENTRAL) {
-                return Err(bad("a directory record is damaged"));
+                return Err(bad(ArchiveFault::RecordDamaged));
             }
             let field = |off: usize| u32_at(directory, at + off).unwrap_or(0);
             let half = |off: usize| usize::from(u16_at(directory, at + off).unwrap_or(0));
@@ -186,10 +299,10 @@ impl<'a> Npz<'a> {
             let name_at = at + 46;
             let name = directory
                 .get(name_at..name_at + name_len)
-                .ok_or_else(|| bad("a directory record is cut short"))?;
+                .ok_or(bad(ArchiveFault::RecordCutShort))?;
             let extra = directory
                 .get(name_at + name_len..name_at + name_len + extra_len)
-                .ok_or_else(|| bad("a directory record is cut short"))?;
+                .ok_or(bad(ArchiveFault::RecordCutShort))?;
             // The zip64 extra field holds, in order, the sizes and offset whose 32-bit fields
             // are saturated.
             let mut e = 0;
@@ -243,13 +356,13 @@ impl<'a> Npz<'a> {
             .ok_or_else(|| NpzError::Missing {
                 key: key.to_string(),
             })?;
-        let damaged = |message: String| NpzError::Entry {
+        let damaged = |fault: EntryFault| NpzError::Entry {
             key: key.to_string(),
-            message,
+            fault,
         };
         let local = usize::try_from(entry.local_offset).unwrap_or(usize::MAX);
         if u32_at(self.bytes, local) != Some(LOCAL) {
-            return Err(damaged("its local header is missing or damaged".into()));
+            return Err(damaged(EntryFault::LocalHeader));
         }
         let name_len = usize::from(u16_at(self.bytes, local + 26).unwrap_or(0));
         let extra_len = usize::from(u16_at(self.bytes, local + 28).unwrap_or(0));
@@ -260,15 +373,14 @@ impl<'a> Npz<'a> {
         let data = data_end
             .and_then(|end| self.bytes.get(data_at..end))
             .ok_or_else(|| {
-                damaged(format!(
-                    "its {} bytes run past the end of the file (cut short?)",
-                    entry.compressed
-                ))
+                damaged(EntryFault::PastEnd {
+                    compressed: entry.compressed,
+                })
             })?;
         let raw: Cow<'a, [u8]> = match entry.method {
             0 => {
                 if entry.uncompressed != entry.compressed {
-                    return Err(damaged("stored sizes disagree".into()));
+                    return Err(damaged(EntryFault::StoredSizes));
                 }
                 Cow::Borrowed(data)
             }
@@ -279,24 +391,21 @@ impl<'a> Npz<'a> {
                 flate2::read::DeflateDecoder::new(data)
                     .take(entry.uncompressed.saturating_add(1))
                     .read_to_end(&mut out)
-                    .map_err(|e| damaged(format!("does not inflate: {e}")))?;
+                    .map_err(|e| damaged(EntryFault::Inflate(e.to_string())))?;
                 if out.len() as u64 != entry.uncompressed {
-                    return Err(damaged(format!(
-                        "inflates to {} bytes, not the {} the directory gives",
-                        out.len(),
-                        entry.uncompressed
-                    )));
+                    return Err(damaged(EntryFault::InflatedSize {
+                        found: out.len() as u64,
+                        expected: entry.uncompressed,
+                    }));
                 }
                 Cow::Owned(out)
             }
             other => {
-                return Err(damaged(format!(
-                    "compression method {other} (only stored and deflate, as NumPy writes)"
-                )));
+                return Err(damaged(EntryFault::Method(other)));
             }
         };
         if crc32fast::hash(&raw) != entry.crc {
-            return Err(damaged("CRC mismatch: the bytes are damaged".into()));
+            return Err(damaged(EntryFault::Crc));
         }
         Ok(raw)
     }
@@ -344,30 +453,29 @@ fn parse_header(text: &str) -> Option<Header> {
 
 /// Decodes the bytes of one `.npy` file (array `key`).
 pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
-    let npy = |message: String| NpzError::Npy {
+    let npy = |fault: NpyFault| NpzError::Npy {
         key: key.to_string(),
-        message,
+        fault,
     };
-    let (header, data) = npy_header(bytes).map_err(|m| npy(m.into()))?;
+    let (header, data) = npy_header(bytes).map_err(npy)?;
     if header.fortran && header.shape.iter().filter(|&&d| d > 1).count() > 1 {
-        return Err(npy("stored in Fortran order; expected C order".into()));
+        return Err(npy(NpyFault::FortranOrder));
     }
+    let overflows = || {
+        npy(NpyFault::ShapeOverflows {
+            shape: header.shape.clone(),
+        })
+    };
     let count = header
         .shape
         .iter()
         .try_fold(1u64, |n, &d| n.checked_mul(d))
-        .ok_or_else(|| npy(format!("shape {:?} overflows", header.shape)))?;
-    let descr = header.descr.as_str();
-    let dtype = Dtype::of(descr);
+        .ok_or_else(overflows)?;
+    let dtype = Dtype::of(&header.descr);
     let unreadable = || {
-        npy(format!(
-            "values of type `{descr}`; expected floats (`<f4`, `<f8`), integers or a string{}",
-            if descr.contains('O') {
-                " (this one is a pickled Python object)"
-            } else {
-                ""
-            }
-        ))
+        npy(NpyFault::Dtype {
+            descr: header.descr.clone(),
+        })
     };
     let (kind, width) = (dtype.kind, dtype.width);
     // A string's characters are its width; its count is one value.
@@ -379,9 +487,7 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
         'b' if width == 1 => (1, count),
         _ => return Err(unreadable()),
     };
-    let expected = values
-        .checked_mul(unit)
-        .ok_or_else(|| npy(format!("shape {:?} overflows", header.shape)))?;
+    let expected = values.checked_mul(unit).ok_or_else(overflows)?;
     if expected > data.len() as u64 {
         return Err(NpzError::Truncated {
             key: key.to_string(),
@@ -400,21 +506,19 @@ pub fn parse_npy(key: &str, bytes: &[u8]) -> Result<Array, NpzError> {
 }
 
 /// The parsed header of a `.npy` file and the data after it, or what is wrong.
-fn npy_header(bytes: &[u8]) -> Result<(Header, &[u8]), &'static str> {
-    let rest = bytes
-        .strip_prefix(b"\x93NUMPY")
-        .ok_or("not a NumPy .npy array (no magic string)")?;
+fn npy_header(bytes: &[u8]) -> Result<(Header, &[u8]), NpyFault> {
+    let rest = bytes.strip_prefix(b"\x93NUMPY").ok_or(NpyFault::NoMagic)?;
     let (header_len, rest) = match rest {
         [1, _, a, b, rest @ ..] => (usize::from(u16::from_le_bytes([*a, *b])), rest),
         [2 | 3, _, a, b, c, d, rest @ ..] => (u32::from_le_bytes([*a, *b, *c, *d]) as usize, rest),
-        _ => return Err("unknown .npy version"),
+        _ => return Err(NpyFault::UnknownVersion),
     };
-    let header = rest.get(..header_len).ok_or("the header is cut short")?;
+    let header = rest.get(..header_len).ok_or(NpyFault::HeaderCutShort)?;
     let data = &rest[header_len..];
     let header = std::str::from_utf8(header)
         .ok()
         .and_then(parse_header)
-        .ok_or("the header does not parse")?;
+        .ok_or(NpyFault::HeaderUnparsed)?;
     Ok((header, data))
 }
 
@@ -501,10 +605,11 @@ impl Dtype {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn npy(descr: &str, shape: &str, data: &[u8]) -> Vec<u8> {
+    /// The bytes of a `.npy` file of `descr`, `shape` (Python tuple text) and raw `data`.
+    pub(crate) fn npy(descr: &str, shape: &str, data: &[u8]) -> Vec<u8> {
         let mut header =
             format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
         while (10 + header.len() + 1) % 64 != 0 {
@@ -555,13 +660,26 @@ mod tests {
             &npy("<f8", "(18446744073709551615, 3)", &[0u8; 16]),
         )
         .unwrap_err();
-        assert!(err.to_string().contains("overflows"), "{err}");
+        assert!(
+            matches!(
+                err,
+                NpzError::Npy {
+                    fault: NpyFault::ShapeOverflows { .. },
+                    ..
+                }
+            ),
+            "{err}"
+        );
         let err = parse_npy("poses", &npy("|O", "(2,)", &[0u8; 16])).unwrap_err();
         assert!(err.to_string().contains("pickled"), "{err}");
+        assert!(
+            matches!(err, NpzError::Npy { fault: NpyFault::Dtype { ref descr }, .. } if descr == "|O"),
+            "{err}"
+        );
     }
 
     /// A stored (uncompressed) zip of `(name, bytes)` entries, as `np.savez` writes one.
-    fn zip(entries: &[(&str, Vec<u8>)]) -> Vec<u8> {
+    pub(crate) fn zip(entries: &[(&str, Vec<u8>)]) -> Vec<u8> {
         let mut out = Vec::new();
         let mut directory = Vec::new();
         for (name, data) in entries {
@@ -649,7 +767,16 @@ mod tests {
         far.extend(end);
         let npz = Npz::new(&far).unwrap();
         let err = npz.array("poses").unwrap_err();
-        assert!(err.to_string().contains("local header"), "{err}");
+        assert!(
+            matches!(
+                err,
+                NpzError::Entry {
+                    fault: EntryFault::LocalHeader,
+                    ..
+                }
+            ),
+            "{err}"
+        );
     }
 
     #[test]
@@ -663,5 +790,157 @@ mod tests {
         eocd[10..12].copy_from_slice(&5u16.to_le_bytes());
         eocd[12..16].copy_from_slice(&1000u32.to_le_bytes());
         assert!(Npz::new(&eocd).is_err());
+    }
+
+    /// The texts of every archive and entry fault, as `rejects.jsonl` shows them: they must not
+    /// change.
+    #[test]
+    fn every_archive_fault_reads_as_it_always_has() {
+        let poses: Vec<u8> = (0..12).flat_map(|i| (i as f64).to_le_bytes()).collect();
+        let good = npy("<f8", "(2, 6)", &poses);
+        let archive = zip(&[("poses.npy", good.clone())]);
+        let text = |bytes: &[u8], key: &str| match Npz::new(bytes) {
+            Ok(npz) => npz.array(key).unwrap_err().to_string(),
+            Err(e) => e.to_string(),
+        };
+        let with = |at: usize, value: &[u8]| {
+            let mut b = archive.clone();
+            b[at..at + value.len()].copy_from_slice(value);
+            b
+        };
+        let eocd = archive.len() - 22;
+        let dir = eocd - (46 + "poses.npy".len());
+        let mut cases: Vec<(Vec<u8>, &str)> = vec![
+            (
+                vec![0u8; 30],
+                "not a readable .npz (zip) archive: no end-of-directory record (the file is cut short or is not a zip)",
+            ),
+            (
+                with(eocd + 16, &9999u32.to_le_bytes()),
+                "not a readable .npz (zip) archive: the directory lies past the end of the file (cut short?)",
+            ),
+            (
+                with(eocd + 10, &9u16.to_le_bytes()),
+                "not a readable .npz (zip) archive: the directory lists more entries than it has room for",
+            ),
+            (
+                with(dir, b"PK\x09\x09"),
+                "not a readable .npz (zip) archive: a directory record is damaged",
+            ),
+            (
+                with(dir + 28, &200u16.to_le_bytes()),
+                "not a readable .npz (zip) archive: a directory record is cut short",
+            ),
+            (
+                with(dir + 42, &5u32.to_le_bytes()),
+                "array `poses`: its local header is missing or damaged",
+            ),
+            (
+                with(dir + 20, &9999u32.to_le_bytes()),
+                "array `poses`: its 9999 bytes run past the end of the file (cut short?)",
+            ),
+            (
+                with(dir + 24, &7u32.to_le_bytes()),
+                "array `poses`: stored sizes disagree",
+            ),
+            (
+                with(dir + 10, &12u16.to_le_bytes()),
+                "array `poses`: compression method 12 (only stored and deflate, as NumPy writes)",
+            ),
+            (
+                with(dir + 16, &7u32.to_le_bytes()),
+                "array `poses`: CRC mismatch: the bytes are damaged",
+            ),
+            (
+                with(dir + 10, &8u16.to_le_bytes()),
+                "array `poses`: inflates to 6 bytes, not the 224 the directory gives",
+            ),
+        ];
+        let mut bad_block = with(dir + 10, &8u16.to_le_bytes());
+        bad_block[30 + "poses.npy".len()] = 0x07;
+        cases.push((
+            bad_block,
+            "array `poses`: does not inflate: corrupt deflate stream",
+        ));
+        // A zip64 locator before the end record, pointing at `target`.
+        let zip64 = |target: Option<u64>| {
+            let mut b = archive[..eocd].to_vec();
+            let at = b.len() as u64;
+            b.extend(ZIP64_EOCD.to_le_bytes());
+            b.extend(ZIP64_LOCATOR.to_le_bytes());
+            b.extend([0u8; 4]);
+            b.extend(target.unwrap_or(at).to_le_bytes());
+            b.extend([0u8; 4]);
+            b.extend(&archive[eocd..]);
+            b
+        };
+        cases.push((
+            zip64(Some(0)),
+            "not a readable .npz (zip) archive: the zip64 locator points at no zip64 end record",
+        ));
+        cases.push((
+            zip64(None),
+            "not a readable .npz (zip) archive: zip64 end record cut short",
+        ));
+        for (bytes, want) in cases {
+            assert_eq!(text(&bytes, "poses"), want);
+        }
+        assert_eq!(text(&archive, "trans"), "no array `trans`");
+    }
+
+    /// The texts of every `.npy` fault: they must not change.
+    #[test]
+    fn every_npy_fault_reads_as_it_always_has() {
+        let poses: Vec<u8> = (0..12).flat_map(|i| (i as f64).to_le_bytes()).collect();
+        let good = npy("<f8", "(2, 6)", &poses);
+        let npy_text = |bytes: &[u8]| parse_npy("poses", bytes).unwrap_err().to_string();
+        let mut fortran = npy("<f8", "(2, 6)", &poses);
+        let at = fortran.windows(5).position(|w| w == b"False").unwrap();
+        fortran[at..at + 5].copy_from_slice(b"True ");
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (
+                b"NUMPY".to_vec(),
+                "array `poses`: not a NumPy .npy array (no magic string)",
+            ),
+            (
+                b"\x93NUMPY\x07\x00".to_vec(),
+                "array `poses`: unknown .npy version",
+            ),
+            (
+                good[..20].to_vec(),
+                "array `poses`: the header is cut short",
+            ),
+            (
+                npy("<f8", "(2, x)", &poses),
+                "array `poses`: the header does not parse",
+            ),
+            (
+                fortran,
+                "array `poses`: stored in Fortran order; expected C order",
+            ),
+            (
+                npy("<f8", "(4294967296, 4294967296, 2)", &poses),
+                "array `poses`: shape [4294967296, 4294967296, 2] overflows",
+            ),
+            (
+                npy("<f8", "(4294967296, 4294967296)", &poses),
+                "array `poses`: shape [4294967296, 4294967296] overflows",
+            ),
+            (
+                npy("<c16", "(2,)", &poses),
+                "array `poses`: values of type `<c16`; expected floats (`<f4`, `<f8`), integers or a string",
+            ),
+            (
+                npy("|O", "(2,)", &poses),
+                "array `poses`: values of type `|O`; expected floats (`<f4`, `<f8`), integers or a string (this one is a pickled Python object)",
+            ),
+            (
+                npy("<f8", "(3, 6)", &poses),
+                "array `poses`: shape [3, 6] needs 144 bytes of values but the entry holds 96",
+            ),
+        ];
+        for (bytes, want) in cases {
+            assert_eq!(npy_text(&bytes), want);
+        }
     }
 }

@@ -32,12 +32,12 @@ pub enum AmassErrorKind {
     )]
     NoFrameRate,
     /// An array has the wrong shape or type.
-    #[error("`{key}`: {message}")]
+    #[error("`{key}`: {fault}")]
     Shape {
         /// The key.
         key: &'static str,
         /// What is wrong.
-        message: String,
+        fault: ShapeFault,
     },
     /// A value is NaN, infinite or absurdly large.
     #[error(
@@ -52,6 +52,52 @@ pub enum AmassErrorKind {
         index: usize,
         /// The value.
         value: f64,
+    },
+}
+
+/// What is wrong with the shape or type of an AMASS file's array.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ShapeFault {
+    /// Strings where numbers belong.
+    #[error("{kind} values, not numbers")]
+    NotNumbers {
+        /// The values' kind (`str`, `bytes`).
+        kind: &'static str,
+    },
+    /// `poses` is not two-dimensional.
+    #[error("shape {shape:?}; expected (frames, 156) for SMPL-H or (frames, 165) for SMPL-X")]
+    PosesShape {
+        /// The shape found.
+        shape: Vec<usize>,
+    },
+    /// `poses` has a width of neither family.
+    #[error("{width} values per frame; expected 156 (SMPL-H) or 165 (SMPL-X)")]
+    PosesWidth {
+        /// Values per frame found.
+        width: usize,
+    },
+    /// `trans` is not one translation per pose.
+    #[error("shape {shape:?}; expected ({frames}, 3), a translation per pose")]
+    TransShape {
+        /// The shape found.
+        shape: Vec<usize>,
+        /// Frames of `poses`.
+        frames: usize,
+    },
+    /// `betas` is not one-dimensional.
+    #[error("shape {shape:?}; expected (betas,)")]
+    BetasShape {
+        /// The shape found.
+        shape: Vec<usize>,
+    },
+    /// `gender` holds numbers.
+    #[error("numbers, not a str or bytes value")]
+    GenderNotText,
+    /// The frame-rate key is not one positive, finite number.
+    #[error("{values:?}; expected one positive frame rate")]
+    FrameRate {
+        /// The values found.
+        values: Vec<f64>,
     },
 }
 
@@ -96,36 +142,28 @@ pub fn read_sequence(file: &str, bytes: &[u8], fps_required: bool) -> Result<Seq
         file: file.to_string(),
         kind,
     };
-    let shape = |key: &'static str, message: String| fail(AmassErrorKind::Shape { key, message });
+    let shape = |key: &'static str, fault: ShapeFault| fail(AmassErrorKind::Shape { key, fault });
     let npz = Npz::new(bytes).map_err(|e| fail(AmassErrorKind::Npz(e)))?;
     let get = |key: &str| npz.array(key).map_err(|e| fail(AmassErrorKind::Npz(e)));
     let floats = |key: &'static str| -> Result<(Vec<usize>, Vec<f64>), AmassError> {
         let array = get(key)?;
         match array.floats() {
             Some(v) => Ok((array.shape.clone(), v.into_owned())),
-            None => Err(shape(key, format!("{} values, not numbers", array.kind()))),
+            None => Err(shape(key, ShapeFault::NotNumbers { kind: array.kind() })),
         }
     };
     let (pose_shape, poses) = floats("poses")?;
     let (frames, width) = match pose_shape.as_slice() {
         [t, w] => (*t, *w),
         _ => {
-            return Err(shape(
-                "poses",
-                format!(
-                    "shape {pose_shape:?}; expected (frames, 156) for SMPL-H or (frames, 165) for SMPL-X"
-                ),
-            ));
+            return Err(shape("poses", ShapeFault::PosesShape { shape: pose_shape }));
         }
     };
     let family = match width {
         156 => Family::SmplH,
         165 => Family::SmplX,
         _ => {
-            return Err(shape(
-                "poses",
-                format!("{width} values per frame; expected 156 (SMPL-H) or 165 (SMPL-X)"),
-            ));
+            return Err(shape("poses", ShapeFault::PosesWidth { width }));
         }
     };
     check_values("poses", &poses, width).map_err(fail)?;
@@ -133,7 +171,10 @@ pub fn read_sequence(file: &str, bytes: &[u8], fps_required: bool) -> Result<Seq
     if trans_shape.as_slice() != [frames, 3] {
         return Err(shape(
             "trans",
-            format!("shape {trans_shape:?}; expected ({frames}, 3), a translation per pose"),
+            ShapeFault::TransShape {
+                shape: trans_shape,
+                frames,
+            },
         ));
     }
     check_values("trans", &trans, 3).map_err(fail)?;
@@ -141,7 +182,7 @@ pub fn read_sequence(file: &str, bytes: &[u8], fps_required: bool) -> Result<Seq
     if betas_shape.len() != 1 {
         return Err(shape(
             "betas",
-            format!("shape {betas_shape:?}; expected (betas,)"),
+            ShapeFault::BetasShape { shape: betas_shape },
         ));
     }
     check_values("betas", &betas, betas.len().max(1)).map_err(fail)?;
@@ -156,7 +197,7 @@ pub fn read_sequence(file: &str, bytes: &[u8], fps_required: bool) -> Result<Seq
                 value: value.trim().to_string(),
                 bytes: true,
             }),
-            _ => return Err(shape("gender", "numbers, not a str or bytes value".into())),
+            _ => return Err(shape("gender", ShapeFault::GenderNotText)),
         },
     };
     let rate_key = ["mocap_framerate", "mocap_frame_rate"]
@@ -175,10 +216,7 @@ pub fn read_sequence(file: &str, bytes: &[u8], fps_required: bool) -> Result<Seq
             match v.as_slice() {
                 [fps] if fps.is_finite() && *fps > 0.0 => Some(*fps),
                 _ => {
-                    return Err(shape(
-                        key,
-                        format!("{v:?}; expected one positive frame rate"),
-                    ));
+                    return Err(shape(key, ShapeFault::FrameRate { values: v }));
                 }
             }
         }
@@ -219,4 +257,98 @@ fn check_values(key: &'static str, values: &[f64], width: usize) -> Result<(), A
 pub fn humanml3d_stride(fps: f64) -> (usize, f64) {
     let stride = ((fps / 20.0).floor() as usize).max(1);
     (stride, fps / stride as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::npz::tests::{npy, zip};
+    use super::*;
+
+    fn f8(values: &[f64]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    /// A sequence file of two SMPL-H frames, with `(key, npy bytes)` replacing or adding arrays.
+    fn file(changes: &[(&str, Vec<u8>)]) -> Vec<u8> {
+        let mut arrays: Vec<(String, Vec<u8>)> = vec![
+            ("poses".into(), npy("<f8", "(2, 156)", &f8(&[0.0; 312]))),
+            ("trans".into(), npy("<f8", "(2, 3)", &f8(&[0.0; 6]))),
+            ("betas".into(), npy("<f8", "(16,)", &f8(&[0.0; 16]))),
+            ("gender".into(), npy("|S4", "()", b"male")),
+            ("mocap_framerate".into(), npy("<f8", "()", &f8(&[120.0]))),
+        ];
+        for (key, bytes) in changes {
+            match arrays.iter_mut().find(|(k, _)| k == key) {
+                Some(a) => a.1 = bytes.clone(),
+                None => arrays.push((key.to_string(), bytes.clone())),
+            }
+        }
+        let named: Vec<(String, Vec<u8>)> = arrays
+            .into_iter()
+            .map(|(k, b)| (format!("{k}.npy"), b))
+            .collect();
+        let entries: Vec<(&str, Vec<u8>)> =
+            named.iter().map(|(k, b)| (k.as_str(), b.clone())).collect();
+        zip(&entries)
+    }
+
+    /// The texts of the shape faults, as `rejects.jsonl` shows them: they must not change.
+    #[test]
+    fn every_shape_fault_reads_as_it_always_has() {
+        assert!(read_sequence("a.npz", &file(&[]), true).is_ok());
+        let cases: Vec<(&str, Vec<u8>, ShapeFault, &str)> = vec![
+            (
+                "poses",
+                npy("|S4", "()", b"walk"),
+                ShapeFault::NotNumbers { kind: "bytes" },
+                "a.npz: `poses`: bytes values, not numbers",
+            ),
+            (
+                "poses",
+                npy("<f8", "(312,)", &f8(&[0.0; 312])),
+                ShapeFault::PosesShape { shape: vec![312] },
+                "a.npz: `poses`: shape [312]; expected (frames, 156) for SMPL-H or (frames, 165) for SMPL-X",
+            ),
+            (
+                "poses",
+                npy("<f8", "(3, 104)", &f8(&[0.0; 312])),
+                ShapeFault::PosesWidth { width: 104 },
+                "a.npz: `poses`: 104 values per frame; expected 156 (SMPL-H) or 165 (SMPL-X)",
+            ),
+            (
+                "trans",
+                npy("<f8", "(3, 2)", &f8(&[0.0; 6])),
+                ShapeFault::TransShape {
+                    shape: vec![3, 2],
+                    frames: 2,
+                },
+                "a.npz: `trans`: shape [3, 2]; expected (2, 3), a translation per pose",
+            ),
+            (
+                "betas",
+                npy("<f8", "(4, 4)", &f8(&[0.0; 16])),
+                ShapeFault::BetasShape { shape: vec![4, 4] },
+                "a.npz: `betas`: shape [4, 4]; expected (betas,)",
+            ),
+            (
+                "gender",
+                npy("<i8", "()", &f8(&[0.0])),
+                ShapeFault::GenderNotText,
+                "a.npz: `gender`: numbers, not a str or bytes value",
+            ),
+            (
+                "mocap_framerate",
+                npy("<f8", "(2,)", &f8(&[60.0, -1.5])),
+                ShapeFault::FrameRate {
+                    values: vec![60.0, -1.5],
+                },
+                "a.npz: `mocap_framerate`: [60.0, -1.5]; expected one positive frame rate",
+            ),
+        ];
+        for (key, bytes, fault, want) in cases {
+            let err = read_sequence("a.npz", &file(&[(key, bytes)]), true).unwrap_err();
+            assert_eq!(err.to_string(), want);
+            assert_eq!(err.kind, AmassErrorKind::Shape { key, fault }, "{err}");
+        }
+    }
 }

@@ -8,7 +8,9 @@ use std::collections::BTreeMap;
 
 use serde_json::Value;
 
-use super::span::{AnnotationError, CaptureAnnotation, Note, NoteKind, Span, Time};
+use super::span::{
+    AnnotationError, AnnotationFault, CaptureAnnotation, Note, NoteKind, Span, Time,
+};
 
 /// One BABEL sequence record, keyed by its AMASS feature path.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,14 +38,14 @@ pub fn read_babel(text: &str, file: &str) -> Result<Vec<BabelRecord>, Annotation
     let root: Value = serde_json::from_str(text).map_err(|e| AnnotationError {
         file: file.to_string(),
         line: Some(e.line() as u64),
-        message: format!("not valid JSON: {e}"),
+        fault: AnnotationFault::Json(e.to_string()),
     })?;
     let records = root.get("records").unwrap_or(&root);
     let Some(map) = records.as_object() else {
         return Err(AnnotationError {
             file: file.to_string(),
             line: None,
-            message: "expected a JSON object of BABEL records keyed by sequence id".into(),
+            fault: AnnotationFault::NotBabel,
         });
     };
     let mut out = Vec::new();

@@ -12,7 +12,9 @@ use std::collections::BTreeMap;
 use serde_json::Value;
 
 use super::frame_index::{csv_lines, split_csv_line};
-use super::span::{AnnotationError, CaptureAnnotation, Hand, Note, NoteKind, Span, Time, stem_of};
+use super::span::{
+    AnnotationError, AnnotationFault, CaptureAnnotation, Hand, Note, NoteKind, Span, Time, stem_of,
+};
 
 /// How an event log is written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,12 +118,77 @@ pub fn read_event_log(
     Ok(out)
 }
 
-fn error(file: &str, line: Option<u64>, message: impl Into<String>) -> AnnotationError {
+fn error(file: &str, line: Option<u64>, fault: AnnotationFault) -> AnnotationError {
     AnnotationError {
         file: file.to_string(),
         line,
-        message: message.into(),
+        fault,
     }
+}
+
+/// What is wrong with one event-log row (or JSON event). Cells are quoted as written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RowFault {
+    /// A frame below 0.
+    #[error("frame {frame} is negative")]
+    NegativeFrame {
+        /// The frame.
+        frame: i64,
+    },
+    /// A frame cell that is not a whole number.
+    #[error("frame `{raw}`: expected a whole frame number")]
+    FrameNotWhole {
+        /// The cell.
+        raw: String,
+    },
+    /// A time that is negative or not finite.
+    #[error("time `{raw}`: expected a finite, non-negative number of seconds")]
+    TimeOutOfRange {
+        /// The cell.
+        raw: String,
+    },
+    /// A time cell that is not a number.
+    #[error("time `{raw}`: expected a number of seconds")]
+    TimeNotNumber {
+        /// The cell.
+        raw: String,
+    },
+    /// A frame row read at a rate that is not positive.
+    #[error("frame rows need a positive frame rate to be placed in time, got {fps}")]
+    NoFrameRate {
+        /// The rate given.
+        fps: f64,
+    },
+    /// Frame and time both given, more than half a frame apart.
+    #[error("frame {frame} ({secs} s at {fps} fps) and time {time} s disagree; give one of them")]
+    FrameTimeDisagree {
+        /// The frame.
+        frame: i64,
+        /// The frame in seconds.
+        secs: f64,
+        /// The rate.
+        fps: f64,
+        /// The time given.
+        time: f64,
+    },
+    /// Neither frame nor time.
+    #[error("has neither a frame nor a time: expected one of them")]
+    NoTime,
+    /// An `event` cell of an unknown kind.
+    #[error("event `{event}`: expected `instruction`, `grasp` or `release`")]
+    UnknownEvent {
+        /// The cell, lowercased.
+        event: String,
+    },
+    /// A `hand` cell that names no hand.
+    #[error("hand `{raw}`: expected `left`, `right` or `both`")]
+    UnknownHand {
+        /// The cell.
+        raw: String,
+    },
+    /// An instruction event without its text.
+    #[error("instruction event with no instruction text: expected the instruction")]
+    NoInstruction,
 }
 
 /// The name of a known column, as a `'static` key.
@@ -134,14 +201,10 @@ type Rows = (Vec<RawRow>, Option<String>, Vec<String>);
 fn csv_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
     let mut lines = csv_lines(text);
     let Some((header_line, header)) = lines.next() else {
-        return Err(error(
-            file,
-            None,
-            "empty file: expected a header naming `instruction` and `frame` or `time`",
-        ));
+        return Err(error(file, None, AnnotationFault::EmptyEventLog));
     };
     let names = split_csv_line(header)
-        .map_err(|e| error(file, Some(header_line), format!("header: {e}")))?;
+        .map_err(|e| error(file, Some(header_line), AnnotationFault::EventLogHeader(e)))?;
     let mut columns: Vec<Option<&'static str>> = Vec::with_capacity(names.len());
     let mut unknown = Vec::new();
     for name in &names {
@@ -151,7 +214,7 @@ fn csv_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
                 return Err(error(
                     file,
                     Some(header_line),
-                    format!("header names column `{c}` twice"),
+                    AnnotationFault::DuplicateColumn(c),
                 ));
             }
             Some(c) => columns.push(Some(c)),
@@ -167,35 +230,32 @@ fn csv_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
         return Err(error(
             file,
             Some(header_line),
-            format!(
-                "header has no `instruction` column (expected columns among {}), found `{}`",
-                EVENT_COLUMNS.join(", "),
-                header.trim()
-            ),
+            AnnotationFault::NoInstructionColumn {
+                header: header.trim().to_string(),
+            },
         ));
     }
     if !columns.contains(&Some("frame")) && !columns.contains(&Some("time")) {
         return Err(error(
             file,
             Some(header_line),
-            format!(
-                "header has neither a `frame` nor a `time` column, found `{}`",
-                header.trim()
-            ),
+            AnnotationFault::NoTimeColumn {
+                header: header.trim().to_string(),
+            },
         ));
     }
     let mut rows = Vec::new();
     for (n, (line, text)) in lines.enumerate() {
-        let cells = split_csv_line(text).map_err(|e| error(file, Some(line), e))?;
+        let cells =
+            split_csv_line(text).map_err(|e| error(file, Some(line), AnnotationFault::Csv(e)))?;
         if cells.len() != columns.len() {
             return Err(error(
                 file,
                 Some(line),
-                format!(
-                    "expected {} columns as in the header, found {}",
-                    columns.len(),
-                    cells.len()
-                ),
+                AnnotationFault::ColumnCount {
+                    expected: columns.len(),
+                    found: cells.len(),
+                },
             ));
         }
         let cells = columns
@@ -216,17 +276,18 @@ fn csv_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
 }
 
 fn json_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
-    let root: Value = serde_json::from_str(text)
-        .map_err(|e| error(file, Some(e.line() as u64), format!("not valid JSON: {e}")))?;
+    let root: Value = serde_json::from_str(text).map_err(|e| {
+        error(
+            file,
+            Some(e.line() as u64),
+            AnnotationFault::Json(e.to_string()),
+        )
+    })?;
     let (events, capture, wrapped) = match &root {
         Value::Array(events) => (events, None, false),
         Value::Object(map) => {
             let Some(events) = map.get("events").and_then(Value::as_array) else {
-                return Err(error(
-                    file,
-                    None,
-                    "expected an array of events or an object with an `events` array",
-                ));
+                return Err(error(file, None, AnnotationFault::NotEvents));
             };
             let capture = match map.get("capture") {
                 None | Some(Value::Null) => None,
@@ -236,18 +297,16 @@ fn json_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
                     return Err(error(
                         file,
                         None,
-                        format!("`capture` must be a string, found {other}"),
+                        AnnotationFault::CaptureNotText {
+                            found: other.to_string(),
+                        },
                     ));
                 }
             };
             (events, capture, true)
         }
         _ => {
-            return Err(error(
-                file,
-                None,
-                "expected an array of events or an object with an `events` array",
-            ));
+            return Err(error(file, None, AnnotationFault::NotEvents));
         }
     };
     let lines = element_lines(text, wrapped);
@@ -260,7 +319,10 @@ fn json_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
             return Err(error(
                 file,
                 line,
-                format!("event {}: expected an object, found {event}", i + 1),
+                AnnotationFault::EventNotObject {
+                    event: i + 1,
+                    found: event.to_string(),
+                },
             ));
         };
         let mut cells = BTreeMap::new();
@@ -279,10 +341,11 @@ fn json_rows(text: &str, file: &str) -> Result<Rows, AnnotationError> {
                     return Err(error(
                         file,
                         line,
-                        format!(
-                            "event {}: `{key}` must be a string or a number, found {other}",
-                            i + 1
-                        ),
+                        AnnotationFault::CellNotText {
+                            event: i + 1,
+                            key: key.clone(),
+                            found: other.to_string(),
+                        },
                     ));
                 }
             };
@@ -379,17 +442,17 @@ fn check_row(
     default_capture: &str,
 ) -> Result<Event, AnnotationError> {
     let n = row.n;
-    let fail = |message: String| error(file, row.line, format!("row {n}: {message}"));
+    let fail = |fault: RowFault| error(file, row.line, AnnotationFault::Row { row: n, fault });
     let cell = |name: &str| row.cells.get(name).map(String::as_str);
     let frame = match cell("frame") {
         None => None,
         Some(raw) => match raw.parse::<i64>() {
             Ok(f) if f >= 0 => Some(f),
-            Ok(f) => return Err(fail(format!("frame {f} is negative"))),
+            Ok(frame) => return Err(fail(RowFault::NegativeFrame { frame })),
             Err(_) => {
-                return Err(fail(format!(
-                    "frame `{raw}`: expected a whole frame number"
-                )));
+                return Err(fail(RowFault::FrameNotWhole {
+                    raw: raw.to_string(),
+                }));
             }
         },
     };
@@ -398,19 +461,19 @@ fn check_row(
         Some(raw) => match raw.parse::<f64>() {
             Ok(t) if t.is_finite() && t >= 0.0 => Some(t),
             Ok(_) => {
-                return Err(fail(format!(
-                    "time `{raw}`: expected a finite, non-negative number of seconds"
-                )));
+                return Err(fail(RowFault::TimeOutOfRange {
+                    raw: raw.to_string(),
+                }));
             }
             Err(_) => {
-                return Err(fail(format!("time `{raw}`: expected a number of seconds")));
+                return Err(fail(RowFault::TimeNotNumber {
+                    raw: raw.to_string(),
+                }));
             }
         },
     };
     if frame.is_some() && !(fps.is_finite() && fps > 0.0) {
-        return Err(fail(format!(
-            "frame rows need a positive frame rate to be placed in time, got {fps}"
-        )));
+        return Err(fail(RowFault::NoFrameRate { fps }));
     }
     let (at, secs) = match (frame, time) {
         (Some(f), None) => (Time::Frame { frame: f, fps }, f as f64 / fps),
@@ -418,16 +481,17 @@ fn check_row(
         (Some(f), Some(t)) => {
             let secs = f as f64 / fps;
             if (secs - t).abs() > 0.5 / fps {
-                return Err(fail(format!(
-                    "frame {f} ({secs} s at {fps} fps) and time {t} s disagree; give one of them"
-                )));
+                return Err(fail(RowFault::FrameTimeDisagree {
+                    frame: f,
+                    secs,
+                    fps,
+                    time: t,
+                }));
             }
             (Time::Frame { frame: f, fps }, secs)
         }
         (None, None) => {
-            return Err(fail(
-                "has neither a frame nor a time: expected one of them".into(),
-            ));
+            return Err(fail(RowFault::NoTime));
         }
     };
     let kind = match cell("event").map(str::to_ascii_lowercase).as_deref() {
@@ -435,9 +499,9 @@ fn check_row(
         Some("grasp") => Kind::Grasp,
         Some("release") => Kind::Release,
         Some(other) => {
-            return Err(fail(format!(
-                "event `{other}`: expected `instruction`, `grasp` or `release`"
-            )));
+            return Err(fail(RowFault::UnknownEvent {
+                event: other.to_string(),
+            }));
         }
     };
     let hand = match cell("hand") {
@@ -445,17 +509,15 @@ fn check_row(
         Some(raw) => match Hand::parse(raw) {
             Some(h) => Some(h),
             None => {
-                return Err(fail(format!(
-                    "hand `{raw}`: expected `left`, `right` or `both`"
-                )));
+                return Err(fail(RowFault::UnknownHand {
+                    raw: raw.to_string(),
+                }));
             }
         },
     };
     let instruction = cell("instruction").unwrap_or("").to_string();
     if kind == Kind::Instruction && instruction.is_empty() {
-        return Err(fail(
-            "instruction event with no instruction text: expected the instruction".into(),
-        ));
+        return Err(fail(RowFault::NoInstruction));
     }
     Ok(Event {
         n,
@@ -571,5 +633,159 @@ fn build(capture: &str, mut events: Vec<Event>, file: &str) -> CaptureAnnotation
         origin: format!("{file}#{capture}"),
         notes,
         ..CaptureAnnotation::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn csv(text: &str) -> String {
+        read_event_log(text, EventLogFormat::Csv, "log.csv", 30.0)
+            .unwrap_err()
+            .to_string()
+    }
+
+    fn json(text: &str) -> String {
+        read_event_log(text, EventLogFormat::Json, "log.json", 30.0)
+            .unwrap_err()
+            .to_string()
+    }
+
+    /// The texts of every CSV event-log fault, as builds show them: they must not change.
+    #[test]
+    fn every_csv_fault_reads_as_it_always_has() {
+        let cases = [
+            (
+                "",
+                "log.csv: empty file: expected a header naming `instruction` and `frame` or `time`",
+            ),
+            (
+                "frame,\"instruction\"x\n",
+                "log.csv:1: header: field 2: expected `,` or the line end after the closing quote, found `x`",
+            ),
+            (
+                "frame,Frame,instruction\n",
+                "log.csv:1: header names column `frame` twice",
+            ),
+            (
+                "frame,hand\n",
+                "log.csv:1: header has no `instruction` column (expected columns among frame, time, instruction, motion_type, hand, object, event, capture), found `frame,hand`",
+            ),
+            (
+                "instruction,hand \n",
+                "log.csv:1: header has neither a `frame` nor a `time` column, found `instruction,hand`",
+            ),
+            (
+                "frame,instruction\n\n3,\"walk\n",
+                "log.csv:3: field 2 opens a double quote that is not closed on this line",
+            ),
+            (
+                "frame,instruction\n3,wa\"lk\n",
+                "log.csv:2: field 2: a double quote inside an unquoted field (quote the whole field and double the quote: `\"\"`)",
+            ),
+            (
+                "frame,instruction\n3,walk,x\n",
+                "log.csv:2: expected 2 columns as in the header, found 3",
+            ),
+            (
+                "frame,instruction\n1,a\n-3,walk\n",
+                "log.csv:3: row 2: frame -3 is negative",
+            ),
+            (
+                "frame,instruction\n3.5,walk\n",
+                "log.csv:2: row 1: frame `3.5`: expected a whole frame number",
+            ),
+            (
+                "time,instruction\ninf,walk\n",
+                "log.csv:2: row 1: time `inf`: expected a finite, non-negative number of seconds",
+            ),
+            (
+                "time,instruction\nsoon,walk\n",
+                "log.csv:2: row 1: time `soon`: expected a number of seconds",
+            ),
+            (
+                "frame,time,instruction\n30,2.5,walk\n",
+                "log.csv:2: row 1: frame 30 (1 s at 30 fps) and time 2.5 s disagree; give one of them",
+            ),
+            (
+                "frame,time,instruction\n,,walk\n",
+                "log.csv:2: row 1: has neither a frame nor a time: expected one of them",
+            ),
+            (
+                "frame,instruction,event\n3,walk,jump\n",
+                "log.csv:2: row 1: event `jump`: expected `instruction`, `grasp` or `release`",
+            ),
+            (
+                "frame,instruction,hand\n3,walk,middle\n",
+                "log.csv:2: row 1: hand `middle`: expected `left`, `right` or `both`",
+            ),
+            (
+                "frame,instruction\n3,\n",
+                "log.csv:2: row 1: instruction event with no instruction text: expected the instruction",
+            ),
+        ];
+        for (text, want) in cases {
+            assert_eq!(csv(text), want, "{text}");
+        }
+        let err = read_event_log("frame,instruction\n3,walk\n", EventLogFormat::Csv, "l", 0.0)
+            .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "l:2: row 1: frame rows need a positive frame rate to be placed in time, got 0"
+        );
+    }
+
+    /// The texts of the JSON event-log faults: they must not change.
+    #[test]
+    fn every_json_fault_reads_as_it_always_has() {
+        let cases = [
+            (
+                "[1,",
+                "log.json:1: not valid JSON: EOF while parsing a value at line 1 column 3",
+            ),
+            (
+                "3",
+                "log.json: expected an array of events or an object with an `events` array",
+            ),
+            (
+                "{\"events\": 3}",
+                "log.json: expected an array of events or an object with an `events` array",
+            ),
+            (
+                "{\"capture\": 3, \"events\": []}",
+                "log.json: `capture` must be a string, found 3",
+            ),
+            (
+                "[\n{\"frame\": 1, \"instruction\": \"a\"},\n[1]\n]",
+                "log.json:3: event 2: expected an object, found [1]",
+            ),
+            (
+                "[{\"frame\": [1]}]",
+                "log.json:1: event 1: `frame` must be a string or a number, found [1]",
+            ),
+            (
+                "[{\"frame\": -1, \"instruction\": \"a\"}]",
+                "log.json:1: row 1: frame -1 is negative",
+            ),
+        ];
+        for (text, want) in cases {
+            assert_eq!(json(text), want, "{text}");
+        }
+        let err = read_event_log(
+            "frame,instruction\n1,a\n-3,walk\n",
+            EventLogFormat::Csv,
+            "l",
+            30.0,
+        )
+        .unwrap_err();
+        assert_eq!(err.line, Some(3));
+        assert_eq!(
+            err.fault,
+            AnnotationFault::Row {
+                row: 2,
+                fault: RowFault::NegativeFrame { frame: -3 }
+            }
+        );
     }
 }

@@ -141,7 +141,8 @@ pub fn sidecar_fields(json: &serde_json::Value) -> Option<BTreeMap<String, Strin
 pub struct LabelRefusal {
     /// `label_pattern`, `sidecar` or `label_template`.
     pub reason: RejectReason,
-    /// What was expected and found.
+    /// What was expected and found: the `Reject`'s message (kept as text: the kind is `reason`,
+    /// and the runner builds refusals of its own from other readers' texts).
     pub message: String,
 }
 

@@ -10,7 +10,8 @@
 use std::collections::BTreeMap;
 
 use super::span::{
-    AnnotationError, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note, NoteKind, Span, Time,
+    AnnotationError, AnnotationFault, CaptureAnnotation, NOT_LISTED, NOTES_PER_KIND, Note,
+    NoteKind, Span, Time,
 };
 use motionforge_language::caption::{MAX_CAPTION_CHARS, over_length};
 
@@ -32,10 +33,39 @@ pub struct IndexRow {
     pub line: u64,
 }
 
+/// Why a CSV line does not split into fields; `column` is the field's 1-based position.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum CsvFault {
+    /// A quoted field runs to the line end.
+    #[error("field {column} opens a double quote that is not closed on this line")]
+    UnclosedQuote {
+        /// The field.
+        column: usize,
+    },
+    /// Something other than a comma follows a closing quote.
+    #[error(
+        "field {column}: expected `,` or the line end after the closing quote, found `{found}`"
+    )]
+    AfterQuote {
+        /// The field.
+        column: usize,
+        /// The character found.
+        found: char,
+    },
+    /// A double quote in the middle of an unquoted field.
+    #[error(
+        "field {column}: a double quote inside an unquoted field (quote the whole field and double the quote: `\"\"`)"
+    )]
+    QuoteInField {
+        /// The field.
+        column: usize,
+    },
+}
+
 /// Splits one CSV line (without its line end) into fields. Double-quoted fields may contain
 /// commas and `""` for a quote; spaces around a quoted field are ignored; unquoted fields are kept
 /// as written (callers trim). Errors say what was wrong.
-pub fn split_csv_line(line: &str) -> Result<Vec<String>, String> {
+pub fn split_csv_line(line: &str) -> Result<Vec<String>, CsvFault> {
     let line = line.strip_suffix('\r').unwrap_or(line);
     let mut fields = Vec::new();
     let mut chars = line.chars().peekable();
@@ -65,11 +95,7 @@ pub fn split_csv_line(line: &str) -> Result<Vec<String>, String> {
                         }
                     }
                     Some(c) => field.push(c),
-                    None => {
-                        return Err(format!(
-                            "field {column} opens a double quote that is not closed on this line"
-                        ));
-                    }
+                    None => return Err(CsvFault::UnclosedQuote { column }),
                 }
             }
             while let Some(&c) = chars.peek() {
@@ -85,12 +111,7 @@ pub fn split_csv_line(line: &str) -> Result<Vec<String>, String> {
                     return Ok(fields);
                 }
                 Some(',') => fields.push(field),
-                Some(c) => {
-                    return Err(format!(
-                        "field {column}: expected `,` or the line end after the closing quote, \
-                         found `{c}`"
-                    ));
-                }
+                Some(found) => return Err(CsvFault::AfterQuote { column, found }),
             }
         } else {
             field.push_str(&lead);
@@ -105,11 +126,9 @@ pub fn split_csv_line(line: &str) -> Result<Vec<String>, String> {
                         break;
                     }
                     Some('"') => {
-                        return Err(format!(
-                            "field {}: a double quote inside an unquoted field (quote the whole \
-                             field and double the quote: `\"\"`)",
-                            fields.len() + 1
-                        ));
+                        return Err(CsvFault::QuoteInField {
+                            column: fields.len() + 1,
+                        });
                     }
                     Some(c) => field.push(c),
                 }
@@ -140,16 +159,13 @@ pub fn read_frame_index(
         return Err(AnnotationError {
             file: file.to_string(),
             line: None,
-            message: format!(
-                "empty file: expected the header `{}`",
-                INDEX_COLUMNS.join(",")
-            ),
+            fault: AnnotationFault::EmptyIndex,
         });
     };
-    let columns = header_columns(header).map_err(|message| AnnotationError {
+    let columns = header_columns(header).map_err(|fault| AnnotationError {
         file: file.to_string(),
         line: Some(header_line),
-        message,
+        fault,
     })?;
     let mut rows = Vec::new();
     let mut notes = Vec::new();
@@ -180,9 +196,8 @@ pub fn read_frame_index(
 }
 
 /// Position of each of [`INDEX_COLUMNS`] in the header (any order, names matched without case).
-fn header_columns(header: &str) -> Result<[usize; 4], String> {
-    let expected = || format!("expected the header `{}`", INDEX_COLUMNS.join(","));
-    let names = split_csv_line(header).map_err(|e| format!("{}: {e}", expected()))?;
+fn header_columns(header: &str) -> Result<[usize; 4], AnnotationFault> {
+    let names = split_csv_line(header).map_err(AnnotationFault::IndexHeader)?;
     let names: Vec<String> = names
         .iter()
         .map(|n| n.trim().to_ascii_lowercase())
@@ -198,28 +213,25 @@ fn header_columns(header: &str) -> Result<[usize; 4], String> {
         match found.as_slice() {
             [i] => *slot = *i,
             [] => {
-                return Err(format!(
-                    "{}, found `{}` (no `{want}` column)",
-                    expected(),
-                    header.trim()
-                ));
+                return Err(AnnotationFault::IndexColumnMissing {
+                    header: header.trim().to_string(),
+                    column: want,
+                });
             }
-            _ => return Err(format!("{}: `{want}` appears twice", expected())),
+            _ => return Err(AnnotationFault::IndexColumnTwice { column: want }),
         }
     }
     if names.len() != INDEX_COLUMNS.len() {
-        return Err(format!(
-            "{}, found {} columns: `{}`",
-            expected(),
-            names.len(),
-            header.trim()
-        ));
+        return Err(AnnotationFault::IndexColumnCount {
+            found: names.len(),
+            header: header.trim().to_string(),
+        });
     }
     Ok(at)
 }
 
 fn read_row(text: &str, line: u64, columns: &[usize; 4]) -> Result<IndexRow, String> {
-    let cells = split_csv_line(text)?;
+    let cells = split_csv_line(text).map_err(|e| e.to_string())?;
     if cells.len() != INDEX_COLUMNS.len() {
         return Err(format!(
             "expected {} columns ({}), found {}",
@@ -743,4 +755,54 @@ pub fn read_caption(text: &str) -> Option<String> {
         .map(|l| l.split('#').next().unwrap_or(l).trim())
         .find(|c| !c.is_empty())
         .map(str::to_string)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The texts of the index and BABEL file faults, as builds show them: they must not change.
+    #[test]
+    fn every_file_fault_reads_as_it_always_has() {
+        let index = |text: &str| read_frame_index(text, "index.csv").unwrap_err().to_string();
+        let cases = [
+            (
+                "\n",
+                "index.csv: empty file: expected the header `source_path,start_frame,end_frame,new_name`",
+            ),
+            (
+                "source_path,\"start_frame",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`: field 2 opens a double quote that is not closed on this line",
+            ),
+            (
+                "source_path,start_frame,new_name ",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`, found `source_path,start_frame,new_name` (no `end_frame` column)",
+            ),
+            (
+                "source_path,start_frame,end_frame,new_name,Start_Frame",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`: `start_frame` appears twice",
+            ),
+            (
+                "source_path,start_frame,end_frame,new_name,text",
+                "index.csv:1: expected the header `source_path,start_frame,end_frame,new_name`, found 5 columns: `source_path,start_frame,end_frame,new_name,text`",
+            ),
+        ];
+        for (text, want) in cases {
+            assert_eq!(index(text), want, "{text}");
+        }
+        let babel = |text: &str| {
+            super::super::babel::read_babel(text, "babel.json")
+                .map(|_| ())
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            babel("{"),
+            "babel.json:1: not valid JSON: EOF while parsing an object at line 1 column 1"
+        );
+        assert_eq!(
+            babel("[]"),
+            "babel.json: expected a JSON object of BABEL records keyed by sequence id"
+        );
+    }
 }

@@ -2,6 +2,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::event_log::{EVENT_COLUMNS, RowFault};
+use super::frame_index::{CsvFault, INDEX_COLUMNS};
+
 /// A point on a capture's timeline, as the annotation states it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Time {
@@ -366,14 +369,134 @@ pub fn cap_per_kind(notes: Vec<Note>, limit: usize) -> Vec<Note> {
 
 /// Why an annotation file cannot be read at all (single bad records become notes or rejects).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
+#[error("{file}{}: {fault}", line.map(|l| format!(":{l}")).unwrap_or_default())]
 pub struct AnnotationError {
     /// The annotation file.
     pub file: String,
     /// 1-based line, where known.
     pub line: Option<u64>,
     /// What was expected and found.
-    pub message: String,
+    pub fault: AnnotationFault,
+}
+
+/// What makes an annotation file unreadable as a whole. Texts quoted from the file (a header,
+/// a JSON value, a column name) are kept as they are: they are data, not kinds of fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AnnotationFault {
+    /// The file is not JSON.
+    #[error("not valid JSON: {0}")]
+    Json(
+        /// serde_json's message (kept as text: it names the line and column, and
+        /// `serde_json::Error` is not `Clone`).
+        String,
+    ),
+    /// An event log with no header line.
+    #[error("empty file: expected a header naming `instruction` and `frame` or `time`")]
+    EmptyEventLog,
+    /// An event log's header line does not split into fields.
+    #[error("header: {0}")]
+    EventLogHeader(CsvFault),
+    /// An event log's header names a column twice.
+    #[error("header names column `{0}` twice")]
+    DuplicateColumn(&'static str),
+    /// An event log's header has no `instruction` column.
+    #[error(
+        "header has no `instruction` column (expected columns among {}), found `{header}`",
+        EVENT_COLUMNS.join(", ")
+    )]
+    NoInstructionColumn {
+        /// The header line, trimmed.
+        header: String,
+    },
+    /// An event log's header has neither `frame` nor `time`.
+    #[error("header has neither a `frame` nor a `time` column, found `{header}`")]
+    NoTimeColumn {
+        /// The header line, trimmed.
+        header: String,
+    },
+    /// A CSV row does not split into fields.
+    #[error("{0}")]
+    Csv(CsvFault),
+    /// A CSV row with more or fewer fields than the header.
+    #[error("expected {expected} columns as in the header, found {found}")]
+    ColumnCount {
+        /// The header's columns.
+        expected: usize,
+        /// The row's fields.
+        found: usize,
+    },
+    /// A JSON event log that is neither an array nor an object with an `events` array.
+    #[error("expected an array of events or an object with an `events` array")]
+    NotEvents,
+    /// A JSON event log whose `capture` is not a string.
+    #[error("`capture` must be a string, found {found}")]
+    CaptureNotText {
+        /// The value, as JSON.
+        found: String,
+    },
+    /// A JSON event that is not an object.
+    #[error("event {event}: expected an object, found {found}")]
+    EventNotObject {
+        /// The event's 1-based position.
+        event: usize,
+        /// The event, as JSON.
+        found: String,
+    },
+    /// A JSON event's known key whose value is neither a string nor a number.
+    #[error("event {event}: `{key}` must be a string or a number, found {found}")]
+    CellNotText {
+        /// The event's 1-based position.
+        event: usize,
+        /// The key.
+        key: String,
+        /// The value, as JSON.
+        found: String,
+    },
+    /// An event-log row that cannot be used.
+    #[error("row {row}: {fault}")]
+    Row {
+        /// The row's 1-based number (data rows, or events).
+        row: usize,
+        /// What is wrong with it.
+        fault: RowFault,
+    },
+    /// A frame index with no header line.
+    #[error("empty file: expected the header `{}`", INDEX_COLUMNS.join(","))]
+    EmptyIndex,
+    /// A frame index's header line does not split into fields.
+    #[error("expected the header `{columns}`: {0}", columns = INDEX_COLUMNS.join(","))]
+    IndexHeader(CsvFault),
+    /// A frame index's header lacks one of the columns.
+    #[error(
+        "expected the header `{}`, found `{header}` (no `{column}` column)",
+        INDEX_COLUMNS.join(",")
+    )]
+    IndexColumnMissing {
+        /// The header line, trimmed.
+        header: String,
+        /// The missing column.
+        column: &'static str,
+    },
+    /// A frame index's header names a column twice.
+    #[error("expected the header `{}`: `{column}` appears twice", INDEX_COLUMNS.join(","))]
+    IndexColumnTwice {
+        /// The repeated column.
+        column: &'static str,
+    },
+    /// A frame index's header has other columns besides the four.
+    #[error(
+        "expected the header `{}`, found {found} columns: `{header}`",
+        INDEX_COLUMNS.join(",")
+    )]
+    IndexColumnCount {
+        /// Columns in the header.
+        found: usize,
+        /// The header line, trimmed.
+        header: String,
+    },
+    /// A BABEL file whose root (or `records`) is not an object.
+    #[error("expected a JSON object of BABEL records keyed by sequence id")]
+    NotBabel,
 }
 
 /// The key a capture is found by: its file stem, after the source's path mapping.

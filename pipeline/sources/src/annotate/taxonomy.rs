@@ -47,7 +47,8 @@ pub enum TaxonomyError {
     Read {
         /// The file.
         file: String,
-        /// The I/O error.
+        /// The I/O error's text (kept as text: the error is cloned, and `std::io::Error` is not
+        /// `Clone`).
         message: String,
     },
     /// A taxonomy file is not valid TOML or has the wrong shape.
@@ -55,11 +56,11 @@ pub enum TaxonomyError {
     Parse {
         /// The file.
         file: String,
-        /// The parser's message.
+        /// The TOML parser's message (kept as text: it quotes the offending line).
         message: String,
     },
     /// A type or group name is empty, or a type name is not in normal form.
-    #[error("{file}: {what} name `{name}` is not valid: {reason}")]
+    #[error("{file}: {what} name `{name}` is not valid: {fault}")]
     InvalidName {
         /// The file.
         file: String,
@@ -68,7 +69,7 @@ pub enum TaxonomyError {
         /// The name as written.
         name: String,
         /// What is wrong with it.
-        reason: String,
+        fault: NameFault,
     },
     /// Two groups share a name.
     #[error("{file}: group `{name}` is defined twice")]
@@ -97,7 +98,7 @@ pub enum TaxonomyError {
         group: String,
     },
     /// A type's mirror does not exist, is the type itself, or does not mirror back.
-    #[error("{file}: type `{type_name}` mirrors to `{mirror}`: {reason}")]
+    #[error("{file}: type `{type_name}` mirrors to `{mirror}`: {fault}")]
     BadMirror {
         /// The file.
         file: String,
@@ -106,20 +107,20 @@ pub enum TaxonomyError {
         /// Its `mirror` value.
         mirror: String,
         /// What is wrong.
-        reason: String,
+        fault: MirrorFault,
     },
     /// An alias is empty, repeated, shadowed by a type name, or names a type that does not exist.
-    #[error("alias `{alias}` -> `{target}`: {reason}")]
+    #[error("alias `{alias}` -> `{target}`: {fault}")]
     BadAlias {
         /// The alias as written.
         alias: String,
         /// The type it names.
         target: String,
         /// What is wrong.
-        reason: String,
+        fault: AliasFault,
     },
     /// A rule's regex does not compile, or it names a type that does not exist.
-    #[error("rule {index} (`{pattern}` -> `{target}`): {reason}")]
+    #[error("rule {index} (`{pattern}` -> `{target}`): {fault}")]
     BadRule {
         /// The rule's position in `rules` (0-based).
         index: usize,
@@ -128,8 +129,86 @@ pub enum TaxonomyError {
         /// The type it names.
         target: String,
         /// What is wrong.
-        reason: String,
+        fault: RuleFault,
     },
+}
+
+/// What is wrong with a type or group name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NameFault {
+    /// Empty or blank.
+    #[error("it is empty")]
+    Empty,
+    /// Not in normal form (lowercase words, single spaces).
+    #[error("write it as `{normal}` (lowercase words, single spaces)")]
+    NotNormal {
+        /// The name in normal form.
+        normal: String,
+    },
+}
+
+/// What is wrong with a type's `mirror`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MirrorFault {
+    /// The type names itself.
+    #[error("a type cannot mirror to itself; leave `mirror` out")]
+    ToItself,
+    /// No type has the mirror's name.
+    #[error("no type has that name")]
+    NoSuchType,
+    /// The mirror type does not mirror back. The names are boxed `str`s to keep
+    /// [`TaxonomyError`] as small as it was: build errors carry it by value.
+    #[error("not mutual: `{other}` mirrors to {}", mirrored_name(.other_mirror.as_deref()))]
+    NotMutual {
+        /// The mirror type.
+        other: Box<str>,
+        /// Its own `mirror`, if any.
+        other_mirror: Option<Box<str>>,
+    },
+}
+
+/// A type's mirror as messages name it: `` `name` `` or `nothing`.
+fn mirrored_name(mirror: Option<&str>) -> String {
+    mirror.map_or("nothing".to_string(), |m| format!("`{m}`"))
+}
+
+/// What is wrong with an alias.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AliasFault {
+    /// The alias normalizes to nothing.
+    #[error("the alias is empty")]
+    Empty,
+    /// No type has the target's name.
+    #[error("no type has that name")]
+    NoSuchType,
+    /// The alias is another type's name.
+    #[error("`{label}` is itself a type name, which always wins over an alias")]
+    TypeName {
+        /// The alias, normalized.
+        label: String,
+    },
+    /// Two aliases normalize to the same label.
+    #[error("same label as alias `{other}` once normalized to `{label}`")]
+    SameLabel {
+        /// The other alias as written.
+        other: String,
+        /// The label both normalize to.
+        label: String,
+    },
+}
+
+/// What is wrong with a rule.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RuleFault {
+    /// No type has the rule's target name.
+    #[error("no type has that name")]
+    NoSuchType,
+    /// The pattern does not compile.
+    #[error("not a valid regex: {0}")]
+    Regex(
+        /// The regex crate's message (kept as text: it spans lines and points into the pattern).
+        String,
+    ),
 }
 
 /// One motion type.
@@ -289,16 +368,17 @@ impl Taxonomy {
         objects: BTreeMap<String, Vec<String>>,
         file: &str,
     ) -> Result<Taxonomy, TaxonomyError> {
-        let invalid = |what: &'static str, name: &str, reason: String| TaxonomyError::InvalidName {
-            file: file.to_string(),
-            what,
-            name: name.to_string(),
-            reason,
-        };
+        let invalid =
+            |what: &'static str, name: &str, fault: NameFault| TaxonomyError::InvalidName {
+                file: file.to_string(),
+                what,
+                name: name.to_string(),
+                fault,
+            };
         let mut group_names = HashMap::new();
         for group in &groups {
             if group.name.trim().is_empty() {
-                return Err(invalid("group", &group.name, "it is empty".into()));
+                return Err(invalid("group", &group.name, NameFault::Empty));
             }
             if group_names.insert(group.name.as_str(), ()).is_some() {
                 return Err(TaxonomyError::DuplicateGroup {
@@ -311,14 +391,10 @@ impl Taxonomy {
         for (i, ty) in types.iter().enumerate() {
             let normal = normalize_label(&ty.name);
             if normal.is_empty() {
-                return Err(invalid("type", &ty.name, "it is empty".into()));
+                return Err(invalid("type", &ty.name, NameFault::Empty));
             }
             if normal != ty.name {
-                return Err(invalid(
-                    "type",
-                    &ty.name,
-                    format!("write it as `{normal}` (lowercase words, single spaces)"),
-                ));
+                return Err(invalid("type", &ty.name, NameFault::NotNormal { normal }));
             }
             if index.insert(normal, i).is_some() {
                 return Err(TaxonomyError::DuplicateType {
@@ -336,29 +412,23 @@ impl Taxonomy {
         }
         for ty in &types {
             let Some(mirror) = &ty.mirror else { continue };
-            let bad = |reason: String| TaxonomyError::BadMirror {
+            let bad = |fault: MirrorFault| TaxonomyError::BadMirror {
                 file: file.to_string(),
                 type_name: ty.name.clone(),
                 mirror: mirror.clone(),
-                reason,
+                fault,
             };
             if *mirror == ty.name {
-                return Err(bad(
-                    "a type cannot mirror to itself; leave `mirror` out".into()
-                ));
+                return Err(bad(MirrorFault::ToItself));
             }
             let Some(other) = index.get(mirror.as_str()).and_then(|&j| types.get(j)) else {
-                return Err(bad("no type has that name".into()));
+                return Err(bad(MirrorFault::NoSuchType));
             };
             if other.mirror.as_deref() != Some(ty.name.as_str()) {
-                return Err(bad(format!(
-                    "not mutual: `{}` mirrors to {}",
-                    other.name,
-                    other
-                        .mirror
-                        .as_deref()
-                        .map_or("nothing".to_string(), |m| format!("`{m}`"))
-                )));
+                return Err(bad(MirrorFault::NotMutual {
+                    other: other.name.as_str().into(),
+                    other_mirror: other.mirror.as_deref().map(Box::from),
+                }));
             }
         }
         Ok(Taxonomy {
@@ -520,48 +590,47 @@ impl TypeMap {
         let mut aliases: HashMap<String, usize> = HashMap::new();
         let mut spelled: HashMap<String, &str> = HashMap::new();
         for (alias, target) in &config.aliases {
-            let bad = |reason: String| TaxonomyError::BadAlias {
+            let bad = |fault: AliasFault| TaxonomyError::BadAlias {
                 alias: alias.clone(),
                 target: target.clone(),
-                reason,
+                fault,
             };
             let key = normalize_label(alias);
             if key.is_empty() {
-                return Err(bad("the alias is empty".into()));
+                return Err(bad(AliasFault::Empty));
             }
             let Some(&t) = taxonomy.index.get(normalize_label(target).as_str()) else {
-                return Err(bad("no type has that name".into()));
+                return Err(bad(AliasFault::NoSuchType));
             };
             if let Some(&own) = taxonomy.index.get(key.as_str())
                 && own != t
             {
-                return Err(bad(format!(
-                    "`{key}` is itself a type name, which always wins over an alias"
-                )));
+                return Err(bad(AliasFault::TypeName { label: key }));
             }
             if let Some(other) = spelled.insert(key.clone(), alias) {
-                return Err(bad(format!(
-                    "same label as alias `{other}` once normalized to `{key}`"
-                )));
+                return Err(bad(AliasFault::SameLabel {
+                    other: other.to_string(),
+                    label: key,
+                }));
             }
             aliases.insert(key, t);
         }
         let mut rules = Vec::with_capacity(config.rules.len());
         for (index, rule) in config.rules.iter().enumerate() {
-            let bad = |reason: String| TaxonomyError::BadRule {
+            let bad = |fault: RuleFault| TaxonomyError::BadRule {
                 index,
                 pattern: rule.pattern.clone(),
                 target: rule.r#type.clone(),
-                reason,
+                fault,
             };
             let Some(&target) = taxonomy.index.get(normalize_label(&rule.r#type).as_str()) else {
-                return Err(bad("no type has that name".into()));
+                return Err(bad(RuleFault::NoSuchType));
             };
             let regex = RegexBuilder::new(&rule.pattern)
                 .case_insensitive(true)
                 .size_limit(RULE_SIZE_LIMIT)
                 .build()
-                .map_err(|e| bad(format!("not a valid regex: {e}")))?;
+                .map_err(|e| bad(RuleFault::Regex(e.to_string())))?;
             rules.push(CompiledRule { regex, target });
         }
         Ok(TypeMap {
@@ -884,5 +953,95 @@ type = "turn left"
     fn bundled_taxonomy_is_valid() {
         let t = Taxonomy::bundled().expect("bundled taxonomy");
         assert!(t.get("walk forward").is_some_and(|t| t.locomotion));
+    }
+
+    /// The texts of the name, mirror, alias and rule faults: they must not change.
+    #[test]
+    fn every_fault_reads_as_it_always_has() {
+        let text = |r: Result<Taxonomy, TaxonomyError>| r.map(|_| ()).unwrap_err().to_string();
+        let extra = |t: MotionType| text(small().with_extra(vec![t]));
+        let blank_group = SMALL.replace("name = \"locomotion\"", "name = \" \"");
+        assert_eq!(
+            text(Taxonomy::from_toml(&blank_group, "bad.toml")),
+            "bad.toml: group name ` ` is not valid: it is empty"
+        );
+        let cases = [
+            (
+                ty(" ", "locomotion", None),
+                "extra types: type name ` ` is not valid: it is empty",
+            ),
+            (
+                ty("Side  Step", "locomotion", None),
+                "extra types: type name `Side  Step` is not valid: write it as `side step` (lowercase words, single spaces)",
+            ),
+            (
+                ty("spin", "turning", Some("spin")),
+                "extra types: type `spin` mirrors to `spin`: a type cannot mirror to itself; leave `mirror` out",
+            ),
+            (
+                ty("spin", "turning", Some("spun")),
+                "extra types: type `spin` mirrors to `spun`: no type has that name",
+            ),
+            (
+                ty("spin", "turning", Some("walk forward")),
+                "extra types: type `spin` mirrors to `walk forward`: not mutual: `walk forward` mirrors to nothing",
+            ),
+            (
+                ty("spin", "turning", Some("turn left")),
+                "extra types: type `spin` mirrors to `turn left`: not mutual: `turn left` mirrors to `turn right`",
+            ),
+        ];
+        for (t, want) in cases {
+            assert_eq!(extra(t), want);
+        }
+        let map = |config: TypeMapConfig| TypeMap::new(small(), &config).map(|_| ()).unwrap_err();
+        let alias = |pairs: &[(&str, &str)]| TypeMapConfig {
+            aliases: pairs
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect(),
+            ..TypeMapConfig::default()
+        };
+        let cases = [
+            (
+                alias(&[(" _ ", "turn left")]),
+                "alias ` _ ` -> `turn left`: the alias is empty",
+            ),
+            (
+                alias(&[("spin", "spin left")]),
+                "alias `spin` -> `spin left`: no type has that name",
+            ),
+            (
+                alias(&[("Turn-Left", "turn right")]),
+                "alias `Turn-Left` -> `turn right`: `turn left` is itself a type name, which always wins over an alias",
+            ),
+            (
+                alias(&[("Spin", "turn left"), ("spin", "turn right")]),
+                "alias `spin` -> `turn right`: same label as alias `Spin` once normalized to `spin`",
+            ),
+        ];
+        for (config, want) in cases {
+            let err = map(config);
+            assert_eq!(err.to_string(), want);
+            assert!(matches!(err, TaxonomyError::BadAlias { .. }), "{err}");
+        }
+        let rule = |p: &str, t: &str| TypeMapConfig {
+            rules: vec![TypeRule {
+                pattern: p.into(),
+                r#type: t.into(),
+            }],
+            ..TypeMapConfig::default()
+        };
+        assert_eq!(
+            map(rule("^turn", "spin")).to_string(),
+            "rule 0 (`^turn` -> `spin`): no type has that name"
+        );
+        let err = map(rule("^(turn", "turn left")).to_string();
+        assert!(
+            err.starts_with(
+                "rule 0 (`^(turn` -> `turn left`): not a valid regex: regex parse error:"
+            ),
+            "{err}"
+        );
     }
 }
