@@ -240,8 +240,7 @@ fn ingest_bytes(path: &Path, bytes: &[u8], config: &PositionsConfig) -> ingest::
         source: "test",
         profile: &spec,
         fps_override: None,
-        positions: Some(config),
-        amass: None,
+        format: config,
     })
 }
 

@@ -52,8 +52,7 @@ fn cmu() -> &'static Capture {
             source: "test",
             profile: &ProfileSpec::bundled("cmu").unwrap(),
             fps_override: None,
-            positions: None,
-            amass: None,
+            format: &ingest::Bvh,
         });
         out.capture.unwrap()
     })

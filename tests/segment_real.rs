@@ -32,8 +32,7 @@ fn capture(path: &Path, profile: &str) -> Capture {
         source: "test",
         profile: &spec,
         fps_override: None,
-        positions: None,
-        amass: None,
+        format: &ingest::Bvh,
     });
     out.capture.unwrap_or_else(|| panic!("{:?}", out.rejects))
 }

@@ -172,8 +172,7 @@ impl<'s> CaptureRead<'s> {
             source: &self.source.name,
             profile: self.spec,
             fps_override: self.fps_override,
-            positions: self.source.positions.as_ref(),
-            amass: self.source.amass.as_ref(),
+            format: ingest::format_of(self.source),
         }
     }
 

@@ -231,23 +231,11 @@ pub fn annotation_notes(
             }
         }
     }
-    // Body shapes and MoSh's first stage sit beside AMASS sequences: skipped, and said so.
-    for file in files {
-        if config
-            .sources
-            .get(file.source)
-            .is_some_and(|s| s.amass.is_some())
-            && motionforge_sources::amass::is_not_a_motion(&file.file_name())
-        {
-            notes.push(Note::new(
-                NoteKind::AmassNotAMotion,
-                format!(
-                    "`{}`: a body shape or MoSh stage-i file, not a motion: skipped",
-                    file.display
-                ),
-            ));
-        }
-    }
+    // Files among the captures that hold no motion (AMASS's body shapes): skipped, and said so.
+    notes.extend(files.iter().filter_map(|file| {
+        let source = config.sources.get(file.source)?;
+        crate::stages::ingest::format_of(source).skipped(file)
+    }));
     notes
 }
 
