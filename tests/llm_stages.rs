@@ -175,6 +175,8 @@ fn llm_stages_ask_each_text_once_and_a_rebuild_sends_nothing() {
     let first = build(&config, &BuildOptions::default()).unwrap();
     // 3 texts x (labels + paraphrases + plans) + 3 plan repairs.
     assert_eq!(server.requests(), 12, "{:?}", server.prompts());
+    // One client for the build's LLM stages (one rate limit, one circuit breaker): one probe.
+    assert_eq!(server.listings(), 1);
     assert_eq!(first.labels.requests, 3);
     assert_eq!(
         first.labels.flagged.len(),
@@ -537,6 +539,9 @@ fn the_optional_llm_pair_check_drops_pairs_it_says_no_to() {
     let asked = server.requests();
     assert!(asked > 0, "pairs were asked about");
     assert_eq!(first.pair_check.requests, asked);
+    // The pair check is a stage of its own: each distinct text pair asked once.
+    let run = stage(&first, "pair_check");
+    assert_eq!((run.items, run.ran), (first.pair_check.texts, asked));
     let vetoed = first
         .synthetic
         .dropped

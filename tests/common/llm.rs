@@ -143,6 +143,7 @@ impl LlmServerBuilder {
             expected_auth: self.api_key,
             models: self.models.clone(),
             requests: AtomicUsize::new(0),
+            listings: AtomicUsize::new(0),
             in_flight: AtomicUsize::new(0),
             max_in_flight: AtomicUsize::new(0),
             seen: Mutex::new(Vec::new()),
@@ -218,6 +219,11 @@ impl LlmServer {
         self.state.requests.load(Ordering::SeqCst)
     }
 
+    /// Model listings answered (`GET /v1/models`: a client probes once before its first request).
+    pub(crate) fn listings(&self) -> usize {
+        self.state.listings.load(Ordering::SeqCst)
+    }
+
     /// Every completion request received, in order.
     pub(crate) fn seen(&self) -> Vec<Request> {
         self.state.seen.lock().unwrap().clone()
@@ -254,6 +260,8 @@ struct ServerState {
     expected_auth: Option<String>,
     models: Option<Vec<String>>,
     requests: AtomicUsize,
+    /// `GET /v1/models` answered (the client's probes).
+    listings: AtomicUsize,
     in_flight: AtomicUsize,
     max_in_flight: AtomicUsize,
     seen: Mutex<Vec<Request>>,
@@ -284,6 +292,7 @@ impl Drop for InFlight {
 }
 
 async fn models(State(s): State<Arc<ServerState>>) -> Response {
+    s.listings.fetch_add(1, Ordering::SeqCst);
     let data: Vec<Value> = (s.models.iter().flatten())
         .map(|id| json!({"id": id, "object": "model"}))
         .collect();

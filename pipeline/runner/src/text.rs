@@ -90,11 +90,12 @@ pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, B
         .map_err(|source| BuildError::LlmCache { path, source })
 }
 
-/// What the LLM stages ask with: the prompt templates and the response cache, opened once per
-/// build.
+/// What the LLM stages ask with: the prompt templates, the response cache and the client, each
+/// made once per build.
 pub(super) struct LlmContext {
     prompts: motionforge_llm::prompt::Prompts,
     cache: Option<ResponseCache>,
+    connection: augment::Connection,
 }
 
 impl LlmContext {
@@ -103,6 +104,7 @@ impl LlmContext {
         Ok(LlmContext {
             prompts: shared.config.prompts()?,
             cache: open_cache(shared)?,
+            connection: augment::Connection::default(),
         })
     }
 
@@ -116,6 +118,7 @@ impl LlmContext {
     ) -> (&'c motionforge_llm::prompt::Prompts, augment::Asker<'c>) {
         let asker = augment::Asker {
             llm: config.llm.as_ref(),
+            connection: &self.connection,
             offline,
             cache: self.cache.as_mut(),
             asking: Asking {
@@ -167,6 +170,7 @@ pub(super) fn label(
     let input = LabelInput {
         config: &config.part_labels,
         llm: config.llm.as_ref(),
+        connection: asker.connection,
         prompts,
         offline: asks.offline,
         progress: asks.progress,

@@ -168,12 +168,29 @@ impl Asking<'_> {
     }
 }
 
+/// The build's one LLM client, made when the first request is to be sent (never offline) and
+/// shared by every LLM stage after it: one rate limit and one circuit breaker per build, as the
+/// server sees one client.
+#[derive(Debug, Default)]
+pub struct Connection(std::cell::OnceCell<Result<LlmClient, LlmError>>);
+
+impl Connection {
+    /// The client for `config`, made on first use (or why it cannot be made).
+    pub fn client(&self, config: &LlmConfig) -> Result<&LlmClient, &LlmError> {
+        self.0
+            .get_or_init(|| LlmClient::new(config.clone()))
+            .as_ref()
+    }
+}
+
 /// Where an LLM stage's prompts go and how it reports them: the server (`None` without
-/// `[llm]`), whether only the cache may answer (`--offline`), the response cache, and the
-/// stage's name and progress.
+/// `[llm]`) and the build's client for it, whether only the cache may answer (`--offline`), the
+/// response cache, and the stage's name and progress.
 pub struct Asker<'a> {
     /// The server's settings.
     pub llm: Option<&'a LlmConfig>,
+    /// The build's client.
+    pub connection: &'a Connection,
     /// Answers from the cache only.
     pub offline: bool,
     /// The response cache (`None` without `[llm]`).
@@ -187,6 +204,7 @@ impl Asker<'_> {
     fn again(&mut self) -> Asker<'_> {
         Asker {
             llm: self.llm,
+            connection: self.connection,
             offline: self.offline,
             cache: self.cache.as_deref_mut(),
             asking: self.asking,
@@ -203,6 +221,7 @@ pub(crate) fn answers(
 ) -> Result<Vec<Option<String>>, AugmentError> {
     let Asker {
         llm,
+        connection,
         offline,
         cache,
         asking,
@@ -229,7 +248,7 @@ pub(crate) fn answers(
             })
             .collect());
     }
-    let client = match LlmClient::new(cfg.clone()) {
+    let client = match connection.client(cfg) {
         Ok(c) => c,
         Err(e) => {
             *report

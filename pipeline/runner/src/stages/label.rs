@@ -16,7 +16,7 @@ use motionforge_language::parts::velocity::motion_parts;
 use motionforge_language::parts::{LabelSource, LabelSources, PartSet};
 use motionforge_llm::Unanswered;
 use motionforge_llm::cache::ResponseCache;
-use motionforge_llm::client::{LlmClient, LlmConfig, LlmError};
+use motionforge_llm::client::{LlmConfig, LlmError};
 use motionforge_llm::prompt::{PromptError, Prompts};
 use motionforge_sources::clip::{Clip, LoadedClip, SourceKind};
 
@@ -113,6 +113,8 @@ pub struct LabelInput<'a> {
     pub config: &'a PartLabelConfig,
     /// The LLM server, if configured.
     pub llm: Option<&'a LlmConfig>,
+    /// The build's client for it.
+    pub connection: &'a crate::stages::augment::Connection,
     /// Prompt templates.
     pub prompts: &'a Prompts,
     /// Force offline (the build's `--offline`).
@@ -233,7 +235,10 @@ fn asked_answers(
 ) -> Result<(Answers, Missing), LabelError> {
     let mut answers: Answers = Vec::with_capacity(texts.len());
     let mut missing: Missing = Vec::new();
-    let client = LlmClient::new(cfg.clone()).map_err(LabelError::Client)?;
+    let client = input
+        .connection
+        .client(cfg)
+        .map_err(|e| LabelError::Client(e.clone()))?;
     let asking = Asking {
         stage: NAME,
         progress: input.progress,
