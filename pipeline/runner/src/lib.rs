@@ -6,10 +6,12 @@
 //!
 //! # A clip's way through this crate
 //!
-//! Step 7 ties steps 1-6 together: [`source`] finds the capture, [`stages::ingest`] and
-//! [`stages::segment`] read and cut it, [`stages::label`], [`stages::augment`],
-//! [`stages::mirror`] and [`stages::compose`] add to the clip, and the write stage hands its row
-//! to the format crate; [`build`] runs them in order, reusing every cached item.
+//! Step 7 ties steps 1-6 together: [`source`] finds the capture, [`stages::ingest`] (through the
+//! capture's [`stages::ingest::CaptureFormat`]) and [`stages::segment`] read and cut it,
+//! [`stages::label`], [`stages::augment`], [`stages::mirror`] and [`stages::compose`] add to the
+//! clip, the label check measures its text against its motion, and the write stage hands its row
+//! to the format crate. [`build`] (and [`plan`]) run the stages as one loop over registered steps,
+//! one per [`Stage`], reusing every cached item.
 
 pub mod config;
 pub mod source;

@@ -253,7 +253,7 @@ fn open_unlinked(dir: &Path) -> Option<std::fs::File> {
 static SPILLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// The per-item stage cache under `<output>/.motionforge/cache/<stage>/`, entries named by
-/// fingerprint and packed into a few files per stage ([`super::pack`]). In probe mode (for
+/// fingerprint and packed into a few files per stage (`pack.rs`). In probe mode (for
 /// `plan`) nothing is computed or stored: misses are collected instead.
 #[derive(Debug, Clone)]
 pub struct Workspace {
