@@ -1,4 +1,5 @@
-//! The errors of the LLM client ([`LlmError`]), one variant per way a prompt can go unanswered.
+//! The errors of the LLM client ([`LlmError`]): of its config, of the server and its answers, of
+//! the cache, and of the client's own runtime.
 
 use super::ConfigFault;
 
