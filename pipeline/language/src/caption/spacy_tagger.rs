@@ -484,7 +484,7 @@ impl SpacyTagger {
     /// matrix product over the rows of all of them. The weights are packed once a product, which
     /// for one short caption costs as much as the product itself (`docs/performance.md`,
     /// "Captions tagged in batches"); each row's arithmetic is the same as alone, so the tags
-    /// (and the scores, bit for bit) are those of [`SpacyTagger::tag`].
+    /// (and the scores, bit for bit) are those of each text tagged alone (the tests' `tag`).
     pub(crate) fn tag_many(&self, texts: &[&[SpacyToken]]) -> Vec<Vec<&str>> {
         let mut out: Vec<Vec<&str>> = texts.iter().map(|t| Vec::with_capacity(t.len())).collect();
         let windows = texts.iter().enumerate().flat_map(|(i, tokens)| {

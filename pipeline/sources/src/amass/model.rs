@@ -421,8 +421,8 @@ struct ShapeArrays<'a> {
 }
 
 impl ShapeArrays<'_> {
-    /// Regrouped sums through the joint regressor (`joints × vertices`): J_template =
-    /// R · v_template, J_dirs[b] = R · shapedirs[.., b] (per coefficient then joint).
+    /// Regrouped sums through the joint regressor (`joints × vertices`): `J_template =
+    /// R · v_template`, `J_dirs[b] = R · shapedirs[.., b]` (per coefficient then joint).
     fn regress(
         &self,
         regressor: &[f64],
