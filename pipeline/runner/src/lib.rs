@@ -10,7 +10,7 @@
 //! capture's [`stages::ingest::CaptureFormat`]) and [`stages::segment`] read and cut it,
 //! [`stages::label`], [`stages::augment`], [`stages::mirror`] and [`stages::compose`] add to the
 //! clip, the label check measures its text against its motion, and the write stage hands its row
-//! to the format crate. [`build`] (and [`plan`]) run the stages as one loop over registered steps,
+//! to the format crate. [`build`] (and [`plan()`]) run the stages as one loop over registered steps,
 //! one per [`Stage`], reusing every cached item.
 
 pub mod config;

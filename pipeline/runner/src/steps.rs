@@ -2,7 +2,7 @@
 //! the one that gathers every capture's clips), run on what the steps before it left in the
 //! [`BuildState`]. The loop decides which steps a run reaches (`--through`, and in probe mode the
 //! first stage whose output is missing), and reports and records every stage's run. Adding a
-//! stage is a [`Step`] and its line in [`STEPS`]; what a stage caches goes through
+//! stage is a [`Step`] and its line in [`STAGES`] or [`SINKS`]; what a stage caches goes through
 //! [`crate::stage::CachedStage`].
 
 use std::collections::{BTreeMap, BTreeSet};
