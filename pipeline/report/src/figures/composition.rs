@@ -5,21 +5,15 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::DrawResult;
 use super::axes::{
     Axis, AxisChart, category_chart, count_ticks, draw_categories, draw_legend, draw_note,
     plot_area, tick_label,
 };
 use super::style::{GREY, NOTE, dots, font, kind_color, kind_label, lighten, udots};
+use super::{DrawResult, Root};
 use crate::stats::{SplitComposition, Stats};
 
-pub(super) fn composition<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn composition(root: &Root, stats: &Stats) -> DrawResult {
     let splits = &stats.composition;
     let area = plot_area(root);
     let kinds = kinds_with_rows(splits);

@@ -1,25 +1,18 @@
 //! Figure 1: occurrences per motion type (LINGO Fig. 6), bars on a linear or, for counts spanning
 //! more than two decades, a log axis.
 
-use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::DrawResult;
 use super::axes::{
     Axis, category_chart, count_label, count_ticks, draw_categories, draw_note, plot_area,
     tick_label,
 };
 use super::style::{BLUE, NOTE, font, udots};
+use super::{DrawResult, Root};
 use crate::stats::{Stats, types_in_report_order};
 
-pub(super) fn motion_type_counts<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn motion_type_counts(root: &Root, stats: &Stats) -> DrawResult {
     let types = types_in_report_order(stats);
     let area = plot_area(root);
     let max = types.iter().map(|t| t.clips).max().unwrap_or(1).max(1) as f64;

@@ -1,10 +1,8 @@
 //! Figure 2: motion length per motion type (LINGO Fig. A2), Gaussian KDE violins over box plots,
 //! with the clips as points when few; the box plot is shared with the plausibility figure.
 
-use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::DrawResult;
 use super::axes::{
     Axis, category_chart, draw_categories, draw_note, nice_ticks, plot_area, tick_label,
 };
@@ -12,19 +10,13 @@ use super::style::{
     BLUE, DARK, DATA_LINE, DOT, MAX_STRIP, MAX_STRIP_CATEGORIES, dots, jitter, lighten, stroke,
     udots,
 };
+use super::{DrawResult, Root};
 use crate::ClipRow;
 use crate::stats::{
     Stats, kde, lengths_by_type, quantile, silverman_bandwidth, types_in_report_order, whiskers,
 };
 
-pub(super) fn motion_lengths<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    rows: &[ClipRow],
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn motion_lengths(root: &Root, rows: &[ClipRow], stats: &Stats) -> DrawResult {
     let order = types_in_report_order(stats);
     let lengths = lengths_by_type(rows);
     let data: Vec<(&str, &[f64])> = order
