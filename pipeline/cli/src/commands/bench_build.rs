@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use motionforge::build::{BuildOptions, BuildReport, DATA_DIR, build, plan};
 use motionforge::progress::{Progress, ProgressSink};
 
-use super::bench::peak_rss_kb;
+use super::bench::{bvh_files, peak_rss_kb};
 use super::bench_floor::{
     BvhioReference, EncodeReference, Scan, bvhio_reference, encode_reference, scan,
 };
@@ -211,15 +211,7 @@ impl Input {
         // Canonical, so the config and the output name the folder without `..`.
         let dir =
             std::fs::canonicalize(dir).with_context(|| format!("cannot find {}", dir.display()))?;
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .with_context(|| format!("cannot list {}", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "bvh"))
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            bail!("no .bvh files in {}", dir.display());
-        }
+        let files = bvh_files(&dir)?;
         let (mut bytes, mut frames) = (0u64, 0u64);
         for file in &files {
             let data =
