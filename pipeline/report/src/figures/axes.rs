@@ -358,20 +358,19 @@ where
 /// The frame the category charts share (clips per motion type, lengths, composition): one slot
 /// per category along x, their `labels` laid out to fit it (drawn below by `draw_categories`),
 /// the value axis `y` up the left labelled by `y_label`, grid lines across at its ticks (light
-/// ones where it has them), `margin` round the plot. Returns the chart, the laid-out labels and
-/// the slot width.
+/// ones where it has them). Returns the chart, the laid-out labels and the slot width.
 pub(super) fn category_chart<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
     labels: &[(String, Option<String>)],
     y: Axis,
     y_label: &dyn Fn(&f64) -> String,
-    margin: u32,
     (x_desc, y_desc): (&str, &str),
 ) -> DrawResult<(AxisChart<'a, DB>, Categories, f64)>
 where
     DB::ErrorType: 'static,
 {
     let n = labels.len().max(1);
+    let margin = udots(4.0);
     let tick_texts: Vec<String> = y.bold.iter().map(y_label).collect();
     let (y_area, slot) = category_slots(area, &tick_texts, true, margin, n)?;
     let cats = layout_categories(area, labels, slot)?;

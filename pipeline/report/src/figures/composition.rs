@@ -43,7 +43,6 @@ pub(super) fn composition(root: &Root, stats: &Stats) -> DrawResult {
         &labels,
         Axis::new(0.0..top, ticks),
         &|v| tick_label(*v, step),
-        udots(4.0),
         ("split", "clips"),
     )?;
     if kinds.is_empty() {

@@ -62,7 +62,6 @@ pub(super) fn motion_type_counts(root: &Root, stats: &Stats) -> DrawResult {
         &labels,
         Axis::new(base..top, bold).with_light(light),
         &|v| tick_text(*v),
-        udots(4.0),
         (
             "motion type",
             if log { "clips (log scale)" } else { "clips" },

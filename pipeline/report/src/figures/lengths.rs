@@ -49,7 +49,6 @@ pub(super) fn motion_lengths(root: &Root, rows: &[ClipRow], stats: &Stats) -> Dr
         &labels,
         Axis::new(0.0..top, ticks),
         &|v| tick_label(*v, step),
-        udots(4.0),
         ("motion type", "length (s)"),
     )?;
     if data.is_empty() {
