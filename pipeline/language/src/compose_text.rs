@@ -58,7 +58,8 @@ use std::collections::{BTreeMap, HashSet};
 use std::fmt;
 use std::sync::LazyLock;
 
-use serde::{Deserialize, Serialize};
+use motionforge_core::base::leak;
+use serde::{Deserialize, Deserializer, Serialize};
 
 /// How two simultaneous actions are joined into one text.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -321,49 +322,73 @@ fn is_gerund_form(word: &str) -> bool {
 /// The bundled word lists (`schemas/compose_text.toml`).
 const WORDS_TOML: &str = include_str!("../../../schemas/compose_text.toml");
 
-/// The word lists as written in the file; each is documented there.
-#[derive(Deserialize)]
+/// The composer's vocabulary (`schemas/compose_text.toml`, where each list is documented), kept
+/// for the life of the process.
+#[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct WordFile {
-    not_gerunds: Vec<String>,
-    stressed_final: Vec<String>,
-    verbs: Vec<String>,
-    light_verbs: Vec<String>,
-    compound_heads: Vec<String>,
-    gait_nouns: Vec<String>,
-    move_nouns: Vec<String>,
-    nominal_phrases: Vec<String>,
-    subjects: Vec<String>,
-    auxiliaries: Vec<String>,
-    side_words: Vec<String>,
-    body_parts: Vec<String>,
-    positions: Vec<String>,
-    coordinators: Vec<String>,
-    plain_adverbs: Vec<String>,
-    not_adverbs: Vec<String>,
-    particle_verbs: BTreeMap<String, Vec<String>>,
+struct Words {
+    #[serde(deserialize_with = "leaked")]
+    not_gerunds: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    stressed_final: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    verbs: HashSet<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    light_verbs: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    compound_heads: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    gait_nouns: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    move_nouns: Vec<&'static str>,
+    #[serde(deserialize_with = "phrases")]
+    nominal_phrases: Vec<Vec<&'static str>>,
+    #[serde(deserialize_with = "phrases")]
+    subjects: Vec<Vec<&'static str>>,
+    #[serde(deserialize_with = "leaked")]
+    auxiliaries: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    side_words: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    body_parts: HashSet<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    positions: HashSet<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    coordinators: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    plain_adverbs: Vec<&'static str>,
+    #[serde(deserialize_with = "leaked")]
+    not_adverbs: Vec<&'static str>,
+    #[serde(deserialize_with = "particles")]
+    particle_verbs: Vec<(&'static str, Vec<&'static str>)>,
 }
 
-/// The composer's vocabulary (`schemas/compose_text.toml`).
-#[derive(Default)]
-struct Words {
-    not_gerunds: Vec<&'static str>,
-    stressed_final: Vec<&'static str>,
-    verbs: HashSet<&'static str>,
-    light_verbs: Vec<&'static str>,
-    compound_heads: Vec<&'static str>,
-    gait_nouns: Vec<&'static str>,
-    move_nouns: Vec<&'static str>,
-    nominal_phrases: Vec<Vec<&'static str>>,
-    subjects: Vec<Vec<&'static str>>,
-    auxiliaries: Vec<&'static str>,
-    side_words: Vec<&'static str>,
-    body_parts: HashSet<&'static str>,
-    positions: HashSet<&'static str>,
-    coordinators: Vec<&'static str>,
-    plain_adverbs: Vec<&'static str>,
-    not_adverbs: Vec<&'static str>,
-    particle_verbs: Vec<(&'static str, Vec<&'static str>)>,
+/// A list of words of the file.
+fn leaked<'de, D: Deserializer<'de>, C: FromIterator<&'static str>>(d: D) -> Result<C, D::Error> {
+    Ok(Vec::<String>::deserialize(d)?
+        .into_iter()
+        .map(leak)
+        .collect())
+}
+
+/// A list of phrases of the file, each as its words.
+fn phrases<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Vec<&'static str>>, D::Error> {
+    let phrases: Vec<String> = Deserialize::deserialize(d)?;
+    Ok(phrases
+        .into_iter()
+        .map(|p| leak(p).split_whitespace().collect())
+        .collect())
+}
+
+/// The particle verbs of the file: each verb with its particles.
+fn particles<'de, D: Deserializer<'de>>(
+    d: D,
+) -> Result<Vec<(&'static str, Vec<&'static str>)>, D::Error> {
+    let verbs: BTreeMap<String, Vec<String>> = Deserialize::deserialize(d)?;
+    Ok(verbs
+        .into_iter()
+        .map(|(w, p)| (leak(w), p.into_iter().map(leak).collect()))
+        .collect())
 }
 
 /// Why the composer's word file cannot be used.
@@ -378,38 +403,7 @@ pub enum WordsError {
 }
 
 fn load_words(text: &str) -> Result<Words, WordsError> {
-    let f: WordFile = toml::from_str(text).map_err(WordsError::Toml)?;
-    let list = |v: Vec<String>| -> Vec<&'static str> {
-        v.into_iter().map(motionforge_core::base::leak).collect()
-    };
-    let phrases = |v: Vec<String>| -> Vec<Vec<&'static str>> {
-        v.into_iter()
-            .map(|p| motionforge_core::base::leak(p).split_whitespace().collect())
-            .collect()
-    };
-    let words = Words {
-        not_gerunds: list(f.not_gerunds),
-        stressed_final: list(f.stressed_final),
-        verbs: list(f.verbs).into_iter().collect(),
-        light_verbs: list(f.light_verbs),
-        compound_heads: list(f.compound_heads),
-        gait_nouns: list(f.gait_nouns),
-        move_nouns: list(f.move_nouns),
-        nominal_phrases: phrases(f.nominal_phrases),
-        subjects: phrases(f.subjects),
-        auxiliaries: list(f.auxiliaries),
-        side_words: list(f.side_words),
-        body_parts: list(f.body_parts).into_iter().collect(),
-        positions: list(f.positions).into_iter().collect(),
-        coordinators: list(f.coordinators),
-        plain_adverbs: list(f.plain_adverbs),
-        not_adverbs: list(f.not_adverbs),
-        particle_verbs: f
-            .particle_verbs
-            .into_iter()
-            .map(|(w, p)| (motionforge_core::base::leak(w), list(p)))
-            .collect(),
-    };
+    let words: Words = toml::from_str(text).map_err(WordsError::Toml)?;
     if words.verbs.is_empty() || words.subjects.iter().any(Vec::is_empty) {
         return Err(WordsError::Empty);
     }

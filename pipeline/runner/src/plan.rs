@@ -116,22 +116,26 @@ impl std::fmt::Display for StaleReason {
     }
 }
 
+impl StaleReason {
+    /// The reasons that carry nothing: each read back by its words alone.
+    const FIXED: [StaleReason; 8] = [
+        StaleReason::New,
+        StaleReason::CacheEntryMissing,
+        StaleReason::NoCachedAnswer,
+        StaleReason::LabelsNotCached,
+        StaleReason::NeverWritten,
+        StaleReason::OutputsChanged,
+        StaleReason::RowsChanged,
+        StaleReason::ReportUnfinished,
+    ];
+}
+
 impl std::str::FromStr for StaleReason {
     type Err = String;
 
     /// Reads the words back (`plan --json` holds them).
     fn from_str(s: &str) -> Result<StaleReason, String> {
-        let fixed = [
-            StaleReason::New,
-            StaleReason::CacheEntryMissing,
-            StaleReason::NoCachedAnswer,
-            StaleReason::LabelsNotCached,
-            StaleReason::NeverWritten,
-            StaleReason::OutputsChanged,
-            StaleReason::RowsChanged,
-            StaleReason::ReportUnfinished,
-        ];
-        if let Some(reason) = fixed.into_iter().find(|r| r.to_string() == s) {
+        if let Some(reason) = StaleReason::FIXED.into_iter().find(|r| r.to_string() == s) {
             return Ok(reason);
         }
         if let Some(parts) = s.strip_prefix(CHANGED) {
@@ -430,18 +434,11 @@ mod tests {
 
     #[test]
     fn reasons_read_back_from_their_words_and_list_in_word_order() {
-        let reasons = [
-            StaleReason::New,
-            StaleReason::CacheEntryMissing,
+        let carrying = [
             StaleReason::Changed(vec!["file content".into(), "config dataset.seed".into()]),
             StaleReason::Upstream(Stage::Ingest),
-            StaleReason::NoCachedAnswer,
-            StaleReason::LabelsNotCached,
-            StaleReason::NeverWritten,
-            StaleReason::OutputsChanged,
-            StaleReason::RowsChanged,
-            StaleReason::ReportUnfinished,
         ];
+        let reasons: Vec<StaleReason> = StaleReason::FIXED.into_iter().chain(carrying).collect();
         for reason in &reasons {
             assert_eq!(
                 reason.to_string().parse::<StaleReason>().as_ref(),

@@ -166,18 +166,24 @@ pub(crate) struct BvhTimings {
     pub(crate) total_s: f64,
 }
 
-/// Reads, forward kinematics and mirrors every capture in `data`, best of `repeat` passes.
-pub(crate) fn bvh_timings(data: &Path, profile: &str, repeat: usize) -> Result<BvhTimings> {
-    let spec = load_profile(profile)?;
-    let mut files: Vec<PathBuf> = std::fs::read_dir(data)
-        .with_context(|| format!("cannot list {}", data.display()))?
+/// The `.bvh` files of `dir` (not below it), in name order; none is an error.
+pub(super) fn bvh_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "bvh"))
         .collect();
     files.sort();
     if files.is_empty() {
-        bail!("no .bvh files in {}", data.display());
+        bail!("no .bvh files in {}", dir.display());
     }
+    Ok(files)
+}
+
+/// Reads, forward kinematics and mirrors every capture in `data`, best of `repeat` passes.
+pub(crate) fn bvh_timings(data: &Path, profile: &str, repeat: usize) -> Result<BvhTimings> {
+    let spec = load_profile(profile)?;
+    let files = bvh_files(data)?;
     let texts: Vec<String> = files
         .iter()
         .map(std::fs::read_to_string)

@@ -10,11 +10,8 @@ use anyhow::{Context, Result, bail};
 use motionforge::amass::{self, Family};
 
 use super::bench::bvh_timings;
-use super::bench_build::{
-    BuildRun, CONFIG_FILE, CONFIG_MARKER, OUTPUT_DIR, WorkDir, grouped, rss_mb, timed_build,
-};
+use super::bench_build::{BenchWork, BuildRun, CONFIG_MARKER, OUTPUT_DIR, grouped, rss_mb};
 use super::bench_machine::load_average;
-use super::load_checked;
 use crate::ui::Ui;
 
 /// What `bench --amass` is asked to do.
@@ -222,28 +219,12 @@ struct AmassBuild {
 }
 
 fn build_run(args: &AmassBench, files: &[PathBuf], family: Family, ui: &Ui) -> Result<AmassBuild> {
-    let work = WorkDir::new(args.keep.as_deref())?;
-    let config_path = work.path.join(CONFIG_FILE);
-    std::fs::write(&config_path, config_text(args, files, family, &work.path)?)
-        .with_context(|| format!("cannot write {}", config_path.display()))?;
-    let config = load_checked(&config_path, None)?;
-    let dataset = config.dataset_dir();
-    let threads = args
-        .threads
-        .unwrap_or_else(rayon::current_num_threads)
-        .max(1);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .thread_name(|i| format!("bench-amass-{i}"))
-        .build()
-        .context("cannot start the build's thread pool")?;
+    let bench = BenchWork::new(args.keep.as_deref(), args.threads, "bench-amass", |work| {
+        config_text(args, files, family, work)
+    })?;
     let mut best: Option<(BuildRun, usize)> = None;
     for _ in 0..args.repeat.max(1) {
-        if dataset.exists() {
-            std::fs::remove_dir_all(&dataset)
-                .with_context(|| format!("cannot remove {}", dataset.display()))?;
-        }
-        let (run, report) = pool.install(|| timed_build(&config, ui))?;
+        let (run, report) = bench.fresh_build(ui)?;
         if report.clips == 0 || !report.rejects.is_empty() {
             bail!(
                 "the build wrote {} rows from {} files and rejected {}: {}",
@@ -263,7 +244,7 @@ fn build_run(args: &AmassBench, files: &[PathBuf], family: Family, ui: &Ui) -> R
     Ok(AmassBuild {
         best,
         rows,
-        threads,
+        threads: bench.threads,
     })
 }
 

@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use motionforge::build::{BuildOptions, BuildReport, DATA_DIR, build, plan};
 use motionforge::progress::{Progress, ProgressSink};
 
-use super::bench::peak_rss_kb;
+use super::bench::{bvh_files, peak_rss_kb};
 use super::bench_floor::{
     BvhioReference, EncodeReference, Scan, bvhio_reference, encode_reference, scan,
 };
@@ -47,7 +47,7 @@ pub(crate) struct BuildBench {
 
 /// The first line of the config the bench writes: marks a `--keep` folder as the bench's own.
 pub(super) const CONFIG_MARKER: &str = "# written by `motionforge bench --build`";
-pub(super) const CONFIG_FILE: &str = "bench.toml";
+const CONFIG_FILE: &str = "bench.toml";
 pub(super) const OUTPUT_DIR: &str = "out";
 
 /// Runs the benchmark and prints its table (or JSON with `--json`).
@@ -62,25 +62,20 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         Some(p) => p.clone(),
         None => input.default_pattern()?,
     };
-    let work = WorkDir::new(args.keep.as_deref())?;
-    let config_path = work.path.join(CONFIG_FILE);
-    let config_text = config_text(&input.dir, &args.profile, &pattern, copies, &work.path);
-    std::fs::write(&config_path, config_text)
-        .with_context(|| format!("cannot write {}", config_path.display()))?;
-    let config = load_checked(&config_path, None)?;
-    let dataset = config.dataset_dir();
-    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
     // Everything the build runs in parallel runs on rayon: a pool of N threads is the build on N
     // cores (the scan and the encode reference are single-threaded by design).
-    let threads = args
-        .threads
-        .unwrap_or_else(rayon::current_num_threads)
-        .max(1);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .thread_name(|i| format!("bench-build-{i}"))
-        .build()
-        .context("cannot start the build's thread pool")?;
+    let bench = BenchWork::new(args.keep.as_deref(), args.threads, "bench-build", |work| {
+        Ok(config_text(
+            &input.dir,
+            &args.profile,
+            &pattern,
+            copies,
+            work,
+        ))
+    })?;
+    let (config, dataset, pool) = (&bench.config, &bench.dataset, &bench.pool);
+    let work = &bench.work.path;
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
     let start_load = load_average();
 
     // The full builds come first, so the process peak read after them is theirs: nothing before
@@ -88,11 +83,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let mut full = Vec::new();
     let mut report = None;
     for _ in 0..repeat {
-        if dataset.exists() {
-            std::fs::remove_dir_all(&dataset)
-                .with_context(|| format!("cannot remove {}", dataset.display()))?;
-        }
-        let (run, r) = pool.install(|| timed_build(&config, ui))?;
+        let (run, r) = bench.fresh_build(ui)?;
         if r.clips == 0 {
             bail!(
                 "the build wrote 0 clips from {} captures ({} rejected: {}); does `--pattern {pattern}` match the file names?",
@@ -113,13 +104,13 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
     let cache = folder_sizes(&dataset.join(".motionforge").join("cache"))?;
     let shards = shard_sizes(&dataset.join(DATA_DIR))?;
 
-    let (noop, noop_ran) = noop_builds(&pool, &config, repeat, ui)?;
-    let (plans, plan_stale) = timed_plans(&pool, &config, repeat)?;
+    let (noop, noop_ran) = noop_builds(pool, config, repeat, ui)?;
+    let (plans, plan_stale) = timed_plans(pool, config, repeat)?;
 
     let scan = scan(&input, copies, repeat)?;
     let encode = encode_reference(&dataset.join(DATA_DIR), config.dataset.zstd_level, repeat)?;
     let bvhio = match &args.bvhio {
-        Some(python) => Some(bvhio_reference(&input.dir, python.as_deref(), &work.path)?),
+        Some(python) => Some(bvhio_reference(&input.dir, python.as_deref(), work)?),
         None => None,
     };
     let end_load = load_average();
@@ -129,7 +120,7 @@ pub(crate) fn bench_build(args: &BuildBench, ui: &Ui) -> Result<()> {
         input: &input,
         copies,
         repeat,
-        threads,
+        threads: bench.threads,
         cpus,
         pattern: &pattern,
         report: &report,
@@ -220,15 +211,7 @@ impl Input {
         // Canonical, so the config and the output name the folder without `..`.
         let dir =
             std::fs::canonicalize(dir).with_context(|| format!("cannot find {}", dir.display()))?;
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .with_context(|| format!("cannot list {}", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "bvh"))
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            bail!("no .bvh files in {}", dir.display());
-        }
+        let files = bvh_files(&dir)?;
         let (mut bytes, mut frames) = (0u64, 0u64);
         for file in &files {
             let data =
@@ -330,6 +313,56 @@ impl WorkDir {
         std::fs::create_dir_all(&path)
             .with_context(|| format!("cannot create {}", path.display()))?;
         Ok(WorkDir { path, remove })
+    }
+}
+
+/// A bench's builds set up: the work folder with the config written there and loaded, the
+/// config's dataset folder, and the rayon pool of `threads` the builds run on.
+pub(super) struct BenchWork {
+    pub(super) work: WorkDir,
+    pub(super) config: motionforge::config::Config,
+    pub(super) dataset: PathBuf,
+    pub(super) threads: usize,
+    pub(super) pool: rayon::ThreadPool,
+}
+
+impl BenchWork {
+    /// Writes the config `text` gives for the work folder (`keep`, or a temporary one), loads
+    /// it, and starts a pool of `threads` (default rayon's own) named `<name>-<i>`.
+    pub(super) fn new(
+        keep: Option<&Path>,
+        threads: Option<usize>,
+        name: &'static str,
+        text: impl FnOnce(&Path) -> Result<String>,
+    ) -> Result<BenchWork> {
+        let work = WorkDir::new(keep)?;
+        let config_path = work.path.join(CONFIG_FILE);
+        std::fs::write(&config_path, text(&work.path)?)
+            .with_context(|| format!("cannot write {}", config_path.display()))?;
+        let config = load_checked(&config_path, None)?;
+        let dataset = config.dataset_dir();
+        let threads = threads.unwrap_or_else(rayon::current_num_threads).max(1);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(move |i| format!("{name}-{i}"))
+            .build()
+            .context("cannot start the build's thread pool")?;
+        Ok(BenchWork {
+            work,
+            config,
+            dataset,
+            threads,
+            pool,
+        })
+    }
+
+    /// A timed build from scratch on the pool: the dataset folder removed first.
+    pub(super) fn fresh_build(&self, ui: &Ui) -> Result<(BuildRun, BuildReport)> {
+        if self.dataset.exists() {
+            std::fs::remove_dir_all(&self.dataset)
+                .with_context(|| format!("cannot remove {}", self.dataset.display()))?;
+        }
+        self.pool.install(|| timed_build(&self.config, ui))
     }
 }
 

@@ -392,110 +392,127 @@ struct TitleBand<'t> {
     height: u32,
 }
 
-/// Draws the title and ground grid of `scene` into the panel at `x0` of a `w × h` RGB buffer, and
-/// a one-metre bar when `bar`.
-#[allow(clippy::too_many_arguments)]
-fn draw_background(
-    buf: &mut [u8],
-    (w, h): (u32, u32),
-    (x0, y0): (i32, i32),
-    scene: &Scene,
+/// A panel's cell as drawn: a `size`-pixel square at `origin` of an `image`-sized RGB buffer,
+/// showing `scene` at `scale` pixels per image-plane metre.
+struct Cell<'s> {
+    image: ImageSize,
+    origin: (i32, i32),
+    scene: &'s Scene<'s>,
     scale: f64,
     size: u32,
-    title: &TitleBand,
-    bar: bool,
-) -> Draw {
-    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
-    let px = pixel_map(scene, scale, size, x0, y0);
-    draw_ground(&root, &px, scene, grid_steps(scene.ground.0))?;
-    let caption = TextStyle::from((FONT, CAPTION_PX).into_font()).color(&INK);
-    let id = TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK);
-    let mut y = y0 - title.height as i32 + TITLE_PAD as i32;
-    for line in &title.lines.0 {
-        root.draw(&Text::new(line.as_str(), (x0 + 4, y), caption.clone()))?;
-        y += CAPTION_LINE as i32;
-    }
-    for line in &title.lines.1 {
-        root.draw(&Text::new(line.as_str(), (x0 + 4, y), id.clone()))?;
-        y += ID_LINE as i32;
-    }
-    if bar {
-        // One metre of the image plane at this panel's scale, bottom left.
-        let length = scale.round().clamp(1.0, f64::from(size) - 16.0) as i32;
-        let at = y0 + size as i32 - 10;
-        root.draw(&PathElement::new(
-            vec![(x0 + 8, at), (x0 + 8 + length, at)],
-            INK.stroke_width(2),
-        ))?;
-        root.draw(&Text::new(
-            "1 m",
-            (x0 + 10 + length, at - 7),
-            TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK),
-        ))?;
-    }
-    root.present()?;
-    Ok(())
 }
 
-/// Image-plane metres to pixels of the panel whose drawing area starts at (`x0`, `y0`).
-fn pixel_map(
-    scene: &Scene,
-    scale: f64,
-    size: u32,
-    x0: i32,
-    y0: i32,
-) -> impl Fn([f64; 2]) -> (i32, i32) + use<> {
-    let c = scene.centre;
-    let half = f64::from(size) / 2.0;
-    move |p: [f64; 2]| {
+type Area<'b> = DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>;
+
+impl Cell<'_> {
+    /// Image-plane metres to pixels of this cell.
+    fn px(&self, p: [f64; 2]) -> (i32, i32) {
+        let c = self.scene.centre;
+        let half = f64::from(self.size) / 2.0;
         (
-            x0 + (half + (p[0] - c[0]) * scale).round() as i32,
-            y0 + (half - (p[1] - c[1]) * scale).round() as i32,
+            self.origin.0 + (half + (p[0] - c[0]) * self.scale).round() as i32,
+            self.origin.1 + (half - (p[1] - c[1]) * self.scale).round() as i32,
         )
     }
-}
 
-/// Draws frame `f` of `scene`: bones far to near, coloured by the child joint's part, and the
-/// pelvis goal as a marker when the row has one.
-fn draw_pose(
-    buf: &mut [u8],
-    (w, h): (u32, u32),
-    (x0, y0): (i32, i32),
-    scene: &Scene,
-    f: usize,
-    scale: f64,
-    size: u32,
-) -> Draw {
-    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
-    let px = pixel_map(scene, scale, size, x0, y0);
-    let n = scene.joints;
-    let pose = &scene.points[f * n..(f + 1) * n];
-    let joints = &scene.panel.skeleton.joints;
-    let body = &scene.body;
-    let mut bones: Vec<(f64, usize, usize)> = joints
-        .iter()
-        .enumerate()
-        .filter_map(|(j, joint)| joint.parent.filter(|p| *p < n && j < n).map(|p| (j, p)))
-        .filter(|(_, p)| body.get(*p).copied().unwrap_or(false))
-        .map(|(j, p)| ((pose[j].1 + pose[p].1) / 2.0, j, p))
-        .collect();
-    bones.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let width = (f64::from(size) / 90.0).round().max(2.0) as u32;
-    for (_, j, p) in bones {
-        let colour = part_colour(joints[j].part);
-        root.draw(&PathElement::new(
-            vec![px(pose[p].0), px(pose[j].0)],
-            colour.stroke_width(width),
-        ))?;
+    /// Runs `draw` on the cell's drawing area over `buf`, then presents it.
+    fn paint(&self, buf: &mut [u8], draw: impl FnOnce(&Area) -> Draw) -> Draw {
+        let root = BitMapBackend::with_buffer(buf, self.image).into_drawing_area();
+        draw(&root)?;
+        root.present()?;
+        Ok(())
     }
-    if let Some(g) = &scene.panel.frames.info.goal_pelvis
-        && g.len() >= 2
-    {
-        let at = px(project(DVec3::new(f64::from(g[0]), f64::from(g[1]), 0.0)).0);
-        root.draw(&Cross::new(at, 5, GOAL.stroke_width(2)))?;
+
+    /// Draws the title and ground grid, and a one-metre bar when `bar`.
+    fn background(&self, buf: &mut [u8], title: &TitleBand, bar: bool) -> Draw {
+        let (x0, y0) = self.origin;
+        self.paint(buf, |root| {
+            self.ground(root, grid_steps(self.scene.ground.0))?;
+            let caption = TextStyle::from((FONT, CAPTION_PX).into_font()).color(&INK);
+            let id = TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK);
+            let mut y = y0 - title.height as i32 + TITLE_PAD as i32;
+            for line in &title.lines.0 {
+                root.draw(&Text::new(line.as_str(), (x0 + 4, y), caption.clone()))?;
+                y += CAPTION_LINE as i32;
+            }
+            for line in &title.lines.1 {
+                root.draw(&Text::new(line.as_str(), (x0 + 4, y), id.clone()))?;
+                y += ID_LINE as i32;
+            }
+            if bar {
+                // One metre of the image plane at this panel's scale, bottom left.
+                let length = self.scale.round().clamp(1.0, f64::from(self.size) - 16.0) as i32;
+                let at = y0 + self.size as i32 - 10;
+                root.draw(&PathElement::new(
+                    vec![(x0 + 8, at), (x0 + 8 + length, at)],
+                    INK.stroke_width(2),
+                ))?;
+                root.draw(&Text::new(
+                    "1 m",
+                    (x0 + 10 + length, at - 7),
+                    TextStyle::from((FONT, ID_PX).into_font()).color(&ID_INK),
+                ))?;
+            }
+            Ok(())
+        })
     }
-    root.present()?;
-    Ok(())
+
+    /// The ground grid of a filmstrip cell after the first, with the cell's time.
+    fn grid(&self, buf: &mut [u8]) -> Draw {
+        let gx = self.scene.ground.0;
+        self.paint(buf, |root| self.ground(root, [gx[0], gx[1]].into_iter()))
+    }
+
+    /// Draws frame `f` of the scene: bones far to near, coloured by the child joint's part, and
+    /// the pelvis goal as a marker when the row has one.
+    fn pose(&self, buf: &mut [u8], f: usize) -> Draw {
+        let scene = self.scene;
+        let n = scene.joints;
+        let pose = &scene.points[f * n..(f + 1) * n];
+        let joints = &scene.panel.skeleton.joints;
+        let body = &scene.body;
+        let mut bones: Vec<(f64, usize, usize)> = joints
+            .iter()
+            .enumerate()
+            .filter_map(|(j, joint)| joint.parent.filter(|p| *p < n && j < n).map(|p| (j, p)))
+            .filter(|(_, p)| body.get(*p).copied().unwrap_or(false))
+            .map(|(j, p)| ((pose[j].1 + pose[p].1) / 2.0, j, p))
+            .collect();
+        bones.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let width = (f64::from(self.size) / 90.0).round().max(2.0) as u32;
+        self.paint(buf, |root| {
+            for (_, j, p) in bones {
+                let colour = part_colour(joints[j].part);
+                root.draw(&PathElement::new(
+                    vec![self.px(pose[p].0), self.px(pose[j].0)],
+                    colour.stroke_width(width),
+                ))?;
+            }
+            if let Some(g) = &scene.panel.frames.info.goal_pelvis
+                && g.len() >= 2
+            {
+                let at = self.px(project(DVec3::new(f64::from(g[0]), f64::from(g[1]), 0.0)).0);
+                root.draw(&Cross::new(at, 5, GOAL.stroke_width(2)))?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The ground's lines along y at `xs`, then across it at every [`grid_steps`] of its depth.
+    fn ground(&self, root: &Area, xs: impl Iterator<Item = f64>) -> Draw {
+        let (gx, gy) = self.scene.ground;
+        for x in xs {
+            let a = self.px(project(DVec3::new(x, gy[0], 0.0)).0);
+            let b = self.px(project(DVec3::new(x, gy[1], 0.0)).0);
+            root.draw(&PathElement::new(vec![a, b], GRID))?;
+        }
+        for y in grid_steps(gy) {
+            let a = self.px(project(DVec3::new(gx[0], y, 0.0)).0);
+            let b = self.px(project(DVec3::new(gx[1], y, 0.0)).0);
+            root.draw(&PathElement::new(vec![a, b], GRID))?;
+        }
+        Ok(())
+    }
 }
 
 /// A rendered preview: the GIF's frames (RGB), the filmstrip (RGB), their sizes.
@@ -601,41 +618,34 @@ impl PanelView<'_> {
             .collect();
         let band = title_band(&titles);
         let (w, h) = (size * scenes.len() as u32, size + band);
+        let cells: Vec<_> = scenes
+            .iter()
+            .enumerate()
+            .map(|(k, scene)| Cell {
+                image: (w, h),
+                origin: ((size * k as u32) as i32, band as i32),
+                scene,
+                scale: scales[k],
+                size,
+            })
+            .collect();
         let mut background = vec![255u8; (w * h * 3) as usize];
-        for (k, s) in scenes.iter().enumerate() {
+        for (cell, lines) in cells.iter().zip(&titles) {
             let title = TitleBand {
-                lines: &titles[k],
+                lines,
                 height: band,
             };
-            draw_background(
-                &mut background,
-                (w, h),
-                ((size * k as u32) as i32, band as i32),
-                s,
-                scales[k],
-                size,
-                &title,
-                self.bar,
-            )
-            .map_err(render_err)?;
+            cell.background(&mut background, &title, self.bar)
+                .map_err(render_err)?;
         }
         let count = if animate { count } else { 0 };
         let mut frames = Vec::with_capacity(count);
         for f in 0..count {
             let mut buf = background.clone();
-            for (k, s) in scenes.iter().enumerate() {
+            for cell in &cells {
                 // A shorter clip holds its last pose.
-                let at = f.min(s.frames().saturating_sub(1));
-                draw_pose(
-                    &mut buf,
-                    (w, h),
-                    ((size * k as u32) as i32, band as i32),
-                    s,
-                    at,
-                    scales[k],
-                    size,
-                )
-                .map_err(render_err)?;
+                let at = f.min(cell.scene.frames().saturating_sub(1));
+                cell.pose(&mut buf, at).map_err(render_err)?;
             }
             frames.push(buf);
         }
@@ -668,64 +678,30 @@ impl PanelView<'_> {
                 } else {
                     (c as usize * (n - 1)) / (cells as usize - 1)
                 };
-                let x0 = (c * size) as i32;
+                let cell = Cell {
+                    image: (sw, sh),
+                    origin: ((c * size) as i32, y0),
+                    scene: s,
+                    scale,
+                    size,
+                };
                 if c == 0 {
-                    draw_background(&mut strip, (sw, sh), (x0, y0), s, scale, size, &title, bar)
-                        .map_err(render_err)?;
+                    cell.background(&mut strip, &title, bar)
                 } else {
-                    draw_grid_cell(&mut strip, (sw, sh), (x0, y0), s, scale, size)
-                        .map_err(render_err)?;
+                    cell.grid(&mut strip)
                 }
-                draw_pose(&mut strip, (sw, sh), (x0, y0), s, at, scale, size)
-                    .map_err(render_err)?;
+                .map_err(render_err)?;
+                cell.pose(&mut strip, at).map_err(render_err)?;
             }
         }
         Ok(((sw, sh), strip))
     }
 }
 
-/// The ground grid of a filmstrip cell after the first, with the cell's time.
-fn draw_grid_cell(
-    buf: &mut [u8],
-    (w, h): (u32, u32),
-    (x0, y0): (i32, i32),
-    scene: &Scene,
-    scale: f64,
-    size: u32,
-) -> Draw {
-    let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
-    let px = pixel_map(scene, scale, size, x0, y0);
-    let gx = scene.ground.0;
-    draw_ground(&root, &px, scene, [gx[0], gx[1]].into_iter())?;
-    root.present()?;
-    Ok(())
-}
-
 /// Every [`GRID_M`] from the start of the ground range `r` to about its end.
 fn grid_steps(r: [f64; 2]) -> impl Iterator<Item = f64> {
     let n = ((r[1] - r[0]) / GRID_M).round().clamp(0.0, 400.0) as usize;
     (0..=n).map(move |i| r[0] + i as f64 * GRID_M)
-}
-
-/// The ground's lines along y at `xs`, then across it at every [`grid_steps`] of its depth.
-fn draw_ground(
-    root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
-    px: &impl Fn([f64; 2]) -> (i32, i32),
-    scene: &Scene,
-    xs: impl Iterator<Item = f64>,
-) -> Draw {
-    let (gx, gy) = scene.ground;
-    for x in xs {
-        let a = px(project(DVec3::new(x, gy[0], 0.0)).0);
-        let b = px(project(DVec3::new(x, gy[1], 0.0)).0);
-        root.draw(&PathElement::new(vec![a, b], GRID))?;
-    }
-    for y in grid_steps(gy) {
-        let a = px(project(DVec3::new(gx[0], y, 0.0)).0);
-        let b = px(project(DVec3::new(gx[1], y, 0.0)).0);
-        root.draw(&PathElement::new(vec![a, b], GRID))?;
-    }
-    Ok(())
 }
 
 /// The GIF palette: the drawing's own colours first, then a 6×6×6 cube and a grey ramp for

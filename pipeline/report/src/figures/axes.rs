@@ -356,25 +356,30 @@ where
 }
 
 /// The frame the category charts share (clips per motion type, lengths, composition): one slot
-/// per category along x (`n` of them, labelled below by `draw_categories`, `label_height` tall),
-/// the value axis `y` up the left, grid lines across at its ticks (light ones where it has
-/// them). `sizes` is the margin, the category labels' height and the value labels' width.
+/// per category along x, their `labels` laid out to fit it (drawn below by `draw_categories`),
+/// the value axis `y` up the left labelled by `y_label`, grid lines across at its ticks (light
+/// ones where it has them). Returns the chart, the laid-out labels and the slot width.
 pub(super) fn category_chart<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
-    (x, y): (Axis, Axis),
-    (margin, label_height, y_area): (u32, u32, u32),
+    labels: &[(String, Option<String>)],
+    y: Axis,
     y_label: &dyn Fn(&f64) -> String,
     (x_desc, y_desc): (&str, &str),
-) -> DrawResult<AxisChart<'a, DB>>
+) -> DrawResult<(AxisChart<'a, DB>, Categories, f64)>
 where
     DB::ErrorType: 'static,
 {
+    let n = labels.len().max(1);
+    let margin = udots(4.0);
+    let tick_texts: Vec<String> = y.bold.iter().map(y_label).collect();
+    let (y_area, slot) = category_slots(area, &tick_texts, true, margin, n)?;
+    let cats = layout_categories(area, labels, slot)?;
     let light_grid = !y.light.is_empty();
     let mut chart = ChartBuilder::on(area)
         .margin(margin)
-        .x_label_area_size(label_height + udots(DESC + 6.0))
+        .x_label_area_size(cats.height + udots(DESC + 6.0))
         .y_label_area_size(y_area)
-        .build_cartesian_2d(x, y)?;
+        .build_cartesian_2d(Axis::categories(n), y)?;
     let mut mesh = chart.configure_mesh();
     mesh.disable_x_mesh()
         .set_all_tick_mark_size(udots(TICK_MARK))
@@ -390,5 +395,5 @@ where
         .x_desc(x_desc)
         .y_desc(y_desc)
         .draw()?;
-    Ok(chart)
+    Ok((chart, cats, slot))
 }

@@ -5,24 +5,17 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::DrawResult;
 use super::axes::{
-    Axis, AxisChart, category_chart, category_slots, count_ticks, draw_categories, draw_legend,
-    draw_note, layout_categories, plot_area, tick_label, tick_labels,
+    Axis, AxisChart, category_chart, count_ticks, draw_categories, draw_legend, draw_note,
+    plot_area, tick_label,
 };
 use super::style::{GREY, NOTE, dots, font, kind_color, kind_label, lighten, udots};
+use super::{DrawResult, Root};
 use crate::stats::{SplitComposition, Stats};
 
-pub(super) fn composition<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn composition(root: &Root, stats: &Stats) -> DrawResult {
     let splits = &stats.composition;
     let area = plot_area(root);
-    let n = splits.len().max(1);
     let kinds = kinds_with_rows(splits);
     let any_mirrored = splits
         .iter()
@@ -33,7 +26,6 @@ where
         .max()
         .unwrap_or(0)
         .max(1) as f64;
-    let margin = udots(4.0);
     let labels: Vec<(String, Option<String>)> = splits
         .iter()
         .map(|s| (s.split.clone(), Some(format!("(n = {})", s.total))))
@@ -46,12 +38,10 @@ where
     let headroom = ((legend + dots(NOTE + 3.0)) / plot_height).clamp(0.15, 0.7);
     let top = max / (1.0 - headroom);
     let (ticks, step) = count_ticks(top);
-    let (y_area, slot) = category_slots(&area, &tick_labels(&ticks, step), true, margin, n)?;
-    let cats = layout_categories(&area, &labels, slot)?;
-    let mut chart = category_chart(
+    let (mut chart, cats, slot) = category_chart(
         &area,
-        (Axis::categories(n), Axis::new(0.0..top, ticks)),
-        (margin, cats.height, y_area),
+        &labels,
+        Axis::new(0.0..top, ticks),
         &|v| tick_label(*v, step),
         ("split", "clips"),
     )?;

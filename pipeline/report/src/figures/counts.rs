@@ -1,28 +1,20 @@
 //! Figure 1: occurrences per motion type (LINGO Fig. 6), bars on a linear or, for counts spanning
 //! more than two decades, a log axis.
 
-use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::DrawResult;
 use super::axes::{
-    Axis, category_chart, category_slots, count_label, count_ticks, draw_categories, draw_note,
-    layout_categories, plot_area, tick_label,
+    Axis, category_chart, count_label, count_ticks, draw_categories, draw_note, plot_area,
+    tick_label,
 };
 use super::style::{BLUE, NOTE, font, udots};
+use super::{DrawResult, Root};
 use crate::stats::{Stats, types_in_report_order};
 
-pub(super) fn motion_type_counts<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn motion_type_counts(root: &Root, stats: &Stats) -> DrawResult {
     let types = types_in_report_order(stats);
     let area = plot_area(root);
-    let n = types.len().max(1);
     let max = types.iter().map(|t| t.clips).max().unwrap_or(1).max(1) as f64;
     let min = types.iter().map(|t| t.clips).min().unwrap_or(1).max(1) as f64;
     // A log axis only for counts spanning more than two decades (LINGO's thousands against a
@@ -61,21 +53,14 @@ where
             tick_label(v, step)
         }
     };
-    let margin = udots(4.0);
-    let tick_texts: Vec<String> = bold.iter().map(|v| tick_text(*v)).collect();
-    let (y_area, slot) = category_slots(&area, &tick_texts, true, margin, n)?;
     let labels: Vec<(String, Option<String>)> = types
         .iter()
         .map(|t| (t.motion_type.clone(), None))
         .collect();
-    let cats = layout_categories(&area, &labels, slot)?;
-    let mut chart = category_chart(
+    let (mut chart, cats, slot) = category_chart(
         &area,
-        (
-            Axis::categories(n),
-            Axis::new(base..top, bold).with_light(light),
-        ),
-        (margin, cats.height, y_area),
+        &labels,
+        Axis::new(base..top, bold).with_light(light),
         &|v| tick_text(*v),
         (
             "motion type",

@@ -4,12 +4,12 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::DrawResult;
 use super::axes::{Axis, AxisChart, TICK_MARK, draw_legend, draw_note, plot_area, tick_label};
 use super::style::{
     AXIS_LINE, DESC, GRID, GRID_LINE, MAX_SCATTER, NOTE, RED, TICK, dots, font, lighten, stroke,
     udots,
 };
+use super::{DrawResult, Root};
 use crate::ClipRow;
 
 /// A "nice" step (1, 2, 2.5 or 5 x 10^k) at least `raw`.
@@ -48,13 +48,7 @@ fn heat_color(t: f64) -> RGBColor {
     RGBColor(m(a.0, b.0), m(a.1, b.1), m(a.2, b.2))
 }
 
-pub(super) fn goal_locations<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    rows: &[ClipRow],
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn goal_locations(root: &Root, rows: &[ClipRow]) -> DrawResult {
     let goals: Vec<(f64, f64)> = rows
         .iter()
         .filter(|r| r.is_original())

@@ -1,31 +1,22 @@
 //! Figure 2: motion length per motion type (LINGO Fig. A2), Gaussian KDE violins over box plots,
 //! with the clips as points when few; the box plot is shared with the plausibility figure.
 
-use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::DrawResult;
 use super::axes::{
-    Axis, category_chart, category_slots, draw_categories, draw_note, layout_categories,
-    nice_ticks, plot_area, tick_label, tick_labels,
+    Axis, category_chart, draw_categories, draw_note, nice_ticks, plot_area, tick_label,
 };
 use super::style::{
     BLUE, DARK, DATA_LINE, DOT, MAX_STRIP, MAX_STRIP_CATEGORIES, dots, jitter, lighten, stroke,
     udots,
 };
+use super::{DrawResult, Root};
 use crate::ClipRow;
 use crate::stats::{
     Stats, kde, lengths_by_type, quantile, silverman_bandwidth, types_in_report_order, whiskers,
 };
 
-pub(super) fn motion_lengths<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    rows: &[ClipRow],
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn motion_lengths(root: &Root, rows: &[ClipRow], stats: &Stats) -> DrawResult {
     let order = types_in_report_order(stats);
     let lengths = lengths_by_type(rows);
     let data: Vec<(&str, &[f64])> = order
@@ -48,19 +39,15 @@ where
         .filter_map(|(_, v)| v.last().copied())
         .fold(0.0, f64::max);
     let top = if top > 0.0 { top * 1.05 } else { 1.0 };
-    let n = data.len().max(1);
     let (ticks, step) = nice_ticks(0.0, top, 6);
-    let margin = udots(4.0);
-    let (y_area, slot) = category_slots(&area, &tick_labels(&ticks, step), true, margin, n)?;
     let labels: Vec<(String, Option<String>)> = data
         .iter()
         .map(|(name, v)| (name.to_string(), Some(format!("(n = {})", v.len()))))
         .collect();
-    let cats = layout_categories(&area, &labels, slot)?;
-    let mut chart = category_chart(
+    let (mut chart, cats, slot) = category_chart(
         &area,
-        (Axis::categories(n), Axis::new(0.0..top, ticks)),
-        (margin, cats.height, y_area),
+        &labels,
+        Axis::new(0.0..top, ticks),
         &|v| tick_label(*v, step),
         ("motion type", "length (s)"),
     )?;

@@ -131,6 +131,9 @@ pub const FIGURES: [FigureSpec; 5] = [
 
 type DrawResult<T = ()> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
+/// A whole figure's drawing area: each is drawn once, as SVG, and PDF and PNG are encoded from it.
+type Root<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+
 /// Writes every figure of [`FIGURES`] as SVG, PDF and PNG into `dir`; returns the paths.
 pub(crate) fn write_figures(
     rows: &[ClipRow],
@@ -182,15 +185,7 @@ fn write_figure(
     Ok(written)
 }
 
-fn render<DB: DrawingBackend>(
-    spec: &FigureSpec,
-    root: &DrawingArea<DB, Shift>,
-    rows: &[ClipRow],
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+fn render(spec: &FigureSpec, root: &Root, rows: &[ClipRow], stats: &Stats) -> DrawResult {
     root.fill(&WHITE)?;
     match spec.stem {
         "motion_type_counts" => counts::motion_type_counts(root, stats),

@@ -5,7 +5,6 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::DrawResult;
 use super::axes::{
     Axis, AxisChart, TICK_MARK, category_slots, draw_categories, layout_categories, nice_ticks,
     plot_area, tick_label, tick_labels,
@@ -15,17 +14,11 @@ use super::style::{
     AXIS_LINE, BLUE, DATA_LINE, DESC, DOT, GREEN, GREY, GRID, GRID_LINE, MAX_STRIP, NOTE, RED,
     TICK, font, jitter, lighten, stroke, udots,
 };
+use super::{DrawResult, Root};
 use crate::ClipRow;
 use crate::stats::{MetricInfo, Stats, metric_values};
 
-pub(super) fn plausibility<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    rows: &[ClipRow],
-    stats: &Stats,
-) -> DrawResult
-where
-    DB::ErrorType: 'static,
-{
+pub(super) fn plausibility(root: &Root, rows: &[ClipRow], stats: &Stats) -> DrawResult {
     let area = plot_area(root);
     // One row of panels: a figure* across both columns, each panel a metric.
     let panels = area.split_evenly((1, 4));

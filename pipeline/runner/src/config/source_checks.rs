@@ -133,17 +133,9 @@ impl SourceConfig {
                 ),
             );
         }
-        if let Some(table) = &self.fps_table
-            && !config.resolve(Path::new(table)).is_file()
-        {
-            c.push(
-                &key_at(at, &[K("fps_table")]),
-                format!("{table:?}"),
-                &format!(
-                    "an existing JSON file (resolved as {})",
-                    config.resolve(Path::new(table)).display()
-                ),
-            );
+        if let Some(table) = &self.fps_table {
+            let key = key_at(at, &[K("fps_table")]);
+            expect_existing(config, &key, table, "JSON file", Path::is_file, c);
         }
         if let Some(a) = &self.amass
             && !a.body_model.trim().is_empty()
@@ -231,24 +223,19 @@ impl LabelConfig {
                 }
             }
             LabelConfig::FrameIndex { path, texts, .. } => {
-                let resolved = config.resolve(Path::new(path));
-                if !path.trim().is_empty() && !resolved.is_file() {
-                    c.push(
-                        &key_at(at, &[K("path")]),
-                        format!("{path:?}"),
-                        &format!("an existing index CSV (resolved as {})", resolved.display()),
-                    );
+                if !path.trim().is_empty() {
+                    let key = key_at(at, &[K("path")]);
+                    expect_existing(config, &key, path, "index CSV", Path::is_file, c);
                 }
-                if let Some(dir) = texts
-                    && !config.resolve(Path::new(dir)).is_dir()
-                {
-                    c.push(
-                        &key_at(at, &[K("texts")]),
-                        format!("{dir:?}"),
-                        &format!(
-                            "an existing folder of caption files (resolved as {})",
-                            config.resolve(Path::new(dir)).display()
-                        ),
+                if let Some(dir) = texts {
+                    let key = key_at(at, &[K("texts")]);
+                    expect_existing(
+                        config,
+                        &key,
+                        dir,
+                        "folder of caption files",
+                        Path::is_dir,
+                        c,
                     );
                 }
             }
@@ -402,6 +389,26 @@ impl AmassConfig {
                 ),
             );
         }
+    }
+}
+
+/// A problem at `key` unless `path`, relative to the config file, is there as `there` asks (a
+/// file, a folder): `an existing {what} (resolved as ...)`.
+fn expect_existing(
+    config: &Config,
+    key: &[Seg<'_>],
+    path: &str,
+    what: &str,
+    there: fn(&Path) -> bool,
+    c: &mut Checks<'_>,
+) {
+    let resolved = config.resolve(Path::new(path));
+    if !there(&resolved) {
+        c.push(
+            key,
+            format!("{path:?}"),
+            &format!("an existing {what} (resolved as {})", resolved.display()),
+        );
     }
 }
 

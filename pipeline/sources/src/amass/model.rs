@@ -460,12 +460,8 @@ impl ShapeArrays<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::npz::tests::{npy, zip};
+    use super::super::npz::tests::{f8, npy, npz};
     use super::*;
-
-    fn f8(values: &[f64]) -> Vec<u8> {
-        values.iter().flat_map(|v| v.to_le_bytes()).collect()
-    }
 
     fn i8s(values: &[i64]) -> Vec<u8> {
         values.iter().flat_map(|v| v.to_le_bytes()).collect()
@@ -474,7 +470,7 @@ mod tests {
     /// A model of 2 vertices, 2 joints and 2 shape directions, with `(key, npy bytes)` replacing
     /// arrays.
     fn model(changes: &[(&str, Vec<u8>)]) -> Vec<u8> {
-        let mut arrays: Vec<(String, Vec<u8>)> = vec![
+        let arrays: Vec<(String, Vec<u8>)> = vec![
             ("v_template".into(), npy("<f8", "(2, 3)", &f8(&[0.0; 6]))),
             ("shapedirs".into(), npy("<f8", "(2, 3, 2)", &f8(&[0.0; 12]))),
             (
@@ -489,18 +485,7 @@ mod tests {
             ("weights".into(), npy("<f8", "(1,)", &f8(&[0.0]))),
             ("f".into(), npy("<i8", "(1,)", &i8s(&[0]))),
         ];
-        for (key, bytes) in changes {
-            if let Some(a) = arrays.iter_mut().find(|(k, _)| k == key) {
-                a.1 = bytes.clone();
-            }
-        }
-        let named: Vec<(String, Vec<u8>)> = arrays
-            .into_iter()
-            .map(|(k, b)| (format!("{k}.npy"), b))
-            .collect();
-        let entries: Vec<(&str, Vec<u8>)> =
-            named.iter().map(|(k, b)| (k.as_str(), b.clone())).collect();
-        zip(&entries)
+        npz(arrays, changes)
     }
 
     /// The texts of the shape faults, as errors show them: they must not change.

@@ -678,6 +678,29 @@ pub(crate) mod tests {
         );
     }
 
+    /// The little-endian bytes of `values`: a `<f8` array's data.
+    pub(crate) fn f8(values: &[f64]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    /// An `.npz` of `(key, npy bytes)` `arrays`, each of `changes` replacing the array of its
+    /// key or added after them.
+    pub(crate) fn npz(mut arrays: Vec<(String, Vec<u8>)>, changes: &[(&str, Vec<u8>)]) -> Vec<u8> {
+        for (key, bytes) in changes {
+            match arrays.iter_mut().find(|(k, _)| k == key) {
+                Some(a) => a.1 = bytes.clone(),
+                None => arrays.push((key.to_string(), bytes.clone())),
+            }
+        }
+        let named: Vec<(String, Vec<u8>)> = arrays
+            .into_iter()
+            .map(|(k, b)| (format!("{k}.npy"), b))
+            .collect();
+        let entries: Vec<(&str, Vec<u8>)> =
+            named.iter().map(|(k, b)| (k.as_str(), b.clone())).collect();
+        zip(&entries)
+    }
+
     /// A stored (uncompressed) zip of `(name, bytes)` entries, as `np.savez` writes one.
     pub(crate) fn zip(entries: &[(&str, Vec<u8>)]) -> Vec<u8> {
         let mut out = Vec::new();

@@ -261,35 +261,19 @@ pub fn humanml3d_stride(fps: f64) -> (usize, f64) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::npz::tests::{npy, zip};
+    use super::super::npz::tests::{f8, npy, npz};
     use super::*;
-
-    fn f8(values: &[f64]) -> Vec<u8> {
-        values.iter().flat_map(|v| v.to_le_bytes()).collect()
-    }
 
     /// A sequence file of two SMPL-H frames, with `(key, npy bytes)` replacing or adding arrays.
     fn file(changes: &[(&str, Vec<u8>)]) -> Vec<u8> {
-        let mut arrays: Vec<(String, Vec<u8>)> = vec![
+        let arrays: Vec<(String, Vec<u8>)> = vec![
             ("poses".into(), npy("<f8", "(2, 156)", &f8(&[0.0; 312]))),
             ("trans".into(), npy("<f8", "(2, 3)", &f8(&[0.0; 6]))),
             ("betas".into(), npy("<f8", "(16,)", &f8(&[0.0; 16]))),
             ("gender".into(), npy("|S4", "()", b"male")),
             ("mocap_framerate".into(), npy("<f8", "()", &f8(&[120.0]))),
         ];
-        for (key, bytes) in changes {
-            match arrays.iter_mut().find(|(k, _)| k == key) {
-                Some(a) => a.1 = bytes.clone(),
-                None => arrays.push((key.to_string(), bytes.clone())),
-            }
-        }
-        let named: Vec<(String, Vec<u8>)> = arrays
-            .into_iter()
-            .map(|(k, b)| (format!("{k}.npy"), b))
-            .collect();
-        let entries: Vec<(&str, Vec<u8>)> =
-            named.iter().map(|(k, b)| (k.as_str(), b.clone())).collect();
-        zip(&entries)
+        npz(arrays, changes)
     }
 
     /// The texts of the shape faults, as `rejects.jsonl` shows them: they must not change.
