@@ -180,6 +180,22 @@ pub(super) struct BuildState<'a, 'o> {
     pub(super) written: sinks::Written,
 }
 
+/// How an LLM stage asks: the build's LLM context in `llm` (opened on first use), and whether it
+/// may send requests (not offline, not in probe mode).
+fn asks<'s>(
+    llm: &'s mut Option<text::LlmContext>,
+    shared: &'s capture::Shared<'_>,
+    options: &'s BuildOptions,
+    probe: bool,
+) -> Result<text::TextRequests<'s>, BuildError> {
+    Ok(text::TextRequests {
+        llm: text::llm_context(llm, shared)?,
+        shared,
+        offline: options.offline || probe,
+        progress: &options.progress,
+    })
+}
+
 /// Every clip of the captures, originals and mirrors, with where their frames are, and what
 /// the stages dropped, noted and rejected, in their report order.
 #[derive(Default)]
@@ -272,26 +288,26 @@ impl<'a, 'o> BuildState<'a, 'o> {
         Ok(runs)
     }
 
-    /// How a text stage asks: the LLM context (opened on first use) and this build's options.
-    fn text_requests(&mut self) -> Result<text::TextRequests<'_>, BuildError> {
-        Ok(text::TextRequests {
-            llm: text::llm_context(&mut self.llm, &self.shared)?,
-            shared: &self.shared,
-            offline: self.options.offline || self.probe,
-            progress: &self.options.progress,
-        })
+    /// Runs a text stage with how it asks (the LLM context, opened on first use, and this build's
+    /// options), the capture items, what the text stages did so far and where frames are read.
+    fn text_stage<R>(
+        &mut self,
+        stage: impl FnOnce(
+            text::TextRequests<'_>,
+            &mut [Item],
+            &mut text::TextOutcome,
+            &motions::MotionSource,
+        ) -> Result<R, BuildError>,
+    ) -> Result<R, BuildError> {
+        let asks = asks(&mut self.llm, &self.shared, self.options, self.probe)?;
+        stage(asks, &mut self.items, &mut self.text, &self.motions)
     }
 
     /// Part labels of the clips' texts; in probe mode, blocked when their assignment is not
     /// cached.
     fn label(&mut self) -> Result<Vec<StageRun>, BuildError> {
-        let mut items = std::mem::take(&mut self.items);
-        let mut text = std::mem::take(&mut self.text);
-        let motions = self.motions.sibling();
-        let labelled = text::label(self.text_requests()?, &motions, &mut items, &mut text);
-        self.items = items;
-        self.text = text;
-        let (run, assigned) = labelled?;
+        let (run, assigned) =
+            self.text_stage(|asks, items, text, motions| text::label(asks, motions, items, text))?;
         if !assigned {
             self.blocked = Some(Stage::Label);
         }
@@ -303,12 +319,8 @@ impl<'a, 'o> BuildState<'a, 'o> {
         if !self.config.paraphrases.enabled {
             return Ok(Vec::new());
         }
-        let mut items = std::mem::take(&mut self.items);
-        let mut text = std::mem::take(&mut self.text);
-        let run = text::paraphrase(self.text_requests()?, &mut items, &mut text);
-        self.items = items;
-        self.text = text;
-        Ok(vec![run?])
+        let run = self.text_stage(|asks, items, text, _| text::paraphrase(asks, items, text))?;
+        Ok(vec![run])
     }
 
     /// Task plans of the single actions' texts, when `task_plans.enabled`.
@@ -316,12 +328,8 @@ impl<'a, 'o> BuildState<'a, 'o> {
         if !self.config.task_plans.enabled {
             return Ok(Vec::new());
         }
-        let items = std::mem::take(&mut self.items);
-        let mut text = std::mem::take(&mut self.text);
-        let run = text::plan(self.text_requests()?, &items, &mut text);
-        self.items = items;
-        self.text = text;
-        Ok(vec![run?])
+        let run = self.text_stage(|asks, items, text, _| text::plan(asks, items, text))?;
+        Ok(vec![run])
     }
 
     /// Mirrored copies of every capture's labelled clips, on all cores, when `mirror.enabled`;
@@ -444,10 +452,8 @@ impl<'a, 'o> BuildState<'a, 'o> {
         if !synthetic.enabled || !synthetic.llm_check {
             return Ok(Vec::new());
         }
-        let clips = std::mem::take(&mut self.gathered.clips);
-        let checked = synthetic::llm_vetoes(self.text_requests()?, &clips);
-        self.gathered.clips = clips;
-        let (vetoed, report) = checked?;
+        let asks = asks(&mut self.llm, &self.shared, self.options, self.probe)?;
+        let (vetoed, report) = synthetic::llm_vetoes(asks, &self.gathered.clips)?;
         let run = text::augment_run(Stage::PairCheck.name(), &report);
         self.vetoed = vetoed;
         self.pair_check = report;
