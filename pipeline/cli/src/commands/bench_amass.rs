@@ -10,7 +10,8 @@ use anyhow::{Context, Result, bail};
 use motionforge::amass::{self, Family};
 
 use super::bench::bvh_timings;
-use super::bench_build::{BenchWork, BuildRun, CONFIG_MARKER, OUTPUT_DIR, grouped, rss_mb};
+use super::bench_build::{BenchWork, CONFIG_MARKER, OUTPUT_DIR, grouped, rss_mb};
+use super::bench_clock::BuildRun;
 use super::bench_machine::load_average;
 use crate::ui::Ui;
 

@@ -11,6 +11,7 @@ use motionforge::config::Config;
 pub(crate) mod bench;
 mod bench_amass;
 mod bench_build;
+mod bench_clock;
 mod bench_export;
 mod bench_floor;
 mod bench_machine;
