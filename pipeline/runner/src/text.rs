@@ -78,7 +78,7 @@ pub(crate) struct ClipLabels {
 }
 
 /// The LLM response cache, when the config can use one (an `[llm]` section or the LLM labeller).
-pub(super) fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> {
+fn open_cache(shared: &Shared<'_>) -> Result<Option<ResponseCache>, BuildError> {
     let config = shared.config;
     let wanted = config.llm.is_some() || config.part_labels.labeller == Labeller::Llm;
     if !wanted {
@@ -100,7 +100,7 @@ pub(super) struct LlmContext {
 
 impl LlmContext {
     /// The config's prompt templates and its response cache (when it can use one).
-    pub(super) fn open(shared: &Shared<'_>) -> Result<LlmContext, BuildError> {
+    fn open(shared: &Shared<'_>) -> Result<LlmContext, BuildError> {
         Ok(LlmContext {
             prompts: shared.config.prompts()?,
             cache: open_cache(shared)?,
